@@ -1,0 +1,57 @@
+"""The example systems shipped with lpvest (the ``models/`` folder)."""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from .errors import ModelFileError
+
+__all__ = ["models_dir", "example_systems", "find_system", "ExampleEntry"]
+
+
+def models_dir() -> Path:
+    """The folder holding the example model files: ``models/`` next to the
+    package in a source checkout, else the copy installed as ``lpvest._models``."""
+    here = Path(__file__).resolve().parent
+    for candidate in (here.parent / "models", here / "_models"):
+        if candidate.is_dir() and any(candidate.glob("*.toml")):
+            return candidate
+    raise ModelFileError(f"the example model files are missing (looked in {here.parent / 'models'})")
+
+
+@dataclass(frozen=True)
+class ExampleEntry:
+    """One example system: its name, title and file (read without building it)."""
+
+    name: str
+    title: str
+    path: Path
+
+
+def example_systems() -> list[ExampleEntry]:
+    """Every example system, sorted by name."""
+    out = []
+    for path in sorted(models_dir().glob("*.toml")):
+        try:
+            meta = tomllib.loads(path.read_text(encoding="utf-8")).get("system", {})
+        except tomllib.TOMLDecodeError as exc:
+            raise ModelFileError(f"{path}: not valid TOML: {exc}") from exc
+        out.append(ExampleEntry(str(meta.get("name", path.stem)), str(meta.get("title", "")), path))
+    return sorted(out, key=lambda e: e.name)
+
+
+def find_system(source: str | Path) -> Path:
+    """The file for ``source``: an existing path, or an example system's name."""
+    path = Path(source)
+    if path.suffix == ".toml" or path.exists():
+        if not path.is_file():
+            raise ModelFileError(f"{path}: no such model file")
+        return path
+    entries = example_systems()
+    for e in entries:
+        if e.name == str(source):
+            return e.path
+    names = ", ".join(e.name for e in entries)
+    raise ModelFileError(f"no example system {str(source)!r} (examples: {names}; or give a .toml file)")

@@ -1,0 +1,272 @@
+"""The ``lpvest`` command line.
+
+::
+
+    lpvest systems                          the example systems, one line each
+    lpvest systems show NAME|FILE.toml      dimensions, matrices, scheduling map
+    lpvest simulate NAME|FILE.toml          simulate one model: CSV, plot, summary
+    lpvest reproduce NAME|all --out DIR     reproduce a paper example
+
+Errors in the user's input print one line (``lpvest: error: ...``) and exit
+with status 2; no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from .errors import LpvestError
+
+__all__ = ["main", "describe_model"]
+
+
+def _parse_params(items: Sequence[str] | None) -> dict[str, float]:
+    out = {}
+    for item in items or ():
+        name, sep, value = item.partition("=")
+        if not sep:
+            raise LpvestError(f"--param {item!r}: expected NAME=VALUE")
+        try:
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise LpvestError(f"--param {item!r}: {value!r} is not a number") from None
+    return out
+
+
+def _fmt(m: np.ndarray, indent: str = "      ") -> str:
+    text = np.array2string(np.asarray(m), precision=6, suppress_small=True, max_line_width=100)
+    return "\n".join(indent + line for line in text.splitlines())
+
+
+def describe_model(key: str, model: object) -> str:
+    """A human-readable description: type, dimensions, matrices, maps."""
+    from .systems import (
+        AffineLPV,
+        InnovationLPV,
+        LPVInputOutput,
+        LTVInputOutput,
+        LTVStateSpace,
+        PolytopicLPV,
+    )
+
+    lines: list[str] = []
+    add = lines.append
+
+    def dependence(dep) -> None:  # type: ignore[no-untyped-def]
+        add(f"    basis: {', '.join(dep.term_names)}")
+        for name, stack in dep.coefficients.items():
+            for i, term in enumerate(dep.term_names):
+                if i == 0 or np.any(stack[i]):
+                    add(f"    {name} [{term}]  {stack.shape[1]}x{stack.shape[2]}")
+                    add(_fmt(stack[i]))
+
+    if isinstance(model, AffineLPV):
+        add(f"  model {key}: affine LPV with general noise (Cox & Toth (1)-(3))")
+        add(f"    n_x={model.nx} n_u={model.nu} n_y={model.ny} n_w={model.nw} n_v={model.nv} n_p={model.n_p}")
+        dependence(model.dependence)
+        for name in ("Q", "S", "R"):
+            add(f"    {name}")
+            add(_fmt(getattr(model.noise, name)))
+    elif isinstance(model, PolytopicLPV):
+        add(f"  model {key}: polytopic LPV (Peixoto et al. (1)), N={model.n_vertices} vertices")
+        add(f"    n_x={model.nx} n_w={model.nw} n_z={model.nz} n_y={model.ny}")
+        if model.parameters:
+            add("    parameters: " + ", ".join(f"{k} = {v:g}" for k, v in model.parameters.items()))
+        m = model.simplex_map
+        if m is None:
+            add("    scheduling: alpha itself (no physical scheduling map)")
+        elif hasattr(m, "formulas"):
+            for i, f in enumerate(m.formulas):  # type: ignore[attr-defined]
+                add(f"    alpha_{i + 1} = {f.text}")
+        else:
+            coords = ", ".join(c.name for c in m.coordinates)  # type: ignore[attr-defined]
+            add(f"    alpha: multilinear weights over ({coords})")
+        for i in range(model.n_vertices):
+            add(f"    vertex {i + 1}:")
+            for name, stack in model.vertices._asdict().items():
+                add(f"      {name}  {stack.shape[1]}x{stack.shape[2]}")
+                add(_fmt(stack[i], "        "))
+        if model.affine is not None:
+            add("    affine form:")
+            dependence(model.affine)
+    elif isinstance(model, InnovationLPV):
+        back, ahead = model.window
+        add(f"  model {key}: LPV innovation form with given gain")
+        add(f"    n_x={model.nx} n_u={model.nu} n_y={model.ny}; gain uses p_(t-{back})..p_(t+{ahead})")
+        dependence(model.dependence)
+        add("    K = " + str(model.K.to_list()))
+        add("    innovation covariance")
+        add(_fmt(model.innovation_covariance))
+    elif isinstance(model, LPVInputOutput):
+        add(f"  model {key}: LPV input-output (SISO)")
+        terms = [f"({c.text}) y[t-{i + 1}]" for i, c in enumerate(model.y_coefficients)]
+        terms += [f"({c.text}) u[t-{i}]" for i, c in enumerate(model.u_coefficients)]
+        terms += ["e[t]"] + [f"({c.text}) e[t-{i + 1}]" for i, c in enumerate(model.e_coefficients)]
+        add("    y[t] = " + " + ".join(terms))
+        add(f"    noise variance {model.noise_variance:g}")
+    elif isinstance(model, LTVInputOutput):
+        n = model.order
+        add(f"  model {key}: continuous-time LTV input-output, order {n}")
+        add("    y^(" + str(n) + ") + " + " + ".join(f"({f.text}) y^({i})" for i, f in enumerate(model.a))
+            + " + " + " + ".join(f"({f.text}) u^({i})" for i, f in enumerate(model.b)) + " = 0")
+        if model.input is not None:
+            add(f"    input u(t) = {model.input.text}")
+        if model.x0 is not None:
+            add(f"    x(0) = {model.x0.tolist()}")
+    elif isinstance(model, LTVStateSpace):
+        add(f"  model {key}: continuous-time LTV state space, n = {model.n}")
+        for name, fm in model.formulas.items():
+            add(f"    {name}(t) = {fm.to_list() if fm is not None else '<callable>'}")
+        if model.input is not None:
+            add(f"    input u(t) = {model.input.text}")
+        if model.x0 is not None:
+            add(f"    x(0) = {model.x0.tolist()}")
+    else:  # pragma: no cover
+        add(f"  model {key}: {type(model).__name__}")
+    return "\n".join(lines)
+
+
+def _model_summary(model: object) -> str:
+    from .modelfile import MODEL_TYPES
+
+    for name, cls in MODEL_TYPES.items():
+        if isinstance(model, cls):
+            return name
+    return type(model).__name__  # pragma: no cover
+
+
+def cmd_systems(args: argparse.Namespace) -> int:
+    from .catalog import example_systems
+    from .modelfile import load_system
+
+    if args.action is None:
+        entries = example_systems()
+        width = max(len(e.name) for e in entries)
+        for e in entries:
+            system = load_system(e.path)
+            models = ", ".join(f"{k} ({_model_summary(m)})" for k, m in system.models.items())
+            print(f"{e.name:<{width}}  {e.title}  [models: {models}]")
+        return 0
+    if args.action != "show" or not args.target:
+        raise LpvestError("usage: lpvest systems [show NAME|FILE.toml]")
+    system = load_system(args.target, parameters=_parse_params(args.param))
+    print(f"{system.name}: {system.title}")
+    if system.source:
+        print(f"  source: {system.source}")
+    if system.path:
+        print(f"  file: {system.path}")
+    if system.description:
+        for line in system.description.strip().splitlines():
+            print(f"  {line}")
+    if system.parameters:
+        print("  parameters: " + ", ".join(f"{k} = {v:g}" for k, v in system.parameters.items()))
+    if system.scheduling is not None:
+        s = system.scheduling
+        box = ", ".join(f"{n} in [{lo:g}, {hi:g}]" for n, lo, hi in zip(s.names, s.lower, s.upper, strict=True))
+        print(f"  scheduling: {box}")
+    keys = [args.model] if args.model else list(system.models)
+    for key in keys:
+        print(describe_model(key, system.model(key)))
+    return 0
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from .experiments.simulate import simulate_system
+    from .modelfile import load_system
+
+    if args.steps < 2:
+        raise LpvestError(f"--steps must be at least 2; found {args.steps}")
+    system = load_system(args.target, parameters=_parse_params(args.param))
+    sim = simulate_system(system, args.model, steps=args.steps, schedule=args.schedule, seed=args.seed)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    stem = f"{system.name}-{sim.model}"
+    csv = sim.write_csv(out / f"{stem}.csv")
+    png = sim.plot(out / f"{stem}.png")
+    print(f"simulated {system.name} / {sim.model}: {args.steps} samples")
+    for name, col in sim.columns.items():
+        if name == sim.time_name:
+            continue
+        print(f"  {name:<10} min {np.min(col):>11.4g}  max {np.max(col):>11.4g}  rms {np.sqrt(np.mean(col**2)):>11.4g}")
+    print(f"wrote {csv}\nwrote {png}")
+    return 0
+
+
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    from .experiments import registry, write_results
+
+    experiments = registry()
+    if args.name in (None, "list"):
+        if not experiments:
+            print("no experiments are registered")
+        for exp in experiments.values():
+            print(f"{exp.name:<28} {exp.title}")
+        return 0
+    names = list(experiments) if args.name == "all" else [args.name]
+    unknown = [n for n in names if n not in experiments]
+    if unknown:
+        raise LpvestError(f"no experiment {unknown[0]!r} (known: {', '.join(experiments) or 'none'})")
+    out = Path(args.out)
+    for name in names:
+        exp = experiments[name]
+        print(f"== {exp.name}: {exp.title}")
+        result = exp.run(out / name)
+        print(result.table)
+        path = write_results(result, out / name)
+        print(f"wrote {path}" + "".join(f"\nwrote {f}" for f in result.figures))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="lpvest", description="Estimation for LPV and LTV systems.")
+    parser.add_argument("--version", action="version", version=f"lpvest {_version()}")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("systems", help="list the example systems, or show one")
+    p.add_argument("action", nargs="?", choices=["show"], help="show one system in detail")
+    p.add_argument("target", nargs="?", help="example name or model file (.toml)")
+    p.add_argument("--model", help="show only this model of the system")
+    p.add_argument("--param", action="append", metavar="NAME=VALUE", help="override a model parameter")
+    p.set_defaults(func=cmd_systems)
+
+    p = sub.add_parser("simulate", help="simulate one model and write CSV and a plot")
+    p.add_argument("target", help="example name or model file (.toml)")
+    p.add_argument("--model", help="model of the system (default: the file's default)")
+    p.add_argument("--steps", type=int, default=100, help="number of samples (default 100)")
+    p.add_argument("--schedule", nargs="+", metavar="FORMULA",
+                   help="scheduling per component as formulas of the step k, e.g. '0.5*sin(0.25*k)'")
+    p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    p.add_argument("--param", action="append", metavar="NAME=VALUE", help="override a model parameter")
+    p.add_argument("--out", default="out/simulate", help="output folder (default out/simulate)")
+    p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("reproduce", help="reproduce a paper example (list them with 'list')")
+    p.add_argument("name", nargs="?", help="experiment name, 'all', or 'list'")
+    p.add_argument("--out", default="out", help="output folder (default out); each experiment gets a subfolder")
+    p.set_defaults(func=cmd_reproduce)
+    return parser
+
+
+def _version() -> str:
+    from . import __version__
+
+    return __version__
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except LpvestError as exc:
+        print(f"lpvest: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,173 @@
+"""Simulate any example system (or a user's model file) with default signals.
+
+Used by ``lpvest simulate``: a scheduling signal given as a formula of the
+step ``k`` (default: a sinusoid spanning 90 % of the box), the model's own
+noise (seeded) or input, and the Peixoto et al. disturbance
+``w_k = sin(0.5 k) exp(-0.1 k)`` from ``k = 10`` for polytopic plants.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..expressions import Expression
+from ..modelfile import SystemFile
+from ..scheduling import SchedulingSpace
+from ..systems import (
+    AffineLPV,
+    InnovationLPV,
+    LPVInputOutput,
+    LTVInputOutput,
+    LTVStateSpace,
+    PolytopicLPV,
+)
+
+__all__ = ["Simulation", "simulate_system", "default_schedule", "peixoto_disturbance"]
+
+
+@dataclass(frozen=True)
+class Simulation:
+    """Named columns of a simulation, each of shape (T,)."""
+
+    system: str
+    model: str
+    time_name: str  #: "k" (discrete) or "t" (continuous)
+    columns: dict[str, np.ndarray]
+    groups: dict[str, list[str]]  #: plot panels: title -> column names
+
+    def write_csv(self, path: Path) -> Path:
+        names = list(self.columns)
+        data = np.column_stack([self.columns[n] for n in names])
+        np.savetxt(path, data, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+        return path
+
+    def plot(self, path: Path) -> Path:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        panels = [(title, cols) for title, cols in self.groups.items() if cols]
+        fig, axes = plt.subplots(len(panels), 1, figsize=(8, 2.2 * len(panels)), sharex=True)
+        axes = np.atleast_1d(axes)
+        time = self.columns[self.time_name]
+        for ax, (title, cols) in zip(axes, panels, strict=True):
+            for c in cols:
+                ax.plot(time, self.columns[c], label=c, drawstyle="steps-post" if self.time_name == "k" else "default")
+            ax.set_ylabel(title)
+            ax.legend(loc="upper right", fontsize="small", ncol=min(4, len(cols)))
+            ax.grid(alpha=0.3)
+        axes[-1].set_xlabel(self.time_name)
+        fig.suptitle(f"{self.system}: model {self.model}")
+        fig.tight_layout()
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        return path
+
+
+def default_schedule(space: SchedulingSpace) -> list[str]:
+    """One formula of ``k`` per component: ``mid + 0.9*half*sin(0.25 k)``."""
+    out = []
+    for lo, hi in zip(space.lower, space.upper, strict=True):
+        mid, half = (lo + hi) / 2.0, (hi - lo) / 2.0
+        out.append(f"{float(mid)!r} + {float(0.9 * half)!r}*sin(0.25*k)")
+    return out
+
+
+def peixoto_disturbance(k: np.ndarray, onset: int = 10) -> np.ndarray:
+    """``w_k = sin(0.5 k) exp(-0.1 k)`` for ``k >= onset``, else 0 (Peixoto et al., Fig. 2)."""
+    k = np.asarray(k, dtype=float)
+    return np.where(k >= onset, np.sin(0.5 * k) * np.exp(-0.1 * k), 0.0)
+
+
+def _schedule(space: SchedulingSpace, formulas: list[str] | None, k: np.ndarray) -> np.ndarray:
+    formulas = formulas or default_schedule(space)
+    if len(formulas) != space.dim:
+        raise ValueError(f"--schedule needs {space.dim} formulas (one per {', '.join(space.names)})")
+    cols = [np.broadcast_to(Expression.parse(f, allowed=["k"]).evaluate({"k": k}), k.shape) for f in formulas]
+    return np.column_stack(cols).astype(float)
+
+
+def _add(columns: dict, groups: dict, group: str, prefix: str, arr: np.ndarray) -> None:
+    arr = np.asarray(arr)
+    arr = arr[:, None] if arr.ndim == 1 else arr
+    names = [f"{prefix}[{i + 1}]" if arr.shape[1] > 1 else prefix for i in range(arr.shape[1])]
+    for i, n in enumerate(names):
+        columns[n] = arr[:, i]
+    groups.setdefault(group, []).extend(names)
+
+
+def simulate_system(
+    system: SystemFile,
+    model_key: str | None = None,
+    *,
+    steps: int = 100,
+    schedule: list[str] | None = None,
+    seed: int = 0,
+    t_end: float = 20.0,
+) -> Simulation:
+    """Simulate one model of ``system`` with default signals (see module doc)."""
+    key = model_key or system.default
+    model = system.model(key)
+    columns: dict[str, np.ndarray] = {}
+    groups: dict[str, list[str]] = {}
+    if isinstance(model, LTVInputOutput | LTVStateSpace):
+        t = np.linspace(0.0, t_end, steps)
+        traj = model.simulate(t)
+        columns["t"] = t
+        _add(columns, groups, "input", "u", traj.u)
+        _add(columns, groups, "output", "y", traj.y)
+        _add(columns, groups, "state", "x", traj.x)
+        return Simulation(system.name, key, "t", columns, groups)
+    k = np.arange(steps, dtype=float)
+    columns["k"] = k
+    if isinstance(model, PolytopicLPV):
+        if model.simplex_map is not None:
+            p = _schedule(model.simplex_map.space, schedule, k)
+            alpha = model.alpha_batch(p)
+            _add(columns, groups, "scheduling", model.simplex_map.space.names[0] if p.shape[1] == 1 else "p", p)
+        else:
+            raw = _schedule(SchedulingSpace(["s"], [0.0], [1.0]), schedule, k)[:, 0]
+            alpha = np.column_stack([1.0 - raw, raw])
+        _add(columns, groups, "alpha", "alpha", alpha)
+        w = np.tile(peixoto_disturbance(k)[:, None], (1, model.nw))
+        traj = model.simulate(alpha, w)
+        _add(columns, groups, "disturbance", "w", w)
+        _add(columns, groups, "output", "y", traj.y)
+        _add(columns, groups, "to estimate", "z", traj.z)
+        _add(columns, groups, "state", "x", traj.x)
+        return Simulation(system.name, key, "k", columns, groups)
+    assert system.scheduling is not None
+    space = system.scheduling
+    if isinstance(model, AffineLPV):
+        p = _schedule(space, schedule, k)
+        u = np.sin(0.1 * k)[:, None] * np.ones((1, model.nu))
+        traj = model.simulate(p, u, rng=seed)
+        _add(columns, groups, "scheduling", "p", p)
+        if model.nu:
+            _add(columns, groups, "input", "u", u)
+        _add(columns, groups, "output", "y", traj.y)
+        _add(columns, groups, "state", "x", traj.x)
+        return Simulation(system.name, key, "k", columns, groups)
+    if isinstance(model, InnovationLPV | LPVInputOutput):
+        back, ahead = (model.window if isinstance(model, InnovationLPV) else (0, 0))
+        kk = np.arange(-back, steps + ahead, dtype=float)
+        p = _schedule(space, schedule, kk)
+        u = np.sin(0.1 * k)[:, None]
+        rng = np.random.default_rng(seed)
+        e = rng.standard_normal((steps, 1))
+        if isinstance(model, InnovationLPV):
+            traj = model.simulate(p, u[:, : model.nu], e=e)
+            _add(columns, groups, "state", "x", traj.x)
+        else:
+            traj = model.simulate(p, u, e=e)
+        _add(columns, groups, "scheduling", "p", p[back : back + steps])
+        _add(columns, groups, "input", "u", u)
+        _add(columns, groups, "noise", "e", e)
+        _add(columns, groups, "output", "y", traj.y)
+        return Simulation(system.name, key, "k", columns, groups)
+    raise TypeError(f"cannot simulate a {type(model).__name__}")  # pragma: no cover
+

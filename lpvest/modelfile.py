@@ -1,0 +1,705 @@
+"""Model files: example systems and users' own systems as TOML.
+
+A file describes one *system* (a paper's example) with one or more *models*
+(realizations or views of it). Every error names the file, the field and what
+was expected versus found, in one line::
+
+    models/bad.toml: models.plant.Q: Q has shape (3, 2); expected (3, 3)
+
+The format, by example (see ``models/*.toml`` for complete files)::
+
+    [system]
+    name = "my-plant"                 # how `lpvest systems show` finds it
+    title = "One line about it"
+    default = "plant"                 # the model used when none is named
+
+    [parameters]                      # optional named numbers, usable in formulas
+    rho = 1.0
+
+    [scheduling]                      # the scheduling box (LPV models)
+    names = ["theta"]
+    lower = [-1.0]
+    upper = [1.0]
+
+    [models.plant]
+    type = "affine"                   # affine | polytopic | innovation | lpv-io | ltv-io | ltv-ss
+    A = { "1" = [[0.5, 0.1], [0, 0.4]], theta = [[0.1, 0], [0, -0.1]] }
+    C = [[1, 0]]                      # a plain array: constant in theta
+    Q = [[0.1, 0], [0, 0.1]]
+    R = [[0.01]]
+
+Matrix entries may be formulas of the parameters (``"-0.05*rho"``); LTV
+coefficients are formulas of ``t``. See :mod:`lpvest.expressions` for what a
+formula may contain.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import LpvestError, ModelFileError
+from .expressions import Expression, FormulaMatrix
+from .scheduling import (
+    BasisFunction,
+    CallableBasis,
+    FormulaBasis,
+    SchedulingSpace,
+    parse_basis,
+)
+from .systems.affine import CONSTANT_TERM, AffineDependence, AffineLPV
+from .systems.innovation import InnovationLPV, LPVInputOutput
+from .systems.ltv import LTVInputOutput, LTVStateSpace, TimeFunction
+from .systems.polytopic import (
+    POLYTOPIC_MATRICES,
+    FormulaSimplexMap,
+    MultilinearSimplexMap,
+    PolytopicLPV,
+    SimplexMap,
+)
+
+__all__ = [
+    "SystemFile",
+    "Model",
+    "load_system",
+    "loads_system",
+    "dump_system",
+    "save_system",
+    "MODEL_TYPES",
+]
+
+Model = AffineLPV | PolytopicLPV | InnovationLPV | LPVInputOutput | LTVInputOutput | LTVStateSpace
+
+#: Model ``type`` names in files and the classes they load as.
+MODEL_TYPES: dict[str, type] = {
+    "affine": AffineLPV,
+    "polytopic": PolytopicLPV,
+    "innovation": InnovationLPV,
+    "lpv-io": LPVInputOutput,
+    "ltv-io": LTVInputOutput,
+    "ltv-ss": LTVStateSpace,
+}
+
+
+@dataclass(frozen=True, eq=False)
+class SystemFile:
+    """A loaded model file: metadata, scheduling box and the models."""
+
+    name: str
+    title: str
+    models: Mapping[str, Model]
+    default: str
+    scheduling: SchedulingSpace | None = None
+    parameters: Mapping[str, float] = field(default_factory=dict)
+    source: str = ""
+    description: str = ""
+    path: Path | None = None
+
+    def model(self, key: str | None = None) -> Model:
+        """The model named ``key`` (default: the file's default model)."""
+        key = self.default if key is None else key
+        try:
+            return self.models[key]
+        except KeyError:
+            raise ModelFileError(
+                f"{self.path or self.name}: no model {key!r} (models: {', '.join(self.models)})"
+            ) from None
+
+
+# -- reading -----------------------------------------------------------------
+
+
+class _Reader:
+    """Walks the parsed TOML and turns every problem into a one-line
+    :class:`ModelFileError` naming file and field."""
+
+    def __init__(self, origin: str, parameters: Mapping[str, float]) -> None:
+        self.origin = origin
+        self.parameters = dict(parameters)
+
+    def error(self, where: str, msg: str) -> ModelFileError:
+        return ModelFileError(f"{self.origin}: {where}: {msg}")
+
+    @contextmanager
+    def at(self, where: str) -> Iterator[None]:
+        try:
+            yield
+        except ModelFileError:
+            raise
+        except LpvestError as exc:
+            raise self.error(where, str(exc)) from exc
+
+    def table(self, data: Mapping, key: str, where: str, *, required: bool = True) -> dict:
+        if key not in data:
+            if required:
+                raise self.error(where, f"missing required table [{key}]" if where != key else "missing")
+            return {}
+        val = data[key]
+        if not isinstance(val, dict):
+            raise self.error(f"{where}.{key}" if where else key, f"expected a table, found {_kind(val)}")
+        return val
+
+    def keys(self, data: Mapping, where: str, allowed: set[str], required: set[str] = frozenset()) -> None:
+        unknown = sorted(set(data) - allowed)
+        if unknown:
+            raise self.error(
+                where, f"unknown key {unknown[0]!r} (expected one of: {', '.join(sorted(allowed))})"
+            )
+        missing = sorted(required - set(data))
+        if missing:
+            raise self.error(where, f"missing required key {missing[0]!r}")
+
+    def string(self, data: Mapping, key: str, where: str, default: str | None = None) -> str:
+        if key not in data:
+            if default is None:
+                raise self.error(where, f"missing required key {key!r}")
+            return default
+        val = data[key]
+        if not isinstance(val, str):
+            raise self.error(f"{where}.{key}", f"expected a string, found {_kind(val)}")
+        return val
+
+    def number(self, value: Any, where: str) -> float:
+        if isinstance(value, bool):
+            raise self.error(where, "expected a number, found a boolean")
+        if isinstance(value, int | float):
+            return float(value)
+        if isinstance(value, str):
+            with self.at(where):
+                return Expression.parse(value, parameters=self.parameters).value()
+        raise self.error(where, f"expected a number or formula, found {_kind(value)}")
+
+    def numbers(self, value: Any, where: str) -> list[float]:
+        if not isinstance(value, list):
+            raise self.error(where, f"expected a list of numbers, found {_kind(value)}")
+        return [self.number(v, f"{where}[{i + 1}]") for i, v in enumerate(value)]
+
+    def matrix(self, value: Any, where: str) -> np.ndarray:
+        """A numeric matrix: list of rows of numbers/formulas of the parameters."""
+        if isinstance(value, int | float | str) and not isinstance(value, bool):
+            return np.array([[self.number(value, where)]])
+        if not isinstance(value, list) or not value or not all(isinstance(r, list) for r in value):
+            raise self.error(where, f"expected a matrix (list of rows), found {_kind(value)}")
+        widths = {len(r) for r in value}
+        if len(widths) != 1:
+            raise self.error(where, f"rows have different lengths {sorted(widths)}; expected equal")
+        return np.array(
+            [[self.number(v, f"{where}[{i + 1},{j + 1}]") for j, v in enumerate(r)] for i, r in enumerate(value)]
+        ).reshape(len(value), widths.pop())
+
+    def strings(self, value: Any, where: str) -> list[str]:
+        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+            raise self.error(where, f"expected a list of strings, found {_kind(value)}")
+        return list(value)
+
+    # -- pieces ---------------------------------------------------------------
+    def scheduling(self, data: Mapping) -> SchedulingSpace | None:
+        if "scheduling" not in data:
+            return None
+        sch = self.table(data, "scheduling", "")
+        self.keys(sch, "scheduling", {"names", "lower", "upper"}, {"names", "lower", "upper"})
+        names = self.strings(sch["names"], "scheduling.names")
+        lower = self.numbers(sch["lower"], "scheduling.lower")
+        upper = self.numbers(sch["upper"], "scheduling.upper")
+        for key, vals in (("lower", lower), ("upper", upper)):
+            if len(vals) != len(names):
+                raise self.error(
+                    f"scheduling.{key}", f"has {len(vals)} entries; expected {len(names)} (one per name)"
+                )
+        clash = sorted(set(names) & set(self.parameters))
+        if clash:
+            raise self.error("scheduling.names", f"{clash[0]!r} is also a parameter name")
+        with self.at("scheduling"):
+            return SchedulingSpace(names, lower, upper)
+
+    def need_space(self, space: SchedulingSpace | None, where: str) -> SchedulingSpace:
+        if space is None:
+            raise self.error(where, "this model type needs a [scheduling] table in the file")
+        return space
+
+    def basis(self, spec: Mapping, space: SchedulingSpace, matrices: Mapping, where: str) -> list[BasisFunction]:
+        bounds_tab = spec.get("bounds", {})
+        if not isinstance(bounds_tab, dict):
+            raise self.error(f"{where}.bounds", f"expected a table, found {_kind(bounds_tab)}")
+        if "basis" in spec:
+            texts = self.strings(spec["basis"], f"{where}.basis")
+        else:  # order of first appearance in the matrices
+            texts = []
+            for val in matrices.values():
+                if isinstance(val, dict):
+                    texts.extend(k for k in val if k != CONSTANT_TERM and k not in texts)
+        out: list[BasisFunction] = []
+        for text in texts:
+            b = bounds_tab.get(text)
+            bnd = None
+            if b is not None:
+                nums = self.numbers(b, f"{where}.bounds.{text}")
+                if len(nums) != 2:
+                    raise self.error(f"{where}.bounds.{text}", "expected [lower, upper]")
+                bnd = (nums[0], nums[1])
+            with self.at(f"{where}.basis"):
+                out.append(parse_basis(text, space, bounds=bnd))
+        return out
+
+    def affine_matrices(
+        self, spec: Mapping, names: tuple[str, ...], where: str
+    ) -> dict[str, np.ndarray | dict[str, np.ndarray]]:
+        out: dict[str, Any] = {}
+        for n in names:
+            if n not in spec:
+                continue
+            val = spec[n]
+            if isinstance(val, dict):
+                if not val:
+                    raise self.error(f"{where}.{n}", "has no terms")
+                out[n] = {term: self.matrix(m, f"{where}.{n}.{term}") for term, m in val.items()}
+            else:
+                out[n] = self.matrix(val, f"{where}.{n}")
+        return out
+
+    def dependence(
+        self, spec: Mapping, space: SchedulingSpace, names: tuple[str, ...], where: str
+    ) -> AffineDependence:
+        mats = self.affine_matrices(spec, names, where)
+        basis = self.basis(spec, space, spec, where)
+        with self.at(where):
+            return AffineDependence.build(space, basis, mats)
+
+    # -- model types ----------------------------------------------------------
+    def model(self, key: str, spec: Any, space: SchedulingSpace | None) -> Model:
+        where = f"models.{key}"
+        if not isinstance(spec, dict):
+            raise self.error(where, f"expected a table, found {_kind(spec)}")
+        kind = self.string(spec, "type", where)
+        reader = {
+            "affine": self.affine,
+            "polytopic": self.polytopic,
+            "innovation": self.innovation,
+            "lpv-io": self.lpv_io,
+            "ltv-io": self.ltv_io,
+            "ltv-ss": self.ltv_ss,
+        }.get(kind)
+        if reader is None:
+            known = ", ".join(MODEL_TYPES)
+            raise self.error(f"{where}.type", f"unknown model type {kind!r} (expected one of: {known})")
+        return reader(key, spec, space, where)  # type: ignore[operator]
+
+    def affine(self, key: str, spec: Mapping, space: SchedulingSpace | None, where: str) -> AffineLPV:
+        names = ("A", "B", "C", "D", "G", "H")
+        self.keys(
+            spec,
+            where,
+            {"type", "title", "basis", "bounds", *names, "Q", "R", "S", "x0", "P0"},
+            {"A", "C", "Q", "R"},
+        )
+        space = self.need_space(space, where)
+        mats = self.affine_matrices(spec, names, where)
+        basis = self.basis(spec, space, spec, where)
+        noise = {k: self.matrix(spec[k], f"{where}.{k}") for k in ("Q", "R", "S") if k in spec}
+        x0 = self.numbers(spec["x0"], f"{where}.x0") if "x0" in spec else None
+        P0 = self.matrix(spec["P0"], f"{where}.P0") if "P0" in spec else None
+        with self.at(where):
+            return AffineLPV.from_matrices(space, basis, **mats, **noise, x0=x0, P0=P0, name=key)  # type: ignore[arg-type]
+
+    def simplex_map(self, spec: Any, space: SchedulingSpace | None, where: str) -> SimplexMap:
+        if not isinstance(spec, dict):
+            raise self.error(where, f"expected a table, found {_kind(spec)}")
+        space = self.need_space(space, where)
+        kind = self.string(spec, "kind", where)
+        if kind == "formulas":
+            self.keys(spec, where, {"kind", "alpha"}, {"alpha"})
+            alpha = spec["alpha"]
+            if not isinstance(alpha, list):
+                raise self.error(f"{where}.alpha", f"expected a list of formulas, found {_kind(alpha)}")
+            with self.at(f"{where}.alpha"):
+                return FormulaSimplexMap(
+                    space, [Expression.parse(a, parameters=self.parameters, allowed=space.names) for a in alpha]
+                )
+        if kind == "multilinear":
+            self.keys(spec, where, {"kind", "over", "lower", "upper"}, {"over", "lower", "upper"})
+            over = self.strings(spec["over"], f"{where}.over")
+            lower = self.numbers(spec["lower"], f"{where}.lower")
+            upper = self.numbers(spec["upper"], f"{where}.upper")
+            with self.at(where):
+                coords = [parse_basis(o, space) for o in over]
+                return MultilinearSimplexMap(space, coords, lower, upper)
+        raise self.error(f"{where}.kind", f"unknown map kind {kind!r} (expected 'formulas' or 'multilinear')")
+
+    def polytopic(self, key: str, spec: Mapping, space: SchedulingSpace | None, where: str) -> PolytopicLPV:
+        self.keys(spec, where, {"type", "title", "map", "vertex", "common", "affine"})
+        mapping = self.simplex_map(spec["map"], space, f"{where}.map") if "map" in spec else None
+        affine = None
+        if "affine" in spec:
+            aff = self.table(spec, "affine", where)
+            self.keys(aff, f"{where}.affine", {"basis", "bounds", *POLYTOPIC_MATRICES}, set(POLYTOPIC_MATRICES))
+            aff_space = self.need_space(space, f"{where}.affine")
+            affine = self.dependence(aff, aff_space, POLYTOPIC_MATRICES, f"{where}.affine")
+        if "vertex" not in spec:
+            if affine is None:
+                raise self.error(where, "give the vertices ([[...vertex]] tables) or the affine form ([...affine])")
+            if "common" in spec:
+                raise self.error(f"{where}.common", "only used together with [[...vertex]] tables")
+            with self.at(where):
+                model = PolytopicLPV.from_affine(affine, parameters=self.parameters, name=key)
+            if mapping is not None:
+                self.check_consistent(model.vertices._asdict(), mapping, affine, where)
+                model = PolytopicLPV(model.vertices, mapping, affine, self.parameters, key)
+            return model
+        vertices = spec["vertex"]
+        if not isinstance(vertices, list) or not all(isinstance(v, dict) for v in vertices) or not vertices:
+            raise self.error(f"{where}.vertex", "expected one or more [[vertex]] tables")
+        common = self.table(spec, "common", where, required=False)
+        self.keys(common, f"{where}.common", set(POLYTOPIC_MATRICES))
+        stacks: dict[str, list[np.ndarray]] = {}
+        for i, vt in enumerate(vertices):
+            vw = f"{where}.vertex[{i + 1}]"
+            self.keys(vt, vw, set(POLYTOPIC_MATRICES))
+            for n in POLYTOPIC_MATRICES:
+                if n in vt and n in common:
+                    raise self.error(f"{vw}.{n}", f"{n} is also given in [{where}.common]")
+                if n in vt:
+                    stacks.setdefault(n, []).append(self.matrix(vt[n], f"{vw}.{n}"))
+                elif n in common:
+                    stacks.setdefault(n, []).append(self.matrix(common[n], f"{where}.common.{n}"))
+                else:
+                    raise self.error(vw, f"missing {n} (give it here or in [{where}.common])")
+        arrays = {}
+        for n, mats in stacks.items():
+            shapes = {m.shape for m in mats}
+            if len(shapes) != 1:
+                raise self.error(f"{where}.vertex", f"{n} has different shapes at the vertices: {sorted(shapes)}")
+            arrays[n] = np.stack(mats)
+        with self.at(where):
+            model = PolytopicLPV(arrays, mapping, affine, self.parameters, key)
+        if affine is not None:
+            if mapping is None:
+                raise self.error(where, "a model with both vertices and an affine form needs a [map]")
+            self.check_consistent(arrays, mapping, affine, where)
+        return model
+
+    def check_consistent(
+        self, vertices: Mapping[str, np.ndarray], mapping: SimplexMap, affine: AffineDependence, where: str
+    ) -> None:
+        """The vertices combined by the map must reproduce the affine form."""
+        space = affine.space
+        pts = np.vstack([space.corners(), space.sample(np.random.default_rng(0), 16)])
+        alpha = mapping.evaluate(pts)
+        direct = affine.evaluate_batch(pts, check=False)
+        for n in POLYTOPIC_MATRICES:
+            combo = np.einsum("ti,irc->trc", alpha, vertices[n])
+            err = np.max(np.abs(combo - direct[n]))
+            scale = max(1.0, float(np.max(np.abs(direct[n]))))
+            if err > 1e-9 * scale:
+                t = int(np.argmax(np.max(np.abs(combo - direct[n]), axis=(1, 2))))
+                at = ", ".join(f"{k} = {v:g}" for k, v in zip(space.names, pts[t], strict=True))
+                raise self.error(
+                    f"{where}.vertex",
+                    f"{n} at the vertices, combined by the map, differs from the affine form by "
+                    f"{err:.3g} at {at}; expected agreement",
+                )
+
+    def innovation(self, key: str, spec: Mapping, space: SchedulingSpace | None, where: str) -> InnovationLPV:
+        names = ("A", "B", "C", "D")
+        self.keys(
+            spec, where, {"type", "title", "basis", "bounds", *names, "K", "innovation_covariance", "x0"},
+            {"A", "B", "C", "D", "K", "innovation_covariance"},
+        )
+        space = self.need_space(space, where)
+        dep = self.dependence(spec, space, names, where)
+        with self.at(f"{where}.K"):
+            K = FormulaMatrix.parse(spec["K"], name="K", parameters=self.parameters, allowed=space.names)
+        omega = self.matrix(spec["innovation_covariance"], f"{where}.innovation_covariance")
+        x0 = self.numbers(spec["x0"], f"{where}.x0") if "x0" in spec else None
+        with self.at(where):
+            return InnovationLPV(dep, K, omega, x0, key)
+
+    def formulas(self, value: Any, where: str, allowed: list[str]) -> list[Expression]:
+        if not isinstance(value, list):
+            raise self.error(where, f"expected a list of formulas, found {_kind(value)}")
+        out = []
+        for i, v in enumerate(value):
+            with self.at(f"{where}[{i + 1}]"):
+                out.append(Expression.parse(v, parameters=self.parameters, allowed=allowed))
+        return out
+
+    def lpv_io(self, key: str, spec: Mapping, space: SchedulingSpace | None, where: str) -> LPVInputOutput:
+        self.keys(spec, where, {"type", "title", "y", "u", "e", "noise_variance"}, {"y", "u"})
+        space = self.need_space(space, where)
+        names = list(space.names)
+        y = self.formulas(spec["y"], f"{where}.y", names)
+        u = self.formulas(spec["u"], f"{where}.u", names)
+        e = self.formulas(spec.get("e", []), f"{where}.e", names)
+        var = self.number(spec.get("noise_variance", 1.0), f"{where}.noise_variance")
+        with self.at(where):
+            return LPVInputOutput(space, y, u, e, var, key)
+
+    def ltv_io(self, key: str, spec: Mapping, space: SchedulingSpace | None, where: str) -> LTVInputOutput:
+        self.keys(spec, where, {"type", "title", "a", "b", "input", "x0"}, {"a", "b"})
+        a = self.formulas(spec["a"], f"{where}.a", ["t"])
+        b = self.formulas(spec["b"], f"{where}.b", ["t"])
+        u = self.formulas([spec["input"]], f"{where}.input", ["t"])[0] if "input" in spec else None
+        x0 = self.numbers(spec["x0"], f"{where}.x0") if "x0" in spec else None
+        with self.at(where):
+            return LTVInputOutput(a, b, input=u, x0=x0, name=key)
+
+    def ltv_ss(self, key: str, spec: Mapping, space: SchedulingSpace | None, where: str) -> LTVStateSpace:
+        self.keys(spec, where, {"type", "title", "A", "B", "C", "input", "x0"}, {"A", "B", "C"})
+        mats = {}
+        for n in ("A", "B", "C"):
+            with self.at(f"{where}.{n}"):
+                mats[n] = FormulaMatrix.parse(spec[n], name=n, parameters=self.parameters, allowed=["t"])
+        u = self.formulas([spec["input"]], f"{where}.input", ["t"])[0] if "input" in spec else None
+        x0 = self.numbers(spec["x0"], f"{where}.x0") if "x0" in spec else None
+        with self.at(where):
+            return LTVStateSpace(mats["A"], mats["B"], mats["C"], input=u, x0=x0, name=key)
+
+
+def _kind(value: Any) -> str:
+    return {dict: "a table", list: "a list", str: "a string", bool: "a boolean"}.get(
+        type(value), type(value).__name__
+    )
+
+
+def loads_system(
+    text: str, *, origin: str = "<string>", parameters: Mapping[str, float] | None = None
+) -> SystemFile:
+    """Parse a model file from TOML text (``origin`` names it in errors)."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ModelFileError(f"{origin}: not valid TOML: {exc}") from exc
+    return _build(data, origin, parameters, None)
+
+
+def load_system(
+    source: str | Path, *, parameters: Mapping[str, float] | None = None
+) -> SystemFile:
+    """Load a model file, or an example system by name.
+
+    Parameters
+    ----------
+    source : str or Path
+        A path to a ``.toml`` file, or the name of an example system
+        (``lpvest systems`` lists them).
+    parameters : mapping, optional
+        Values overriding the file's ``[parameters]`` (e.g. ``{"rho": 5.0}``).
+
+    Examples
+    --------
+    >>> system = load_system("peixoto-ex2", parameters={"rho": 5.0})
+    >>> system.model().vertices.A[0]
+    array([[ 1.05,  0.35],
+           [-0.41, -0.25]])
+    """
+    from .catalog import find_system
+
+    path = find_system(source)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ModelFileError(f"{path}: cannot be read: {exc.strerror}") from exc
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ModelFileError(f"{path}: not valid TOML: {exc}") from exc
+    return _build(data, str(path), parameters, path)
+
+
+def _build(
+    data: dict, origin: str, overrides: Mapping[str, float] | None, path: Path | None
+) -> SystemFile:
+    r = _Reader(origin, {})
+    r.keys(data, "file", {"system", "parameters", "scheduling", "models"}, {"system", "models"})
+    sysmeta = r.table(data, "system", "system")
+    r.keys(sysmeta, "system", {"name", "title", "source", "description", "default"}, {"name", "title"})
+    params_tab = r.table(data, "parameters", "parameters", required=False)
+    params: dict[str, float] = {}
+    for k, v in params_tab.items():
+        if not k.isidentifier():
+            raise r.error(f"parameters.{k}", "is not a valid name")
+        params[k] = r.number(v, f"parameters.{k}")
+    for k, v in (overrides or {}).items():
+        if k not in params:
+            known = ", ".join(params) or "none"
+            raise r.error("parameters", f"no parameter {k!r} to override (known: {known})")
+        params[k] = float(v)
+    r.parameters = params
+    space = r.scheduling(data)
+    models_tab = r.table(data, "models", "models")
+    if not models_tab:
+        raise r.error("models", "expected at least one [models.NAME] table")
+    models = {key: r.model(key, spec, space) for key, spec in models_tab.items()}
+    default = r.string(sysmeta, "default", "system", next(iter(models)))
+    if default not in models:
+        raise r.error("system.default", f"no model {default!r} (models: {', '.join(models)})")
+    return SystemFile(
+        name=r.string(sysmeta, "name", "system"),
+        title=r.string(sysmeta, "title", "system"),
+        models=models,
+        default=default,
+        scheduling=space,
+        parameters=params,
+        source=r.string(sysmeta, "source", "system", ""),
+        description=r.string(sysmeta, "description", "system", ""),
+        path=path,
+    )
+
+
+# -- writing -----------------------------------------------------------------
+
+
+def _num(x: float) -> float | int:
+    return float(x)
+
+
+def _matrix_out(m: np.ndarray) -> list[list[float]]:
+    return [[_num(v) for v in row] for row in np.asarray(m)]
+
+
+def _basis_name(b: BasisFunction) -> str:
+    if isinstance(b, CallableBasis):
+        raise ModelFileError(
+            f"basis function {b.name!r} is a Python callable and cannot be written to a model file"
+        )
+    return b.name
+
+
+def _dependence_out(dep: AffineDependence, out: dict) -> None:
+    names = [_basis_name(b) for b in dep.basis]
+    if names:
+        out["basis"] = names
+    bounds = {
+        b.name: [_num(v) for v in b.declared_bounds]
+        for b in dep.basis
+        if isinstance(b, FormulaBasis) and b.declared_bounds is not None
+    }
+    if bounds:
+        out["bounds"] = bounds
+    for key, stack in dep.coefficients.items():
+        nonzero = [i for i in range(stack.shape[0]) if i == 0 or np.any(stack[i])]
+        if nonzero == [0]:
+            out[key] = _matrix_out(stack[0])
+        else:
+            out[key] = {dep.term_names[i]: _matrix_out(stack[i]) for i in nonzero}
+
+
+def _formula_out(e: Expression) -> float | str:
+    return e.value() if e.is_constant else e.source
+
+
+def _time_out(f: TimeFunction, what: str) -> float | str:
+    if f.expression is None:
+        raise ModelFileError(f"{what} is a Python callable and cannot be written to a model file")
+    return _formula_out(f.expression)
+
+
+def _map_out(m: SimplexMap) -> dict:
+    if isinstance(m, FormulaSimplexMap):
+        return {"kind": "formulas", "alpha": [_formula_out(f) for f in m.formulas]}
+    if isinstance(m, MultilinearSimplexMap):
+        return {
+            "kind": "multilinear",
+            "over": [_basis_name(c) for c in m.coordinates],
+            "lower": [_num(v) for v in m.lower],
+            "upper": [_num(v) for v in m.upper],
+        }
+    raise ModelFileError(f"simplex map {type(m).__name__} cannot be written to a model file")
+
+
+def _model_out(model: Model) -> dict:
+    if isinstance(model, AffineLPV):
+        out: dict[str, Any] = {"type": "affine"}
+        _dependence_out(model.dependence, out)
+        out.update(Q=_matrix_out(model.noise.Q), R=_matrix_out(model.noise.R), S=_matrix_out(model.noise.S))
+        out.update(x0=[_num(v) for v in model.x0], P0=_matrix_out(model.P0))
+        return out
+    if isinstance(model, PolytopicLPV):
+        out = {"type": "polytopic"}
+        if model.simplex_map is not None:
+            out["map"] = _map_out(model.simplex_map)
+        out["vertex"] = [
+            {n: _matrix_out(getattr(model.vertices, n)[i]) for n in POLYTOPIC_MATRICES}
+            for i in range(model.n_vertices)
+        ]
+        if model.affine is not None:
+            aff: dict[str, Any] = {}
+            _dependence_out(model.affine, aff)
+            out["affine"] = aff
+        return out
+    if isinstance(model, InnovationLPV):
+        out = {"type": "innovation"}
+        _dependence_out(model.dependence, out)
+        out["K"] = model.K.to_list()
+        out["innovation_covariance"] = _matrix_out(model.innovation_covariance)
+        out["x0"] = [_num(v) for v in model.x0]
+        return out
+    if isinstance(model, LPVInputOutput):
+        return {
+            "type": "lpv-io",
+            "y": [_formula_out(c) for c in model.y_coefficients],
+            "u": [_formula_out(c) for c in model.u_coefficients],
+            "e": [_formula_out(c) for c in model.e_coefficients],
+            "noise_variance": model.noise_variance,
+        }
+    if isinstance(model, LTVInputOutput):
+        out = {
+            "type": "ltv-io",
+            "a": [_time_out(f, f"a[{i}]") for i, f in enumerate(model.a)],
+            "b": [_time_out(f, f"b[{i}]") for i, f in enumerate(model.b)],
+        }
+        if model.input is not None:
+            out["input"] = _time_out(model.input, "input")
+        if model.x0 is not None:
+            out["x0"] = [_num(v) for v in model.x0]
+        return out
+    if isinstance(model, LTVStateSpace):
+        out = {"type": "ltv-ss"}
+        for n in ("A", "B", "C"):
+            fm = model.formulas[n]
+            if fm is None:
+                raise ModelFileError(f"{n}(t) is a Python callable and cannot be written to a model file")
+            out[n] = fm.to_list()
+        if model.input is not None:
+            out["input"] = _time_out(model.input, "input")
+        if model.x0 is not None:
+            out["x0"] = [_num(v) for v in model.x0]
+        return out
+    raise ModelFileError(f"{type(model).__name__} cannot be written to a model file")
+
+
+def dump_system(system: SystemFile) -> str:
+    """The system as TOML text. Matrices are written with their values (model
+    parameters already applied); loading the text gives the same models."""
+    import tomli_w
+
+    meta = {"name": system.name, "title": system.title, "default": system.default}
+    if system.source:
+        meta["source"] = system.source
+    if system.description:
+        meta["description"] = system.description
+    data: dict[str, Any] = {"system": meta}
+    if system.parameters:
+        data["parameters"] = dict(system.parameters)
+    if system.scheduling is not None:
+        s = system.scheduling
+        data["scheduling"] = {
+            "names": list(s.names),
+            "lower": [_num(v) for v in s.lower],
+            "upper": [_num(v) for v in s.upper],
+        }
+    data["models"] = {k: _model_out(m) for k, m in system.models.items()}
+    return tomli_w.dumps(data)
+
+
+def save_system(system: SystemFile, path: str | Path) -> Path:
+    """Write :func:`dump_system` to ``path``."""
+    path = Path(path)
+    path.write_text(dump_system(system), encoding="utf-8")
+    return path
+

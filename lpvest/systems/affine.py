@@ -1,0 +1,467 @@
+"""Affine LPV models: matrices affine in basis functions of the scheduling vector.
+
+:class:`AffineDependence` holds a set of named matrices
+``M(p) = M_0 + sum_i M_i psi_i(p)`` over a scheduling box; :class:`AffineLPV`
+is the discrete-time LPV state-space model with general noise of
+000_dc6273d4fec795cd.txt, eqs. (1)-(3)::
+
+    x_{t+1} = A(p_t) x_t + B(p_t) u_t + G(p_t) w_t
+    y_t     = C(p_t) x_t + D(p_t) u_t + H(p_t) v_t,   [w; v] ~ N(0, [[Q, S], [S^T, R]])
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from ..errors import DimensionError, ExpressionError
+from ..expressions import Expression
+from ..scheduling import BasisFunction, SchedulingSpace
+from ..validation import as_matrix, as_rng, as_signal, as_vector, check_positive_definite
+
+__all__ = [
+    "AffineDependence",
+    "AffineLPV",
+    "NoiseCovariance",
+    "StateSpaceMatrices",
+    "LPVTrajectory",
+    "CONSTANT_TERM",
+]
+
+#: The key of the constant term ``M_0`` in coefficient mappings and model files.
+CONSTANT_TERM = "1"
+
+MatrixSpec = np.ndarray | Sequence | Mapping[str, object]
+
+
+def _canonical(term: str) -> str:
+    return Expression.parse(term).source
+
+
+@dataclass(frozen=True, eq=False)
+class AffineDependence:
+    """Named matrices affine in basis functions of ``p`` over a scheduling box.
+
+    ``coefficients[name]`` has shape ``(1 + n_psi, rows, cols)``: the constant
+    term first, then one matrix per basis function (zeros where a matrix does
+    not depend on that function).
+
+    Examples
+    --------
+    >>> from lpvest.scheduling import SchedulingSpace, Monomial
+    >>> space = SchedulingSpace(["theta"], [-1], [1])
+    >>> dep = AffineDependence.build(space, [Monomial.component(0, space)],
+    ...     {"A": {"1": [[0.5]], "theta": [[0.25]]}})
+    >>> dep.evaluate([1.0])["A"]
+    array([[0.75]])
+    """
+
+    space: SchedulingSpace
+    basis: tuple[BasisFunction, ...]
+    coefficients: Mapping[str, np.ndarray]
+
+    def __post_init__(self) -> None:
+        n_terms = 1 + len(self.basis)
+        names = [b.name for b in self.basis]
+        if len(set(names)) != len(names):
+            raise ExpressionError(f"basis functions are not unique: {names}")
+        packed, slices = [], {}
+        col = 0
+        for key, stack in self.coefficients.items():
+            if stack.ndim != 3 or stack.shape[0] != n_terms:
+                raise DimensionError(
+                    f"coefficients of {key} have shape {stack.shape}; "
+                    f"expected ({n_terms}, rows, cols)"
+                )
+            stack.setflags(write=False)
+            size = stack.shape[1] * stack.shape[2]
+            packed.append(stack.reshape(n_terms, size))
+            slices[key] = (col, col + size, stack.shape[1:])
+            col += size
+        pk = np.concatenate(packed, axis=1) if packed else np.zeros((n_terms, 0))
+        object.__setattr__(self, "_packed", pk)
+        object.__setattr__(self, "_slices", slices)
+
+    # -- construction ---------------------------------------------------------
+    @classmethod
+    def build(
+        cls,
+        space: SchedulingSpace,
+        basis: Sequence[BasisFunction],
+        matrices: Mapping[str, MatrixSpec],
+        shapes: Mapping[str, tuple[int | None, int | None]] | None = None,
+    ) -> AffineDependence:
+        """Build from readable specifications.
+
+        Parameters
+        ----------
+        space : SchedulingSpace
+        basis : sequence of BasisFunction, length n_psi
+        matrices : mapping of str to array_like or mapping
+            Each matrix is either an array (constant in ``p``) or a mapping from
+            term names (``"1"`` for the constant term, or a basis function's
+            name) to coefficient matrices; absent terms are zero.
+        shapes : mapping of str to (rows, cols), optional
+            Expected shapes (``None`` = any) checked with the matrix's name.
+        """
+        basis = tuple(basis)
+        index = {CONSTANT_TERM: 0}
+        for i, b in enumerate(basis):
+            index[b.name] = i + 1
+            try:
+                index.setdefault(_canonical(b.name), i + 1)
+            except ExpressionError:
+                pass
+        coeffs: dict[str, np.ndarray] = {}
+        for key, spec in matrices.items():
+            shape = (shapes or {}).get(key)
+            if isinstance(spec, Mapping):
+                terms: dict[int, np.ndarray] = {}
+                for term, value in spec.items():
+                    pos = index.get(str(term))
+                    if pos is None:
+                        try:
+                            pos = index.get(_canonical(str(term)))
+                        except ExpressionError:
+                            pos = None
+                    if pos is None:
+                        known = ", ".join([CONSTANT_TERM] + [b.name for b in basis])
+                        raise ExpressionError(
+                            f"{key}: term {term!r} is not a basis function (known: {known})"
+                        )
+                    if pos in terms:
+                        raise ExpressionError(f"{key}: term {term!r} is given twice")
+                    label = f"{key}[{term}]"
+                    terms[pos] = as_matrix(value, label, shape)
+                    shape = terms[pos].shape
+                if not terms:
+                    raise DimensionError(f"{key} has no terms")
+                stack = np.zeros((1 + len(basis), *shape))  # type: ignore[misc]
+                for pos, m in terms.items():
+                    stack[pos] = m
+            else:
+                m = as_matrix(spec, key, shape)
+                stack = np.zeros((1 + len(basis), *m.shape))
+                stack[0] = m
+            coeffs[key] = stack
+        return cls(space, basis, coeffs)
+
+    # -- evaluation -----------------------------------------------------------
+    @property
+    def term_names(self) -> tuple[str, ...]:
+        return (CONSTANT_TERM, *(b.name for b in self.basis))
+
+    def shape(self, name: str) -> tuple[int, int]:
+        return self._slices[name][2]  # type: ignore[attr-defined,no-any-return]
+
+    def psi(self, p: np.ndarray, *, check: bool = True) -> np.ndarray:
+        """``[1, psi_1(p), ..., psi_n(p)]`` for one scheduling vector."""
+        p = self.space.check(p) if check else np.asarray(p, dtype=float)
+        out = np.empty(1 + len(self.basis))
+        out[0] = 1.0
+        for i, b in enumerate(self.basis):
+            out[i + 1] = b(p)
+        return out
+
+    def psi_batch(self, p: np.ndarray, *, check: bool = True) -> np.ndarray:
+        """``psi`` for a trajectory ``p`` of shape ``(T, n_p)``, shape ``(T, 1 + n_psi)``."""
+        p = as_signal(p, "p", self.space.dim)
+        if check:
+            for t in range(p.shape[0]):
+                self.space.check(p[t], what=f"scheduling value at t={t}:")
+        out = np.empty((p.shape[0], 1 + len(self.basis)))
+        out[:, 0] = 1.0
+        for i, b in enumerate(self.basis):
+            out[:, i + 1] = b.evaluate(p)
+        return out
+
+    def evaluate(self, p: np.ndarray, *, check: bool = True) -> dict[str, np.ndarray]:
+        """Every matrix at one scheduling vector ``p`` (one product for all)."""
+        flat = self.psi(p, check=check) @ self._packed  # type: ignore[attr-defined]
+        return {k: flat[a:b].reshape(s) for k, (a, b, s) in self._slices.items()}  # type: ignore[attr-defined]
+
+    def evaluate_batch(self, p: np.ndarray, *, check: bool = True) -> dict[str, np.ndarray]:
+        """Every matrix along a trajectory ``p`` (T, n_p): arrays ``(T, rows, cols)``."""
+        flat = self.psi_batch(p, check=check) @ self._packed  # type: ignore[attr-defined]
+        T = flat.shape[0]
+        return {k: flat[:, a:b].reshape(T, *s) for k, (a, b, s) in self._slices.items()}  # type: ignore[attr-defined]
+
+    def subset(self, names: Sequence[str]) -> AffineDependence:
+        """The dependence restricted to ``names``."""
+        return AffineDependence(self.space, self.basis, {n: self.coefficients[n] for n in names})
+
+
+class StateSpaceMatrices(NamedTuple):
+    """The matrices of (1) at one scheduling value (or stacked along time)."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    G: np.ndarray
+    H: np.ndarray
+
+
+class LPVTrajectory(NamedTuple):
+    """A simulated trajectory; row ``t`` holds time ``t``."""
+
+    x: np.ndarray  #: states, shape (T, n_x)
+    y: np.ndarray  #: outputs, shape (T, n_y)
+    w: np.ndarray  #: process noise, shape (T, n_w)
+    v: np.ndarray  #: measurement noise, shape (T, n_v)
+
+
+@dataclass(frozen=True, eq=False)
+class NoiseCovariance:
+    """Joint covariance ``[[Q, S], [S^T, R]]`` of ``(w_t, v_t)``, eq. (2).
+
+    The joint matrix must be symmetric positive definite (checked with a
+    tolerance relative to its scale).
+    """
+
+    Q: np.ndarray
+    S: np.ndarray
+    R: np.ndarray
+
+    def __init__(self, Q: object, R: object, S: object | None = None) -> None:
+        q = as_matrix(Q, "Q")
+        r = as_matrix(R, "R")
+        if q.shape[0] != q.shape[1]:
+            raise DimensionError(f"Q has shape {q.shape}; expected a square matrix")
+        if r.shape[0] != r.shape[1]:
+            raise DimensionError(f"R has shape {r.shape}; expected a square matrix")
+        s = np.zeros((q.shape[0], r.shape[0])) if S is None else as_matrix(S, "S", (q.shape[0], r.shape[0]))
+        joint = np.block([[q, s], [s.T, r]])
+        check_positive_definite(q, "Q")
+        check_positive_definite(r, "R")
+        check_positive_definite(joint, "the joint noise covariance [[Q, S], [S^T, R]]")
+        for name, m in (("Q", q), ("S", s), ("R", r)):
+            m.setflags(write=False)
+            object.__setattr__(self, name, m)
+
+    @property
+    def joint(self) -> np.ndarray:
+        return np.block([[self.Q, self.S], [self.S.T, self.R]])
+
+    def sample(self, rng: np.random.Generator, size: int) -> tuple[np.ndarray, np.ndarray]:
+        """Draw ``size`` samples of ``(w, v)``."""
+        L = np.linalg.cholesky(self.joint)
+        z = rng.standard_normal((size, L.shape[0])) @ L.T
+        nw = self.Q.shape[0]
+        return z[:, :nw], z[:, nw:]
+
+
+_MATRIX_NAMES = ("A", "B", "C", "D", "G", "H")
+
+
+@dataclass(frozen=True, eq=False)
+class AffineLPV:
+    """Discrete-time LPV state-space model with general noise, eqs. (1)-(3) of
+    000_dc6273d4fec795cd.txt.
+
+    Build one with :meth:`from_matrices`. ``x0`` and ``P0`` are the mean and
+    covariance of the initial state (default: known zero state, as the paper
+    assumes).
+
+    Examples
+    --------
+    >>> from lpvest.scheduling import SchedulingSpace, Monomial
+    >>> space = SchedulingSpace(["p"], [-1], [1])
+    >>> model = AffineLPV.from_matrices(space, [Monomial.component(0, space)],
+    ...     A={"1": [[0.5]], "p": [[0.2]]}, C=[[1.0]], Q=[[0.1]], R=[[0.01]])
+    >>> model.at([0.5]).A
+    array([[0.6]])
+    >>> traj = model.simulate(np.full((100, 1), 0.5), rng=0)
+    >>> traj.y.shape
+    (100, 1)
+    """
+
+    dependence: AffineDependence
+    noise: NoiseCovariance
+    x0: np.ndarray
+    P0: np.ndarray
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        dep = self.dependence
+        missing = [n for n in _MATRIX_NAMES if n not in dep.coefficients]
+        if missing:
+            raise DimensionError(f"AffineLPV needs matrices {missing}")
+        nx = dep.shape("A")[0]
+        nu = dep.shape("B")[1]
+        ny = dep.shape("C")[0]
+        nw, nv = self.noise.Q.shape[0], self.noise.R.shape[0]
+        expected = {
+            "A": (nx, nx),
+            "B": (nx, nu),
+            "C": (ny, nx),
+            "D": (ny, nu),
+            "G": (nx, nw),
+            "H": (ny, nv),
+        }
+        for n, shp in expected.items():
+            if dep.shape(n) != shp:
+                raise DimensionError(f"{n} has shape {dep.shape(n)}; expected {shp}")
+        if self.x0.shape != (nx,):
+            raise DimensionError(f"x0 has shape {self.x0.shape}; expected ({nx},)")
+        if self.P0.shape != (nx, nx):
+            raise DimensionError(f"P0 has shape {self.P0.shape}; expected ({nx}, {nx})")
+
+    @classmethod
+    def from_matrices(
+        cls,
+        space: SchedulingSpace,
+        basis: Sequence[BasisFunction],
+        *,
+        A: MatrixSpec,
+        C: MatrixSpec,
+        Q: object,
+        R: object,
+        B: MatrixSpec | None = None,
+        D: MatrixSpec | None = None,
+        G: MatrixSpec | None = None,
+        H: MatrixSpec | None = None,
+        S: object | None = None,
+        x0: object | None = None,
+        P0: object | None = None,
+        name: str = "",
+    ) -> AffineLPV:
+        """Build the model; each matrix is an array (constant) or a mapping of
+        term name to coefficient (see :meth:`AffineDependence.build`).
+
+        Defaults: no input (``B``, ``D`` with zero columns), ``G = I``,
+        ``H = I``, ``S = 0``, ``x0 = 0``, ``P0 = 0``.
+        """
+        noise = NoiseCovariance(Q, R, S)
+        nw, nv = noise.Q.shape[0], noise.R.shape[0]
+        pre = AffineDependence.build(space, basis, {"A": A, "C": C})
+        nx, ny = pre.shape("A")[0], pre.shape("C")[0]
+        if pre.shape("A") != (nx, nx):
+            raise DimensionError(f"A has shape {pre.shape('A')}; expected a square matrix")
+        if B is not None:
+            nu = AffineDependence.build(space, basis, {"B": B}, {"B": (nx, None)}).shape("B")[1]
+        elif D is not None:
+            nu = AffineDependence.build(space, basis, {"D": D}, {"D": (ny, None)}).shape("D")[1]
+        else:
+            nu = 0
+        specs = {
+            "A": A,
+            "B": np.zeros((nx, nu)) if B is None else B,
+            "C": C,
+            "D": np.zeros((ny, nu)) if D is None else D,
+            "G": np.eye(nx) if G is None else G,
+            "H": np.eye(ny) if H is None else H,
+        }
+        shapes = {
+            "A": (nx, nx),
+            "B": (nx, nu),
+            "C": (ny, nx),
+            "D": (ny, nu),
+            "G": (nx, nw),
+            "H": (ny, nv),
+        }
+        dep = AffineDependence.build(space, basis, specs, shapes)
+        x0v = np.zeros(nx) if x0 is None else as_vector(x0, "x0", nx)
+        P0m = np.zeros((nx, nx)) if P0 is None else as_matrix(P0, "P0", (nx, nx))
+        if P0 is not None:
+            P0m = check_positive_definite(P0m, "P0", semidefinite=True)
+        return cls(dep, noise, x0v, P0m, name)
+
+    # -- dimensions -----------------------------------------------------------
+    @property
+    def space(self) -> SchedulingSpace:
+        return self.dependence.space
+
+    @property
+    def basis(self) -> tuple[BasisFunction, ...]:
+        return self.dependence.basis
+
+    @property
+    def nx(self) -> int:
+        return self.dependence.shape("A")[0]
+
+    @property
+    def nu(self) -> int:
+        return self.dependence.shape("B")[1]
+
+    @property
+    def ny(self) -> int:
+        return self.dependence.shape("C")[0]
+
+    @property
+    def nw(self) -> int:
+        return self.noise.Q.shape[0]
+
+    @property
+    def nv(self) -> int:
+        return self.noise.R.shape[0]
+
+    @property
+    def n_p(self) -> int:
+        return self.space.dim
+
+    # -- evaluation -----------------------------------------------------------
+    def at(self, p: object, *, check: bool = True) -> StateSpaceMatrices:
+        """The matrices at one scheduling vector ``p`` (range-checked)."""
+        m = self.dependence.evaluate(np.asarray(p, dtype=float), check=check)
+        return StateSpaceMatrices(*(m[n] for n in _MATRIX_NAMES))
+
+    def at_batch(self, p: object, *, check: bool = True) -> StateSpaceMatrices:
+        """The matrices along a scheduling trajectory ``p`` of shape (T, n_p),
+        each stacked to shape ``(T, rows, cols)``."""
+        m = self.dependence.evaluate_batch(np.asarray(p, dtype=float), check=check)
+        return StateSpaceMatrices(*(m[n] for n in _MATRIX_NAMES))
+
+    # -- simulation -----------------------------------------------------------
+    def simulate(
+        self,
+        p: object,
+        u: object | None = None,
+        *,
+        w: object | None = None,
+        v: object | None = None,
+        x0: object | None = None,
+        rng: np.random.Generator | int | None = None,
+    ) -> LPVTrajectory:
+        """Simulate (1) along the scheduling trajectory ``p``.
+
+        Parameters
+        ----------
+        p : array_like, shape (T, n_p)
+            Scheduling trajectory (each sample range-checked).
+        u : array_like, shape (T, n_u), optional
+            Input (zero when omitted).
+        w, v : array_like, shapes (T, n_w) and (T, n_v), optional
+            Noise sequences; both or neither. When omitted they are drawn from
+            ``N(0, Sigma)`` with ``rng``.
+        x0 : array_like, shape (n_x,), optional
+            Initial state. Default: the model's mean ``x0`` when the noise is
+            given, a draw from ``N(x0, P0)`` when the noise is drawn.
+        rng : numpy.random.Generator or int, optional
+            Random source (or its seed) for the noise and the initial state.
+        """
+        p = as_signal(p, "p", self.n_p)
+        T = p.shape[0]
+        u = as_signal(u if u is not None else np.zeros((T, self.nu)), "u", self.nu, T)
+        if (w is None) != (v is None):
+            raise DimensionError("give both noise sequences w and v, or neither")
+        if w is None:
+            gen = as_rng(rng)
+            w, v = self.noise.sample(gen, T)
+            if x0 is None:
+                x0 = gen.multivariate_normal(self.x0, self.P0) if np.any(self.P0) else self.x0
+        else:
+            w = as_signal(w, "w", self.nw, T)
+            v = as_signal(v, "v", self.nv, T)
+        x = self.x0 if x0 is None else as_vector(x0, "x0", self.nx)
+        m = self.at_batch(p)
+        X = np.empty((T, self.nx))
+        Y = np.empty((T, self.ny))
+        for t in range(T):
+            X[t] = x
+            Y[t] = m.C[t] @ x + m.D[t] @ u[t] + m.H[t] @ v[t]
+            x = m.A[t] @ x + m.B[t] @ u[t] + m.G[t] @ w[t]
+        return LPVTrajectory(X, Y, np.asarray(w), np.asarray(v))

@@ -1,0 +1,293 @@
+"""LPV models in innovation form with a given gain, and LPV input-output models.
+
+:class:`InnovationLPV` is (4a)-(4b) of 000_dc6273d4fec795cd.txt with the gain
+given rather than computed::
+
+    x_{t+1} = A(p_t) x_t + B(p_t) u_t + K_t e_t,   y_t = C(p_t) x_t + D(p_t) u_t + e_t,
+
+with ``e_t ~ N(0, Omega)``. The same ``e`` drives state and output, so it does
+not fit :class:`~lpvest.systems.AffineLPV` (its joint covariance would be
+singular). ``K_t`` is a matrix of formulas that may depend rationally on
+shifted scheduling values, as in realization (21b) where
+``K_t = (1 - p_{t+1}) / p_{t+1}``; a constant ``K`` gives (21c).
+
+:class:`LPVInputOutput` is the SISO difference equation (21a)::
+
+    y_t = sum_{i>=1} a_i(p_t) y_{t-i} + sum_{i>=0} b_i(p_t) u_{t-i} + e_t + sum_{i>=1} c_i(p_t) e_{t-i}.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from ..errors import DimensionError, ExpressionError, NumericalError
+from ..expressions import Expression, FormulaMatrix, shift_name
+from ..scheduling import SchedulingSpace
+from ..validation import as_matrix, as_rng, as_signal, as_vector, check_positive_definite
+from .affine import AffineDependence
+
+__all__ = ["InnovationLPV", "LPVInputOutput", "InnovationTrajectory", "scheduling_window"]
+
+
+class InnovationTrajectory(NamedTuple):
+    """A simulated trajectory; row ``t`` holds time ``t``."""
+
+    x: np.ndarray  #: states, shape (T, n_x) (empty for input-output models)
+    y: np.ndarray  #: outputs, shape (T, n_y)
+    e: np.ndarray  #: innovations, shape (T, n_y)
+
+
+def scheduling_window(shifts: dict[str, set[int]]) -> tuple[int, int]:
+    """``(lookback, lookahead)``: how many scheduling samples before ``t`` and
+    after ``t`` a set of formulas needs."""
+    ks = [k for s in shifts.values() for k in s] or [0]
+    return max(0, -min(ks)), max(0, max(ks))
+
+
+def _window_values(space: SchedulingSpace, p: np.ndarray, lookback: int, T: int) -> dict:
+    """Values of every (shifted) scheduling name along ``t = 0..T-1``; ``p`` holds
+    ``lookback`` samples before ``t = 0``."""
+    vals = {}
+    for j, n in enumerate(space.names):
+        for k in range(-lookback, p.shape[0] - lookback - T + 1):
+            seg = p[lookback + k : lookback + k + T, j]
+            vals[n if k == 0 else shift_name(n, k)] = seg
+    return vals
+
+
+@dataclass(frozen=True, eq=False)
+class InnovationLPV:
+    """LPV state-space model in innovation form with a given gain formula.
+
+    Parameters
+    ----------
+    dependence : AffineDependence
+        ``A, B, C, D`` affine in basis functions of ``p_t``.
+    K : FormulaMatrix, shape (n_x, n_y)
+        The gain; its formulas may use ``shift(p, k)`` for ``p_{t+k}``.
+    innovation_covariance : array_like, shape (n_y, n_y)
+        ``Omega``, positive definite.
+    x0 : array_like, shape (n_x,), optional
+        Initial state (default zero).
+    """
+
+    dependence: AffineDependence
+    K: FormulaMatrix
+    innovation_covariance: np.ndarray
+    x0: np.ndarray
+    name: str = ""
+
+    def __init__(
+        self,
+        dependence: AffineDependence,
+        K: FormulaMatrix,
+        innovation_covariance: object,
+        x0: object | None = None,
+        name: str = "",
+    ) -> None:
+        for n in ("A", "B", "C", "D"):
+            if n not in dependence.coefficients:
+                raise DimensionError(f"InnovationLPV needs matrix {n}")
+        nx = dependence.shape("A")[0]
+        ny = dependence.shape("C")[0]
+        nu = dependence.shape("B")[1]
+        expected = {"A": (nx, nx), "B": (nx, nu), "C": (ny, nx), "D": (ny, nu)}
+        for n, shp in expected.items():
+            if dependence.shape(n) != shp:
+                raise DimensionError(f"{n} has shape {dependence.shape(n)}; expected {shp}")
+        if K.shape != (nx, ny):
+            raise DimensionError(f"K has shape {K.shape}; expected ({nx}, {ny})")
+        unknown = set(K.shifts) - set(dependence.space.names)
+        if unknown:
+            raise ExpressionError(f"K uses unknown name {sorted(unknown)[0]!r}")
+        omega = check_positive_definite(
+            as_matrix(innovation_covariance, "innovation covariance", (ny, ny)),
+            "innovation covariance",
+        )
+        x0v = np.zeros(nx) if x0 is None else as_vector(x0, "x0", nx)
+        object.__setattr__(self, "dependence", dependence)
+        object.__setattr__(self, "K", K)
+        object.__setattr__(self, "innovation_covariance", omega)
+        object.__setattr__(self, "x0", x0v)
+        object.__setattr__(self, "name", name)
+
+    @property
+    def space(self) -> SchedulingSpace:
+        return self.dependence.space
+
+    @property
+    def nx(self) -> int:
+        return self.dependence.shape("A")[0]
+
+    @property
+    def nu(self) -> int:
+        return self.dependence.shape("B")[1]
+
+    @property
+    def ny(self) -> int:
+        return self.dependence.shape("C")[0]
+
+    @property
+    def n_p(self) -> int:
+        return self.space.dim
+
+    @property
+    def window(self) -> tuple[int, int]:
+        """``(lookback, lookahead)`` scheduling samples the gain needs."""
+        return scheduling_window(self.K.shifts)
+
+    def simulate(
+        self,
+        p: object,
+        u: object | None = None,
+        *,
+        e: object | None = None,
+        x0: object | None = None,
+        rng: np.random.Generator | int | None = None,
+    ) -> InnovationTrajectory:
+        """Simulate for ``T`` steps.
+
+        Parameters
+        ----------
+        p : array_like, shape (lookback + T + lookahead, n_p)
+            Scheduling trajectory, with the samples the gain needs before
+            ``t = 0`` and after ``t = T - 1`` (see :attr:`window`; for (21b)
+            one extra sample at the end).
+        u : array_like, shape (T, n_u), optional
+        e : array_like, shape (T, n_y), optional
+            Innovations; drawn from ``N(0, Omega)`` with ``rng`` when omitted.
+        """
+        back, ahead = self.window
+        p = as_signal(p, "p", self.n_p)
+        T = p.shape[0] - back - ahead
+        if T < 1:
+            raise DimensionError(
+                f"p has {p.shape[0]} samples; the gain needs {back} before and {ahead} after "
+                "the simulated steps"
+            )
+        for t in range(p.shape[0]):
+            self.space.check(p[t], what=f"scheduling value at sample {t}:")
+        u = as_signal(u if u is not None else np.zeros((T, self.nu)), "u", self.nu, T)
+        if e is None:
+            L = np.linalg.cholesky(self.innovation_covariance)
+            e = as_rng(rng).standard_normal((T, self.ny)) @ L.T
+        else:
+            e = as_signal(e, "e", self.ny, T)
+        m = self.dependence.evaluate_batch(p[back : back + T], check=False)
+        K = self.K.evaluate(_window_values(self.space, p, back, T))
+        K = np.broadcast_to(K, (T, self.nx, self.ny))
+        if not np.all(np.isfinite(K)):
+            t = int(np.argwhere(~np.isfinite(K))[0][0])
+            raise NumericalError(
+                f"the gain K is not finite at t={t} (formula {self.K.entries[0][0].text!r}, "
+                f"scheduling {p[back + t]}...): the realization is not defined there"
+            )
+        x = self.x0 if x0 is None else as_vector(x0, "x0", self.nx)
+        X = np.empty((T, self.nx))
+        Y = np.empty((T, self.ny))
+        for t in range(T):
+            X[t] = x
+            Y[t] = m["C"][t] @ x + m["D"][t] @ u[t] + e[t]
+            x = m["A"][t] @ x + m["B"][t] @ u[t] + K[t] @ e[t]
+        return InnovationTrajectory(X, Y, np.asarray(e))
+
+
+@dataclass(frozen=True, eq=False)
+class LPVInputOutput:
+    """SISO LPV input-output (ARMAX-type) model with scheduling-dependent
+    coefficients, e.g. (21a): ``y = ["-p"]``, ``u = [0, "p"]``, ``e = [1]``.
+
+    Parameters
+    ----------
+    space : SchedulingSpace
+    y_coefficients : sequence of formula
+        ``a_1, a_2, ...``: coefficients of ``y_{t-1}, y_{t-2}, ...``.
+    u_coefficients : sequence of formula
+        ``b_0, b_1, ...``: coefficients of ``u_t, u_{t-1}, ...``.
+    e_coefficients : sequence of formula
+        ``c_1, c_2, ...``: coefficients of ``e_{t-1}, ...`` (``e_t`` has 1).
+    noise_variance : float
+        Variance of the white noise ``e_t``.
+    """
+
+    space: SchedulingSpace
+    y_coefficients: tuple[Expression, ...]
+    u_coefficients: tuple[Expression, ...]
+    e_coefficients: tuple[Expression, ...]
+    noise_variance: float
+    name: str = ""
+
+    def __init__(
+        self,
+        space: SchedulingSpace,
+        y_coefficients: Sequence[str | float | Expression],
+        u_coefficients: Sequence[str | float | Expression],
+        e_coefficients: Sequence[str | float | Expression] = (),
+        noise_variance: float = 1.0,
+        name: str = "",
+    ) -> None:
+        def parse(seq: Sequence, label: str) -> tuple[Expression, ...]:
+            out = []
+            for i, c in enumerate(seq):
+                ex = c if isinstance(c, Expression) else Expression.parse(c, allowed=space.names)
+                if any(k != 0 for ks in ex.shifts.values() for k in ks):
+                    raise ExpressionError(f"{label}[{i}] = {ex.text!r}: coefficients depend on p_t only")
+                out.append(ex)
+            return tuple(out)
+
+        var = float(noise_variance)
+        if not var > 0 or not np.isfinite(var):
+            raise ExpressionError(f"noise_variance must be positive; found {noise_variance}")
+        object.__setattr__(self, "space", space)
+        object.__setattr__(self, "y_coefficients", parse(y_coefficients, "y"))
+        object.__setattr__(self, "u_coefficients", parse(u_coefficients, "u"))
+        object.__setattr__(self, "e_coefficients", parse(e_coefficients, "e"))
+        object.__setattr__(self, "noise_variance", var)
+        object.__setattr__(self, "name", name)
+
+    def simulate(
+        self,
+        p: object,
+        u: object,
+        *,
+        e: object | None = None,
+        rng: np.random.Generator | int | None = None,
+    ) -> InnovationTrajectory:
+        """Simulate from rest (all signals zero before ``t = 0``).
+
+        ``p`` (T, n_p), ``u`` (T,) or (T, 1), ``e`` (T,) or (T, 1) (drawn from
+        ``N(0, noise_variance)`` with ``rng`` when omitted).
+        """
+        p = as_signal(p, "p", self.space.dim)
+        T = p.shape[0]
+        for t in range(T):
+            self.space.check(p[t], what=f"scheduling value at t={t}:")
+        u = as_signal(u, "u", 1, T)[:, 0]
+        if e is None:
+            e = as_rng(rng).standard_normal(T) * np.sqrt(self.noise_variance)
+        else:
+            e = as_signal(e, "e", 1, T)[:, 0]
+        vals = self.space.as_dict(p)
+
+        def coeffs(seq: tuple[Expression, ...]) -> np.ndarray:
+            return np.array([np.broadcast_to(c.evaluate(vals), (T,)) for c in seq]).reshape(len(seq), T)
+
+        a, b, c = coeffs(self.y_coefficients), coeffs(self.u_coefficients), coeffs(self.e_coefficients)
+        y = np.zeros(T)
+        for t in range(T):
+            acc = e[t]
+            for i in range(a.shape[0]):
+                if t - 1 - i >= 0:
+                    acc += a[i, t] * y[t - 1 - i]
+            for i in range(b.shape[0]):
+                if t - i >= 0:
+                    acc += b[i, t] * u[t - i]
+            for i in range(c.shape[0]):
+                if t - 1 - i >= 0:
+                    acc += c[i, t] * e[t - 1 - i]
+            y[t] = acc
+        return InnovationTrajectory(np.zeros((T, 0)), y[:, None], e[:, None])

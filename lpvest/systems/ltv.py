@@ -1,0 +1,314 @@
+"""Continuous-time SISO linear time-varying systems (002_54d0f33f85fddffe.txt).
+
+- :class:`LTVStateSpace`: ``x' = A(t) x + B(t) u``, ``y = C(t) x``, eq. (1).
+- :class:`LTVInputOutput`: ``y^(n) + sum_{i<n} a_i(t) y^(i) + sum_{i<=m} b_i(t) u^(i) = 0``,
+  eq. (3) with ``a_n = 1``; :meth:`LTVInputOutput.to_state_space` realises it.
+
+Coefficients are :class:`TimeFunction` objects: formulas of ``t`` (with exact
+symbolic derivatives) or Python callables.
+
+Examples
+--------
+>>> io = LTVInputOutput(a=["t**2 + 1", 1], b=["-1/(t + 1000)"])
+>>> ss = io.to_state_space()
+>>> ss.A(2.0)
+array([[ 0.,  1.],
+       [-5., -1.]])
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from ..errors import DimensionError, ExpressionError
+from ..expressions import Expression, FormulaMatrix
+from ..validation import as_vector, check_finite
+
+__all__ = ["TimeFunction", "LTVStateSpace", "LTVInputOutput", "LTVTrajectory"]
+
+
+@dataclass(frozen=True, eq=False)
+class TimeFunction:
+    """A scalar function of time: a formula of ``t`` or a Python callable.
+
+    Formulas carry exact derivatives; a callable may be given its derivative,
+    otherwise it is differentiated by the complex step (exact to round-off for
+    functions built from analytic numpy operations).
+    """
+
+    fn: Callable[[np.ndarray], np.ndarray]
+    text: str
+    expression: Expression | None = None
+    _derivative: Callable[[np.ndarray], np.ndarray] | None = None
+
+    @classmethod
+    def of(cls, value: TimeFunction | str | float | int | Callable) -> TimeFunction:
+        """A :class:`TimeFunction` from a formula (``"t**2 + 1"``), a number, a
+        callable of ``t`` or a :class:`TimeFunction`."""
+        if isinstance(value, TimeFunction):
+            return value
+        if isinstance(value, Expression):
+            expr = value
+        elif isinstance(value, str | int | float) and not isinstance(value, bool):
+            expr = Expression.parse(value, allowed=["t"])
+        elif callable(value):
+            name = getattr(value, "__name__", "callable")
+            return cls(value, f"<{name}>")
+        else:
+            raise ExpressionError(f"{value!r} is neither a formula of t, a number nor a callable")
+        return cls(lambda t, _e=expr: _e.evaluate({"t": t}), expr.text, expr)
+
+    @classmethod
+    def from_callable(
+        cls, fn: Callable, *, derivative: Callable | None = None, name: str = ""
+    ) -> TimeFunction:
+        return cls(fn, name or f"<{getattr(fn, '__name__', 'callable')}>", None, derivative)
+
+    @property
+    def is_constant(self) -> bool:
+        return self.expression is not None and self.expression.is_constant
+
+    def __call__(self, t: float | np.ndarray) -> np.ndarray:
+        t_arr = np.asarray(t, dtype=float)
+        return np.broadcast_to(np.asarray(self.fn(t_arr), dtype=float), t_arr.shape).copy()
+
+    def derivative(self) -> TimeFunction:
+        """The time derivative as a :class:`TimeFunction`."""
+        if self.expression is not None:
+            d = self.expression.derivative("t")
+            return TimeFunction(lambda t, _e=d: _e.evaluate({"t": t}), d.source, d)
+        if self._derivative is not None:
+            return TimeFunction.from_callable(self._derivative, name=f"d/dt {self.text}")
+
+        def complex_step(t: np.ndarray, _f=self.fn) -> np.ndarray:
+            h = 1e-20
+            try:
+                val = np.asarray(_f(np.asarray(t, dtype=float) + 1j * h))
+            except TypeError as exc:
+                raise ExpressionError(
+                    f"cannot differentiate {self.text}: give its derivative explicitly"
+                ) from exc
+            if not np.iscomplexobj(val):
+                raise ExpressionError(f"cannot differentiate {self.text}: give its derivative explicitly")
+            return val.imag / h
+
+        return TimeFunction.from_callable(complex_step, name=f"d/dt {self.text}")
+
+    def __repr__(self) -> str:
+        return f"TimeFunction({self.text!r})"
+
+
+class LTVTrajectory(NamedTuple):
+    """A simulated continuous-time trajectory at the sample times ``t``."""
+
+    t: np.ndarray  #: sample times, shape (T,)
+    x: np.ndarray  #: states, shape (T, n)
+    y: np.ndarray  #: output, shape (T,)
+    u: np.ndarray  #: input, shape (T,)
+
+
+MatrixFunction = Callable[[float], np.ndarray]
+
+
+def _matrix_function(spec: object, name: str) -> tuple[MatrixFunction, FormulaMatrix | None]:
+    if callable(spec) and not isinstance(spec, FormulaMatrix):
+        return (lambda t, _f=spec: np.asarray(_f(t), dtype=float)), None
+    fm = spec if isinstance(spec, FormulaMatrix) else FormulaMatrix.parse(spec, name=name, allowed=["t"])
+    return (lambda t, _m=fm: _m.evaluate({"t": np.asarray(t, dtype=float)})), fm
+
+
+@dataclass(frozen=True, eq=False)
+class LTVStateSpace:
+    """``x' = A(t) x + B(t) u``, ``y = C(t) x`` (SISO), eq. (1).
+
+    ``A``, ``B``, ``C`` are matrices of formulas of ``t`` (lists of rows) or
+    callables ``t -> array``. ``input`` (a :class:`TimeFunction`) and ``x0``
+    are the default input and initial state for :meth:`simulate`.
+    """
+
+    A: MatrixFunction
+    B: MatrixFunction
+    C: MatrixFunction
+    n: int
+    formulas: dict[str, FormulaMatrix | None]
+    input: TimeFunction | None = None
+    x0: np.ndarray | None = None
+    name: str = ""
+
+    def __init__(
+        self,
+        A: object,
+        B: object,
+        C: object,
+        *,
+        input: object | None = None,  # noqa: A002 (the paper's name)
+        x0: object | None = None,
+        name: str = "",
+    ) -> None:
+        fa, ma = _matrix_function(A, "A")
+        fb, mb = _matrix_function(B, "B")
+        fc, mc = _matrix_function(C, "C")
+        a0 = fa(0.0)
+        n = a0.shape[0]
+        for label, f, shp in (("A", fa, (n, n)), ("B", fb, (n, 1)), ("C", fc, (1, n))):
+            val = np.asarray(f(0.0))
+            if val.shape != shp:
+                raise DimensionError(f"{label}(t) has shape {val.shape}; expected {shp}")
+        object.__setattr__(self, "A", fa)
+        object.__setattr__(self, "B", fb)
+        object.__setattr__(self, "C", fc)
+        object.__setattr__(self, "n", n)
+        object.__setattr__(self, "formulas", {"A": ma, "B": mb, "C": mc})
+        object.__setattr__(self, "input", None if input is None else TimeFunction.of(input))
+        object.__setattr__(self, "x0", None if x0 is None else as_vector(x0, "x0", n))
+        object.__setattr__(self, "name", name)
+
+    def simulate(
+        self,
+        t: object,
+        *,
+        u: object | None = None,
+        x0: object | None = None,
+        rtol: float = 1e-12,
+        atol: float = 1e-14,
+    ) -> LTVTrajectory:
+        """Integrate with scipy's DOP853 at tight tolerances.
+
+        Parameters
+        ----------
+        t : array_like, shape (T,)
+            Increasing sample times; integration starts at ``t[0]``.
+        u : formula, number or callable, optional
+            Input ``u(t)`` (default: the model's ``input``, else zero).
+        x0 : array_like, shape (n,), optional
+            State at ``t[0]`` (default: the model's ``x0``, else zero).
+        """
+        from scipy.integrate import solve_ivp
+
+        times = as_vector(t, "t")
+        if times.size < 2 or np.any(np.diff(times) <= 0):
+            raise DimensionError("t must hold at least two strictly increasing sample times")
+        uf = TimeFunction.of(u) if u is not None else (self.input or TimeFunction.of(0.0))
+        x_init = as_vector(x0, "x0", self.n) if x0 is not None else (
+            self.x0 if self.x0 is not None else np.zeros(self.n)
+        )
+
+        def rhs(tt: float, x: np.ndarray) -> np.ndarray:
+            return self.A(tt) @ x + self.B(tt)[:, 0] * float(uf(tt))
+
+        sol = solve_ivp(
+            rhs, (times[0], times[-1]), x_init, method="DOP853", t_eval=times, rtol=rtol, atol=atol
+        )
+        if not sol.success:
+            raise ExpressionError(f"integration failed: {sol.message}")
+        X = sol.y.T
+        Y = np.einsum("trc,tc->t", np.stack([self.C(tt) for tt in times]), X)
+        U = uf(times)
+        check_finite(X, "simulated state")
+        return LTVTrajectory(times, X, Y, U)
+
+
+@dataclass(frozen=True, eq=False)
+class LTVInputOutput:
+    """The input-output equation (3) with ``a_n = 1``.
+
+    Parameters
+    ----------
+    a : sequence, length n
+        ``a_0(t), ..., a_{n-1}(t)`` (formulas of ``t``, numbers or callables).
+    b : sequence, length m + 1 <= n
+        ``b_0(t), ..., b_m(t)``.
+    input : formula or callable, optional
+        Default input for simulation (Sridhar: ``"120*sin(t)"``).
+    x0 : array_like, optional
+        Default initial state of the realization :meth:`to_state_space`.
+    """
+
+    a: tuple[TimeFunction, ...]
+    b: tuple[TimeFunction, ...]
+    input: TimeFunction | None = None
+    x0: np.ndarray | None = None
+    name: str = ""
+
+    def __init__(
+        self,
+        a: Sequence[object],
+        b: Sequence[object],
+        *,
+        input: object | None = None,  # noqa: A002
+        x0: object | None = None,
+        name: str = "",
+    ) -> None:
+        a_f = tuple(TimeFunction.of(v) for v in a)
+        b_f = tuple(TimeFunction.of(v) for v in b)
+        if len(a_f) < 1:
+            raise DimensionError("a needs at least a_0 (the order n = len(a) must be >= 1)")
+        if len(b_f) > len(a_f):
+            raise DimensionError(
+                f"b has {len(b_f)} coefficients b_0..b_{len(b_f) - 1}; the system is strictly "
+                f"proper, so at most n = {len(a_f)}"
+            )
+        object.__setattr__(self, "a", a_f)
+        object.__setattr__(self, "b", b_f)
+        object.__setattr__(self, "input", None if input is None else TimeFunction.of(input))
+        object.__setattr__(self, "x0", None if x0 is None else as_vector(x0, "x0", len(a_f)))
+        object.__setattr__(self, "name", name)
+
+    @property
+    def order(self) -> int:
+        return len(self.a)
+
+    def to_state_space(self) -> LTVStateSpace:
+        """A state-space realization with ``x_1 = y``.
+
+        - Input without derivatives (``b = [b_0]``), any order: phase-variable
+          form ``x_k = y^(k-1)``, ``x_n' = -sum a_i x_{i+1} - b_0 u``.
+        - Order 2 with ``b_1``: ``x_2 = y' + b_1 u``, so that
+          ``x_1' = x_2 - b_1 u`` and
+          ``x_2' = -a_0 x_1 - a_1 x_2 + (a_1 b_1 + b_1' - b_0) u``.
+        """
+        n = self.order
+        a = self.a
+        b = self.b + tuple(TimeFunction.of(0.0) for _ in range(max(0, 1 - len(self.b))))
+        if len(b) > 2 or (len(b) == 2 and n != 2):
+            raise DimensionError(
+                "a state-space realization is implemented for inputs without derivatives "
+                "(b = [b_0]) of any order and for order 2 with b_1"
+            )
+
+        if len(b) == 1 or n == 1:
+
+            def A(t: float) -> np.ndarray:
+                m = np.zeros((n, n))
+                m[np.arange(n - 1), np.arange(1, n)] = 1.0
+                m[n - 1, :] = [-float(ai(t)) for ai in a]
+                return m
+
+            def B(t: float) -> np.ndarray:
+                col = np.zeros((n, 1))
+                col[n - 1, 0] = -float(b[0](t))
+                return col
+        else:
+            db1 = b[1].derivative()
+
+            def A(t: float) -> np.ndarray:
+                return np.array([[0.0, 1.0], [-float(a[0](t)), -float(a[1](t))]])
+
+            def B(t: float) -> np.ndarray:
+                a1, b0, b1 = float(a[1](t)), float(b[0](t)), float(b[1](t))
+                return np.array([[-b1], [a1 * b1 + float(db1(t)) - b0]])
+
+        c_row = np.zeros((1, n))
+        c_row[0, 0] = 1.0
+        return LTVStateSpace(
+            A, B, lambda t: c_row, input=self.input, x0=self.x0, name=self.name
+        )
+
+    def simulate(self, t: object, **kwargs: object) -> LTVTrajectory:
+        """Simulate through :meth:`to_state_space` (same arguments as
+        :meth:`LTVStateSpace.simulate`)."""
+        return self.to_state_space().simulate(t, **kwargs)  # type: ignore[arg-type]

@@ -1,0 +1,417 @@
+"""Polytopic LPV models (001_00f62b5a0c49ad87.txt, eq. (1)) and the exact
+conversion of affine dependence on a box to polytopic vertices.
+
+::
+
+    x_{k+1} = A(alpha_k) x_k + Bw(alpha_k) w_k
+    z_k     = Cz(alpha_k) x_k + Dz(alpha_k) w_k
+    y_k     = Cy(alpha_k) x_k + Dy(alpha_k) w_k,   M(alpha) = sum_i alpha_i M_i,
+
+with ``alpha_k`` on the unit simplex. A :class:`SimplexMap` computes ``alpha``
+from the physical scheduling (``alpha_1 = (1 - theta)/2`` in Example 1).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import NamedTuple, Protocol, runtime_checkable
+
+import numpy as np
+
+from ..errors import DimensionError, ExpressionError, SchedulingRangeError
+from ..expressions import Expression
+from ..scheduling import BasisFunction, Monomial, SchedulingSpace, box_vertices
+from ..validation import as_matrix, as_signal, as_vector, check_simplex
+from .affine import AffineDependence
+
+__all__ = [
+    "PolytopicLPV",
+    "PolytopicMatrices",
+    "PolytopicTrajectory",
+    "SimplexMap",
+    "FormulaSimplexMap",
+    "MultilinearSimplexMap",
+    "affine_to_polytopic",
+    "POLYTOPIC_MATRICES",
+]
+
+#: Matrix names of the polytopic model, in the order of eq. (1).
+POLYTOPIC_MATRICES = ("A", "Bw", "Cz", "Dz", "Cy", "Dy")
+
+
+class PolytopicMatrices(NamedTuple):
+    """The matrices of (1) at one ``alpha`` (or the vertex stacks, shape (N, r, c))."""
+
+    A: np.ndarray
+    Bw: np.ndarray
+    Cz: np.ndarray
+    Dz: np.ndarray
+    Cy: np.ndarray
+    Dy: np.ndarray
+
+
+class PolytopicTrajectory(NamedTuple):
+    """A simulated trajectory; row ``k`` holds time ``k``."""
+
+    x: np.ndarray  #: states, shape (T, n_x)
+    z: np.ndarray  #: signal to be estimated, shape (T, n_z)
+    y: np.ndarray  #: measured output, shape (T, n_y)
+
+
+@runtime_checkable
+class SimplexMap(Protocol):
+    """Maps the physical scheduling vector to ``alpha`` on the unit simplex."""
+
+    space: SchedulingSpace
+
+    @property
+    def n_vertices(self) -> int: ...
+
+    def __call__(self, p: np.ndarray) -> np.ndarray: ...
+
+    def evaluate(self, p: np.ndarray) -> np.ndarray:
+        """Vectorised: ``p`` of shape ``(T, n_p)`` -> ``alpha`` of shape ``(T, N)``."""
+        ...
+
+
+def _validation_points(space: SchedulingSpace, per_axis: int = 5) -> np.ndarray:
+    """Box corners plus a regular grid (at most ~4000 points)."""
+    per_axis = max(2, min(per_axis, int(4000 ** (1.0 / max(space.dim, 1)))))
+    axes = [np.linspace(lo, hi, per_axis) for lo, hi in zip(space.lower, space.upper, strict=True)]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, space.dim)
+    return np.vstack([space.corners(), grid])
+
+
+@dataclass(frozen=True, eq=False)
+class FormulaSimplexMap:
+    """``alpha_i = f_i(p)`` given as formulas of the scheduling components.
+
+    Checked at construction on the box corners and a grid: ``alpha >= 0`` and
+    ``sum(alpha) == 1`` (exact for formulas affine in ``p``).
+
+    Examples
+    --------
+    >>> space = SchedulingSpace(["theta"], [-1], [1])
+    >>> m = FormulaSimplexMap(space, ["(1 - theta)/2", "(1 + theta)/2"])
+    >>> m(np.array([0.5]))
+    array([0.25, 0.75])
+    """
+
+    space: SchedulingSpace
+    formulas: tuple[Expression, ...]
+
+    def __init__(self, space: SchedulingSpace, formulas: Sequence[str | Expression]) -> None:
+        exprs = tuple(
+            f if isinstance(f, Expression) else Expression.parse(f, allowed=space.names)
+            for f in formulas
+        )
+        if len(exprs) < 1:
+            raise ExpressionError("a simplex map needs at least one formula")
+        object.__setattr__(self, "space", space)
+        object.__setattr__(self, "formulas", exprs)
+        pts = _validation_points(space)
+        alpha = self.evaluate(pts)
+        for k in range(pts.shape[0]):
+            try:
+                check_simplex(alpha[k], "alpha")
+            except SchedulingRangeError as exc:
+                where = ", ".join(f"{n} = {v:g}" for n, v in zip(space.names, pts[k], strict=True))
+                raise SchedulingRangeError(f"simplex map at {where}: {exc}") from exc
+
+    @property
+    def n_vertices(self) -> int:
+        return len(self.formulas)
+
+    def __call__(self, p: np.ndarray) -> np.ndarray:
+        return self.evaluate(np.asarray(p, dtype=float).reshape(1, -1))[0]
+
+    def evaluate(self, p: np.ndarray) -> np.ndarray:
+        p = np.asarray(p, dtype=float)
+        vals = self.space.as_dict(p)
+        cols = [np.broadcast_to(f.evaluate(vals), p.shape[:-1]) for f in self.formulas]
+        return np.stack(cols, axis=-1).astype(float)
+
+
+@dataclass(frozen=True, eq=False)
+class MultilinearSimplexMap:
+    """Multilinear interpolation weights on a box of coordinates ``c(p)``.
+
+    With ``lambda_j = (c_j - lower_j) / (upper_j - lower_j)``, vertex ``v`` gets
+    ``alpha_v = prod_j (lambda_j if bit j of v else 1 - lambda_j)``: vertex 0
+    is the all-lower corner. The coordinates are basis functions of ``p``
+    (components for a multi-affine model).
+    """
+
+    space: SchedulingSpace
+    coordinates: tuple[BasisFunction, ...]
+    lower: np.ndarray
+    upper: np.ndarray
+
+    def __init__(
+        self,
+        space: SchedulingSpace,
+        coordinates: Sequence[BasisFunction],
+        lower: Sequence[float],
+        upper: Sequence[float],
+    ) -> None:
+        coords = tuple(coordinates)
+        lo = as_vector(lower, "multilinear map lower bound", len(coords))
+        hi = as_vector(upper, "multilinear map upper bound", len(coords))
+        flat = np.flatnonzero(~(hi > lo))
+        if flat.size:
+            j = int(flat[0])
+            raise ExpressionError(
+                f"coordinate {coords[j].name!r} of the multilinear map does not vary over the "
+                f"scheduling box (range [{lo[j]:g}, {hi[j]:g}]); fold it into the constant term"
+            )
+        object.__setattr__(self, "space", space)
+        object.__setattr__(self, "coordinates", coords)
+        object.__setattr__(self, "lower", lo)
+        object.__setattr__(self, "upper", hi)
+
+    @property
+    def n_vertices(self) -> int:
+        return 2 ** len(self.coordinates)
+
+    def vertex_coordinates(self) -> np.ndarray:
+        """Coordinates of each vertex, shape ``(N, n_c)``."""
+        return box_vertices(self.lower, self.upper)
+
+    def __call__(self, p: np.ndarray) -> np.ndarray:
+        return self.evaluate(np.asarray(p, dtype=float).reshape(1, -1))[0]
+
+    def evaluate(self, p: np.ndarray) -> np.ndarray:
+        p = np.asarray(p, dtype=float)
+        lam = np.stack([c.evaluate(p) for c in self.coordinates], axis=-1)
+        lam = (lam - self.lower) / (self.upper - self.lower)
+        n = len(self.coordinates)
+        alpha = np.ones((*p.shape[:-1], 2**n))
+        for v in range(2**n):
+            for j in range(n):
+                alpha[..., v] *= lam[..., j] if (v >> j) & 1 else 1.0 - lam[..., j]
+        return alpha
+
+
+def affine_to_polytopic(
+    dependence: AffineDependence,
+) -> tuple[dict[str, np.ndarray], MultilinearSimplexMap]:
+    """Exact polytopic form of matrices affine in ``psi(p)`` on a box.
+
+    If every basis function is a multi-affine monomial (each component to the
+    power 0 or 1: ``p1``, ``p1*p2``), the vertices are the matrices at the
+    corners of the box of the components that occur, with multilinear weights
+    in ``p`` (``2**(components used)`` vertices). Otherwise the vertices are
+    taken on the box of basis-function values ``[min psi_i, max psi_i]``, with
+    multilinear weights in ``psi(p)`` (``2**n_psi`` vertices); non-monomial
+    basis functions must then declare their bounds.
+
+    In both cases ``M(p) == sum_v alpha_v(p) M_v`` holds exactly (to
+    round-off) for every ``p`` in the box and ``alpha(p)`` is on the simplex.
+
+    Returns
+    -------
+    vertices : dict of str to ndarray, shape (N, rows, cols)
+    simplex_map : MultilinearSimplexMap
+    """
+    space, basis = dependence.space, dependence.basis
+    if not basis:
+        raise ExpressionError("the matrices do not depend on the scheduling: nothing to convert")
+    multiaffine = all(isinstance(b, Monomial) and b.is_multiaffine for b in basis)
+    if multiaffine:
+        used = sorted({j for b in basis for j, e in enumerate(b.exponents) if e})  # type: ignore[attr-defined]
+        coords: list[BasisFunction] = [Monomial.component(j, space) for j in used]
+        lo = space.lower[used]
+        hi = space.upper[used]
+        mapping = MultilinearSimplexMap(space, coords, lo, hi)
+        # the vertex p: used components at the box corner, others anywhere (unused)
+        corners = np.tile((space.lower + space.upper) / 2.0, (mapping.n_vertices, 1))
+        corners[:, used] = mapping.vertex_coordinates()
+        psi = dependence.psi_batch(corners, check=False)
+    else:
+        bounds = [b.bounds(space) for b in basis]
+        lo = np.array([b[0] for b in bounds])
+        hi = np.array([b[1] for b in bounds])
+        mapping = MultilinearSimplexMap(space, basis, lo, hi)
+        vc = mapping.vertex_coordinates()
+        psi = np.hstack([np.ones((vc.shape[0], 1)), vc])
+    vertices = {
+        name: np.einsum("vk,krc->vrc", psi, stack) for name, stack in dependence.coefficients.items()
+    }
+    return vertices, mapping
+
+
+@dataclass(frozen=True, eq=False)
+class PolytopicLPV:
+    """Polytopic LPV model, eq. (1) of 001_00f62b5a0c49ad87.txt.
+
+    Parameters
+    ----------
+    vertices : mapping of str to array_like, shape (N, rows, cols)
+        Vertex stacks of ``A, Bw, Cz, Dz, Cy, Dy``.
+    simplex_map : SimplexMap, optional
+        Map from the physical scheduling to ``alpha``; ``None`` when the model is
+        scheduled by ``alpha`` itself.
+    affine : AffineDependence, optional
+        The same system stated as affine in the physical scheduling (e.g.
+        system (10)), kept for reference and checks.
+    parameters : mapping, optional
+        Named model parameters the matrices were built with (e.g. ``rho``).
+
+    Examples
+    --------
+    >>> from lpvest import load_system
+    >>> plant = load_system("peixoto-ex1").model()
+    >>> plant.n_vertices, plant.nx, plant.nw, plant.nz, plant.ny
+    (2, 2, 1, 2, 1)
+    >>> plant.alpha([0.0])
+    array([0.5, 0.5])
+    """
+
+    vertices: PolytopicMatrices
+    simplex_map: SimplexMap | None = None
+    affine: AffineDependence | None = None
+    parameters: Mapping[str, float] = field(default_factory=dict)
+    name: str = ""
+
+    def __init__(
+        self,
+        vertices: Mapping[str, object] | PolytopicMatrices,
+        simplex_map: SimplexMap | None = None,
+        affine: AffineDependence | None = None,
+        parameters: Mapping[str, float] | None = None,
+        name: str = "",
+    ) -> None:
+        vmap = vertices._asdict() if isinstance(vertices, PolytopicMatrices) else dict(vertices)
+        missing = [n for n in POLYTOPIC_MATRICES if n not in vmap]
+        unknown = [n for n in vmap if n not in POLYTOPIC_MATRICES]
+        if missing or unknown:
+            raise DimensionError(
+                f"polytopic vertices need exactly {list(POLYTOPIC_MATRICES)}; "
+                f"missing {missing}, unknown {unknown}"
+            )
+        stacks = {}
+        for n in POLYTOPIC_MATRICES:
+            arr = np.array(vmap[n], dtype=float)
+            if arr.ndim != 3:
+                raise DimensionError(f"{n} vertices have shape {arr.shape}; expected (N, rows, cols)")
+            stacks[n] = arr
+        N = stacks["A"].shape[0]
+        nx = stacks["A"].shape[1]
+        nw = stacks["Bw"].shape[2]
+        nz = stacks["Cz"].shape[1]
+        ny = stacks["Cy"].shape[1]
+        expected = {
+            "A": (N, nx, nx),
+            "Bw": (N, nx, nw),
+            "Cz": (N, nz, nx),
+            "Dz": (N, nz, nw),
+            "Cy": (N, ny, nx),
+            "Dy": (N, ny, nw),
+        }
+        for n, shp in expected.items():
+            if stacks[n].shape != shp:
+                raise DimensionError(f"{n} vertices have shape {stacks[n].shape}; expected {shp}")
+            as_matrix(stacks[n].reshape(N * shp[1], shp[2]), f"{n} vertices")  # finite check
+            stacks[n].setflags(write=False)
+        if simplex_map is not None and simplex_map.n_vertices != N:
+            raise DimensionError(
+                f"the simplex map gives {simplex_map.n_vertices} weights; the model has {N} vertices"
+            )
+        object.__setattr__(self, "vertices", PolytopicMatrices(**stacks))
+        object.__setattr__(self, "simplex_map", simplex_map)
+        object.__setattr__(self, "affine", affine)
+        object.__setattr__(self, "parameters", dict(parameters or {}))
+        object.__setattr__(self, "name", name)
+
+    @classmethod
+    def from_affine(
+        cls,
+        dependence: AffineDependence,
+        *,
+        parameters: Mapping[str, float] | None = None,
+        name: str = "",
+    ) -> PolytopicLPV:
+        """The exact polytopic form of a system stated as affine in ``p``
+        (see :func:`affine_to_polytopic`); keeps the affine form."""
+        vertices, mapping = affine_to_polytopic(dependence.subset(POLYTOPIC_MATRICES))
+        return cls(vertices, mapping, dependence, parameters, name)
+
+    # -- dimensions -----------------------------------------------------------
+    @property
+    def n_vertices(self) -> int:
+        return self.vertices.A.shape[0]
+
+    @property
+    def nx(self) -> int:
+        return self.vertices.A.shape[1]
+
+    @property
+    def nw(self) -> int:
+        return self.vertices.Bw.shape[2]
+
+    @property
+    def nz(self) -> int:
+        return self.vertices.Cz.shape[1]
+
+    @property
+    def ny(self) -> int:
+        return self.vertices.Cy.shape[1]
+
+    @property
+    def space(self) -> SchedulingSpace | None:
+        return None if self.simplex_map is None else self.simplex_map.space
+
+    # -- evaluation -----------------------------------------------------------
+    def alpha(self, p: object) -> np.ndarray:
+        """``alpha`` for the physical scheduling ``p`` (range-checked)."""
+        if self.simplex_map is None:
+            raise SchedulingRangeError(
+                f"model {self.name or '(unnamed)'} has no map from a physical scheduling to alpha"
+            )
+        pv = self.simplex_map.space.check(np.asarray(p, dtype=float))
+        return self.simplex_map(pv)
+
+    def alpha_batch(self, p: object) -> np.ndarray:
+        """``alpha`` along a scheduling trajectory ``p`` of shape (T, n_p)."""
+        if self.simplex_map is None:
+            raise SchedulingRangeError(
+                f"model {self.name or '(unnamed)'} has no map from a physical scheduling to alpha"
+            )
+        space = self.simplex_map.space
+        pt = as_signal(p, "p", space.dim)
+        for t in range(pt.shape[0]):
+            space.check(pt[t], what=f"scheduling value at t={t}:")
+        return self.simplex_map.evaluate(pt)
+
+    def at(self, alpha: object, *, check: bool = True) -> PolytopicMatrices:
+        """The matrices at one ``alpha`` (checked to lie on the simplex)."""
+        a = as_vector(alpha, "alpha", self.n_vertices)
+        if check:
+            check_simplex(a, "alpha")
+        return PolytopicMatrices(*(np.tensordot(a, v, axes=1) for v in self.vertices))
+
+    def at_batch(self, alpha: object, *, check: bool = True) -> PolytopicMatrices:
+        """The matrices along ``alpha`` of shape (T, N), stacked (T, rows, cols)."""
+        a = as_signal(alpha, "alpha", self.n_vertices)
+        if check:
+            for t in range(a.shape[0]):
+                check_simplex(a[t], f"alpha at k={t}")
+        return PolytopicMatrices(*(np.einsum("ti,irc->trc", a, v) for v in self.vertices))
+
+    def simulate(self, alpha: object, w: object, *, x0: object | None = None) -> PolytopicTrajectory:
+        """Simulate (1) for ``alpha`` (T, N) and disturbance ``w`` (T, n_w)
+        from ``x0`` (default zero)."""
+        m = self.at_batch(alpha)
+        T = m.A.shape[0]
+        w = as_signal(w, "w", self.nw, T)
+        x = np.zeros(self.nx) if x0 is None else as_vector(x0, "x0", self.nx)
+        X = np.empty((T, self.nx))
+        Z = np.empty((T, self.nz))
+        Y = np.empty((T, self.ny))
+        for k in range(T):
+            X[k] = x
+            Z[k] = m.Cz[k] @ x + m.Dz[k] @ w[k]
+            Y[k] = m.Cy[k] @ x + m.Dy[k] @ w[k]
+            x = m.A[k] @ x + m.Bw[k] @ w[k]
+        return PolytopicTrajectory(X, Z, Y)

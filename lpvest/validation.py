@@ -1,0 +1,218 @@
+"""Input validation shared by every public entry point.
+
+Each check names the user's parameter and, for shapes, both the found and the
+expected shape, e.g. ``"Q has shape (3, 2); expected (3, 3)"``. Symmetry and
+definiteness are judged with tolerances relative to the matrix's own scale
+(an absolute epsilon rejects valid, badly scaled input).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from .errors import DimensionError, NonFiniteError, NotPositiveDefiniteError, SchedulingRangeError
+
+__all__ = [
+    "as_matrix",
+    "as_vector",
+    "as_signal",
+    "as_rng",
+    "check_finite",
+    "check_symmetric",
+    "check_positive_definite",
+    "check_box",
+    "check_simplex",
+    "SYMMETRY_RTOL",
+    "SIMPLEX_ATOL",
+]
+
+#: Relative tolerance of the symmetry check: ``|M - M^T| <= SYMMETRY_RTOL * |M|``.
+SYMMETRY_RTOL = 1e-10
+#: Absolute tolerance for ``sum(alpha) == 1`` and ``alpha >= 0`` (alpha is O(1)).
+SIMPLEX_ATOL = 1e-9
+
+Shape = Sequence[int | None]
+
+
+def _shape_text(shape: Sequence[int | None]) -> str:
+    parts = ["*" if s is None else str(s) for s in shape]
+    return "(" + ", ".join(parts) + ("," if len(parts) == 1 else "") + ")"
+
+
+def _check_shape(arr: np.ndarray, name: str, expected: Shape | None) -> None:
+    if expected is None:
+        return
+    ok = arr.ndim == len(expected) and all(
+        e is None or e == s for s, e in zip(arr.shape, expected, strict=True)
+    )
+    if not ok:
+        raise DimensionError(
+            f"{name} has shape {_shape_text(arr.shape)}; expected {_shape_text(expected)}"
+        )
+
+
+def check_finite(arr: np.ndarray, name: str) -> np.ndarray:
+    """Raise :class:`NonFiniteError` naming ``name`` (and the first bad index) if
+    ``arr`` holds NaN or inf."""
+    arr = np.asarray(arr)
+    if arr.dtype.kind in "fc" and not np.all(np.isfinite(arr)):
+        bad = np.argwhere(~np.isfinite(arr))[0]
+        where = "" if arr.ndim == 0 else f" at index {tuple(int(i) for i in bad)}"
+        value = arr[tuple(bad)] if arr.ndim else arr
+        raise NonFiniteError(f"{name} holds a non-finite value ({value}){where}")
+    return arr
+
+
+def _as_float_array(value: object, name: str) -> np.ndarray:
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise DimensionError(f"{name} is not a numeric array: {exc}") from exc
+    return arr
+
+
+def as_matrix(value: object, name: str, shape: Shape | None = None) -> np.ndarray:
+    """Return ``value`` as a finite 2-D float array of the expected ``shape``.
+
+    Parameters
+    ----------
+    value : array_like, shape (r, c)
+        The matrix. A scalar is accepted when ``shape == (1, 1)``.
+    name : str
+        The user's name for it, used in error messages.
+    shape : sequence of int or None, optional
+        Expected shape; ``None`` entries match any size.
+    """
+    arr = _as_float_array(value, name)
+    if arr.ndim == 0 and shape is not None and tuple(shape) == (1, 1):
+        arr = arr.reshape(1, 1)
+    if arr.ndim != 2:
+        exp = shape if shape is not None else (None, None)
+        raise DimensionError(f"{name} has shape {_shape_text(arr.shape)}; expected {_shape_text(exp)}")
+    _check_shape(arr, name, shape)
+    return check_finite(arr, name)
+
+
+def as_vector(value: object, name: str, length: int | None = None) -> np.ndarray:
+    """Return ``value`` as a finite 1-D float array (a scalar becomes length 1)."""
+    arr = _as_float_array(value, name)
+    if arr.ndim == 0:
+        arr = arr.reshape(1)
+    _check_shape(arr, name, (length,))
+    return check_finite(arr, name)
+
+
+def as_signal(
+    value: object, name: str, width: int, length: int | None = None, *, finite: bool = True
+) -> np.ndarray:
+    """Return a sampled signal as an array of shape ``(length, width)``.
+
+    A 1-D array is accepted for a scalar signal (``width == 1``); ``None`` with
+    ``width == 0`` gives an empty ``(length, 0)`` signal.
+    """
+    if value is None:
+        if width == 0 and length is not None:
+            return np.zeros((length, 0))
+        raise DimensionError(f"{name} is missing; expected shape {_shape_text((length, width))}")
+    arr = _as_float_array(value, name)
+    if arr.ndim == 1 and width == 1:
+        arr = arr[:, None]
+    _check_shape(arr, name, (length, width))
+    if finite:
+        check_finite(arr, name)
+    return arr
+
+
+def check_symmetric(m: np.ndarray, name: str, *, rtol: float = SYMMETRY_RTOL) -> np.ndarray:
+    """Raise unless ``m`` is square and symmetric relative to its own norm."""
+    if m.ndim != 2 or m.shape[0] != m.shape[1]:
+        raise DimensionError(f"{name} has shape {_shape_text(m.shape)}; expected a square matrix")
+    scale = np.max(np.abs(m)) if m.size else 0.0
+    asym = np.max(np.abs(m - m.T)) if m.size else 0.0
+    if asym > rtol * scale:
+        raise NotPositiveDefiniteError(
+            f"{name} is not symmetric: max |{name} - {name}^T| = {asym:.3g} "
+            f"exceeds {rtol:g} x max |{name}| = {rtol * scale:.3g}"
+        )
+    return m
+
+
+def check_positive_definite(
+    m: np.ndarray, name: str, *, semidefinite: bool = False, rtol: float | None = None
+) -> np.ndarray:
+    """Raise unless ``m`` is symmetric positive definite (or semidefinite).
+
+    Definiteness is relative: the smallest eigenvalue must exceed
+    ``rtol * max(|eigenvalue|)`` (default ``rtol = n * eps``); for
+    ``semidefinite=True`` it must exceed ``-rtol * max(|eigenvalue|)``.
+    Returns the symmetrised matrix ``(m + m^T) / 2``.
+    """
+    check_symmetric(m, name)
+    n = m.shape[0]
+    if n == 0:
+        return m
+    sym = 0.5 * (m + m.T)
+    eig = np.linalg.eigvalsh(sym)
+    scale = float(np.max(np.abs(eig)))
+    tol = (rtol if rtol is not None else max(n, 10) * np.finfo(float).eps) * scale
+    lo = float(eig[0])
+    if semidefinite:
+        if lo < -tol:
+            raise NotPositiveDefiniteError(
+                f"{name} is not positive semidefinite: smallest eigenvalue {lo:.3g}"
+            )
+    elif scale == 0.0 or lo <= tol:
+        raise NotPositiveDefiniteError(
+            f"{name} is not positive definite: smallest eigenvalue {lo:.3g} "
+            f"(largest {float(eig[-1]):.3g})"
+        )
+    return sym
+
+
+def check_box(
+    p: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    names: Sequence[str],
+    *,
+    what: str = "scheduling value",
+    rtol: float = 1e-12,
+) -> None:
+    """Raise :class:`SchedulingRangeError` if a component of ``p`` lies outside
+    ``[lower, upper]`` (with a tolerance relative to the box size)."""
+    tol = rtol * np.maximum(1.0, np.maximum(np.abs(lower), np.abs(upper)))
+    bad = (p < lower - tol) | (p > upper + tol)
+    if np.any(bad):
+        j = int(np.argmax(bad))
+        raise SchedulingRangeError(
+            f"{what} {names[j]} = {p[j]:.6g} is outside its declared range "
+            f"[{lower[j]:.6g}, {upper[j]:.6g}]"
+        )
+
+
+def check_simplex(alpha: np.ndarray, name: str = "alpha", *, atol: float = SIMPLEX_ATOL) -> None:
+    """Raise :class:`SchedulingRangeError` unless ``alpha`` lies on the unit
+    simplex (``alpha >= 0``, ``sum(alpha) == 1``, within ``atol``)."""
+    check_finite(alpha, name)
+    if np.any(alpha < -atol):
+        i = int(np.argmin(alpha))
+        raise SchedulingRangeError(
+            f"{name} is not on the unit simplex: {name}[{i + 1}] = {alpha[i]:.6g} < 0"
+        )
+    total = float(np.sum(alpha))
+    if abs(total - 1.0) > atol:
+        raise SchedulingRangeError(
+            f"{name} is not on the unit simplex: its entries sum to {total:.12g}, not 1"
+        )
+
+
+def as_rng(rng: np.random.Generator | int | None) -> np.random.Generator:
+    """A :class:`numpy.random.Generator` from a generator, a seed or ``None``
+    (fresh entropy)."""
+    if isinstance(rng, np.random.Generator):
+        return rng
+    if rng is None or (isinstance(rng, int | np.integer) and not isinstance(rng, bool)):
+        return np.random.default_rng(rng)
+    raise TypeError(f"rng must be a numpy Generator, an integer seed or None, not {type(rng).__name__}")

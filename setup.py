@@ -1,0 +1,12 @@
+"""Package discovery for setuptools (metadata is in pyproject.toml).
+
+The example model files live in the top-level ``models/`` folder and are
+installed as the data package ``lpvest._models``.
+"""
+
+from setuptools import find_packages, setup
+
+setup(
+    packages=[*find_packages(include=["lpvest", "lpvest.*"]), "lpvest._models"],
+    package_dir={"lpvest._models": "models"},
+)

@@ -1,0 +1,253 @@
+"""Model files: round trip and every validation error path."""
+
+import textwrap
+
+import numpy as np
+import pytest
+
+from lpvest import (
+    AffineLPV,
+    InnovationLPV,
+    LPVInputOutput,
+    LTVInputOutput,
+    LTVStateSpace,
+    ModelFileError,
+    PolytopicLPV,
+    dump_system,
+    example_systems,
+    load_system,
+    loads_system,
+)
+
+EXAMPLES = [e.name for e in example_systems()]
+
+
+def test_the_four_example_systems_are_there():
+    assert EXAMPLES == ["cox-toth-ex1", "peixoto-ex1", "peixoto-ex2", "sridhar-ltv"]
+
+
+def _same_model(a, b, rng):
+    assert type(a) is type(b)
+    if isinstance(a, AffineLPV):
+        for p in a.space.sample(rng, 5):
+            for m1, m2 in zip(a.at(p), b.at(p), strict=True):
+                np.testing.assert_array_equal(m1, m2)
+        for n in ("Q", "S", "R"):
+            np.testing.assert_array_equal(getattr(a.noise, n), getattr(b.noise, n))
+        np.testing.assert_array_equal(a.x0, b.x0)
+        np.testing.assert_array_equal(a.P0, b.P0)
+    elif isinstance(a, PolytopicLPV):
+        for m1, m2 in zip(a.vertices, b.vertices, strict=True):
+            np.testing.assert_array_equal(m1, m2)
+        if a.simplex_map is not None:
+            pts = a.space.sample(rng, 5)
+            np.testing.assert_array_equal(a.simplex_map.evaluate(pts), b.simplex_map.evaluate(pts))
+        assert (a.affine is None) == (b.affine is None)
+        if a.affine is not None:
+            for k in a.affine.coefficients:
+                np.testing.assert_array_equal(a.affine.coefficients[k], b.affine.coefficients[k])
+    elif isinstance(a, InnovationLPV):
+        back, ahead = a.window
+        p = np.full((back + 6 + ahead, a.n_p), 0.5)
+        e = rng.standard_normal((6, a.ny))
+        np.testing.assert_array_equal(a.simulate(p, e=e).y, b.simulate(p, e=e).y)
+    elif isinstance(a, LPVInputOutput):
+        p = np.full((6, 1), 0.3)
+        u, e = rng.standard_normal(6), rng.standard_normal(6)
+        np.testing.assert_array_equal(a.simulate(p, u, e=e).y, b.simulate(p, u, e=e).y)
+    elif isinstance(a, LTVInputOutput | LTVStateSpace):
+        t = np.linspace(0, 2, 5)
+        np.testing.assert_array_equal(a.simulate(t).x, b.simulate(t).x)
+    else:  # pragma: no cover
+        raise AssertionError(type(a))
+
+
+@pytest.mark.parametrize("name", EXAMPLES)
+def test_toml_round_trip(name, rng):
+    first = load_system(name)
+    text = dump_system(first)
+    second = loads_system(text, origin="dumped")
+    assert (second.name, second.title, second.default) == (first.name, first.title, first.default)
+    assert list(second.models) == list(first.models)
+    for key in first.models:
+        _same_model(first.model(key), second.model(key), rng)
+    # and the dump is a fixed point
+    assert dump_system(second) == text
+
+
+def test_parameter_override():
+    base = load_system("peixoto-ex2")
+    assert base.parameters == {"rho": 1.0}
+    at5 = load_system("peixoto-ex2", parameters={"rho": 5.0})
+    assert at5.model().vertices.A[0, 1, 1] == pytest.approx(-0.25)
+    with pytest.raises(ModelFileError, match="no parameter 'gamma' to override \\(known: rho\\)"):
+        load_system("peixoto-ex2", parameters={"gamma": 1.0})
+
+
+GOOD = """
+[system]
+name = "user"
+title = "a user's model"
+
+[scheduling]
+names = ["p"]
+lower = [-1.0]
+upper = [1.0]
+
+[models.m]
+type = "affine"
+A = { "1" = [[0.5, 0.1], [0.0, 0.4]], p = [[0.1, 0.0], [0.0, -0.1]] }
+C = [[1.0, 0.0]]
+Q = [[0.1, 0.0], [0.0, 0.1]]
+R = [[0.01]]
+"""
+
+
+def _write(tmp_path, text):
+    path = tmp_path / "user.toml"
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+def test_users_own_file_loads(tmp_path):
+    system = load_system(_write(tmp_path, GOOD))
+    m = system.model()
+    assert isinstance(m, AffineLPV)
+    np.testing.assert_allclose(m.at([1.0]).A, [[0.6, 0.1], [0.0, 0.3]])
+    assert (m.nx, m.nu, m.ny, m.nw, m.nv) == (2, 0, 1, 2, 1)
+
+
+# (replacement in GOOD, expected message after "<file>: ")
+ERRORS = [
+    ('R = [[0.01]]', 'R = [[0.01]]\nP0 = [[1.0, 2.0], [2.0, 1.0]]',
+     "models.m: P0 is not positive semidefinite: smallest eigenvalue -1"),
+    ('Q = [[0.1, 0.0], [0.0, 0.1]]', 'Q = [[0.1, 0.0], [0.0, 0.1], [0.0, 0.0]]',
+     r"models.m: Q has shape \(3, 2\); expected a square matrix"),
+    ('Q = [[0.1, 0.0], [0.0, 0.1]]', 'Q = [[0.1, 0.0, 0.0], [0.0, 0.1, 0.0], [0.0, 0.0, 0.1]]',
+     r"models.m: G has shape \(2, 2\); expected \(2, 3\)"),
+    ('Q = [[0.1, 0.0], [0.0, 0.1]]', 'Q = [[0.1, 0.2], [0.2, 0.1]]',
+     "models.m: Q is not positive definite: smallest eigenvalue -0.1"),
+    ('Q = [[0.1, 0.0], [0.0, 0.1]]', 'Q = [[0.1, 0.05], [0.0, 0.1]]',
+     "models.m: Q is not symmetric"),
+    ('R = [[0.01]]', 'R = [[0.01]]\nS = [[1.0], [0.0]]',
+     r"models.m: the joint noise covariance \[\[Q, S\], \[S\^T, R\]\] is not positive definite"),
+    ('C = [[1.0, 0.0]]', 'C = [[1.0, 0.0], [1.0]]',
+     r"models.m.C: rows have different lengths \[1, 2\]; expected equal"),
+    ('C = [[1.0, 0.0]]', 'C = [[1.0, "x"]]',
+     r"models.m.C\[1,2\]: formula 'x' must be a constant here but uses \['x'\]"),
+    ('C = [[1.0, 0.0]]', 'C = [[1.0, true]]', r"models.m.C\[1,2\]: expected a number, found a boolean"),
+    ('C = [[1.0, 0.0]]', 'C = [[1.0, 0.0]]\nF = [[1.0]]',
+     "models.m: unknown key 'F' \\(expected one of: "),
+    ('R = [[0.01]]', '', "models.m: missing required key 'R'"),
+    ('type = "affine"', 'type = "afine"', "models.m.type: unknown model type 'afine'"),
+    ('p = [[0.1, 0.0], [0.0, -0.1]]', 'q = [[0.1, 0.0], [0.0, -0.1]]',
+     r"models.m.basis: formula 'q' uses unknown name 'q' \(known: p\)"),
+    ('lower = [-1.0]', 'lower = [2.0]', "scheduling: scheduling range of p: lower bound 2 exceeds upper bound 1"),
+    ('lower = [-1.0]', 'lower = [-1.0, 0.0]', r"scheduling.lower: has 2 entries; expected 1 \(one per name\)"),
+    ('names = ["p"]', 'names = ["2p"]', "scheduling: scheduling name '2p' is not a valid identifier"),
+    ('names = ["p"]', 'names = "p"', "scheduling.names: expected a list of strings, found a string"),
+    ('title = "a user\'s model"', '', "system: missing required key 'title'"),
+    ('[models.m]', '[models.m]\nbasis = ["sin(p"]', r"models.m.basis: formula 'sin\(p' is not valid"),
+]
+
+
+@pytest.mark.parametrize(("old", "new", "message"), ERRORS, ids=[e[2][:40] for e in ERRORS])
+def test_validation_errors_name_file_and_field(tmp_path, old, new, message):
+    assert old in GOOD
+    path = _write(tmp_path, GOOD.replace(old, new, 1))
+    with pytest.raises(ModelFileError, match=f"^{path}: {message}") as info:
+        load_system(path)
+    assert "\n" not in str(info.value)
+
+
+def test_invalid_toml_syntax(tmp_path):
+    path = _write(tmp_path, GOOD.replace("R = [[0.01]]", "R = [[0.01]"))
+    with pytest.raises(ModelFileError, match=f"^{path}: not valid TOML: "):
+        load_system(path)
+
+
+def test_missing_file_and_unknown_example(tmp_path):
+    with pytest.raises(ModelFileError, match="nothere.toml: no such model file"):
+        load_system(tmp_path / "nothere.toml")
+    with pytest.raises(ModelFileError, match="no example system 'peixoto-ex9' \\(examples: cox-toth-ex1, "):
+        load_system("peixoto-ex9")
+
+
+POLY = """
+[system]
+name = "poly"
+title = "t"
+[scheduling]
+names = ["theta"]
+lower = [-1.0]
+upper = [1.0]
+[models.plant]
+type = "polytopic"
+[models.plant.map]
+kind = "formulas"
+alpha = ["(1 - theta)/2", "(1 + theta)/2"]
+[[models.plant.vertex]]
+A = [[0.5]]
+[[models.plant.vertex]]
+A = [[0.1]]
+[models.plant.common]
+Bw = [[1.0]]
+Cz = [[1.0]]
+Dz = [[0.0]]
+Cy = [[1.0]]
+Dy = [[1.0]]
+[models.plant.affine]
+Bw = [[1.0]]
+Cz = [[1.0]]
+Dz = [[0.0]]
+Cy = [[1.0]]
+Dy = [[1.0]]
+[models.plant.affine.A]
+"1" = [[0.3]]
+theta = [[-0.2]]
+"""
+
+POLY_ERRORS = [
+    ('theta = [[-0.2]]', 'theta = [[0.2]]',
+     "models.plant.vertex: A at the vertices, combined by the map, differs from the affine form by 0.4"),
+    ('alpha = ["(1 - theta)/2", "(1 + theta)/2"]', 'alpha = ["(1 - theta)/2", "(1 + theta)/3"]',
+     "models.plant.map.alpha: simplex map at theta = 1: alpha is not on the unit simplex: its entries sum to 0.6666"),
+    ('alpha = ["(1 - theta)/2", "(1 + theta)/2"]', 'alpha = ["1 - theta", "theta"]',
+     r"models.plant.map.alpha: simplex map at theta = -1: alpha is not on the unit simplex: alpha\[2\] = -1 < 0"),
+    ('[[models.plant.vertex]]\nA = [[0.1]]', '[[models.plant.vertex]]\nA = [[0.1]]\nBw = [[2.0]]',
+     r"models.plant.vertex\[2\].Bw: Bw is also given in \[models.plant.common\]"),
+    ('Dy = [[1.0]]\n[models.plant.affine]', '[models.plant.affine]',
+     r"models.plant.vertex\[1\]: missing Dy \(give it here or in \[models.plant.common\]\)"),
+    ('[[models.plant.vertex]]\nA = [[0.1]]', '[[models.plant.vertex]]\nA = [[0.1, 0.0]]',
+     r"models.plant.vertex: A has different shapes at the vertices: \[\(1, 1\), \(1, 2\)\]"),
+    ('kind = "formulas"', 'kind = "table"', "models.plant.map.kind: unknown map kind 'table'"),
+]
+
+
+def test_polytopic_file_loads_and_is_consistent(tmp_path):
+    plant = load_system(_write(tmp_path, POLY)).model()
+    np.testing.assert_allclose(plant.vertices.A[:, 0, 0], [0.5, 0.1])
+
+
+@pytest.mark.parametrize(("old", "new", "message"), POLY_ERRORS, ids=[e[2][:40] for e in POLY_ERRORS])
+def test_polytopic_errors(tmp_path, old, new, message):
+    assert old in POLY
+    path = _write(tmp_path, POLY.replace(old, new, 1))
+    with pytest.raises(ModelFileError, match=f"^{path}: {message}"):
+        load_system(path)
+
+
+def test_innovation_and_io_errors(tmp_path):
+    base = load_system("cox-toth-ex1").path.read_text()
+    path = _write(tmp_path, base.replace('K = [[1.0], [1.0]]', 'K = [[1.0]]'))
+    with pytest.raises(ModelFileError, match=r"models.augmented: K has shape \(1, 1\); expected \(2, 1\)"):
+        load_system(path)
+    path = _write(tmp_path, base.replace('"(1 - shift(p, 1)) / shift(p, 1)"', '"(1 - shift(q, 1))"'))
+    with pytest.raises(ModelFileError, match="models.minimal.K: K\\[1,1\\]: formula .* uses unknown name 'q'"):
+        load_system(path)
+    path = _write(tmp_path, base.replace('y = ["-p"]', 'y = ["-shift(p, 1)"]'))
+    with pytest.raises(ModelFileError, match=r"models.io: y\[0\] = .*: coefficients depend on p_t only"):
+        load_system(path)
+    path = _write(tmp_path, base.replace("innovation_covariance = [[1.0]]", "innovation_covariance = [[-1.0]]", 1))
+    with pytest.raises(ModelFileError, match="models.minimal: innovation covariance is not positive definite"):
+        load_system(path)
