@@ -1,0 +1,16 @@
+"""Test FMU: y = slope * t (no inputs)."""
+
+from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
+
+
+class Ramp(Fmi2Slave):
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.slope = 1.0
+        self.time = 0.0
+        self.register_variable(Real("slope", causality=Fmi2Causality.parameter, variability=Fmi2Variability.tunable))
+        self.register_variable(Real("y", causality=Fmi2Causality.output, getter=lambda: self.slope * self.time))
+
+    def do_step(self, current_time, step_size):
+        self.time = current_time + step_size
+        return True

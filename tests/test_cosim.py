@@ -1,0 +1,101 @@
+"""The co-simulation master, on small test FMUs built with pythonfmu."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lpvest.cosim import AlgebraicLoopError, Component, CoSimulation, CoSimulationError, simulate
+
+SCRIPTS = Path(__file__).parent / "fmu_scripts"
+
+
+@pytest.fixture(scope="module")
+def fmus(tmp_path_factory):
+    from pythonfmu import FmuBuilder
+
+    out = tmp_path_factory.mktemp("cosim_fmus")
+    built = {}
+    for name in ("ramp", "gain", "accumulator", "failing"):
+        path = FmuBuilder.build_FMU(SCRIPTS / f"{name}.py", dest=out)
+        built[name] = Path(path)
+    return built
+
+
+def test_chain_has_no_one_step_delay(fmus):
+    comps = [Component("g", fmus["gain"], {"k": 3.0}), Component("r", fmus["ramp"], {"slope": 0.5})]
+    res = simulate(comps, ["r.y -> g.u[1]", "r.y -> g.u[2]"], step_size=0.1, n_steps=10)
+    t = np.arange(11) * 0.1
+    np.testing.assert_allclose(res["time"], t, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(res["r.y"], 0.5 * t, rtol=0, atol=1e-15)
+    # the gain sees r.y at the same t_k (component order in the list does not matter)
+    np.testing.assert_allclose(res["g.y[1]"], 1.5 * t, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(res["g.y[2]"], 1.5 * t, rtol=0, atol=1e-15)
+
+
+def test_vector_connection_and_execution_order(fmus):
+    comps = [Component("a", fmus["gain"], {"k": 2.0}), Component("b", fmus["gain"], {"k": 10.0}),
+             Component("r", fmus["ramp"])]
+    with CoSimulation(comps, ["r.y -> a.u[1]", "r.y -> a.u[2]", "a.y -> b.u"], step_size=1.0) as sim:
+        order = sim.execution_order
+        res = sim.run(4)
+    assert order.index("get r: y") < order.index("set a: u[1], u[2]") < order.index("get a: y[1], y[2]")
+    assert order.index("get a: y[1], y[2]") < order.index("set b: u[1], u[2]")
+    np.testing.assert_allclose(res["b.y[2]"], 20.0 * np.arange(5), rtol=0, atol=1e-12)
+
+
+def test_algebraic_loop_is_reported(fmus):
+    comps = [Component("acc", fmus["accumulator"]), Component("g", fmus["gain"], {"k": 0.5})]
+    conns = ["acc.y -> g.u[1]", "g.y[1] -> acc.u"]
+    with pytest.raises(AlgebraicLoopError, match="algebraic loop: .*acc.u.*g.u\\[1\\]"):
+        CoSimulation(comps, conns, step_size=1.0)
+
+
+def test_loop_through_a_state_runs_when_feedthrough_is_declared(fmus):
+    comps = [Component("acc", fmus["accumulator"], {"x0": 1.0}, feedthrough=False),
+             Component("g", fmus["gain"], {"k": 0.5})]
+    res = simulate(comps, ["acc.y -> g.u[1]", "g.y[1] -> acc.u"], step_size=1.0, n_steps=6)
+    np.testing.assert_allclose(res["acc.y"], 1.5 ** np.arange(7), rtol=1e-15)
+    np.testing.assert_allclose(res["g.y[1]"], 0.5 * 1.5 ** np.arange(7), rtol=1e-15)
+
+
+def test_stop_time_and_integer_step_counter(fmus):
+    res = simulate([Component("r", fmus["ramp"])], [], step_size=0.1, stop_time=1000.0)
+    assert res.shape == (10001,)
+    assert res["time"][-1] == 1000.0  # k * h, not a sum of 10,000 steps
+    assert res["time"][3] == 3 * 0.1
+
+
+@pytest.mark.parametrize(
+    ("conn", "match"),
+    [
+        ("r.y -> q.u", "no component 'q'"),
+        ("r.z -> g.u[1]", "r has no variable 'z'"),
+        ("g.u[1] -> g.u[2]", "source g.u\\[1\\] is not an output"),
+        ("r.y -> g.u", "1 source and 2 target elements"),
+        ("r.y g.u", "expected 'comp.output -> comp.input'"),
+    ],
+)
+def test_setup_errors(fmus, conn, match):
+    comps = [Component("g", fmus["gain"]), Component("r", fmus["ramp"])]
+    with pytest.raises(CoSimulationError, match=match):
+        CoSimulation(comps, [conn], step_size=1.0)
+
+
+def test_driven_twice_and_bad_parameter(fmus):
+    comps = [Component("g", fmus["gain"]), Component("r", fmus["ramp"]), Component("s", fmus["ramp"])]
+    with pytest.raises(CoSimulationError, match="g.u\\[1\\] is driven twice"):
+        CoSimulation(comps, ["r.y -> g.u[1]", "s.y -> g.u[1]"], step_size=1.0)
+    with pytest.raises(CoSimulationError, match="no variable 'gain' to set"):
+        simulate([Component("g", fmus["gain"], {"gain": 1.0})], [], step_size=1.0, n_steps=1)
+
+
+def test_component_failure_names_component_time_and_log(fmus):
+    comps = [Component("f", fmus["failing"], {"fail_at": 3.0})]
+    # pythonfmu maps do_step() returning False to fmi2Discard; the master stops
+    # there and quotes the component's log
+    with pytest.raises(
+        CoSimulationError,
+        match=r"component f: doStep at t = 3 returned discard \(\[ERROR\] deliberate failure for the test\)",
+    ):
+        simulate(comps, [], step_size=1.0, n_steps=10)
