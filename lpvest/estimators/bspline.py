@@ -54,7 +54,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -84,6 +84,8 @@ __all__ = [
     "KernelModel",
     "KernelFit",
     "fit_kernel_model",
+    "KernelRegression",
+    "kernel_regression",
     "bspline_basis",
     "spline_knots",
     "reconstruct_state",
@@ -1052,6 +1054,49 @@ def fit_kernel_model(
     return _fit(plan, float(times[0]), uu, yy, penalty=penalty, instants=idx, rank_rtol=rank_rtol)
 
 
+class KernelRegression(NamedTuple):
+    """The linear system (29)-(30) ``q = P beta`` at every sample."""
+
+    t: np.ndarray  #: sample times, shape (m,)
+    P: np.ndarray  #: shape (m, s): kernel integrals of the basis functions, divided by C
+    q: np.ndarray  #: shape (m,): ``y - r_0 / C`` (known part on the left-hand side)
+    labels: tuple[str, ...]  #: the unknown each column multiplies
+
+
+def kernel_regression(
+    model: KernelModel, t: object, u: object, y: object, *, points: int = 6
+) -> KernelRegression:
+    """The regression matrix ``P`` and target ``q`` of (29)-(30), dense.
+
+    :func:`fit_kernel_model` never forms ``P`` (it reduces it segment by
+    segment); this is for inspection and for checking the solve.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> t = np.linspace(0.0, 6.0, 601)
+    >>> y = np.exp(-0.5 * t) * np.sin(2 * t)     # y'' + y' + 4.25 y = 0
+    >>> reg = kernel_regression(KernelModel(a0=UnknownConstant(), a1=1.0), t, 0 * t, y)
+    >>> reg.P.shape, reg.labels
+    ((601, 1), ('a0',))
+    >>> beta = np.linalg.lstsq(reg.P, reg.q, rcond=None)[0]
+    >>> round(float(beta[0]), 8)
+    4.25
+    """
+    if not isinstance(model, KernelModel):
+        raise DimensionError(f"model must be a KernelModel; found {type(model).__name__}")
+    times, h = _check_samples(t, "t")
+    uu = as_vector(u, "u", times.size)
+    yy = as_vector(y, "y", times.size)
+    if not model.unknowns:
+        raise IdentifiabilityError("the model has no unknown coefficient: nothing to estimate")
+    plan = _build_plan(model, times.size, h, points=points, difference_order=2)
+    A = _dense_system(plan, _parts(plan, float(times[0]), uu, yy))
+    s = plan.n_unknowns
+    return KernelRegression(plan.quad.shifted(float(times[0])).samples, np.ascontiguousarray(A[:, :s]),
+                            A[:, s].copy(), plan.labels)
+
+
 # -- state reconstruction, (4) / (32) ------------------------------------------------------------
 
 
@@ -1177,7 +1222,8 @@ class BSplineObserver:
     Examples
     --------
     >>> import numpy as np
-    >>> from lpvest import load_system, run_streaming
+    >>> from lpvest import load_system
+    >>> from lpvest.estimators import run_streaming
     >>> io = load_system("sridhar-ltv").model()
     >>> t = np.arange(0, 801) * 0.005
     >>> d = io.simulate(t)
@@ -1294,7 +1340,7 @@ class BSplineObserver:
 
     def _window(self, u: float, y: float) -> tuple[np.ndarray, np.ndarray]:
         """The last ``L - 1`` buffered samples followed by the current one."""
-        order = (self._head + 1 + np.arange(self.length - 1)) % self.length
+        order = (self._head + 2 + np.arange(self.length - 1)) % self.length  # oldest of the last L - 1 first
         return (
             np.concatenate([self._ring_u[order], [u]]),
             np.concatenate([self._ring_y[order], [y]]),

@@ -44,10 +44,11 @@ the data); its product with the known weight (``s^k`` times a B-spline, a
 known coefficient or 1) is integrated by ``points / 2``-point Gauss-Legendre
 on each piece between consecutive *breakpoints* (the samples and the B-spline
 knots, so the rule never straddles a knot where a B-spline's derivative
-jumps). The global error of each cumulative integral is ``O(h^points)`` for
-smooth data (``points = 6``: sixth order); the Gauss rule is exact for the
-polynomial pieces up to degree ``points - 1``, so for polynomial weights the
-only error is the interpolation of the data.
+jumps). Both approximations are of order ``points``: the interpolation error
+is ``O(h^points)`` and the ``q``-point Gauss rule's ``O(h^(2q))``, so every
+cumulative integral has a global error ``O(h^points)`` for smooth data
+(``points = 6``, the default: sixth order). Data that are a polynomial of
+degree below ``points`` are interpolated exactly.
 
 Examples
 --------
