@@ -1111,8 +1111,9 @@ def reconstruct_state(
     Parameters
     ----------
     realization : LTVStateSpace
-        A second-order realization (``C'`` from its formulas, or by the complex
-        step for callables).
+        A second-order realization. ``C'`` comes from its formulas, or by the
+        complex step for callables; a callable that returns the same real
+        matrix at nearby times (a constant map) has ``C' = 0``.
     t, y, dy, u : array_like, shape (m,)
 
     Returns
@@ -1142,9 +1143,17 @@ def reconstruct_state(
         def dC(tt: float) -> np.ndarray:
             hh = 1e-20
             val = np.asarray(realization.C(tt + 1j * hh))  # type: ignore[arg-type]
-            if not np.iscomplexobj(val):
-                raise DimensionError("C(t) is a callable without complex-step support: give it as formulas")
-            return val.imag / hh
+            if np.iscomplexobj(val):
+                return val.imag / hh
+            # a callable that ignores its argument (e.g. the constant output map of
+            # LTVInputOutput.to_state_space): constant if it is at nearby times
+            step = 1e-3 * (1.0 + abs(tt))
+            c0 = np.asarray(realization.C(tt), dtype=float)
+            if all(np.array_equal(np.asarray(realization.C(tt + d), dtype=float), c0) for d in (-step, step)):
+                return np.zeros_like(c0)
+            raise DimensionError(
+                "C(t) is a time-varying callable without complex-step support: give C as formulas of t"
+            )
 
     x = np.empty((m, 2))
     for k, tk in enumerate(times):
