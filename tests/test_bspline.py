@@ -269,6 +269,19 @@ def test_noiseless_recovery_sridhar(traj20, noiseless_fit):
     assert fit.labels[:2] == ("a0[0]", "a0[1]") and fit.labels[-1] == "a1"
 
 
+@pytest.mark.parametrize("x0", [[0.0, 0.0], [0.05, -0.3], [-1.0, 2.0]])
+def test_estimate_does_not_depend_on_the_initial_state(sridhar, x0):
+    # the paper leaves x(0) unstated; the kernel representation needs none
+    t = np.linspace(0.0, 8.0, 4001)
+    d = sridhar.simulate(t, x0=x0)
+    model = KernelModel.from_io(sridhar, a0=UnknownSpline(30), a1=UnknownConstant())
+    fit = fit_kernel_model(model, t, d.u, d.y)
+    assert abs(fit.constants["a1"] - 1.0) < 1e-8
+    inner = (t >= 2.0) & (t <= 6.0)
+    assert np.max(np.abs(fit.values["a0"][inner] / (t[inner] ** 2 + 1) - 1)) < 1e-8
+    np.testing.assert_allclose(fit.x[inner], d.x[inner], atol=1e-9 * max(1.0, np.max(np.abs(d.x))))
+
+
 def test_damped_oscillator_closed_form():
     # oracle: y = exp(-t/2) sin(2 t) solves y'' + y' + 4.25 y = 0 exactly
     t = np.linspace(0.0, 6.0, 3001)
@@ -346,6 +359,23 @@ def test_solve_matches_dense_least_squares_oracle(sridhar, traj9):
     beta5 = np.linalg.lstsq(reg.P[rows], reg.q[rows], rcond=None)[0]
     np.testing.assert_allclose(fit5.beta, beta5, rtol=1e-9, atol=1e-9 * np.max(np.abs(beta5)))
     np.testing.assert_array_equal(fit5.instants, rows)
+
+
+def test_solve_with_clustered_knots_and_two_spline_blocks(sridhar, traj9):
+    # uneven segments (knots clustered near 2 s, a long gap after 5 s) and two
+    # spline blocks with different knots: the segment-wise QR against lstsq
+    order = 3
+    base = np.array([0.0, 1.9, 1.95, 2.0, 2.05, 2.1, 5.0, 9.0])
+    knots = np.concatenate([[-0.2, -0.1], base, [9.1, 9.2]])
+    model = KernelModel.from_io(
+        sridhar, a0=UnknownSpline(knots.size - order, order, knots=knots), a1=UnknownSpline(4, order=2)
+    )
+    rng = np.random.default_rng(11)
+    y = traj9.y + 1e-3 * rng.standard_normal(traj9.y.size)
+    reg = kernel_regression(model, traj9.t, traj9.u, y)
+    beta_ref = np.linalg.lstsq(reg.P, reg.q, rcond=None)[0]
+    fit = fit_kernel_model(model, traj9.t, traj9.u, y)
+    np.testing.assert_allclose(fit.beta, beta_ref, rtol=1e-8, atol=1e-8 * np.max(np.abs(beta_ref)))
 
 
 def test_penalty_matches_augmented_least_squares_and_gcv(sridhar, traj9):

@@ -383,6 +383,10 @@ class _Block:
     band_index: np.ndarray | None = None  #: (N * order,) flat (basis, interval) index
     jlo: np.ndarray | None = None  #: (n_basis,) first interval of each basis function
     width: int = 0  #: band width (intervals)
+    band_matrix: Any = None  #: sparse (8 n width, N): node values -> band moments of B_i
+    dband_matrix: Any = None  #: the same for B_i' (a_1, b_1 blocks)
+    sample_first: np.ndarray | None = None  #: (m,) first non-zero basis at each sample
+    sample_values: np.ndarray | None = None  #: (m, order) basis values at the samples
 
 
 @dataclass(frozen=True, eq=False)
@@ -400,6 +404,22 @@ class _Plan:
     @property
     def n_unknowns(self) -> int:
         return len(self.labels)
+
+
+def _band_matrix(quad: ProductQuadrature, band_index: np.ndarray, vals: np.ndarray, size: int) -> Any:
+    """The sparse map from a signal at the nodes to the per-interval moments of
+    ``B_i`` times the signal over each basis function's band: rows
+    ``(direction, k, i, l)`` (forward ``s^k`` then backward ``r^k``), one
+    column per node. A product with it replaces a scatter-add per moment."""
+    from scipy.sparse import csc_matrix
+
+    N, order = vals.shape
+    offsets = (np.arange(2 * MOMENTS) * size)[None, :, None]
+    rows = offsets + band_index.reshape(N, 1, order)  # (N, 8, order)
+    weights = np.concatenate([quad.s_weights, quad.r_weights]).T  # (N, 8)
+    data = weights[:, :, None] * vals[:, None, :]
+    indptr = np.arange(N + 1) * (2 * MOMENTS * order)
+    return csc_matrix((data.ravel(), rows.ravel(), indptr), shape=(2 * MOMENTS * size, N))
 
 
 def _difference_matrix(n: int, order: int) -> np.ndarray:
@@ -445,7 +465,13 @@ def _build_plan(model: KernelModel, m: int, h: float, *, points: int, difference
         jhi[empty] = jlo[empty]
         width = int(max(1, np.max(jhi - jlo + 1)))
         band_index = np.where(nonzero, basis * width + (intervals - jlo[basis]), 0)
-        blocks.append(_Block(name, col, n, c, knots, first, vals, dvals, band_index, jlo, width))
+        band_matrix = _band_matrix(quad, band_index, vals, n * width)
+        dband_matrix = None if dvals is None else _band_matrix(quad, band_index, dvals, n * width)
+        sample_first, sample_values = bspline_basis(quad.samples, knots, c.order)
+        blocks.append(
+            _Block(name, col, n, c, knots, first, vals, dvals, band_index, jlo, width, band_matrix, dband_matrix,
+                   sample_first, sample_values)
+        )
         labels.extend(f"{name}[{i}]" for i in range(n))
         pen_rows.append((col, _difference_matrix(n, difference_order)))
         col += n
@@ -493,26 +519,15 @@ def _band(block: _Block, quad: ProductQuadrature, v_nodes: np.ndarray) -> _Band:
     assert block.values is not None and block.jlo is not None and block.band_index is not None
     n, L, m, h = block.size, block.width, quad.m, quad.h
     order = int(block.name[1])
-    size = n * L
-    k_ = block.values.shape[1]
 
-    def band_moments(vals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        w = (vals * v_nodes[:, None]).ravel()
-        IF = np.empty((MOMENTS, n, L))
-        IB = np.empty((MOMENTS, n, L))
-        for k in range(MOMENTS):
-            IF[k] = np.bincount(
-                block.band_index, weights=w * np.repeat(quad.s_weights[k], k_), minlength=size
-            ).reshape(n, L)
-            IB[k] = np.bincount(
-                block.band_index, weights=w * np.repeat(quad.r_weights[k], k_), minlength=size
-            ).reshape(n, L)
-        return cumulate(IF, IB)  # (4, n, L + 1) each
+    def band_moments(matrix: Any) -> tuple[np.ndarray, np.ndarray]:
+        per_interval = (matrix @ v_nodes).reshape(2, MOMENTS, n, L)
+        return cumulate(per_interval[0], per_interval[1])  # (4, n, L + 1) each
 
-    F, B = band_moments(block.values)
+    F, B = band_moments(block.band_matrix)
     Fd = Bd = None
-    if order == 1 and block.dvalues is not None:
-        Fd, Bd = band_moments(block.dvalues)
+    if order == 1 and block.dband_matrix is not None:
+        Fd, Bd = band_moments(block.dband_matrix)
     zero = np.zeros((MOMENTS, n))
     j = block.jlo[:, None] + np.arange(L + 1)
     mid = slot_identity(order, F, B, j * h, (m - 1 - j) * h, Fd, Bd)
@@ -632,7 +647,13 @@ def _compressed_system(plan: _Plan, parts: _Parts, rows: np.ndarray | None) -> n
         assert jlo is not None
         edges += [jlo, jlo + band.block.width + 1]
     e = np.unique(np.clip(np.concatenate(edges), 0, m))
-    starts, ends = e[:-1], e[1:]
+    # split long segments (the row partition is free within a segment) so that
+    # padding every segment to the longest one costs at most about 5 m rows
+    chunk = max(32, 4 * -(-m // max(e.size - 1, 1)))
+    pieces = -(-np.diff(e) // chunk)
+    within = np.arange(pieces.sum()) - np.repeat(np.cumsum(pieces) - pieces, pieces)
+    starts = np.repeat(e[:-1], pieces) + chunk * within
+    ends = np.minimum(np.append(starts[1:], m), np.repeat(e[1:], pieces))
     K = starts.size
     lens = ends - starts
     Lseg = int(np.max(lens))
@@ -884,8 +905,9 @@ def _fitted(
         di, dd = coefficient_terms(quad, order, phi, dphi, v_nodes)
         ident += di
         deriv += dd
-        first, vals = bspline_basis(t - quad.a, block.knots, k)
-        sample_values[block.name] = np.einsum("gr,gr->g", vals, coef[first[:, None] + np.arange(k)])
+        assert block.sample_first is not None and block.sample_values is not None
+        sidx = block.sample_first[:, None] + np.arange(k)
+        sample_values[block.name] = np.einsum("gr,gr->g", block.sample_values, coef[sidx])
         spline = BSpline(block.knots + quad.a, coef.copy(), k - 1, extrapolate=True)
         splines[block.name] = spline
         functions[block.name] = TimeFunction.from_callable(

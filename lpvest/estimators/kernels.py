@@ -64,7 +64,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -124,6 +124,9 @@ class ProductQuadrature:
         Interpolation stencils: ``v(x_g) ~ sum_l lagrange[l, g] v[gather[l, g]]``.
     lagrange : ndarray, shape (points, N)
         Lagrange weights.
+    moment_matrix : scipy.sparse.csc_matrix, shape (8 J, N)
+        ``s_weights`` and ``r_weights`` summed per interval: one sparse product
+        gives the per-interval moments of a function at the nodes.
     """
 
     a: float
@@ -138,6 +141,7 @@ class ProductQuadrature:
     starts: np.ndarray
     gather: np.ndarray
     lagrange: np.ndarray
+    moment_matrix: Any
 
     @property
     def b(self) -> float:
@@ -154,6 +158,7 @@ class ProductQuadrature:
         return ProductQuadrature(
             float(a), self.h, self.m, self.points, self.x + (float(a) - self.a), self.weights,
             self.interval, self.s_weights, self.r_weights, self.starts, self.gather, self.lagrange,
+            self.moment_matrix,
         )
 
     def interpolate(self, v: np.ndarray) -> np.ndarray:
@@ -167,9 +172,8 @@ class ProductQuadrature:
         ``F[k, j] = int_a^{t_j} (x - a)^k f dx``,
         ``B[k, j] = int_{t_j}^b (b - x)^k f dx``.
         """
-        IF = np.add.reduceat(self.s_weights * f, self.starts, axis=1)
-        IB = np.add.reduceat(self.r_weights * f, self.starts, axis=1)
-        return cumulate(IF, IB)
+        per_interval = (self.moment_matrix @ f).reshape(2, MOMENTS, self.m - 1)
+        return cumulate(per_interval[0], per_interval[1])
 
 
 def cumulate(IF: np.ndarray, IB: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -241,8 +245,17 @@ def product_quadrature(
             if j != l_:
                 lagrange[l_] *= (pos - j) / (l_ - j)
     gather = stencil + np.arange(points)[:, None]
+    from scipy.sparse import csc_matrix
+
+    J = m - 1
+    rows = (np.arange(2 * MOMENTS) * J)[:, None] + interval  # (8, N)
+    moment_matrix = csc_matrix(
+        (np.concatenate([s_weights, r_weights]).T.ravel(), rows.T.ravel(), np.arange(x.size + 1) * 2 * MOMENTS),
+        shape=(2 * MOMENTS * J, x.size),
+    )
     return ProductQuadrature(
-        float(a), float(h), int(m), int(points), x, w, interval, s_weights, r_weights, starts, gather, lagrange
+        float(a), float(h), int(m), int(points), x, w, interval, s_weights, r_weights, starts, gather, lagrange,
+        moment_matrix,
     )
 
 
