@@ -19,13 +19,18 @@ omit (ERRATA.md), and every known coefficient) and ``C = (t - a)^2 +
 (b - t)^2``. The columns of ``h`` are kernel integrals of ``B_k y``,
 ``B_k' y``, ``B_k u``, ... computed by the cumulative product quadrature of
 :mod:`lpvest.estimators.kernels` at *every* sample (the default regression
-instants). The least-squares problem is solved by a QR factorization of the
+instants). The least-squares problem is solved by Householder QR of the
 column-scaled ``[P, q]`` (no normal equations), optionally with a P-spline
 difference penalty whose weight is given or chosen by generalized
-cross-validation (GCV). The rank of ``P`` must equal the number of unknowns
-(practical identifiability, Definition 1; the paper's "rank P = 2n"),
-otherwise :class:`~lpvest.errors.IdentifiabilityError` names the coefficients
-the data do not determine.
+cross-validation (GCV). ``P`` (``m x s``, dense) is never formed: between
+consecutive edges of the B-splines' supports its rows lie in a space of
+dimension about 10, so each such segment is first reduced by a small QR and
+only the stacked triangular factors enter the final QR (a TSQR; see
+:func:`_compressed_system`). :func:`kernel_regression` returns the dense ``P``.
+The rank of ``P`` must equal the number of unknowns (practical
+identifiability, Definition 1; the paper's "rank P = 2n"), otherwise
+:class:`~lpvest.errors.IdentifiabilityError` names the coefficients the data
+do not determine.
 
 With the estimated coefficients, ``y_E`` and ``y_E'`` follow from (9) and the
 derivative identity (10) (the derivative kernels, obtained by differentiating
@@ -65,6 +70,7 @@ from .base import Port
 from .kernels import (
     MOMENTS,
     ProductQuadrature,
+    check_uniform_samples as _check_samples,
     coefficient_terms,
     cumulate,
     finish_identity,
@@ -94,10 +100,6 @@ __all__ = [
 
 #: The coefficients of (11), in this order.
 COEFFICIENTS = ("a0", "a1", "b0", "b1")
-
-#: Relative tolerance of the uniform-sampling check: ``|t[j+1] - t[j] - h| <= tol * h``.
-SAMPLING_RTOL = 1e-6
-
 
 # -- coefficient declarations ------------------------------------------------------------------
 
@@ -340,29 +342,6 @@ def bspline_basis(
             den = knots[i + degree + 1] - knots[i + 1]
             out[:, r] -= np.where(den > 0, degree / np.where(den > 0, den, 1.0), 0.0) * lower[:, r]
     return first, out
-
-
-# -- data checks ---------------------------------------------------------------------------------
-
-
-def _check_samples(t: object, name: str = "t") -> tuple[np.ndarray, float]:
-    """Finite, strictly increasing, uniformly spaced sample times; returns ``(t, h)``."""
-    times = as_vector(t, name)
-    if times.size < 2:
-        raise DimensionError(f"{name} has {times.size} sample(s); at least 2 are needed")
-    d = np.diff(times)
-    if np.any(d <= 0):
-        j = int(np.argmax(d <= 0))
-        raise SamplingError(f"{name} is not strictly increasing: {name}[{j + 1}] = {times[j + 1]!r} <= {name}[{j}]")
-    h = (times[-1] - times[0]) / (times.size - 1)
-    dev = np.abs(d - h)
-    if np.max(dev) > SAMPLING_RTOL * h:
-        j = int(np.argmax(dev))
-        raise SamplingError(
-            f"{name} is not uniformly sampled: step {j} is {d[j]:.9g}, the mean step is {h:.9g} "
-            f"(relative tolerance {SAMPLING_RTOL:g}); the kernel quadrature needs a uniform grid"
-        )
-    return times, float(h)
 
 
 # -- the regression plan (everything that depends on the window geometry, not on the data) -----
@@ -1214,7 +1193,9 @@ class BSplineObserver:
     centre, ``delay = window / 2``), where the B-spline estimate is reliable
     (the paper's inner window). Between refits, sample ``k`` reports the last
     fit at ``t_k - delay``, which stays inside that fit's window because
-    ``hop <= delay``. ``valid`` is 0 until the first window is full (outputs 0).
+    ``hop <= delay + dt``. ``valid`` is 0 until the first window is full
+    (outputs 0 then); the first valid output comes at ``t0 + window``. The
+    estimates at sample ``k`` already use ``y_k`` (no extra step of delay).
 
     Ports
     -----
@@ -1236,7 +1217,7 @@ class BSplineObserver:
         Window length (s), a multiple of ``dt``.
     hop : float, optional
         Time between refits (s), a multiple of ``dt``; default ``dt`` (refit at
-        every sample). Must not exceed ``delay``.
+        every sample). At most ``delay + dt``.
     t0 : float, optional
         Time of the first sample.
     report : float, optional

@@ -68,7 +68,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError
+from ..errors import DimensionError, SamplingError
 from ..validation import as_vector
 
 __all__ = [
@@ -86,6 +86,8 @@ __all__ = [
     "coefficient_terms",
     "finish_identity",
     "window_weight",
+    "check_uniform_samples",
+    "SAMPLING_RTOL",
     "MOMENTS",
 ]
 
@@ -259,6 +261,36 @@ def product_quadrature(
     )
 
 
+#: Relative tolerance of the uniform-sampling check: ``|t[j+1] - t[j] - h| <= tol * h``.
+SAMPLING_RTOL = 1e-6
+
+
+def check_uniform_samples(t: object, name: str = "t") -> tuple[np.ndarray, float]:
+    """Finite, strictly increasing, uniformly spaced sample times; returns ``(t, h)``.
+
+    Raises :class:`~lpvest.errors.NonFiniteError` (NaN/inf),
+    :class:`~lpvest.errors.DimensionError` (fewer than 2 samples) or
+    :class:`~lpvest.errors.SamplingError` (not increasing, or a step deviating
+    from the mean step by more than ``SAMPLING_RTOL`` relative).
+    """
+    times = as_vector(t, name)
+    if times.size < 2:
+        raise DimensionError(f"{name} has {times.size} sample(s); at least 2 are needed")
+    d = np.diff(times)
+    if np.any(d <= 0):
+        j = int(np.argmax(d <= 0))
+        raise SamplingError(f"{name} is not strictly increasing: {name}[{j + 1}] = {times[j + 1]!r} <= {name}[{j}]")
+    h = (times[-1] - times[0]) / (times.size - 1)
+    dev = np.abs(d - h)
+    if np.max(dev) > SAMPLING_RTOL * h:
+        j = int(np.argmax(dev))
+        raise SamplingError(
+            f"{name} is not uniformly sampled: step {j} is {d[j]:.9g}, the mean step is {h:.9g} "
+            f"(relative tolerance {SAMPLING_RTOL:g}); the kernel quadrature needs a uniform grid"
+        )
+    return times, float(h)
+
+
 # -- the kernel integrals as combinations of moments -----------------------------------------
 
 
@@ -399,9 +431,8 @@ def kernel_identity(
     True
     """
     from ..systems.ltv import TimeFunction
-    from .bspline import _check_samples
 
-    times, h = _check_samples(t, "t")
+    times, h = check_uniform_samples(t, "t")
     uu = as_vector(u, "u", times.size)
     yy = as_vector(y, "y", times.size)
     if len(a) != 2 or len(b) > 2:
