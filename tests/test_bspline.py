@@ -10,6 +10,7 @@ import pytest
 from lpvest import (
     BSplineObserver,
     DimensionError,
+    ExpressionError,
     IdentifiabilityError,
     KernelModel,
     Known,
@@ -516,6 +517,10 @@ def test_option_and_declaration_errors(small):
         UnknownSpline(5, 3, knots="periodic")
     with pytest.raises(DimensionError, match=r"explicit knots cover \[0, 3\]"):
         fit_kernel_model(KernelModel.from_io(io, a0=UnknownSpline(4, 2, knots=[-1, 0, 1, 2, 3, 3])), t, d.u, d.y)
+    with pytest.raises(ExpressionError, match=r"a1: expected Known\(...\), UnknownConstant\(\)"):
+        KernelModel(a0=UnknownConstant(), a1="t +* 2")
+    with pytest.raises(ExpressionError, match="b0: .*unknown name 'x'"):
+        KernelModel(a0=UnknownConstant(), a1=1.0, b0="x**2")
     with pytest.raises(DimensionError, match="unknown coefficient name 'c0'"):
         KernelModel.from_io(io, c0=UnknownConstant())
     with pytest.raises(DimensionError, match="second-order systems"):

@@ -63,7 +63,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError, IdentifiabilityError, NonFiniteError, SamplingError
+from ..errors import DimensionError, ExpressionError, IdentifiabilityError, NonFiniteError, SamplingError
 from ..systems.ltv import LTVInputOutput, LTVStateSpace, TimeFunction
 from ..validation import as_vector, check_finite
 from .base import Port
@@ -180,10 +180,10 @@ def _as_coefficient(value: object, name: str) -> Coefficient:
         return value
     try:
         return Known(value)
-    except Exception as exc:  # noqa: BLE001 (re-raised with the coefficient's name)
-        raise DimensionError(
-            f"{name}: expected Known(...), UnknownConstant(), UnknownSpline(...), a formula, "
-            f"a number or a callable; found {value!r}"
+    except ExpressionError as exc:
+        raise ExpressionError(
+            f"{name}: expected Known(...), UnknownConstant(), UnknownSpline(...), a formula of t, "
+            f"a number or a callable ({exc})"
         ) from exc
 
 
