@@ -393,11 +393,14 @@ def _band_matrix(quad: ProductQuadrature, band_index: np.ndarray, vals: np.ndarr
     from scipy.sparse import csc_matrix
 
     N, order = vals.shape
-    offsets = (np.arange(2 * MOMENTS) * size)[None, :, None]
-    rows = offsets + band_index.reshape(N, 1, order)  # (N, 8, order)
-    weights = np.concatenate([quad.s_weights, quad.r_weights]).T  # (N, 8)
+    index = np.int32 if 2 * MOMENTS * size < 2**31 else np.int64
+    offsets = (np.arange(2 * MOMENTS, dtype=index) * size)[None, :, None]
+    rows = offsets + band_index.astype(index).reshape(N, 1, order)  # (N, 8, order)
+    weights = np.empty((N, 2 * MOMENTS))
+    weights[:, :MOMENTS] = quad.s_weights.T
+    weights[:, MOMENTS:] = quad.r_weights.T
     data = weights[:, :, None] * vals[:, None, :]
-    indptr = np.arange(N + 1) * (2 * MOMENTS * order)
+    indptr = np.arange(N + 1, dtype=index) * (2 * MOMENTS * order)
     return csc_matrix((data.ravel(), rows.ravel(), indptr), shape=(2 * MOMENTS * size, N))
 
 

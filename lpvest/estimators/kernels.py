@@ -240,19 +240,24 @@ def product_quadrature(
     r_weights = w * (b - x) ** k
     starts = np.searchsorted(interval, np.arange(m - 1))
     stencil = np.clip(interval - points // 2 + 1, 0, m - points)
+    # Lagrange weights L_l(pos) = prod_{j != l} (pos - j) / (l - j); a node lies
+    # strictly between two samples, so pos is never an integer
     pos = (x - samples[stencil]) / h
-    lagrange = np.ones((points, x.size))
-    for l_ in range(points):
-        for j in range(points):
-            if j != l_:
-                lagrange[l_] *= (pos - j) / (l_ - j)
+    diff = pos - np.arange(points)[:, None]  # (points, N)
+    total = np.prod(diff, axis=0)
+    ell = np.arange(points)
+    denominators = np.array([np.prod([l_ - j for j in ell if j != l_]) for l_ in ell], dtype=float)
+    lagrange = total / (diff * denominators[:, None])
     gather = stencil + np.arange(points)[:, None]
     from scipy.sparse import csc_matrix
 
     J = m - 1
-    rows = (np.arange(2 * MOMENTS) * J)[:, None] + interval  # (8, N)
+    rows = (np.arange(2 * MOMENTS, dtype=np.int32) * J)[None, :] + interval.astype(np.int32)[:, None]  # (N, 8)
+    data = np.empty((x.size, 2 * MOMENTS))
+    data[:, :MOMENTS] = s_weights.T
+    data[:, MOMENTS:] = r_weights.T
     moment_matrix = csc_matrix(
-        (np.concatenate([s_weights, r_weights]).T.ravel(), rows.T.ravel(), np.arange(x.size + 1) * 2 * MOMENTS),
+        (data.ravel(), rows.ravel(), np.arange(x.size + 1, dtype=np.int32) * (2 * MOMENTS)),
         shape=(2 * MOMENTS * J, x.size),
     )
     return ProductQuadrature(
