@@ -54,6 +54,23 @@ from .systems import (
     affine_to_polytopic as affine_to_polytopic,
 )
 
+# B-spline (issue 5)
+# isort: split
+from .errors import SamplingError as SamplingError
+from .estimators.bspline import (
+    BSplineObserver as BSplineObserver,
+    KernelFit as KernelFit,
+    KernelModel as KernelModel,
+    KernelRegression as KernelRegression,
+    Known as Known,
+    UnknownConstant as UnknownConstant,
+    UnknownSpline as UnknownSpline,
+    fit_kernel_model as fit_kernel_model,
+    kernel_regression as kernel_regression,
+    reconstruct_state as reconstruct_state,
+)
+from .estimators.kernels import KernelIdentity as KernelIdentity, kernel_identity as kernel_identity
+
 __all__ = [
     "__version__",
     "example_systems",
@@ -90,4 +107,18 @@ __all__ = [
     "PolytopicLPV",
     "TimeFunction",
     "affine_to_polytopic",
+    # B-spline (issue 5)
+    "SamplingError",
+    "BSplineObserver",
+    "KernelFit",
+    "KernelModel",
+    "KernelRegression",
+    "Known",
+    "UnknownConstant",
+    "UnknownSpline",
+    "fit_kernel_model",
+    "kernel_regression",
+    "reconstruct_state",
+    "KernelIdentity",
+    "kernel_identity",
 ]

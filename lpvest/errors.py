@@ -20,6 +20,7 @@ __all__ = [
     "IdentifiabilityError",
     "NumericalError",
     "LMIInfeasibleError",
+    "SamplingError",
 ]
 
 
@@ -71,3 +72,8 @@ class LMIInfeasibleError(LpvestError, RuntimeError):
     def __init__(self, message: str, *, status: str = "") -> None:
         super().__init__(message)
         self.status = status
+
+
+class SamplingError(LpvestError, ValueError):
+    """Sample times are not strictly increasing or not uniformly spaced where a
+    method needs a uniform grid (e.g. the B-spline kernel estimator)."""

@@ -1,0 +1,525 @@
+"""Double-sided kernel representation of second-order SISO LTV systems.
+
+Sridhar, Ghoshal & Michalska (002_54d0f33f85fddffe.txt), Section II: the
+input-output equation (11)
+
+    y'' + a_1(t) y' + a_0(t) y + b_1(t) u' + b_0(t) u = 0
+
+multiplied by ``(xi - a)^2`` (forward) or ``(b - zeta)^2`` (backward) and
+integrated twice gives (12) and (15); their sum divided by
+``C(t) = (t - a)^2 + (b - t)^2`` is the kernel identity (9) with the kernels
+(13)-(19). Differentiating (12) and (15) in ``t`` (Leibniz rule; the paper
+does not print these) gives the derivative identity (10) for ``n = 2``::
+
+    C y' = (2 (t - a) - 2 (b - t)) y(t) - C a_1(t) y(t) - C b_1(t) u(t)
+           + int_a^t  d/dt K_Fy(t, xi)   y dxi   + int_a^t  d/dt K_Fu(t, xi)   u dxi
+           + int_t^b  d/dt K_By(t, zeta) y dzeta + int_t^b  d/dt K_Bu(t, zeta) u dzeta
+
+    d/dt K_Fy = -2 + 2 (xi - a) a_1 + (xi - a)^2 a_1' - (xi - a)^2 a_0
+    d/dt K_By =  2 + 2 (b - zeta) a_1 - (b - zeta)^2 a_1' + (b - zeta)^2 a_0
+
+(and the same for ``u`` with ``b_1``, ``b_0`` and without the constants).
+
+Every kernel is a polynomial in ``t`` and in ``s = xi - a`` (``r = b - zeta``)
+times a coefficient (or its derivative). With ``T = t - a``, ``R = b - t``, the
+forward moments ``F_k(t) = int_a^t s^k phi(xi) v(xi) dxi`` and backward moments
+``B_k(t) = int_t^b r^k phi(zeta) v(zeta) dzeta`` (``k <= 3``), the kernel
+integrals are short combinations (:func:`slot_identity`,
+:func:`slot_derivative`)::
+
+    free part       6 F_1 - 2 T F_0 + 6 B_1 - 2 R B_0            (phi = 1, v = y)
+    a_0 (or b_0)   -T F_2 + F_3 + B_3 - R B_2                    (phi = a_0, v = y)
+    a_1 (or b_1)   -3 F_2 + 2 T F_1 + 3 B_2 - 2 R B_1            (phi = a_1)
+                   + T F'_2 - F'_3 - B'_3 + R B'_2               (phi = a_1')
+
+So one pass of *cumulative* quadrature per function gives the kernel
+integrals at every sample at once.
+
+Quadrature (:class:`ProductQuadrature`)
+---------------------------------------
+A product rule on the uniformly sampled data: on each sample interval the
+signal (``y`` or ``u``) is replaced by the Lagrange polynomial through the
+``points`` nearest samples (a centred stencil, shifted inwards at the ends of
+the data); its product with the known weight (``s^k`` times a B-spline, a
+known coefficient or 1) is integrated by ``points / 2``-point Gauss-Legendre
+on each piece between consecutive *breakpoints* (the samples and the B-spline
+knots, so the rule never straddles a knot where a B-spline's derivative
+jumps). Both approximations are of order ``points``: the interpolation error
+is ``O(h^points)`` and the ``q``-point Gauss rule's ``O(h^(2q))``, so every
+cumulative integral has a global error ``O(h^points)`` for smooth data
+(``points = 6``, the default: sixth order). Data that are a polynomial of
+degree below ``points`` are interpolated exactly.
+
+Examples
+--------
+>>> import numpy as np
+>>> t = np.linspace(0.0, 2.0, 201)
+>>> quad = product_quadrature(0.0, 0.01, t.size)
+>>> F, B = quad.cumulative(quad.interpolate(np.cos(t)))
+>>> bool(abs(F[0, -1] - np.sin(2.0)) < 1e-12)  # int_0^2 cos = sin 2
+True
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from ..errors import DimensionError, SamplingError
+from ..validation import as_vector
+
+__all__ = [
+    "ProductQuadrature",
+    "product_quadrature",
+    "cumulate",
+    "KernelIdentity",
+    "kernel_identity",
+    "kernel_functions",
+    "KernelFunctions",
+    "slot_identity",
+    "slot_derivative",
+    "free_identity",
+    "free_derivative",
+    "coefficient_terms",
+    "finish_identity",
+    "window_weight",
+    "check_uniform_samples",
+    "SAMPLING_RTOL",
+    "MOMENTS",
+]
+
+#: Number of moments ``s^0 .. s^3`` the kernels (13)-(17) need.
+MOMENTS = 4
+
+
+@dataclass(frozen=True, eq=False)
+class ProductQuadrature:
+    """Cumulative product quadrature on ``m`` uniform samples ``a + j h``.
+
+    Build it with :func:`product_quadrature`. Node arrays have length ``N``
+    (``points / 2`` Gauss nodes per piece between breakpoints); interval
+    arrays have length ``J = m - 1``.
+
+    Attributes
+    ----------
+    a, h : float
+        First sample time and sample spacing; the window is ``[a, b]``,
+        ``b = a + (m - 1) h``.
+    m : int
+        Number of samples.
+    points : int
+        Interpolation stencil (even); the rule's order.
+    x : ndarray, shape (N,)
+        Quadrature nodes (absolute time).
+    weights : ndarray, shape (N,)
+        Gauss weights (they sum to ``b - a``).
+    interval : ndarray of int, shape (N,)
+        Sample interval ``j`` (``a + j h <= x <= a + (j + 1) h``) of each node.
+    s_weights, r_weights : ndarray, shape (4, N)
+        ``weights * (x - a)^k`` and ``weights * (b - x)^k``, ``k = 0..3``.
+    starts : ndarray of int, shape (J,)
+        First node of each interval (nodes are sorted).
+    gather : ndarray of int, shape (points, N)
+        Interpolation stencils: ``v(x_g) ~ sum_l lagrange[l, g] v[gather[l, g]]``.
+    lagrange : ndarray, shape (points, N)
+        Lagrange weights.
+    moment_matrix : scipy.sparse.csc_matrix, shape (8 J, N)
+        ``s_weights`` and ``r_weights`` summed per interval: one sparse product
+        gives the per-interval moments of a function at the nodes.
+    """
+
+    a: float
+    h: float
+    m: int
+    points: int
+    x: np.ndarray
+    weights: np.ndarray
+    interval: np.ndarray
+    s_weights: np.ndarray
+    r_weights: np.ndarray
+    starts: np.ndarray
+    gather: np.ndarray
+    lagrange: np.ndarray
+    moment_matrix: Any
+
+    @property
+    def b(self) -> float:
+        return self.a + (self.m - 1) * self.h
+
+    @property
+    def samples(self) -> np.ndarray:
+        """Sample times ``a + j h``, shape (m,)."""
+        return self.a + self.h * np.arange(self.m)
+
+    def shifted(self, a: float) -> ProductQuadrature:
+        """The same rule on the window starting at ``a`` (same ``h`` and ``m``;
+        every weight is invariant under the shift)."""
+        return ProductQuadrature(
+            float(a), self.h, self.m, self.points, self.x + (float(a) - self.a), self.weights,
+            self.interval, self.s_weights, self.r_weights, self.starts, self.gather, self.lagrange,
+            self.moment_matrix,
+        )
+
+    def interpolate(self, v: np.ndarray) -> np.ndarray:
+        """Samples ``v`` (shape (m,)) interpolated at the nodes, shape (N,)."""
+        return np.einsum("lg,lg->g", self.lagrange, v[self.gather])
+
+    def cumulative(self, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Forward and backward moments of ``f`` (given at the nodes).
+
+        Returns ``F, B``, each of shape (4, m):
+        ``F[k, j] = int_a^{t_j} (x - a)^k f dx``,
+        ``B[k, j] = int_{t_j}^b (b - x)^k f dx``.
+        """
+        per_interval = (self.moment_matrix @ f).reshape(2, MOMENTS, self.m - 1)
+        return cumulate(per_interval[0], per_interval[1])
+
+
+def cumulate(IF: np.ndarray, IB: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-interval integrals (..., L) to moments at the ``L + 1`` bounding
+    samples: ``F`` sums the intervals to the left of a sample, ``B`` those to
+    its right. Returns arrays of shape (..., L + 1)."""
+    zeros = np.zeros((*IF.shape[:-1], 1))
+    F = np.concatenate([zeros, np.cumsum(IF, axis=-1)], axis=-1)
+    B = np.concatenate([np.cumsum(IB[..., ::-1], axis=-1)[..., ::-1], zeros], axis=-1)
+    return F, B
+
+
+def product_quadrature(
+    a: float, h: float, m: int, *, breakpoints: Sequence[float] | np.ndarray = (), points: int = 6
+) -> ProductQuadrature:
+    """Build the cumulative product quadrature of the module docstring.
+
+    Parameters
+    ----------
+    a, h : float
+        First sample time and uniform spacing (``h > 0``).
+    m : int
+        Number of samples (at least ``points``).
+    breakpoints : array_like, optional
+        Extra breakpoints (B-spline knots); those strictly inside ``(a, b)``
+        and not on a sample split their interval.
+    points : int, optional
+        Interpolation stencil, even, ``2 <= points <= 12``; the rule is of
+        order ``points`` (default 6).
+
+    Examples
+    --------
+    >>> q = product_quadrature(0.0, 0.5, 5, breakpoints=[0.75], points=4)
+    >>> q.x.size  # 4 intervals + 1 split, 2 Gauss nodes per piece
+    10
+    """
+    if isinstance(points, bool) or not isinstance(points, int | np.integer) or not 2 <= points <= 12 or points % 2:
+        raise DimensionError(f"points (interpolation stencil) must be an even integer in [2, 12]; found {points!r}")
+    if not h > 0 or not np.isfinite(h):
+        raise DimensionError(f"the sample spacing must be positive and finite; found {h!r}")
+    if m < points:
+        raise DimensionError(
+            f"the data have {m} samples; the {points}-point quadrature needs at least {points}"
+        )
+    samples = a + h * np.arange(m)
+    b = samples[-1]
+    bp = np.asarray(breakpoints, dtype=float).ravel()
+    rel = (bp - a) / h
+    inside = (bp > a) & (bp < b) & (np.abs(rel - np.round(rel)) > 1e-9)
+    edges = np.union1d(samples, bp[inside])
+    left, right = edges[:-1], edges[1:]
+    piece_interval = np.clip(np.searchsorted(samples, left, side="right") - 1, 0, m - 2)
+    q = points // 2
+    gx, gw = np.polynomial.legendre.leggauss(q)
+    half = 0.5 * (right - left)
+    mid = 0.5 * (right + left)
+    x = (mid[:, None] + half[:, None] * gx).ravel()
+    w = (half[:, None] * gw).ravel()
+    interval = np.repeat(piece_interval, q)
+    k = np.arange(MOMENTS)[:, None]
+    s_weights = w * (x - a) ** k
+    r_weights = w * (b - x) ** k
+    starts = np.searchsorted(interval, np.arange(m - 1))
+    stencil = np.clip(interval - points // 2 + 1, 0, m - points)
+    # Lagrange weights L_l(pos) = prod_{j != l} (pos - j) / (l - j); a node lies
+    # strictly between two samples, so pos is never an integer
+    pos = (x - samples[stencil]) / h
+    diff = pos - np.arange(points)[:, None]  # (points, N)
+    total = np.prod(diff, axis=0)
+    ell = np.arange(points)
+    denominators = np.array([np.prod([l_ - j for j in ell if j != l_]) for l_ in ell], dtype=float)
+    lagrange = total / (diff * denominators[:, None])
+    gather = stencil + np.arange(points)[:, None]
+    from scipy.sparse import csc_matrix
+
+    J = m - 1
+    rows = (np.arange(2 * MOMENTS, dtype=np.int32) * J)[None, :] + interval.astype(np.int32)[:, None]  # (N, 8)
+    data = np.empty((x.size, 2 * MOMENTS))
+    data[:, :MOMENTS] = s_weights.T
+    data[:, MOMENTS:] = r_weights.T
+    moment_matrix = csc_matrix(
+        (data.ravel(), rows.ravel(), np.arange(x.size + 1, dtype=np.int32) * (2 * MOMENTS)),
+        shape=(2 * MOMENTS * J, x.size),
+    )
+    return ProductQuadrature(
+        float(a), float(h), int(m), int(points), x, w, interval, s_weights, r_weights, starts, gather, lagrange,
+        moment_matrix,
+    )
+
+
+#: Relative tolerance of the uniform-sampling check: ``|t[j+1] - t[j] - h| <= tol * h``.
+SAMPLING_RTOL = 1e-6
+
+
+def check_uniform_samples(t: object, name: str = "t") -> tuple[np.ndarray, float]:
+    """Finite, strictly increasing, uniformly spaced sample times; returns ``(t, h)``.
+
+    Raises :class:`~lpvest.errors.NonFiniteError` (NaN/inf),
+    :class:`~lpvest.errors.DimensionError` (fewer than 2 samples) or
+    :class:`~lpvest.errors.SamplingError` (not increasing, or a step deviating
+    from the mean step by more than ``SAMPLING_RTOL`` relative).
+    """
+    times = as_vector(t, name)
+    if times.size < 2:
+        raise DimensionError(f"{name} has {times.size} sample(s); at least 2 are needed")
+    d = np.diff(times)
+    if np.any(d <= 0):
+        j = int(np.argmax(d <= 0))
+        raise SamplingError(f"{name} is not strictly increasing: {name}[{j + 1}] = {times[j + 1]!r} <= {name}[{j}]")
+    h = (times[-1] - times[0]) / (times.size - 1)
+    dev = np.abs(d - h)
+    if np.max(dev) > SAMPLING_RTOL * h:
+        j = int(np.argmax(dev))
+        raise SamplingError(
+            f"{name} is not uniformly sampled: step {j} is {d[j]:.9g}, the mean step is {h:.9g} "
+            f"(relative tolerance {SAMPLING_RTOL:g}); the kernel quadrature needs a uniform grid"
+        )
+    return times, float(h)
+
+
+# -- the kernel integrals as combinations of moments -----------------------------------------
+
+
+def free_identity(F: np.ndarray, B: np.ndarray, T: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Kernel part depending on no coefficient (ERRATA: missing from (24)/(28)):
+    ``int_a^t [4 s - 2 (t - xi)] y + int_t^b [4 r + 2 (t - zeta)] y``;
+    ``F, B`` are the moments of ``y``."""
+    return 6.0 * F[1] - 2.0 * T * F[0] + 6.0 * B[1] - 2.0 * R * B[0]
+
+
+def free_derivative(F: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``t``-derivative of the integrals of :func:`free_identity` without the
+    boundary terms (those are ``(2T - 2R) y(t)``)."""
+    return -2.0 * F[0] + 2.0 * B[0]
+
+
+def slot_identity(
+    order: int, F: np.ndarray, B: np.ndarray, T: np.ndarray, R: np.ndarray,
+    Fd: np.ndarray | None = None, Bd: np.ndarray | None = None,
+) -> np.ndarray:
+    """Kernel integrals of one coefficient: ``order`` 0 (``a_0``/``b_0``) or 1
+    (``a_1``/``b_1``); ``F, B`` moments of ``phi v``, ``Fd, Bd`` of ``phi' v``
+    (``None``: ``phi' = 0``). Works elementwise on broadcastable arrays."""
+    if order == 0:
+        return -T * F[2] + F[3] + B[3] - R * B[2]
+    out = -3.0 * F[2] + 2.0 * T * F[1] + 3.0 * B[2] - 2.0 * R * B[1]
+    if Fd is not None and Bd is not None:
+        out = out + T * Fd[2] - Fd[3] - Bd[3] + R * Bd[2]
+    return out
+
+
+def slot_derivative(
+    order: int, F: np.ndarray, B: np.ndarray, Fd: np.ndarray | None = None, Bd: np.ndarray | None = None
+) -> np.ndarray:
+    """``t``-derivative of the integrals of :func:`slot_identity` without the
+    boundary terms (those are ``-C phi(t) v(t)`` for order 1, none for 0)."""
+    if order == 0:
+        return -F[2] + B[2]
+    out = 2.0 * F[1] + 2.0 * B[1]
+    if Fd is not None and Bd is not None:
+        out = out + Fd[2] - Bd[2]
+    return out
+
+
+def window_weight(t: np.ndarray, a: float, b: float) -> np.ndarray:
+    """``C_[a,b](t) = (t - a)^2 + (b - t)^2`` of (18), (19)."""
+    return (t - a) ** 2 + (b - t) ** 2
+
+
+# -- the identity (9)/(10) with known coefficients --------------------------------------------
+
+
+class KernelIdentity(NamedTuple):
+    """Right-hand sides of (9) and (10) at the samples."""
+
+    t: np.ndarray  #: sample times, shape (m,)
+    y: np.ndarray  #: ``int K_y y + int K_u u``, (9), shape (m,)
+    dy: np.ndarray  #: the derivative identity (10) with ``y(t)`` from ``y`` above, shape (m,)
+
+
+CoefficientLike = object  # a TimeFunction, a formula, a number or a callable
+
+
+def coefficient_terms(
+    quad: ProductQuadrature, order: int, phi: np.ndarray, dphi: np.ndarray | None, v_nodes: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Kernel integrals of one coefficient ``phi`` (values at the nodes; its
+    derivative ``dphi`` for order 1, ``None`` if zero) acting on the signal
+    ``v``: the identity part and the derivative part (without boundary terms),
+    each of shape (m,), not yet divided by ``C``."""
+    t = quad.samples
+    T, R = t - quad.a, quad.b - t
+    F, B = quad.cumulative(phi * v_nodes)
+    Fd = Bd = None
+    if order == 1 and dphi is not None and np.any(dphi != 0.0):
+        Fd, Bd = quad.cumulative(dphi * v_nodes)
+    return slot_identity(order, F, B, T, R, Fd, Bd), slot_derivative(order, F, B, Fd, Bd)
+
+
+def finish_identity(
+    quad: ProductQuadrature,
+    ident: np.ndarray,
+    deriv: np.ndarray,
+    a1: np.ndarray,
+    b1: np.ndarray,
+    u: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``y_E = ident / C`` (9) and ``y_E' = deriv / C + ((2T - 2R) / C - a_1) y_E
+    - b_1 u`` (10), with ``a_1, b_1, u`` at the samples."""
+    t = quad.samples
+    T, R = t - quad.a, quad.b - t
+    C = window_weight(t, quad.a, quad.b)
+    y_e = ident / C
+    dy_e = deriv / C + ((2.0 * T - 2.0 * R) / C - a1) * y_e - b1 * u
+    return y_e, dy_e
+
+
+def kernel_identity(
+    t: object,
+    u: object,
+    y: object,
+    a: Sequence[CoefficientLike],
+    b: Sequence[CoefficientLike] = (),
+    *,
+    points: int = 6,
+) -> KernelIdentity:
+    """Evaluate the kernel identities (9) and (10) with *known* coefficients.
+
+    Parameters
+    ----------
+    t : array_like, shape (m,)
+        Uniform sample times; the window is ``[t[0], t[-1]]``.
+    u, y : array_like, shape (m,)
+        Input and output samples.
+    a : sequence of length 2
+        ``a_0(t), a_1(t)`` (:class:`~lpvest.systems.ltv.TimeFunction`,
+        formula, number or callable); ``a_1'`` comes from
+        :meth:`TimeFunction.derivative`.
+    b : sequence of length <= 2, optional
+        ``b_0(t), b_1(t)`` (missing ones are zero).
+    points : int, optional
+        Quadrature order (:func:`product_quadrature`).
+
+    Returns
+    -------
+    KernelIdentity
+        ``y``: the right-hand side of (9), equal to the data ``y`` up to the
+        quadrature error when the coefficients are the system's; ``dy``: the
+        derivative identity (10), equal to ``y'``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> t = np.linspace(0, 5, 2001)
+    >>> y = np.exp(-t) * np.sin(2 * t)  # y'' + 2 y' + 5 y = 0
+    >>> out = kernel_identity(t, np.zeros_like(t), y, a=[5.0, 2.0])
+    >>> bool(np.max(np.abs(out.y - y)) < 1e-12)
+    True
+    """
+    from ..systems.ltv import TimeFunction
+
+    times, h = check_uniform_samples(t, "t")
+    uu = as_vector(u, "u", times.size)
+    yy = as_vector(y, "y", times.size)
+    if len(a) != 2 or len(b) > 2:
+        raise DimensionError(
+            f"kernel_identity is for second-order systems (11): a needs (a_0, a_1) and b at most "
+            f"(b_0, b_1); found {len(a)} a and {len(b)} b coefficients"
+        )
+    funcs = {
+        "a0": TimeFunction.of(a[0]),
+        "a1": TimeFunction.of(a[1]),
+        "b0": TimeFunction.of(b[0] if len(b) > 0 else 0.0),
+        "b1": TimeFunction.of(b[1] if len(b) > 1 else 0.0),
+    }
+    quad = product_quadrature(times[0], h, times.size, points=points)
+    samples = quad.samples
+    y_nodes, u_nodes = quad.interpolate(yy), quad.interpolate(uu)
+    F, B = quad.cumulative(y_nodes)
+    ident = free_identity(F, B, samples - quad.a, quad.b - samples)
+    deriv = free_derivative(F, B)
+    for name, f in funcs.items():
+        order = int(name[1])
+        di, dd = coefficient_terms(
+            quad, order, f(quad.x), f.derivative()(quad.x) if order == 1 else None,
+            y_nodes if name[0] == "a" else u_nodes,
+        )
+        ident, deriv = ident + di, deriv + dd
+    y_e, dy_e = finish_identity(quad, ident, deriv, funcs["a1"](samples), funcs["b1"](samples), uu)
+    return KernelIdentity(samples, y_e, dy_e)
+
+
+# -- the kernels as printed, pointwise (a reference for tests and plots) ----------------------
+
+
+class KernelFunctions(NamedTuple):
+    """The kernels (13)-(19) and their ``t``-derivatives at points ``(t, tau)``."""
+
+    Ky: np.ndarray  #: (18)
+    Ku: np.ndarray  #: (19)
+    dKy: np.ndarray  #: d/dt of (18) without the jump at tau = t
+    dKu: np.ndarray  #: d/dt of (19)
+    C: np.ndarray  #: C_[a,b](t)
+
+
+def kernel_functions(
+    t: np.ndarray,
+    tau: np.ndarray,
+    a: float,
+    b: float,
+    coefficients: dict[str, Callable[[np.ndarray], np.ndarray]],
+) -> KernelFunctions:
+    """The kernels (13)-(19) evaluated literally, pointwise.
+
+    ``coefficients`` maps ``a0, a1, da1, b0, b1, db1`` to callables of time
+    (missing ones are zero). The kernels are the paper's full ones, including
+    the part that depends on no coefficient. Not used by the estimator (which
+    works with moments); a reference implementation for checks.
+    """
+    t = np.asarray(t, dtype=float)
+    tau = np.asarray(tau, dtype=float)
+
+    def get(name: str) -> np.ndarray:
+        f = coefficients.get(name)
+        return np.zeros_like(tau) if f is None else np.asarray(f(tau), dtype=float)
+
+    a0, a1, da1 = get("a0"), get("a1"), get("da1")
+    b0, b1, db1 = get("b0"), get("b1"), get("db1")
+    s = tau - a
+    r = b - tau
+    KFy = 4 * s - s**2 * a1 + (t - tau) * (-2 + 2 * s * a1 + s**2 * da1 - s**2 * a0)  # (13)
+    KFu = -(s**2) * b1 + (t - tau) * (2 * s * b1 + s**2 * db1 - s**2 * b0)  # (14)
+    KBy = 4 * r + r**2 * a1 + (t - tau) * (2 + 2 * r * a1 - r**2 * da1 + r**2 * a0)  # (16)
+    KBu = r**2 * b1 + (t - tau) * (2 * r * b1 - r**2 * db1 + r**2 * b0)  # (17)
+    dKFy = -2 + 2 * s * a1 + s**2 * da1 - s**2 * a0
+    dKFu = 2 * s * b1 + s**2 * db1 - s**2 * b0
+    dKBy = 2 + 2 * r * a1 - r**2 * da1 + r**2 * a0
+    dKBu = 2 * r * b1 - r**2 * db1 + r**2 * b0
+    C = window_weight(t, a, b)
+    fwd = tau <= t
+    return KernelFunctions(
+        np.where(fwd, KFy, KBy) / C,
+        np.where(fwd, KFu, KBu) / C,
+        np.where(fwd, dKFy, dKBy) / C,
+        np.where(fwd, dKFu, dKBu) / C,
+        C,
+    )
