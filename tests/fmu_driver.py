@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 from fmpy import extract, read_model_description
-from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, printLogMessage
+from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
 
 
 class Driver:
@@ -34,11 +34,6 @@ class Driver:
         callbacks.allocateMemory = ctypes.cast(None, type(callbacks.allocateMemory))
         callbacks.freeMemory = ctypes.cast(None, type(callbacks.freeMemory))
         self.fmu.instantiate(callbacks=callbacks, loggingOn=logging_on)
-        _ = printLogMessage
-
-    # raw calls returning the status
-    def call(self, fn: str, *args) -> int:  # noqa: ANN002
-        return int(getattr(self.fmu.dll if hasattr(self.fmu, "dll") else None, fn)(self.fmu.component, *args))
 
     def status(self, method, *args) -> int:  # noqa: ANN001, ANN002
         from fmpy.fmi1 import FMICallException
@@ -60,8 +55,6 @@ class Driver:
         t = self.types[name]
         setter = {"Real": self.fmu.setReal, "Integer": self.fmu.setInteger,
                   "Boolean": self.fmu.setBoolean, "String": self.fmu.setString}[t]
-        if t == "String":
-            value = value.encode() if isinstance(value, str) else value
         return self.status(setter, [self.vr[name]], [value])
 
     def set_vector(self, base: str, values) -> int:  # noqa: ANN001
@@ -76,14 +69,20 @@ class Driver:
         return getter([self.vr[name]])[0]
 
     def vector(self, base: str) -> np.ndarray:
-        names = sorted((n for n in self.vr if n.startswith(base + "[")), key=lambda n: int(n[len(base) + 1:-1]))
+        from lpvest.fmi.naming import parse_element
+
+        names = sorted((n for n in self.vr if n.startswith(base + "[")), key=lambda n: parse_element(n)[1])
         return np.array(self.fmu.getReal([self.vr[n] for n in names]))
 
     def step(self, t: float, h: float) -> int:
         return self.status(self.fmu.doStep, t, h)
 
     def errors(self) -> list[str]:
+        """The messages logged at status fmi2Error or worse."""
         return [m for s, _, m in self.messages if s >= 3]
+
+    def outputs(self, names: list[str]) -> np.ndarray:
+        return np.array(self.fmu.getReal([self.vr[n] for n in names]))
 
     def free(self) -> None:
         self.fmu.freeInstance()

@@ -293,8 +293,16 @@ def _slave_class(script: Path) -> type:
 def _model_description(plan: FmuPlan, staging: Path) -> tuple[bytes, int, int, int]:
     from pythonfmu.default_experiment import DefaultExperiment
 
-    cls = _slave_class(staging / plan.script)
-    slave = cls(instance_name="lpvest-build", resources=str(staging))
+    # as at run time, resources/ is on sys.path while the slave is instantiated
+    sys.path.insert(0, str(staging))
+    try:
+        cls = _slave_class(staging / plan.script)
+        slave = cls(instance_name="lpvest-build", resources=str(staging))
+    finally:
+        sys.path.remove(str(staging))
+        for name, module in list(sys.modules.items()):
+            if str(getattr(module, "__file__", "") or "").startswith(str(staging)):
+                del sys.modules[name]
     slave.default_experiment = DefaultExperiment(start_time=0.0, stop_time=plan.stop_time, step_size=plan.step_size)
     options = {
         "needsExecutionTool": True,  # a Python interpreter

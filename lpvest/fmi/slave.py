@@ -261,8 +261,8 @@ class LpvestSlave(Fmi2Slave):
             if not math.isfinite(value):
                 self._reject(e, f"{what} = {value} is not finite; value rejected")
                 return
-            # the same relative tolerance as lpvest.validation.check_box
-            tol = 1e-12 * max(1.0, abs(e.minimum or 0.0), abs(e.maximum or 0.0))
+            # inputs: the relative tolerance of lpvest.validation.check_box; parameters: exact
+            tol = 1e-12 * max(1.0, abs(e.minimum or 0.0), abs(e.maximum or 0.0)) if e.kind == "input" else 0.0
             below = e.minimum is not None and value < e.minimum - tol
             if below or (e.maximum is not None and value > e.maximum + tol):
                 lo = "-inf" if e.minimum is None else f"{e.minimum:.6g}"
@@ -272,7 +272,7 @@ class LpvestSlave(Fmi2Slave):
         elif e.fmi_type == "Integer":
             value = int(value)
             if (e.minimum is not None and value < e.minimum) or (e.maximum is not None and value > e.maximum):
-                bounds = f"[{e.minimum}, {e.maximum}]"
+                bounds = f"[{'-inf' if e.minimum is None else e.minimum}, {'inf' if e.maximum is None else e.maximum}]"
                 self._reject(e, f"{what} = {value} is outside its declared range {bounds}; value rejected")
                 return
         elif e.fmi_type == "Boolean":

@@ -171,8 +171,10 @@ static char* safe_format(const char* message) {
     size_t n = strlen(message), extra = 0;
     int safe = 1;
     for (size_t i = 0; i < n; i++) {
+        if (message[i] == '%') extra++;
+    }
+    for (size_t i = 0; i < n; i++) {
         if (message[i] == '%') {
-            extra++;
             if (i + 1 < n && message[i + 1] == '%') {
                 i++;
             } else {

@@ -66,12 +66,13 @@ def plant_supports(model: object) -> str | None:
     if isinstance(model, InnovationLPV):
         back, ahead = model.window
         if back or ahead:
+            used = ", ".join([f"p_(t-{back})"] * bool(back) + [f"p_(t+{ahead})"] * bool(ahead))
             return (
-                f"its gain uses the scheduling from p_(t-{back}) to p_(t+{ahead}); a streaming plant "
-                "knows only p_t (use a realization with a gain of p_t, e.g. (21c))"
+                f"its gain uses {used}; a streaming plant knows only p_t at sample t "
+                "(use a realization with a gain of p_t, e.g. (21c))"
             )
         return None
-    return f"a {type(model).__name__} has no state-space realization to stream"
+    return f"{type(model).__name__} is an input-output model with no state to stream (use a state-space realization)"
 
 
 def _check(inputs: Mapping[str, Any], ports: tuple[Port, ...]) -> dict[str, np.ndarray]:
