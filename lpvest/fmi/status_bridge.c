@@ -94,6 +94,19 @@ typedef struct {
 
 static Inner inner;
 static int inner_loaded = 0;
+static void (*inner_finalize)(void) = NULL;
+
+/* pythonfmu 0.7's library has a use-after-free at process exit: the static
+ * shared_ptr holding its interpreter state is destroyed by an exit handler, and
+ * then its destructor function (finalizePythonInterpreter) assigns to the
+ * destroyed pointer, releasing the state a second time (heap corruption, an
+ * abort at exit in about one run in five here). Calling finalizePythonInterpreter
+ * from an exit handler registered after the library is loaded (exit handlers
+ * run in reverse order) releases the state once, while the pointer is alive;
+ * both later calls then see an empty pointer. */
+static void finalize_inner(void) {
+    if (inner_finalize) inner_finalize();
+}
 
 typedef struct {
     fmi2Component inner;
@@ -157,6 +170,8 @@ static int load_inner(const fmi2CallbackFunctions* host, fmi2String name) {
     LOAD(SetFMUstate) LOAD(FreeFMUstate) LOAD(SerializedFMUstateSize) LOAD(SerializeFMUstate)
     LOAD(DeSerializeFMUstate) LOAD(DoStep) LOAD(GetRealStatus)
 #undef LOAD
+    inner_finalize = (void (*)(void))dlsym(h, "finalizePythonInterpreter");
+    if (inner_finalize) atexit(finalize_inner);
     inner_loaded = 1;  /* never unloaded: pythonfmu keeps its interpreter thread alive anyway */
     return 1;
 }
