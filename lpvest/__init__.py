@@ -39,6 +39,13 @@ from .scheduling import (
     Monomial as Monomial,
     SchedulingSpace as SchedulingSpace,
 )
+
+# -- FMU area: test signals and streaming plants (the FMUs' numerics) --
+from .signals import (
+    SignalGenerator as SignalGenerator,
+    SignalSpec as SignalSpec,
+    sample_signal as sample_signal,
+)
 from .systems import (
     AffineDependence as AffineDependence,
     AffineLPV as AffineLPV,
@@ -53,6 +60,7 @@ from .systems import (
     TimeFunction as TimeFunction,
     affine_to_polytopic as affine_to_polytopic,
 )
+from .systems.streaming import DiscretePlant as DiscretePlant, LTVPlant as LTVPlant
 
 __all__ = [
     "__version__",
@@ -90,4 +98,10 @@ __all__ = [
     "PolytopicLPV",
     "TimeFunction",
     "affine_to_polytopic",
+    # FMU area
+    "SignalGenerator",
+    "SignalSpec",
+    "sample_signal",
+    "DiscretePlant",
+    "LTVPlant",
 ]

@@ -227,3 +227,42 @@ def test_lpvest_build_of_a_bad_model_file_is_one_line(tmp_path):
                           capture_output=True, text=True, check=False)
     assert proc.returncode == 2
     assert proc.stderr.startswith(f"lpvest: error: {bad}") and proc.stderr.count("\n") == 1
+
+
+# -- a C host -----------------------------------------------------------------------------
+
+
+def test_a_c_host_runs_the_fmu_with_libpython_preloaded(fmus, tmp_path):
+    """What a non-Python host needs: libpython loaded first (LD_PRELOAD) and a
+    Python path where numpy is found; without libpython the FMU says so."""
+    import shutil
+    import sysconfig
+
+    cc = shutil.which("cc") or shutil.which("gcc")
+    libpython = Path(sysconfig.get_config_var("LIBDIR") or "") / (sysconfig.get_config_var("INSTSONAME") or "")
+    if cc is None or not libpython.is_file():
+        pytest.skip("needs a C compiler and a shared libpython")
+    host = tmp_path / "c_host"
+    subprocess.run([cc, "-O2", "-o", str(host), str(ROOT / "tests" / "data" / "c_host.c"), "-ldl", "-lm"], check=True)
+    unzip = tmp_path / "fmu"
+    with zipfile.ZipFile(fmus["PeixotoEx1Plant"]) as z:
+        z.extractall(unzip)
+    from fmpy import read_model_description
+
+    md = read_model_description(str(fmus["PeixotoEx1Plant"]))
+    vr = {v.name: str(v.valueReference) for v in md.modelVariables}
+    args = [str(host), str(unzip), "PeixotoEx1Plant", md.guid, vr["p[1]"], vr["w[1]"], vr["y[1]"], "20"]
+    env = {k: v for k, v in os.environ.items() if k not in ("LD_PRELOAD", "PYTHONPATH", "PYTHONHOME")}
+    bare = subprocess.run(args, capture_output=True, text=True, env=env, timeout=120, check=False)
+    assert bare.returncode == 4 and "LD_PRELOAD" in bare.stdout
+    site = str(Path(np.__file__).resolve().parent.parent)  # where numpy is installed
+    env.update(LD_PRELOAD=str(libpython), PYTHONPATH=site)
+    proc = subprocess.run(args, capture_output=True, text=True, env=env, timeout=120, check=False, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    ys = [float(line.split()[2]) for line in proc.stdout.splitlines() if line.startswith("Y ")]
+    plant = load_system("peixoto-ex1").model()
+    k = np.arange(20)
+    ref = plant.simulate(plant.alpha_batch(theta(k)[:, None]), np.full((20, 1), 0.3))
+    assert np.array_equal(ys, ref.y[:, 0])
+    assert "BADSTATUS 3" in proc.stdout and "p[1] (theta) = 1.5 is outside" in proc.stdout
+    assert "FREED" in proc.stdout

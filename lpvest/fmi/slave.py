@@ -104,7 +104,12 @@ class LpvestSlave(Fmi2Slave):
         return load_system(path, parameters=values)
 
     def model(self, params: Mapping[str, Any] | None = None) -> Any:
-        """The model this FMU was built for (see :meth:`system`)."""
+        """The model this FMU was built for (see :meth:`system`); without
+        ``params``, the model at the file's parameter values (loaded once)."""
+        if params is None:
+            if getattr(self, "_default_model", None) is None:
+                self._default_model = self.system().model(self.spec["model_key"])
+            return self._default_model
         return self.system(params).model(self.spec["model_key"])
 
     def model_parameters(self) -> list[Parameter]:
