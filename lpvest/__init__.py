@@ -40,7 +40,7 @@ from .scheduling import (
     SchedulingSpace as SchedulingSpace,
 )
 
-# -- FMU area: test signals and streaming plants (the FMUs' numerics) --
+# FMU area (isort places its two imports): test signals
 from .signals import (
     SignalGenerator as SignalGenerator,
     SignalSpec as SignalSpec,
@@ -60,6 +60,7 @@ from .systems import (
     TimeFunction as TimeFunction,
     affine_to_polytopic as affine_to_polytopic,
 )
+# FMU area: streaming plants
 from .systems.streaming import DiscretePlant as DiscretePlant, LTVPlant as LTVPlant
 
 __all__ = [
