@@ -60,6 +60,7 @@ from .systems import (
     TimeFunction as TimeFunction,
     affine_to_polytopic as affine_to_polytopic,
 )
+
 # FMU area: streaming plants
 from .systems.streaming import DiscretePlant as DiscretePlant, LTVPlant as LTVPlant
 

@@ -44,12 +44,22 @@ class Driver:
         except FMICallException as exc:
             return int(exc.status)
 
+    def raw(self, function: str, *args) -> int:  # noqa: ANN002
+        """The status an FMI function returns (warnings included)."""
+        from fmpy.fmi1 import FMICallException
+
+        try:
+            return int(getattr(self.fmu, function)(self.fmu.component, *args))
+        except FMICallException as exc:
+            return int(exc.status)
+
     def initialize(self, start_time: float = 0.0, **params: float | int | bool | str) -> int:
-        self.fmu.setupExperiment(startTime=start_time)
-        st = self.status(self.fmu.enterInitializationMode)
+        """setup, enter, set ``params``, exit: the most severe status."""
+        st = self.raw("fmi2SetupExperiment", 0, 0.0, start_time, 0, 0.0)
+        st = max(st, self.raw("fmi2EnterInitializationMode"))
         for name, value in params.items():
             st = max(st, self.set(name, value))
-        return max(st, self.status(self.fmu.exitInitializationMode))
+        return max(st, self.raw("fmi2ExitInitializationMode"))
 
     def set(self, name: str, value) -> int:  # noqa: ANN001
         t = self.types[name]

@@ -452,3 +452,34 @@ def test_wrong_use_is_reported_not_fatal(fmus):
     assert d.status(d.fmu.getReal, [9999]) == 3
     assert d.step(0.0, 1.0) == 0  # none of it broke the instance
     d.free()
+
+
+def test_requirements_list_what_the_fmu_imports(fmus):
+    with zipfile.ZipFile(fmus["PeixotoEx1Plant"]) as z:
+        assert z.read("resources/requirements.txt").decode().split() == ["numpy>=1.26"]
+    with zipfile.ZipFile(fmus["SridharLtvPlant"]) as z:
+        assert z.read("resources/requirements.txt").decode().split() == ["numpy>=1.26", "scipy>=1.11"]
+
+
+def test_a_different_lpvest_serving_the_fmu_is_a_logged_warning(fmus, tmp_path):
+    """Here the installed lpvest serves the FMU (imported first); when its version
+    differs from the bundled one, instantiation says so (fmi2Warning)."""
+    import json
+
+    other = tmp_path / "PeixotoEx1Plant.fmu"
+    with zipfile.ZipFile(fmus["PeixotoEx1Plant"]) as src, zipfile.ZipFile(other, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item)
+            if item.filename == "resources/lpvest_fmu.json":
+                spec = json.loads(data)
+                spec["lpvest_version"] = "0.0.1"
+                data = json.dumps(spec).encode()
+            dst.writestr(item, data)
+    d = Driver(other)
+    assert d.initialize() == 1  # fmi2Warning: the message queued at instantiation
+    assert any(s == 1 and "which was built with lpvest 0.0.1" in m and "sys.modules" in m for s, _, m in d.messages)
+    assert d.step(0.0, 1.0) == 0
+    d.free()
+    same = Driver(fmus["PeixotoEx1Plant"])
+    assert same.initialize() == 0 and not [m for s, _, m in same.messages if s >= 1]
+    same.free()
