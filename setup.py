@@ -1,12 +1,13 @@
 """Package discovery for setuptools (metadata is in pyproject.toml).
 
 The example model files live in the top-level ``models/`` folder and are
-installed as the data package ``lpvest._models``.
+installed as the data package ``lpvest._models``; the FMU slave scripts in
+``fmus/`` are installed as ``lpvest._fmus`` (``lpvest build`` needs them).
 """
 
 from setuptools import find_packages, setup
 
 setup(
-    packages=[*find_packages(include=["lpvest", "lpvest.*"]), "lpvest._models"],
-    package_dir={"lpvest._models": "models"},
+    packages=[*find_packages(include=["lpvest", "lpvest.*"]), "lpvest._models", "lpvest._fmus"],
+    package_dir={"lpvest._models": "models", "lpvest._fmus": "fmus"},
 )

@@ -39,6 +39,13 @@ from .scheduling import (
     Monomial as Monomial,
     SchedulingSpace as SchedulingSpace,
 )
+
+# FMU area (isort places its two imports): test signals
+from .signals import (
+    SignalGenerator as SignalGenerator,
+    SignalSpec as SignalSpec,
+    sample_signal as sample_signal,
+)
 from .systems import (
     AffineDependence as AffineDependence,
     AffineLPV as AffineLPV,
@@ -70,6 +77,9 @@ from .estimators.bspline import (
     reconstruct_state as reconstruct_state,
 )
 from .estimators.kernels import KernelIdentity as KernelIdentity, kernel_identity as kernel_identity
+
+# FMU area: streaming plants
+from .systems.streaming import DiscretePlant as DiscretePlant, LTVPlant as LTVPlant
 
 __all__ = [
     "__version__",
@@ -121,4 +131,10 @@ __all__ = [
     "reconstruct_state",
     "KernelIdentity",
     "kernel_identity",
+    # FMU area
+    "SignalGenerator",
+    "SignalSpec",
+    "sample_signal",
+    "DiscretePlant",
+    "LTVPlant",
 ]

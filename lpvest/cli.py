@@ -6,6 +6,8 @@
     lpvest systems show NAME|FILE.toml      dimensions, matrices, scheduling map
     lpvest simulate NAME|FILE.toml          simulate one model: CSV, plot, summary
     lpvest reproduce NAME|all --out DIR     reproduce a paper example
+    lpvest build [--out DIR] [--model FILE.toml ...]   build and validate the FMUs
+    lpvest validate FMU...                  validate FMUs (fmpy.validation)
 
 Errors in the user's input print one line (``lpvest: error: ...``) and exit
 with status 2; no traceback.
@@ -222,6 +224,33 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_build(args: argparse.Namespace) -> int:
+    from .fmi.build import build_fmus, format_table, status_bridge
+
+    out = Path(args.out)
+    sources = args.model or None
+    results, notes = build_fmus(sources, out, progress=lambda name: print(f"building {name}", file=sys.stderr))
+    print(format_table([r.validation for r in results]))
+    for note in notes:
+        print(f"note: {note}")
+    if status_bridge() is None:
+        print("note: no C compiler (or not Linux): the FMUs use pythonfmu's binary as is, so bad input "
+              "shows as fmi2Discard at the next fmi2DoStep instead of fmi2Error")
+    bad = [r for r in results if not r.validation.ok]
+    print(f"{len(results)} FMU(s) in {out}" + (f"; {len(bad)} failed validation" if bad else ", all valid"))
+    if not results:
+        raise LpvestError("nothing to build")
+    return 1 if bad else 0
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    from .fmi.build import format_table, validate_fmus
+
+    results = validate_fmus(args.fmus)
+    print(format_table(results))
+    return 0 if all(r.ok for r in results) else 1
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="lpvest", description="Estimation for LPV and LTV systems.")
     parser.add_argument("--version", action="version", version=f"lpvest {_version()}")
@@ -249,6 +278,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("name", nargs="?", help="experiment name, 'all', or 'list'")
     p.add_argument("--out", default="out", help="output folder (default out); each experiment gets a subfolder")
     p.set_defaults(func=cmd_reproduce)
+
+    p = sub.add_parser("build", help="build the FMUs of every example system (or of --model files) and validate them")
+    p.add_argument("--out", default="fmu-build", help="output folder (default fmu-build)")
+    p.add_argument("--model", action="append", metavar="FILE.toml",
+                   help="build the FMUs of this model file (or example name) instead; repeatable")
+    p.set_defaults(func=cmd_build)
+
+    p = sub.add_parser("validate", help="validate FMUs with fmpy (exit status 1 on any problem)")
+    p.add_argument("fmus", nargs="+", metavar="FMU", help="FMU files")
+    p.set_defaults(func=cmd_validate)
     return parser
 
 

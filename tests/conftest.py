@@ -10,3 +10,7 @@ import pytest
 def rng() -> np.random.Generator:
     """A seeded generator: every random test is reproducible."""
     return np.random.default_rng(20261121)
+
+
+# the FMU set, built once per session (tests/conftest_fmu.py)
+from .conftest_fmu import fmus as fmus  # noqa: E402

@@ -1,0 +1,39 @@
+"""Estimator FMU: any streaming estimator of lpvest (slave script).
+
+A generic adapter over the step protocol of
+:mod:`lpvest.estimators.base`: the estimator is built by the factory its
+registration names (``lpvest.fmi.registry``), from the model file and the
+optional design carried in ``resources/``, with the FMU parameters as keywords.
+Its input ports become FMI inputs (``p[j]`` with the scheduling box as declared
+range, ``alpha[i]`` in [0, 1], ``u[i]``, ``y[i]``), its output ports FMI outputs
+(``xhat[i]``, ``P[i,j]``, ...). After the inputs of sample k are set, the
+outputs read ``outputs(inputs)`` (the estimates at k, no state change) before
+fmi2DoStep; fmi2DoStep calls ``step(inputs)``.
+"""
+
+from pathlib import Path
+
+from lpvest.fmi.registry import resolve
+from lpvest.fmi.slave import LpvestSlave
+from lpvest.fmi.spec import Parameter
+from lpvest.fmi.state import decode_state
+
+
+class LpvestEstimator(LpvestSlave):
+    """Streaming estimator."""
+
+    def declare(self):
+        kind = self.spec["estimator"]
+        return self.model_parameters() + [Parameter.from_json(p) for p in kind["parameters"]]
+
+    def make_component(self, params):
+        kind = self.spec["estimator"]
+        design = None
+        if self.spec.get("design_file"):
+            design = decode_state((Path(self.resources) / self.spec["design_file"]).read_bytes())
+        options = {p["name"]: params[p["name"]] for p in kind["parameters"]}
+        return resolve(kind["factory"])(self.model(params), design=design, **options)
+
+    def input_range(self, port, index):
+        return self.scheduling_range(port, index)
+

@@ -1,0 +1,46 @@
+"""Plant FMU: a continuous-time LTV plant (Sridhar et al., Section V) (slave script).
+
+A thin adapter over :class:`lpvest.systems.streaming.LTVPlant`: the state is
+integrated with scipy's DOP853 (``rtol = 1e-12``, ``atol = 1e-14`` by default)
+over each communication step, restarted at every communication point, so any
+step size gives the same accuracy.
+
+Input: by default (``use_model_input = true``) the model's input function of
+time (``u = 120 sin t``) is evaluated inside every step, exactly; with
+``use_model_input = false`` the input ``u`` is held over the step (zero-order
+hold). Outputs ``y`` (``y[1]`` = ``C(t) x``), ``x[i]`` and ``u_applied[1]``
+(the input at the communication point). Needs numpy and scipy.
+"""
+
+from lpvest.fmi.slave import LpvestSlave
+from lpvest.fmi.spec import Parameter
+from lpvest.systems.streaming import LTVPlant
+
+
+class LpvestLtvPlant(LpvestSlave):
+    """Continuous-time LTV plant."""
+
+    def declare(self):
+        model = LTVPlant(self.model())
+        x0 = model.get_state()["x"]
+        return [
+            Parameter("use_model_input", model.use_model_input,
+                      "apply the model's input function of time (else hold the input u over each step)"),
+            Parameter("x0", [float(v) for v in x0], "initial state"),
+            Parameter("rtol", 1e-12, "relative tolerance of the integrator (DOP853)", minimum=1e-14, maximum=1e-3),
+            Parameter("atol", 1e-14, "absolute tolerance of the integrator (DOP853)", minimum=1e-18, maximum=1e-3),
+        ]
+
+    def make_component(self, params):
+        return LTVPlant(
+            self.model(params),
+            use_model_input=bool(params["use_model_input"]),
+            x0=params["x0"],
+            rtol=float(params["rtol"]),
+            atol=float(params["atol"]),
+        )
+
+    def output_dependencies(self, port):
+        if port.name == "x":
+            return []
+        return None

@@ -1,0 +1,53 @@
+"""Plant FMU: a discrete-time LPV plant from a model file (slave script).
+
+A thin adapter over :class:`lpvest.systems.streaming.DiscretePlant`: a
+polytopic model (Peixoto et al. (1)), an affine model with general noise
+(Cox & Toth (1)-(3)) or an innovation-form model with a gain of ``p_t``.
+
+Inputs ``p[j]`` (``alpha[i]`` for a polytopic model without a scheduling map),
+``u[i]``, ``w[i]`` (and ``v[i]`` / ``e[i]``: external noise added to the drawn
+noise); outputs ``y[i]``, ``z[i]`` (polytopic), ``x[i]``. One fmi2DoStep is
+one sample ``k -> k + 1``. ``y_k`` and ``z_k`` feed through: after the inputs
+of sample k are set, they read ``C(p_k) x_k + D u_k + ...`` before fmi2DoStep;
+``x_k`` does not depend on the inputs of sample k.
+
+Parameters: ``noise`` and ``seed`` (models with a noise description),
+``x0[i]``, and the model file's own parameters (e.g. ``rho``).
+"""
+
+from lpvest.fmi.slave import LpvestSlave
+from lpvest.fmi.spec import Parameter
+from lpvest.systems import AffineLPV, InnovationLPV
+from lpvest.systems.streaming import DiscretePlant
+
+
+class LpvestPlant(LpvestSlave):
+    """Discrete-time LPV plant."""
+
+    def declare(self):
+        model = self.model()
+        pars = self.model_parameters()
+        if isinstance(model, AffineLPV | InnovationLPV):
+            pars.append(Parameter("noise", True, "draw the model's noise inside the FMU"))
+            pars.append(Parameter("seed", 0, "seed of the noise generator", minimum=0))
+            x0 = model.x0
+        else:
+            x0 = [0.0] * model.nx
+        pars.append(Parameter("x0", [float(v) for v in x0], "initial state"))
+        return pars
+
+    def make_component(self, params):
+        return DiscretePlant(
+            self.model(params),
+            noise=bool(params.get("noise", False)),
+            seed=int(params.get("seed", 0)),
+            x0=params["x0"],
+        )
+
+    def input_range(self, port, index):
+        return self.scheduling_range(port, index)
+
+    def output_dependencies(self, port):
+        if port.name == "x":
+            return []  # x_k is the state: no direct feedthrough
+        return None  # y_k, z_k depend on every input of sample k

@@ -1,0 +1,104 @@
+"""Estimator kinds that get an FMU: one registration line per filter.
+
+An :class:`EstimatorKind` names the FMU role (``Kalman`` -> ``PeixotoEx1Kalman.fmu``),
+the factory that builds the :class:`~lpvest.estimators.base.StreamingEstimator`
+from a model, its FMU parameters, the model types it applies to, and
+optionally a design function run when the FMU is built (e.g. an LMI
+synthesis: the FMU then carries the design as JSON in ``resources/`` and needs
+no solver at run time). The estimator's ports become the FMU's inputs and
+outputs (see ``fmus/lpvest_estimator.py``).
+
+Factories and design functions are named as ``"module:function"`` strings so
+that this module imports nothing heavy and the FMU imports only what it runs:
+
+- ``factory(model, *, design=None, **parameters) -> StreamingEstimator``
+  (``design`` is the dict the design function returned, or ``None``);
+- ``design(model) -> dict`` (numpy arrays allowed), at build time.
+
+Adding a filter FMU is one line in :data:`ESTIMATOR_KINDS` below, e.g.::
+
+    EstimatorKind("Kalman", "lpvest.estimators.kalman:fmu_estimator", models=("affine",),
+                  parameters=(Parameter("tau", 0, "memory (0: exact)", minimum=0),)),
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .spec import Parameter
+
+__all__ = ["EstimatorKind", "ESTIMATOR_KINDS", "estimator_kinds", "resolve"]
+
+
+@dataclass(frozen=True)
+class EstimatorKind:
+    """How to build one kind of estimator FMU.
+
+    Parameters
+    ----------
+    role : str
+        FMU role, the suffix of the FMU name (``Kalman``, ``TruncatedKalman``,
+        ``HinfPD``, ``HinfRobust``, ``BSplineObserver``).
+    factory : str
+        ``"module:function"`` building the estimator (see the module docs).
+    models : tuple of str
+        Model types (``lpvest.modelfile.MODEL_TYPES`` keys) it applies to.
+    parameters : tuple of Parameter
+        FMU parameters, passed to the factory as keywords.
+    design : str, optional
+        ``"module:function"`` run at build time; its result is carried in the FMU.
+    description : str
+        One line for the model description.
+    files : tuple of Path
+        Extra Python files or packages copied into ``resources/`` (for
+        estimators that live outside lpvest, e.g. in a user's own module).
+    """
+
+    role: str
+    factory: str
+    models: tuple[str, ...] = ("polytopic", "affine", "innovation")
+    parameters: tuple[Parameter, ...] = ()
+    design: str | None = None
+    description: str = ""
+    files: tuple[Path, ...] = field(default=())
+
+    def applies_to(self, model: object) -> bool:
+        from ..modelfile import MODEL_TYPES
+
+        return any(isinstance(model, MODEL_TYPES[t]) for t in self.models if t in MODEL_TYPES)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "role": self.role,
+            "factory": self.factory,
+            "parameters": [p.to_json() for p in self.parameters],
+            "description": self.description,
+        }
+
+
+def resolve(target: str) -> Callable[..., Any]:
+    """The function named ``"module:function"`` (``function`` may be dotted)."""
+    module, sep, name = target.partition(":")
+    if not sep or not module or not name:
+        raise ValueError(f"{target!r} is not of the form 'module:function'")
+    obj: Any = importlib.import_module(module)
+    for part in name.split("."):
+        obj = getattr(obj, part)
+    if not callable(obj):
+        raise TypeError(f"{target} is not callable")
+    return obj  # type: ignore[no-any-return]
+
+
+#: The estimator FMUs built for every applicable model: one line per filter.
+ESTIMATOR_KINDS: list[EstimatorKind] = [
+    # EstimatorKind("Kalman", "lpvest.estimators.kalman:fmu_estimator", models=("affine",)),
+]
+
+
+def estimator_kinds() -> list[EstimatorKind]:
+    """The registered kinds (a copy of :data:`ESTIMATOR_KINDS`)."""
+    return list(ESTIMATOR_KINDS)

@@ -1,0 +1,412 @@
+/*
+ * lpvest status bridge: the FMI 2.0 co-simulation binary of an lpvest FMU.
+ *
+ * pythonfmu's export library (shipped next to this one in binaries/<platform>/
+ * as INNER_LIBRARY) turns every Python exception into fmi2Fatal and has no way
+ * for a Python slave to return fmi2Error or fmi2Warning. This thin layer loads
+ * that library, forwards every FMI call to it, and returns as the call's status
+ * the most severe of (a) the inner status and (b) the statuses the slave gave
+ * its own log messages during that call. The lpvest slaves never raise: they
+ * log bad input at status fmi2Error and leave their state unchanged, so a host
+ * sees fmi2Error with a message naming the variable and can still free, reset
+ * or restore the instance.
+ *
+ * Logging: the inner library only forwards messages when logging is on, so it
+ * is always instantiated with logging on; this layer forwards every message of
+ * status warning or worse to the host, and the others only when the host turned
+ * logging on (for the categories it chose). Messages reach the host as a
+ * format string without arguments, every '%' doubled.
+ *
+ * No Python API is used here; the Python interpreter is the host's (or loaded
+ * with LD_PRELOAD for a C host), exactly as for pythonfmu's own library.
+ */
+#define _GNU_SOURCE
+#include <dlfcn.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#ifndef INNER_LIBRARY
+#define INNER_LIBRARY "lpvest-pythonfmu-export.so"
+#endif
+
+#define EXPORT __attribute__((visibility("default")))
+
+/* --- the FMI 2.0 types (fmi2TypesPlatform.h, fmi2FunctionTypes.h) --- */
+typedef void* fmi2Component;
+typedef void* fmi2ComponentEnvironment;
+typedef void* fmi2FMUstate;
+typedef unsigned int fmi2ValueReference;
+typedef double fmi2Real;
+typedef int fmi2Integer;
+typedef int fmi2Boolean;
+typedef char fmi2Char;
+typedef const fmi2Char* fmi2String;
+typedef char fmi2Byte;
+#define fmi2True 1
+#define fmi2False 0
+
+typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
+typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
+typedef enum { fmi2DoStepStatus, fmi2PendingStatus, fmi2LastSuccessfulTime, fmi2Terminated } fmi2StatusKind;
+
+typedef void (*fmi2CallbackLogger)(fmi2ComponentEnvironment, fmi2String, fmi2Status, fmi2String, fmi2String, ...);
+typedef void* (*fmi2CallbackAllocateMemory)(size_t, size_t);
+typedef void (*fmi2CallbackFreeMemory)(void*);
+typedef void (*fmi2StepFinished)(fmi2ComponentEnvironment, fmi2Status);
+
+typedef struct {
+    fmi2CallbackLogger logger;
+    fmi2CallbackAllocateMemory allocateMemory;
+    fmi2CallbackFreeMemory freeMemory;
+    fmi2StepFinished stepFinished;
+    fmi2ComponentEnvironment componentEnvironment;
+} fmi2CallbackFunctions;
+
+/* --- the inner library's functions --- */
+typedef struct {
+    fmi2Component (*Instantiate)(fmi2String, fmi2Type, fmi2String, fmi2String, const fmi2CallbackFunctions*,
+                                 fmi2Boolean, fmi2Boolean);
+    void (*FreeInstance)(fmi2Component);
+    fmi2Status (*SetupExperiment)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real);
+    fmi2Status (*EnterInitializationMode)(fmi2Component);
+    fmi2Status (*ExitInitializationMode)(fmi2Component);
+    fmi2Status (*Terminate)(fmi2Component);
+    fmi2Status (*Reset)(fmi2Component);
+    fmi2Status (*GetReal)(fmi2Component, const fmi2ValueReference*, size_t, fmi2Real*);
+    fmi2Status (*GetInteger)(fmi2Component, const fmi2ValueReference*, size_t, fmi2Integer*);
+    fmi2Status (*GetBoolean)(fmi2Component, const fmi2ValueReference*, size_t, fmi2Boolean*);
+    fmi2Status (*GetString)(fmi2Component, const fmi2ValueReference*, size_t, fmi2String*);
+    fmi2Status (*SetReal)(fmi2Component, const fmi2ValueReference*, size_t, const fmi2Real*);
+    fmi2Status (*SetInteger)(fmi2Component, const fmi2ValueReference*, size_t, const fmi2Integer*);
+    fmi2Status (*SetBoolean)(fmi2Component, const fmi2ValueReference*, size_t, const fmi2Boolean*);
+    fmi2Status (*SetString)(fmi2Component, const fmi2ValueReference*, size_t, const fmi2String*);
+    fmi2Status (*GetFMUstate)(fmi2Component, fmi2FMUstate*);
+    fmi2Status (*SetFMUstate)(fmi2Component, fmi2FMUstate);
+    fmi2Status (*FreeFMUstate)(fmi2Component, fmi2FMUstate*);
+    fmi2Status (*SerializedFMUstateSize)(fmi2Component, fmi2FMUstate, size_t*);
+    fmi2Status (*SerializeFMUstate)(fmi2Component, fmi2FMUstate, fmi2Byte*, size_t);
+    fmi2Status (*DeSerializeFMUstate)(fmi2Component, const fmi2Byte*, size_t, fmi2FMUstate*);
+    fmi2Status (*DoStep)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
+    fmi2Status (*GetRealStatus)(fmi2Component, fmi2StatusKind, fmi2Real*);
+} Inner;
+
+static Inner inner;
+static int inner_loaded = 0;
+static void (*inner_finalize)(void) = NULL;
+
+/* pythonfmu 0.7's library has a use-after-free at process exit: the static
+ * shared_ptr holding its interpreter state is destroyed by an exit handler, and
+ * then its destructor function (finalizePythonInterpreter) assigns to the
+ * destroyed pointer, releasing the state a second time (heap corruption, an
+ * abort at exit in about one run in five here). Calling finalizePythonInterpreter
+ * from an exit handler registered after the library is loaded (exit handlers
+ * run in reverse order) releases the state once, while the pointer is alive;
+ * both later calls then see an empty pointer. */
+static void finalize_inner(void) {
+    if (inner_finalize) inner_finalize();
+}
+
+typedef struct {
+    fmi2Component inner;
+    fmi2CallbackFunctions host;   /* the host's callbacks (copied) */
+    fmi2CallbackFunctions mine;   /* given to the inner library; lives as long as the instance */
+    char* name;
+    fmi2Boolean logging_on;
+    size_t n_categories;
+    char** categories;
+    fmi2Status worst;             /* most severe status logged during the current call */
+} Bridge;
+
+static char* safe_format(const char* message);
+
+static void report(fmi2CallbackLogger logger, fmi2ComponentEnvironment env, fmi2String name, fmi2Status status,
+                   const char* text) {
+    if (!logger) return;
+    char* fmt = safe_format(text);
+    logger(env, name ? name : "", status, status == fmi2Fatal ? "logStatusFatal" : "logStatusError",
+           fmt ? fmt : "lpvest status bridge: out of memory");
+    free(fmt);
+}
+
+static int load_inner(const fmi2CallbackFunctions* host, fmi2String name) {
+    if (inner_loaded) return 1;
+    Dl_info info;
+    if (!dladdr((void*)&load_inner, &info) || !info.dli_fname) {
+        report(host ? host->logger : NULL, host ? host->componentEnvironment : NULL, name, fmi2Fatal,
+               "lpvest status bridge: cannot find its own file (dladdr failed)");
+        return 0;
+    }
+    const char* slash = strrchr(info.dli_fname, '/');
+    size_t dir_len = slash ? (size_t)(slash - info.dli_fname + 1) : 0;
+    size_t len = dir_len + strlen(INNER_LIBRARY) + 1;
+    char* path = (char*)malloc(len);
+    if (!path) return 0;
+    memcpy(path, info.dli_fname, dir_len);
+    strcpy(path + dir_len, INNER_LIBRARY);
+    void* h = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+    if (!h) {
+        char msg[2048];
+        snprintf(msg, sizeof msg,
+                 "lpvest status bridge: cannot load %s: %s (a C host must load libpython first, "
+                 "e.g. LD_PRELOAD=libpython3.x.so)",
+                 path, dlerror());
+        report(host ? host->logger : NULL, host ? host->componentEnvironment : NULL, name, fmi2Fatal, msg);
+        free(path);
+        return 0;
+    }
+    free(path);
+#define LOAD(field)                                                          \
+    inner.field = (__typeof__(inner.field))dlsym(h, "fmi2" #field);         \
+    if (!inner.field) {                                                      \
+        report(host ? host->logger : NULL, host ? host->componentEnvironment : NULL, name, fmi2Fatal, \
+               "lpvest status bridge: the inner library lacks fmi2" #field); \
+        return 0;                                                            \
+    }
+    LOAD(Instantiate) LOAD(FreeInstance) LOAD(SetupExperiment) LOAD(EnterInitializationMode)
+    LOAD(ExitInitializationMode) LOAD(Terminate) LOAD(Reset) LOAD(GetReal) LOAD(GetInteger) LOAD(GetBoolean)
+    LOAD(GetString) LOAD(SetReal) LOAD(SetInteger) LOAD(SetBoolean) LOAD(SetString) LOAD(GetFMUstate)
+    LOAD(SetFMUstate) LOAD(FreeFMUstate) LOAD(SerializedFMUstateSize) LOAD(SerializeFMUstate)
+    LOAD(DeSerializeFMUstate) LOAD(DoStep) LOAD(GetRealStatus)
+#undef LOAD
+    inner_finalize = (void (*)(void))dlsym(h, "finalizePythonInterpreter");
+    if (inner_finalize) atexit(finalize_inner);
+    inner_loaded = 1;  /* never unloaded: pythonfmu keeps its interpreter thread alive anyway */
+    return 1;
+}
+
+/* The text is handed on as the format string with no arguments (hosts that
+ * bind the logger without varargs, e.g. through ctypes, print the format
+ * itself): a message that is already a safe format (every '%' doubled, as the
+ * lpvest slaves write them) is passed unchanged, any other is escaped. No
+ * variadic argument is ever read. */
+static char* safe_format(const char* message) {
+    if (!message) message = "";
+    size_t n = strlen(message), extra = 0;
+    int safe = 1;
+    for (size_t i = 0; i < n; i++) {
+        if (message[i] == '%') extra++;
+    }
+    for (size_t i = 0; i < n; i++) {
+        if (message[i] == '%') {
+            if (i + 1 < n && message[i + 1] == '%') {
+                i++;
+            } else {
+                safe = 0;
+            }
+        }
+    }
+    char* out = (char*)malloc(n + (safe ? 0 : extra) + 1);
+    if (!out) return NULL;
+    size_t j = 0;
+    for (size_t i = 0; i < n; i++) {
+        out[j++] = message[i];
+        if (!safe && message[i] == '%') out[j++] = '%';
+    }
+    out[j] = '\0';
+    return out;
+}
+
+static int category_enabled(const Bridge* b, fmi2String category) {
+    if (b->n_categories == 0) return 1;
+    if (!category) return 0;
+    for (size_t i = 0; i < b->n_categories; i++)
+        if (strcmp(b->categories[i], category) == 0) return 1;
+    return 0;
+}
+
+static void bridge_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status, fmi2String category,
+                          fmi2String message, ...) {
+    Bridge* b = (Bridge*)env;
+    if (!b) return;
+    if (status > b->worst && status <= fmi2Error) b->worst = status;
+    int forward = status >= fmi2Warning || (b->logging_on && category_enabled(b, category));
+    if (!forward || !b->host.logger) return;
+    char* text = safe_format(message);
+    b->host.logger(b->host.componentEnvironment, name, status, category, text ? text : "(out of memory)");
+    free(text);
+}
+
+static fmi2Status combine(fmi2Status inner_status, fmi2Status logged) {
+    if (inner_status == fmi2Fatal || inner_status == fmi2Pending) return inner_status;
+    return logged > inner_status ? logged : inner_status;
+}
+
+#define BRIDGE(c) ((Bridge*)(c))
+#define FORWARD(c, call)                                \
+    do {                                                \
+        Bridge* b_ = BRIDGE(c);                         \
+        if (!b_) return fmi2Error;                      \
+        b_->worst = fmi2OK;                             \
+        fmi2Status s_ = call;                           \
+        return combine(s_, b_->worst);                  \
+    } while (0)
+
+EXPORT const char* fmi2GetTypesPlatform(void) { return "default"; }
+EXPORT const char* fmi2GetVersion(void) { return "2.0"; }
+
+EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                                     fmi2String fmuResourceLocation, const fmi2CallbackFunctions* functions,
+                                     fmi2Boolean visible, fmi2Boolean loggingOn) {
+    if (!load_inner(functions, instanceName)) return NULL;
+    Bridge* b = (Bridge*)calloc(1, sizeof(Bridge));
+    if (!b) return NULL;
+    if (functions) b->host = *functions;
+    b->mine.logger = bridge_logger;
+    b->mine.allocateMemory = b->host.allocateMemory ? b->host.allocateMemory : calloc;
+    b->mine.freeMemory = b->host.freeMemory ? b->host.freeMemory : free;
+    b->mine.stepFinished = NULL;
+    b->mine.componentEnvironment = b;
+    b->logging_on = loggingOn;
+    b->name = strdup(instanceName ? instanceName : "");
+    b->inner = inner.Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation, &b->mine, visible, fmi2True);
+    if (!b->inner) {
+        free(b->name);
+        free(b);
+        return NULL;
+    }
+    return b;
+}
+
+static void free_categories(Bridge* b) {
+    for (size_t i = 0; i < b->n_categories; i++) free(b->categories[i]);
+    free(b->categories);
+    b->categories = NULL;
+    b->n_categories = 0;
+}
+
+EXPORT void fmi2FreeInstance(fmi2Component c) {
+    Bridge* b = BRIDGE(c);
+    if (!b) return;
+    inner.FreeInstance(b->inner);
+    free_categories(b);
+    free(b->name);
+    free(b);
+}
+
+EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
+                                      const fmi2String categories[]) {
+    Bridge* b = BRIDGE(c);
+    if (!b) return fmi2Error;
+    free_categories(b);
+    b->logging_on = loggingOn;
+    if (nCategories > 0 && categories) {
+        b->categories = (char**)calloc(nCategories, sizeof(char*));
+        if (!b->categories) return fmi2Error;
+        for (size_t i = 0; i < nCategories; i++) b->categories[i] = strdup(categories[i] ? categories[i] : "");
+        b->n_categories = nCategories;
+    }
+    return fmi2OK;
+}
+
+EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
+                                      fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
+    FORWARD(c, inner.SetupExperiment(b_->inner, toleranceDefined, tolerance, startTime, stopTimeDefined, stopTime));
+}
+EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
+    FORWARD(c, inner.EnterInitializationMode(b_->inner));
+}
+EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c) { FORWARD(c, inner.ExitInitializationMode(b_->inner)); }
+EXPORT fmi2Status fmi2Terminate(fmi2Component c) { FORWARD(c, inner.Terminate(b_->inner)); }
+EXPORT fmi2Status fmi2Reset(fmi2Component c) { FORWARD(c, inner.Reset(b_->inner)); }
+
+EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
+    FORWARD(c, inner.GetReal(b_->inner, vr, nvr, value));
+}
+EXPORT fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
+    FORWARD(c, inner.GetInteger(b_->inner, vr, nvr, value));
+}
+EXPORT fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
+    FORWARD(c, inner.GetBoolean(b_->inner, vr, nvr, value));
+}
+EXPORT fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
+    FORWARD(c, inner.GetString(b_->inner, vr, nvr, value));
+}
+EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
+    FORWARD(c, inner.SetReal(b_->inner, vr, nvr, value));
+}
+EXPORT fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                 const fmi2Integer value[]) {
+    FORWARD(c, inner.SetInteger(b_->inner, vr, nvr, value));
+}
+EXPORT fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                 const fmi2Boolean value[]) {
+    FORWARD(c, inner.SetBoolean(b_->inner, vr, nvr, value));
+}
+EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                const fmi2String value[]) {
+    FORWARD(c, inner.SetString(b_->inner, vr, nvr, value));
+}
+
+EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state) {
+    FORWARD(c, inner.GetFMUstate(b_->inner, state));
+}
+EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) {
+    FORWARD(c, inner.SetFMUstate(b_->inner, state));
+}
+EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* state) {
+    FORWARD(c, inner.FreeFMUstate(b_->inner, state));
+}
+EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t* size) {
+    FORWARD(c, inner.SerializedFMUstateSize(b_->inner, state, size));
+}
+EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size) {
+    FORWARD(c, inner.SerializeFMUstate(b_->inner, state, bytes, size));
+}
+EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size,
+                                          fmi2FMUstate* state) {
+    FORWARD(c, inner.DeSerializeFMUstate(b_->inner, bytes, size, state));
+}
+
+static fmi2Status unsupported(fmi2Component c, const char* what) {
+    Bridge* b = BRIDGE(c);
+    if (b) {
+        char msg[256];
+        snprintf(msg, sizeof msg, "FMI function not supported: %s", what);
+        report(b->host.logger, b->host.componentEnvironment, b->name, fmi2Error, msg);
+    }
+    return fmi2Error;
+}
+
+EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown[], size_t nU,
+                                               const fmi2ValueReference vKnown[], size_t nK, const fmi2Real dvKnown[],
+                                               fmi2Real dvUnknown[]) {
+    (void)vUnknown, (void)nU, (void)vKnown, (void)nK, (void)dvKnown, (void)dvUnknown;
+    return unsupported(c, "fmi2GetDirectionalDerivative");
+}
+EXPORT fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                              const fmi2Integer order[], const fmi2Real value[]) {
+    (void)vr, (void)nvr, (void)order, (void)value;
+    return unsupported(c, "fmi2SetRealInputDerivatives");
+}
+EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                               const fmi2Integer order[], fmi2Real value[]) {
+    (void)vr, (void)nvr, (void)order, (void)value;
+    return unsupported(c, "fmi2GetRealOutputDerivatives");
+}
+EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
+                             fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
+    FORWARD(c, inner.DoStep(b_->inner, currentCommunicationPoint, communicationStepSize,
+                            noSetFMUStatePriorToCurrentPoint));
+}
+EXPORT fmi2Status fmi2CancelStep(fmi2Component c) { return unsupported(c, "fmi2CancelStep"); }
+EXPORT fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status* value) {
+    (void)s, (void)value;
+    return unsupported(c, "fmi2GetStatus");
+}
+EXPORT fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real* value) {
+    FORWARD(c, inner.GetRealStatus(b_->inner, s, value));
+}
+EXPORT fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer* value) {
+    (void)s, (void)value;
+    return unsupported(c, "fmi2GetIntegerStatus");
+}
+EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean* value) {
+    (void)s, (void)value;
+    return unsupported(c, "fmi2GetBooleanStatus");
+}
+EXPORT fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String* value) {
+    (void)s, (void)value;
+    return unsupported(c, "fmi2GetStringStatus");
+}

@@ -1,0 +1,336 @@
+"""Test signals: scheduling trajectories, inputs and disturbances.
+
+One :class:`SignalSpec` describes an ``n``-component signal of one kind; a
+:class:`SignalGenerator` produces it sample by sample (what the Scheduler and
+Source FMUs do at each communication point) and :func:`sample_signal` gives a
+whole trajectory at given times by running the same generator, so an FMU and a
+Python experiment get the same numbers from the same specification.
+
+Kinds (per component ``j``; ``t`` is the time of the communication point, and
+``t = k`` for a discrete-time experiment with unit step):
+
+============  ==============================================================
+``zero``      ``0``
+``constant``  ``offset``
+``sinusoid``  ``offset + amplitude sin(omega t + phase)``
+``decaying``  ``offset + amplitude sin(omega t + phase) exp(-decay t)``;
+              Peixoto et al., Section 4: ``w_k = sin(0.5 k) exp(-0.1 k)``
+              applied from ``k = 10`` (absolute ``k``, zero before the onset)
+``gaussian``  ``offset + std * N(0, 1)``, a fresh seeded draw at every point
+``random``    random walk with bounded rate: ``s <- clip(s + rate h U(-1, 1),
+              lower, upper)`` at each step of length ``h``, from ``offset``
+``table``     piecewise-linear in ``t`` through the rows ``(t_i, v_i)``,
+              constant before the first and after the last row
+============  ==============================================================
+
+Before ``onset`` every kind except ``table`` holds ``offset`` (``0`` for
+``zero``). Randomness comes from ``numpy.random.default_rng(seed)``.
+
+Examples
+--------
+>>> spec = SignalSpec.build("decaying", 1, amplitude=1.0, omega=0.5, decay=0.1, onset=10)
+>>> w = sample_signal(spec, np.arange(20.0))
+>>> bool(w[9, 0] == 0.0), bool(np.isclose(w[10, 0], np.sin(5.0) * np.exp(-1.0)))
+(True, True)
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .errors import DimensionError, LpvestError
+
+__all__ = [
+    "SIGNAL_KINDS",
+    "SignalSpec",
+    "SignalGenerator",
+    "SignalError",
+    "sample_signal",
+    "parse_table",
+]
+
+#: The signal kinds, in the order an FMU documents them.
+SIGNAL_KINDS = ("zero", "constant", "sinusoid", "decaying", "gaussian", "random", "table")
+
+
+class SignalError(LpvestError, ValueError):
+    """A signal specification is invalid (the message names the parameter)."""
+
+
+def parse_table(text: str, n: int, *, name: str = "table") -> tuple[np.ndarray, np.ndarray]:
+    """Parse ``"t v_1 ... v_n; t v_1 ... v_n; ..."`` (rows separated by ``;`` or
+    newlines, numbers by spaces or commas) into times ``(m,)`` and values ``(m, n)``.
+
+    >>> parse_table("0 0.5; 10, -0.5", 1)
+    (array([ 0., 10.]), array([[ 0.5],
+           [-0.5]]))
+    """
+    rows = [r.strip() for r in re.split(r"[;\n]", text or "") if r.strip()]
+    if not rows:
+        raise SignalError(f"{name} is empty; expected rows 't v_1 ... v_{n}' separated by ';'")
+    data = []
+    for i, row in enumerate(rows):
+        fields = [f for f in re.split(r"[,\s]+", row) if f]
+        if len(fields) != n + 1:
+            raise SignalError(
+                f"{name} row {i + 1} ({row!r}) has {len(fields)} numbers; expected {n + 1} (t and {n} values)"
+            )
+        try:
+            data.append([float(f) for f in fields])
+        except ValueError:
+            raise SignalError(f"{name} row {i + 1} ({row!r}) holds something that is not a number") from None
+    arr = np.array(data)
+    if not np.all(np.isfinite(arr)):
+        raise SignalError(f"{name} holds a non-finite number")
+    times = arr[:, 0]
+    if np.any(np.diff(times) <= 0):
+        raise SignalError(f"{name}: the times (first column) must be strictly increasing; found {times.tolist()}")
+    return times, arr[:, 1:]
+
+
+@dataclass(frozen=True, eq=False)
+class SignalSpec:
+    """An ``n``-component signal of one kind (see the module documentation).
+
+    Build it with :meth:`build`, which checks every parameter and names the
+    culprit (``prefix`` + parameter name + 1-based index) in its error.
+    """
+
+    kind: str
+    n: int
+    amplitude: np.ndarray
+    omega: np.ndarray
+    phase: np.ndarray
+    offset: np.ndarray
+    decay: np.ndarray
+    std: np.ndarray
+    rate: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    onset: float = 0.0
+    seed: int = 0
+    table_times: np.ndarray | None = None
+    table_values: np.ndarray | None = None
+
+    @classmethod
+    def build(
+        cls,
+        kind: str,
+        n: int,
+        *,
+        amplitude: Any = 1.0,
+        omega: Any = 1.0,
+        phase: Any = 0.0,
+        offset: Any = 0.0,
+        decay: Any = 0.0,
+        std: Any = 1.0,
+        rate: Any = 1.0,
+        lower: Any = -np.inf,
+        upper: Any = np.inf,
+        onset: float = 0.0,
+        seed: int = 0,
+        table: str | tuple[Sequence[float], Sequence[Sequence[float]]] | None = None,
+        prefix: str = "",
+    ) -> SignalSpec:
+        """Check and assemble a specification; scalars broadcast to ``n`` components.
+
+        ``lower``/``upper`` bound the ``random`` kind (it starts at ``offset``
+        clipped into them); ``table`` is the text :func:`parse_table` reads or
+        a pair ``(times, values)``.
+        """
+        if kind not in SIGNAL_KINDS:
+            raise SignalError(f"{prefix}kind = {kind!r} is not a signal kind (one of {', '.join(SIGNAL_KINDS)})")
+        if n < 0:
+            raise SignalError(f"a signal needs n >= 0 components; found {n}")
+
+        def vec(value: Any, label: str, *, finite: bool = True, nonneg: bool = False) -> np.ndarray:
+            try:
+                arr = np.array(value, dtype=float)
+            except (TypeError, ValueError):
+                raise SignalError(f"{prefix}{label} = {value!r} is not a number") from None
+            if arr.ndim == 0:
+                arr = np.full(n, float(arr))
+            if arr.shape != (n,):
+                raise SignalError(f"{prefix}{label} has shape {arr.shape}; expected ({n},)")
+            for j in range(n):
+                v = arr[j]
+                if np.isnan(v) or (finite and not np.isfinite(v)):
+                    raise SignalError(f"{prefix}{label}[{j + 1}] = {v} is not finite")
+                if nonneg and v < 0:
+                    raise SignalError(f"{prefix}{label}[{j + 1}] = {v:g} must be >= 0")
+            arr.setflags(write=False)
+            return arr
+
+        lo = vec(lower, "lower", finite=False)
+        hi = vec(upper, "upper", finite=False)
+        for j in range(n):
+            if not lo[j] <= hi[j]:
+                raise SignalError(f"{prefix}lower[{j + 1}] = {lo[j]:g} exceeds {prefix}upper[{j + 1}] = {hi[j]:g}")
+        onset_f = float(onset)
+        if not np.isfinite(onset_f):
+            raise SignalError(f"{prefix}onset = {onset} is not finite")
+        if isinstance(seed, bool) or int(seed) != seed or seed < 0:
+            raise SignalError(f"{prefix}seed = {seed} must be a non-negative integer")
+        t_times = t_values = None
+        if kind == "table":
+            if table is None:
+                raise SignalError(f"{prefix}table is required for kind 'table'")
+            if isinstance(table, str):
+                t_times, t_values = parse_table(table, n, name=f"{prefix}table")
+            else:
+                t_times = np.asarray(table[0], dtype=float).reshape(-1)
+                t_values = np.asarray(table[1], dtype=float).reshape(t_times.size, n)
+                if np.any(np.diff(t_times) <= 0) or not np.all(np.isfinite(t_values)):
+                    raise SignalError(f"{prefix}table needs increasing times and finite values")
+            t_times.setflags(write=False)
+            t_values.setflags(write=False)
+        return cls(
+            kind=kind,
+            n=n,
+            amplitude=vec(amplitude, "amplitude"),
+            omega=vec(omega, "omega"),
+            phase=vec(phase, "phase"),
+            offset=vec(offset, "offset"),
+            decay=vec(decay, "decay"),
+            std=vec(std, "std", nonneg=True),
+            rate=vec(rate, "rate", nonneg=True),
+            lower=lo,
+            upper=hi,
+            onset=onset_f,
+            seed=int(seed),
+            table_times=t_times,
+            table_values=t_values,
+        )
+
+    @property
+    def is_random(self) -> bool:
+        return self.kind in ("gaussian", "random")
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per-component interval that holds every value the signal can take."""
+        if self.kind == "zero":
+            z = np.zeros(self.n)
+            return z, z.copy()
+        off = self.offset
+        if self.kind == "constant":
+            return off.copy(), off.copy()
+        if self.kind in ("sinusoid", "decaying"):
+            a = np.abs(self.amplitude)
+            if self.kind == "decaying":
+                # |exp(-decay t)| <= exp(-decay onset) for t >= onset when decay >= 0
+                scale = np.where(self.decay >= 0, np.exp(-self.decay * self.onset), np.inf)
+                a = np.where(a == 0, 0.0, a * scale)
+            return np.minimum(off, off - a), np.maximum(off, off + a)
+        if self.kind == "gaussian":
+            inf = np.where(self.std > 0, np.inf, 0.0)
+            return off - inf, off + inf
+        if self.kind == "random":
+            start = np.clip(off, self.lower, self.upper)
+            moving = self.rate > 0
+            return np.where(moving, self.lower, start), np.where(moving, self.upper, start)
+        assert self.table_values is not None
+        return self.table_values.min(axis=0), self.table_values.max(axis=0)
+
+    def deterministic_value(self, t: float) -> np.ndarray:
+        """The value at time ``t`` of a deterministic kind."""
+        if self.kind == "table":
+            assert self.table_times is not None and self.table_values is not None
+            return np.array([np.interp(t, self.table_times, self.table_values[:, j]) for j in range(self.n)])
+        if self.kind == "zero":
+            return np.zeros(self.n)
+        if t < self.onset or self.kind == "constant":
+            return self.offset.copy()
+        s = self.amplitude * np.sin(self.omega * t + self.phase)
+        if self.kind == "decaying":
+            s = s * np.exp(-self.decay * t)
+        return self.offset + s
+
+
+class SignalGenerator:
+    """Produces a :class:`SignalSpec` sample by sample.
+
+    ``start(t0)`` (re)starts at time ``t0``; :attr:`value` is the value at the
+    current time; ``advance(t)`` moves to the later time ``t``.
+    ``get_state``/``set_state`` save and restore everything (time, value,
+    generator state), so a restored generator continues identically.
+    """
+
+    def __init__(self, spec: SignalSpec) -> None:
+        self.spec = spec
+        self.start(0.0)
+
+    def start(self, t0: float) -> None:
+        spec = self.spec
+        self._rng = np.random.default_rng(spec.seed)
+        self._t = float(t0)
+        if spec.kind == "random":
+            self._value = np.clip(spec.offset, spec.lower, spec.upper).astype(float)
+        elif spec.kind == "gaussian":
+            self._value = self._gaussian()
+        else:
+            self._value = spec.deterministic_value(self._t)
+
+    def _gaussian(self) -> np.ndarray:
+        spec = self.spec
+        if self._t < spec.onset:
+            return spec.offset.copy()
+        return spec.offset + spec.std * self._rng.standard_normal(spec.n)
+
+    @property
+    def time(self) -> float:
+        return self._t
+
+    @property
+    def value(self) -> np.ndarray:
+        return self._value.copy()
+
+    def advance(self, t: float) -> np.ndarray:
+        """Move to time ``t`` (>= the current time) and return the new value."""
+        spec = self.spec
+        t = float(t)
+        if not t >= self._t:
+            raise SignalError(f"signal time must not go back: from {self._t} to {t}")
+        h = t - self._t
+        self._t = t
+        if spec.kind == "random":
+            if t >= spec.onset:
+                step = spec.rate * h * self._rng.uniform(-1.0, 1.0, spec.n)
+                self._value = np.clip(self._value + step, spec.lower, spec.upper)
+        elif spec.kind == "gaussian":
+            self._value = self._gaussian()
+        else:
+            self._value = spec.deterministic_value(t)
+        return self.value
+
+    def get_state(self) -> dict[str, Any]:
+        return {"t": self._t, "value": self._value.copy(), "rng": self._rng.bit_generator.state}
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        value = np.asarray(state["value"], dtype=float)
+        if value.shape != (self.spec.n,):
+            raise DimensionError(f"signal state value has shape {value.shape}; expected ({self.spec.n},)")
+        self._t = float(state["t"])
+        self._value = value.copy()
+        rng = np.random.default_rng()
+        rng.bit_generator.state = state["rng"]
+        self._rng = rng
+
+
+def sample_signal(spec: SignalSpec, times: Sequence[float] | np.ndarray) -> np.ndarray:
+    """The signal at increasing ``times`` (shape ``(T,)``), as an array ``(T, n)``:
+    a :class:`SignalGenerator` started at ``times[0]`` and advanced to each time."""
+    t = np.asarray(times, dtype=float).reshape(-1)
+    out = np.empty((t.size, spec.n))
+    if t.size == 0:
+        return out
+    gen = SignalGenerator(spec)
+    gen.start(t[0])
+    out[0] = gen.value
+    for i in range(1, t.size):
+        out[i] = gen.advance(t[i])
+    return out

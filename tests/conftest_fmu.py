@@ -1,0 +1,74 @@
+"""Shared pieces of the FMU tests: the FMU set built once per session."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from lpvest.fmi.registry import EstimatorKind
+from lpvest.fmi.spec import Parameter
+
+HERE = Path(__file__).resolve().parent
+
+#: A two-state affine LPV plant with general noise (S != 0), input u, two
+#: scheduling components: the example systems hold no affine model.
+AFFINE_TOML = """
+[system]
+name = "affine-demo"
+title = "two-state affine LPV test plant with correlated noise"
+default = "plant"
+
+[scheduling]
+names = ["p1", "p2"]
+lower = [-1.0, 0.0]
+upper = [1.0, 2.0]
+
+[models.plant]
+type = "affine"
+A = { "1" = [[0.5, 0.1], [0.0, 0.4]], p1 = [[0.1, 0.0], [0.0, -0.1]], p2 = [[0.0, 0.05], [0.02, 0.0]] }
+B = [[1.0], [0.5]]
+C = { "1" = [[1.0, 0.0]], p2 = [[0.0, 0.3]] }
+D = [[0.2]]
+Q = [[0.1, 0.02], [0.02, 0.05]]
+R = [[0.01]]
+S = [[0.005], [0.0]]
+"""
+
+#: The test-only estimator kind (a moving average, tests/fmu_movavg.py).
+MOVING_AVERAGE = EstimatorKind(
+    "MovingAverage",
+    "fmu_movavg:build",
+    models=("polytopic",),
+    parameters=(Parameter("window", 4, "window length", minimum=1),),
+    files=(HERE / "fmu_movavg.py",),
+)
+
+
+@dataclass(frozen=True)
+class FmuSet:
+    out: Path
+    affine_model: Path
+    paths: dict[str, Path]
+
+    def __getitem__(self, name: str) -> Path:
+        return self.paths[name]
+
+
+@pytest.fixture(scope="session")
+def fmus(tmp_path_factory: pytest.TempPathFactory) -> FmuSet:
+    """Every example system's FMUs, the affine demo's, and the moving-average
+    estimator FMU for peixoto-ex1, built once into a temporary folder."""
+    from lpvest.fmi.build import build_fmu, build_fmus, plan_system
+
+    out = tmp_path_factory.mktemp("fmus")
+    model = out / "affine_demo.toml"
+    model.write_text(AFFINE_TOML)
+    results, _ = build_fmus(None, out)
+    results2, _ = build_fmus([model], out)
+    paths = {r.plan.identifier: r.validation.path for r in results + results2}
+    plans, _ = plan_system("peixoto-ex1", kinds=[MOVING_AVERAGE])
+    est = next(p for p in plans if p.role == "MovingAverage")
+    paths[est.identifier] = build_fmu(est, out)
+    return FmuSet(out, model, paths)

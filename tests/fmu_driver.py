@@ -1,0 +1,98 @@
+"""A small FMI 2.0 co-simulation driver over fmpy's FMU2Slave, for the tests."""
+
+from __future__ import annotations
+
+import ctypes
+from pathlib import Path
+
+import numpy as np
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+
+
+class Driver:
+    """One instance of an FMU: names instead of value references, the log kept,
+    FMI calls that return their status instead of raising."""
+
+    def __init__(self, path: str | Path, name: str = "instance", *, unzip: str | None = None,
+                 logging_on: bool = False) -> None:
+        self.path = str(path)
+        self.md = read_model_description(self.path)
+        self.unzip = unzip or extract(self.path)
+        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
+        self.types = {v.name: v.type for v in self.md.modelVariables}
+        self.messages: list[tuple[int, str, str]] = []
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzip,
+                             modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
+
+        def logger(env, instance, status, category, message):  # noqa: ANN001
+            self.messages.append((status, (category or b"").decode(), message.decode()))
+
+        self._logger = fmi2CallbackLoggerTYPE(logger)
+        callbacks = fmi2CallbackFunctions()
+        callbacks.logger = self._logger
+        callbacks.allocateMemory = ctypes.cast(None, type(callbacks.allocateMemory))
+        callbacks.freeMemory = ctypes.cast(None, type(callbacks.freeMemory))
+        self.fmu.instantiate(callbacks=callbacks, loggingOn=logging_on)
+
+    def status(self, method, *args) -> int:  # noqa: ANN001, ANN002
+        from fmpy.fmi1 import FMICallException
+
+        try:
+            method(*args)
+            return 0
+        except FMICallException as exc:
+            return int(exc.status)
+
+    def raw(self, function: str, *args) -> int:  # noqa: ANN002
+        """The status an FMI function returns (warnings included)."""
+        from fmpy.fmi1 import FMICallException
+
+        try:
+            return int(getattr(self.fmu, function)(self.fmu.component, *args))
+        except FMICallException as exc:
+            return int(exc.status)
+
+    def initialize(self, start_time: float = 0.0, **params: float | int | bool | str) -> int:
+        """setup, enter, set ``params``, exit: the most severe status."""
+        st = self.raw("fmi2SetupExperiment", 0, 0.0, start_time, 0, 0.0)
+        st = max(st, self.raw("fmi2EnterInitializationMode"))
+        for name, value in params.items():
+            st = max(st, self.set(name, value))
+        return max(st, self.raw("fmi2ExitInitializationMode"))
+
+    def set(self, name: str, value) -> int:  # noqa: ANN001
+        t = self.types[name]
+        setter = {"Real": self.fmu.setReal, "Integer": self.fmu.setInteger,
+                  "Boolean": self.fmu.setBoolean, "String": self.fmu.setString}[t]
+        return self.status(setter, [self.vr[name]], [value])
+
+    def set_vector(self, base: str, values) -> int:  # noqa: ANN001
+        values = np.atleast_1d(np.asarray(values, dtype=float))
+        names = [f"{base}[{i + 1}]" for i in range(values.size)]
+        return self.status(self.fmu.setReal, [self.vr[n] for n in names], [float(v) for v in values])
+
+    def get(self, name: str):  # noqa: ANN201
+        t = self.types[name]
+        getter = {"Real": self.fmu.getReal, "Integer": self.fmu.getInteger,
+                  "Boolean": self.fmu.getBoolean, "String": self.fmu.getString}[t]
+        return getter([self.vr[name]])[0]
+
+    def vector(self, base: str) -> np.ndarray:
+        from lpvest.fmi.naming import parse_element
+
+        names = sorted((n for n in self.vr if n.startswith(base + "[")), key=lambda n: parse_element(n)[1])
+        return np.array(self.fmu.getReal([self.vr[n] for n in names]))
+
+    def step(self, t: float, h: float) -> int:
+        return self.status(self.fmu.doStep, t, h)
+
+    def errors(self) -> list[str]:
+        """The messages logged at status fmi2Error or worse."""
+        return [m for s, _, m in self.messages if s >= 3]
+
+    def outputs(self, names: list[str]) -> np.ndarray:
+        return np.array(self.fmu.getReal([self.vr[n] for n in names]))
+
+    def free(self) -> None:
+        self.fmu.freeInstance()

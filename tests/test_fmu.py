@@ -1,0 +1,485 @@
+"""The FMUs: validation, same numbers as the library, FMI behaviour, bad input.
+
+Every FMU is driven step by step through fmpy's FMU2Slave (tests/fmu_driver.py)
+and compared with an independent computation in the library (the batch
+``simulate`` methods, the signals' formulas, another realization of the same
+system).
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+import zipfile
+
+import numpy as np
+import pytest
+
+from lpvest import load_system
+from lpvest.fmi.build import validate_fmus
+from tests.fmu_driver import Driver
+
+EXPECTED = {
+    "CoxTothEx1Plant", "CoxTothEx1Scheduler", "CoxTothEx1Source",
+    "PeixotoEx1Plant", "PeixotoEx1Scheduler", "PeixotoEx1Source",
+    "PeixotoEx2Plant", "PeixotoEx2Scheduler", "PeixotoEx2Source",
+    "SridharLtvPlant",
+    "AffineDemoPlant", "AffineDemoScheduler", "AffineDemoSource",
+    "PeixotoEx1MovingAverage",
+}
+
+
+def theta(k):
+    return np.sin(0.25 * np.asarray(k, dtype=float))
+
+
+def paper_w(k):
+    k = np.asarray(k, dtype=float)
+    return np.where(k >= 10, np.sin(0.5 * k) * np.exp(-0.1 * k), 0.0)  # Peixoto et al., Section 4
+
+
+def run_plant(d: Driver, inputs: dict[str, np.ndarray], outputs: list[str], h: float = 1.0) -> dict[str, np.ndarray]:
+    """Set the inputs of each sample, read the outputs before fmi2DoStep, step."""
+    T = len(next(iter(inputs.values())))
+    rec = {o: [] for o in outputs}
+    for k in range(T):
+        for name, seq in inputs.items():
+            assert d.set_vector(name, seq[k]) == 0
+        for o in outputs:
+            rec[o].append(d.vector(o))
+        assert d.step(k * h, h) == 0, d.errors()
+    return {o: np.array(v) for o, v in rec.items()}
+
+
+# -- validation ------------------------------------------------------------------
+
+
+def test_the_expected_fmus_are_built(fmus):
+    assert set(fmus.paths) == EXPECTED
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_every_fmu_validates_with_zero_problems(fmus, name):
+    (result,) = validate_fmus([fmus[name]])
+    assert result.problems == []
+    assert result.outputs > 0
+
+
+def test_model_description_declares_ranges_dependencies_and_capabilities(fmus):
+    with zipfile.ZipFile(fmus["PeixotoEx1Plant"]) as z:
+        root = ET.fromstring(z.read("modelDescription.xml"))
+        names = z.namelist()
+    cs = root.find("CoSimulation")
+    assert cs.get("canGetAndSetFMUstate") == "true" and cs.get("canSerializeFMUstate") == "true"
+    var = {sv.get("name"): (i + 1, sv) for i, sv in enumerate(root.iter("ScalarVariable"))}
+    p = var["p[1]"][1].find("Real")
+    assert (float(p.get("min")), float(p.get("max"))) == (-1.0, 1.0)  # theta in [-1, 1]
+    deps = {u.get("index"): u.get("dependencies") for u in root.find("ModelStructure/Outputs")}
+    inputs = sorted(str(var[n][0]) for n in ("p[1]", "w[1]"))
+    assert deps[str(var["x[1]"][0])] == ""  # the state does not feed through
+    assert sorted(deps[str(var["y[1]"][0])].split()) == inputs
+    initial = {u.get("index") for u in root.find("ModelStructure/InitialUnknowns")}
+    assert initial == set(deps)
+    assert "resources/lpvest/__init__.py" in names and "resources/requirements.txt" in names
+    assert "binaries/linux64/PeixotoEx1Plant.so" in names
+
+
+# -- same numbers as the library -------------------------------------------------------
+
+
+@pytest.mark.parametrize(("name", "system", "rho"), [
+    ("PeixotoEx1Plant", "peixoto-ex1", None),
+    ("PeixotoEx2Plant", "peixoto-ex2", 5.0),
+])
+def test_polytopic_plant_is_bit_for_bit_the_library(fmus, name, system, rho):
+    T = 120
+    k = np.arange(T)
+    d = Driver(fmus[name])
+    assert d.initialize(**({"rho": rho} if rho is not None else {})) == 0
+    got = run_plant(d, {"p": theta(k)[:, None], "w": paper_w(k)[:, None]}, ["y", "z", "x"])
+    d.free()
+    plant = load_system(system, parameters={"rho": rho} if rho is not None else None).model()
+    ref = plant.simulate(plant.alpha_batch(theta(k)[:, None]), paper_w(k)[:, None])
+    # the same operations as PolytopicLPV.simulate (batch einsum): bit for bit
+    assert np.array_equal(got["y"], ref.y) and np.array_equal(got["z"], ref.z) and np.array_equal(got["x"], ref.x)
+
+
+def test_affine_plant_with_drawn_noise_matches_simulate(fmus):
+    model = load_system(fmus.affine_model).model()
+    T = 150
+    k = np.arange(T)
+    p = np.c_[0.9 * np.sin(0.1 * k), 1.0 + np.cos(0.2 * k)]
+    u = np.cos(0.3 * k)[:, None]
+    d = Driver(fmus["AffineDemoPlant"])
+    assert d.initialize(seed=3) == 0
+    got = run_plant(d, {"p": p, "u": u, "w": np.zeros((T, 2)), "v": np.zeros((T, 1))}, ["y", "x"])
+    d.free()
+    ref = model.simulate(p, u, rng=3)
+    # same draws; the noise product and the matrices are evaluated one row at a
+    # time instead of in one batch (BLAS rounding): round-off only
+    np.testing.assert_allclose(got["y"], ref.y, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(got["x"], ref.x, rtol=1e-12, atol=1e-14)
+
+
+def test_affine_plant_with_external_noise_matches_simulate(fmus, rng):
+    model = load_system(fmus.affine_model).model()
+    T = 100
+    k = np.arange(T)
+    p = np.c_[np.sin(0.3 * k), 1.0 + np.sin(0.05 * k)]
+    u, w, v = rng.standard_normal((T, 1)), rng.standard_normal((T, 2)), rng.standard_normal((T, 1))
+    d = Driver(fmus["AffineDemoPlant"])
+    assert d.initialize(noise=False) == 0
+    got = run_plant(d, {"p": p, "u": u, "w": w, "v": v}, ["y", "x"])
+    d.free()
+    ref = model.simulate(p, u, w=w, v=v)
+    np.testing.assert_allclose(got["y"], ref.y, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(got["x"], ref.x, rtol=1e-12, atol=1e-14)
+
+
+def test_cox_toth_plant_equals_the_input_output_realization(fmus, rng):
+    """The plant realizes (21c); (21a) with the same u, p, e gives the same y
+    (Cox & Toth: the three realizations agree to machine precision)."""
+    system = load_system("cox-toth-ex1")
+    T = 200
+    k = np.arange(T)
+    p = (0.5 + 0.4 * np.sin(0.3 * k))[:, None]
+    u = rng.standard_normal((T, 1))
+    d = Driver(fmus["CoxTothEx1Plant"])
+    assert d.initialize(seed=11) == 0
+    got = run_plant(d, {"p": p, "u": u, "e": np.zeros((T, 1))}, ["y", "x"])
+    d.free()
+    e = np.random.default_rng(11).standard_normal((T, 1))  # Omega = 1: the documented draw order
+    ref_c = system.model("augmented").simulate(p, u, rng=11)
+    assert np.array_equal(got["y"], ref_c.y)
+    ref_a = system.model("io").simulate(p, u, e=e)
+    np.testing.assert_allclose(got["y"], ref_a.y, rtol=1e-12, atol=1e-12)
+
+
+def test_ltv_plant_integrates_accurately_over_any_step(fmus):
+    ss = load_system("sridhar-ltv").model().to_state_space()
+    ref = ss.simulate(np.linspace(0.0, 10.0, 101))  # DOP853, rtol 1e-12, one solve with dense output
+    scale = np.max(np.abs(ref.y))
+    outs = {}
+    for h in (0.1, 0.5):
+        d = Driver(fmus["SridharLtvPlant"])
+        assert d.initialize() == 0
+        n = int(round(10.0 / h))
+        ys, us = [], []
+        for i in range(n + 1):
+            ys.append(d.get("y[1]"))
+            us.append(d.get("u_applied[1]"))
+            if i < n:
+                assert d.step(i * h, h) == 0
+        d.free()
+        outs[h] = np.array(ys)
+        t = np.arange(n + 1) * h
+        np.testing.assert_allclose(us, 120 * np.sin(t), rtol=0, atol=1e-12)
+    # restarting the integrator at each communication point and integrating in
+    # one run differ by the integrator's local errors (rtol 1e-12): 1e-9 of the
+    # signal's scale bounds that over 100 steps
+    np.testing.assert_allclose(outs[0.1], ref.y, rtol=0, atol=1e-9 * scale)
+    np.testing.assert_allclose(outs[0.5], ref.y[::5], rtol=0, atol=1e-9 * scale)
+
+
+def test_ltv_plant_holds_its_input_when_asked(fmus):
+    d = Driver(fmus["SridharLtvPlant"])
+    assert d.initialize(use_model_input=False) == 0
+    for i in range(5):
+        assert d.set_vector("u", 0.0) == 0
+        assert d.get("u_applied[1]") == 0.0
+        assert d.step(0.2 * i, 0.2) == 0
+    assert d.get("y[1]") == 0.0 and np.all(d.vector("x") == 0.0)  # at rest with u = 0
+    assert d.set_vector("u", 3.0) == 0
+    assert d.get("u_applied[1]") == 3.0
+    d.free()
+
+
+def test_scheduler_default_is_the_papers_sinusoid(fmus):
+    d = Driver(fmus["PeixotoEx1Scheduler"])
+    assert d.initialize() == 0
+    p, alpha = [], []
+    for k in range(60):
+        p.append(d.get("p[1]"))
+        alpha.append(d.vector("alpha"))
+        assert d.step(float(k), 1.0) == 0
+    d.free()
+    p = np.array(p)
+    np.testing.assert_allclose(p, theta(np.arange(60)), rtol=0, atol=1e-15)  # theta_k = sin(0.25 k)
+    np.testing.assert_allclose(np.array(alpha), np.c_[(1 - p) / 2, (1 + p) / 2], rtol=0, atol=1e-15)
+
+
+def test_scheduler_random_kind_has_bounded_rate_and_is_seeded(fmus):
+    from lpvest.signals import SignalSpec, sample_signal
+
+    d = Driver(fmus["AffineDemoScheduler"])
+    assert d.initialize(kind="random", seed=4, **{"rate[1]": 0.3, "rate[2]": 0.1}) == 0
+    got = []
+    for k in range(200):
+        got.append(d.vector("p"))
+        assert d.step(0.5 * k, 0.5) == 0
+    d.free()
+    got = np.array(got)
+    assert np.all(np.abs(np.diff(got, axis=0)) <= np.array([0.3, 0.1]) * 0.5 + 1e-15)
+    assert np.all(got >= [-1.0, 0.0]) and np.all(got <= [1.0, 2.0])
+    spec = SignalSpec.build("random", 2, rate=[0.3, 0.1], offset=[0.0, 1.0], lower=[-1, 0], upper=[1, 2], seed=4)
+    assert np.array_equal(got, sample_signal(spec, 0.5 * np.arange(200)))
+
+
+def test_scheduler_table_is_piecewise_linear(fmus):
+    d = Driver(fmus["PeixotoEx1Scheduler"])
+    assert d.initialize(kind="table", table="0 -1; 10 1; 20 0.5") == 0
+    got = []
+    for k in range(30):
+        got.append(d.get("p[1]"))
+        assert d.step(float(k), 1.0) == 0
+    d.free()
+    np.testing.assert_allclose(got, np.interp(np.arange(30.0), [0, 10, 20], [-1, 1, 0.5]), rtol=0, atol=1e-15)
+
+
+def test_source_default_is_the_papers_disturbance_and_gaussian_is_seeded(fmus):
+    d = Driver(fmus["PeixotoEx1Source"])
+    assert d.initialize() == 0
+    w = []
+    for k in range(40):
+        w.append(d.get("w[1]"))
+        assert d.step(float(k), 1.0) == 0
+    d.free()
+    np.testing.assert_allclose(w, paper_w(np.arange(40)), rtol=1e-15, atol=0)
+    d = Driver(fmus["AffineDemoSource"])
+    assert d.initialize(**{"u.kind": "gaussian", "u.seed": 9, "u.std[1]": 2.0}) == 0
+    u = []
+    for k in range(40):
+        u.append(d.get("u[1]"))
+        assert d.step(float(k), 1.0) == 0
+    d.free()
+    assert np.array_equal(u, 2.0 * np.random.default_rng(9).standard_normal((40, 1))[:, 0])
+
+
+def test_moving_average_estimator_fmu_matches_the_protocol(fmus, rng):
+    from tests.fmu_movavg import MovingAverage
+
+    T, window = 30, 5
+    y = rng.standard_normal(T)
+    d = Driver(fmus["PeixotoEx1MovingAverage"])
+    assert d.initialize(window=window) == 0
+    got = run_plant(d, {"p": np.full((T, 1), 0.3), "y": y[:, None]}, ["yhat", "S"])
+    d.free()
+    for k in range(T):  # independent oracle: the mean of the last samples, y_k included
+        win = y[max(0, k - window + 1): k + 1]
+        assert got["yhat"][k, 0] == pytest.approx(win.mean(), rel=1e-14, abs=1e-15)
+        assert got["S"][k, 0] == pytest.approx(np.mean(win**2), rel=1e-14)
+    est = MovingAverage(1, 1, window)
+    ref = [est.step({"p": [0.3], "y": [v]})["yhat"][0] for v in y]
+    assert np.array_equal(got["yhat"][:, 0], ref)  # the same code path: bit for bit
+
+
+def test_matrix_ports_use_structured_names(fmus):
+    from fmpy import read_model_description
+
+    md_names = {v.name for v in read_model_description(str(fmus["PeixotoEx1MovingAverage"])).modelVariables}
+    assert {"S[1,1]", "yhat[1]", "count", "p[1]", "y[1]", "window"} <= md_names
+
+
+# -- FMI behaviour -----------------------------------------------------------------------------
+
+
+def test_direct_feedthrough_reads_correctly_before_do_step(fmus):
+    plant = load_system("peixoto-ex1").model()
+    d = Driver(fmus["PeixotoEx1Plant"])
+    assert d.initialize() == 0
+    for k in range(15):
+        d.set_vector("p", theta(k))
+        d.set_vector("w", paper_w(k))
+        d.step(float(k), 1.0)
+    x = d.vector("x")
+    for w in (0.7, -0.2):  # set the inputs of sample k, read before fmi2DoStep
+        d.set_vector("p", 0.4)
+        d.set_vector("w", w)
+        m = plant.at(plant.alpha([0.4]))
+        np.testing.assert_allclose(d.vector("y"), m.Cy @ x + m.Dy @ [w], rtol=1e-15, atol=1e-16)
+        np.testing.assert_allclose(d.vector("z"), m.Cz @ x + m.Dz @ [w], rtol=1e-15, atol=1e-16)
+        assert np.array_equal(d.vector("x"), x)  # reading does not advance the state
+    assert d.step(15.0, 1.0) == 0
+    np.testing.assert_allclose(d.vector("x"), m.A @ x + m.Bw @ [-0.2], rtol=1e-15)
+    d.free()
+
+
+def _drive(d: Driver, name: str, k0: int, n: int) -> np.ndarray:
+    """n steps of deterministic inputs for the FMU ``name``; the outputs read at each."""
+    md_out = [v.name for v in d.md.modelVariables if v.causality == "output"]
+    h = 0.1 if name == "SridharLtvPlant" else 1.0
+    rows = []
+    for k in range(k0, k0 + n):
+        if "Plant" in name and name != "SridharLtvPlant":
+            d.set_vector("p", 0.5 + 0.3 * np.sin(k))
+            for port in ("u", "w", "e", "v"):
+                if f"{port}[1]" in d.vr:
+                    d.set_vector(port, np.full(sum(n.startswith(port + "[") for n in d.vr), np.cos(k)))
+        if name == "PeixotoEx1MovingAverage":
+            d.set_vector("p", 0.1)
+            d.set_vector("y", np.sin(k))
+        rows.append(d.outputs(md_out))
+        assert d.step(k * h, h) == 0, d.errors()
+    return np.array(rows)
+
+
+STATEFUL = {
+    "CoxTothEx1Plant": {"seed": 5},  # random generator state
+    "AffineDemoPlant": {"seed": 2},
+    "PeixotoEx1Scheduler": {"kind": "random", "seed": 3},
+    "AffineDemoSource": {"u.kind": "gaussian", "u.seed": 1, "w.kind": "gaussian"},
+    "PeixotoEx1MovingAverage": {"window": 6},  # a window of samples
+    "SridharLtvPlant": {},
+}
+
+
+@pytest.mark.parametrize("name", sorted(STATEFUL))
+def test_state_get_set_and_serialize_continue_identically(fmus, name):
+    d = Driver(fmus[name], "a")
+    assert d.initialize(**STATEFUL[name]) == 0
+    _drive(d, name, 0, 12)
+    state = d.fmu.getFMUstate()
+    blob = d.fmu.serializeFMUstate(state)
+    first = _drive(d, name, 12, 10)
+    d.fmu.setFMUstate(state)
+    again = _drive(d, name, 12, 10)
+    assert np.array_equal(first, again)
+    d.fmu.freeFMUstate(state)
+    d.free()
+    fresh = Driver(fmus[name], "b")  # a new instance with default parameters
+    assert fresh.initialize() == 0
+    restored = fresh.fmu.deSerializeFMUstate(blob)
+    fresh.fmu.setFMUstate(restored)
+    assert np.array_equal(first, _drive(fresh, name, 12, 10))
+    fresh.fmu.freeFMUstate(restored)
+    fresh.free()
+
+
+def test_reset_starts_over(fmus):
+    d = Driver(fmus["CoxTothEx1Plant"])
+    assert d.initialize(seed=8) == 0
+    first = _drive(d, "CoxTothEx1Plant", 0, 10)
+    assert d.status(d.fmu.reset) == 0
+    assert d.get("seed") == 0  # parameters are back at their start values
+    assert d.initialize(seed=8) == 0
+    assert np.array_equal(first, _drive(d, "CoxTothEx1Plant", 0, 10))
+    d.free()
+
+
+def test_two_instances_side_by_side_are_independent(fmus):
+    system = load_system("cox-toth-ex1")
+    a, b = Driver(fmus["CoxTothEx1Plant"], "a"), Driver(fmus["CoxTothEx1Plant"], "b")
+    assert a.initialize(seed=1) == 0 and b.initialize(seed=2) == 0
+    T = 40
+    p = (0.3 + 0.5 * np.cos(0.2 * np.arange(T)))[:, None]
+    u = np.sin(np.arange(T))[:, None]
+    ya, yb = [], []
+    for k in range(T):  # interleaved, with different inputs
+        for d, uk, out in ((a, u[k], ya), (b, -u[k], yb)):
+            d.set_vector("p", p[k])
+            d.set_vector("u", uk)
+            d.set_vector("e", 0.0)
+            out.append(d.get("y[1]"))
+            assert d.step(float(k), 1.0) == 0
+    a.free()
+    b.free()
+    model = system.model("augmented")
+    assert np.array_equal(ya, model.simulate(p, u, rng=1).y[:, 0])
+    assert np.array_equal(yb, model.simulate(p, -u, rng=2).y[:, 0])
+
+
+# -- bad input ---------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("port", "value", "expected"), [
+    ("w", math.nan, "input w[1] = nan is not finite"),
+    ("p", math.inf, "input p[1] (theta) = inf is not finite"),
+    ("p", 1.5, "input p[1] (theta) = 1.5 is outside its declared range [-1, 1]"),
+])
+def test_bad_input_is_fmi2error_naming_the_variable_and_the_state_is_kept(fmus, port, value, expected):
+    plant = load_system("peixoto-ex1").model()
+    d = Driver(fmus["PeixotoEx1Plant"])  # logging off: errors are still reported
+    assert d.initialize() == 0
+    for k in range(5):
+        d.set_vector("p", theta(k))
+        d.set_vector("w", paper_w(k))
+        d.step(float(k), 1.0)
+    x = d.vector("x")
+    assert d.set_vector(port, value) == 3  # fmi2Error
+    assert any(expected in m for m in d.errors()), d.errors()
+    assert d.step(5.0, 1.0) == 3  # refuses to step on a rejected input
+    assert any("fmi2DoStep refused" in m and f"{port}[1]" in m for m in d.errors())
+    assert np.array_equal(d.vector("x"), x)
+    # valid values again: the instance goes on from the kept state
+    d.set_vector("p", theta(5))
+    d.set_vector("w", paper_w(5))
+    assert d.step(5.0, 1.0) == 0
+    ref = plant.simulate(plant.alpha_batch(theta(np.arange(7))[:, None]), paper_w(np.arange(7))[:, None])
+    assert np.array_equal(d.vector("x"), ref.x[6])
+    d.free()
+
+
+@pytest.mark.parametrize(("name", "params", "expected"), [
+    ("PeixotoEx1Scheduler", {"amplitude[1]": 2.0},
+     "amplitude[1] = 2 with offset[1] = 0 takes p[1] (theta) to [-2, 2], outside its declared range [-1, 1]"),
+    ("PeixotoEx1Scheduler", {"kind": "triangle"}, "kind = 'triangle' is not a signal kind"),
+    ("PeixotoEx1Scheduler", {"kind": "table", "table": "0 0.5; x 1"}, "table row 2"),
+    ("PeixotoEx1Source", {"w.std[1]": -1.0, "w.kind": "gaussian"}, "w.std[1] = -1 must be >= 0"),
+    ("CoxTothEx1Plant", {"seed": -1}, "parameter seed = -1 is outside its declared range [0, inf]"),
+    ("PeixotoEx1Plant", {"x0[2]": math.nan}, "parameter x0[2] = nan is not finite"),
+    ("SridharLtvPlant", {"rtol": 0.0}, "parameter rtol = 0 is outside its declared range"),
+    ("PeixotoEx1MovingAverage", {"window": 2000}, "window = 2000 must lie in [1, 1000]"),
+])
+def test_invalid_parameter_is_fmi2error_naming_it_and_the_instance_can_be_freed(fmus, name, params, expected):
+    d = Driver(fmus[name])
+    assert d.initialize(**params) == 3
+    assert any(expected in m for m in d.errors()), d.errors()
+    assert d.step(0.0, 1.0) == 3  # never initialized: no step
+    assert any("fmi2DoStep refused" in m for m in d.errors())
+    d.free()
+    again = Driver(fmus[name])  # the process goes on: a new instance works
+    assert again.initialize() == 0 and again.step(0.0, 0.1) == 0
+    again.free()
+
+
+def test_wrong_use_is_reported_not_fatal(fmus):
+    d = Driver(fmus["PeixotoEx1Plant"])
+    assert d.initialize() == 0
+    assert d.status(d.fmu.setReal, [d.vr["y[1]"]], [1.0]) == 3  # an output
+    assert any("y[1] is an output" in m for m in d.errors())
+    assert d.set("x0[1]", 1.0) == 3  # a fixed parameter after initialization
+    assert any("x0[1] is fixed" in m for m in d.errors())
+    assert d.status(d.fmu.getReal, [9999]) == 3
+    assert d.step(0.0, 1.0) == 0  # none of it broke the instance
+    d.free()
+
+
+def test_requirements_list_what_the_fmu_imports(fmus):
+    with zipfile.ZipFile(fmus["PeixotoEx1Plant"]) as z:
+        assert z.read("resources/requirements.txt").decode().split() == ["numpy>=1.26"]
+    with zipfile.ZipFile(fmus["SridharLtvPlant"]) as z:
+        assert z.read("resources/requirements.txt").decode().split() == ["numpy>=1.26", "scipy>=1.11"]
+
+
+def test_a_different_lpvest_serving_the_fmu_is_a_logged_warning(fmus, tmp_path):
+    """Here the installed lpvest serves the FMU (imported first); when its version
+    differs from the bundled one, instantiation says so (fmi2Warning)."""
+    import json
+
+    other = tmp_path / "PeixotoEx1Plant.fmu"
+    with zipfile.ZipFile(fmus["PeixotoEx1Plant"]) as src, zipfile.ZipFile(other, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item)
+            if item.filename == "resources/lpvest_fmu.json":
+                spec = json.loads(data)
+                spec["lpvest_version"] = "0.0.1"
+                data = json.dumps(spec).encode()
+            dst.writestr(item, data)
+    d = Driver(other)
+    assert d.initialize() == 1  # fmi2Warning: the message queued at instantiation
+    assert any(s == 1 and "which was built with lpvest 0.0.1" in m and "sys.modules" in m for s, _, m in d.messages)
+    assert d.step(0.0, 1.0) == 0
+    d.free()
+    same = Driver(fmus["PeixotoEx1Plant"])
+    assert same.initialize() == 0 and not [m for s, _, m in same.messages if s >= 1]
+    same.free()

@@ -1,0 +1,268 @@
+"""The FMUs in other hosts: libcosim, a fresh Python without lpvest, a long run,
+and the command line that builds and validates them."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+import venv
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lpvest import load_system
+from lpvest.cli import main
+from tests.test_fmu import EXPECTED, paper_w, theta
+
+ROOT = Path(__file__).resolve().parent.parent
+
+# -- libcosim: a second, independent importer ---------------------------------------------
+
+
+def _cosim_run(fmu_paths: dict[str, Path], steps: int, step_size: float, script: str) -> dict:
+    """Run libcosim in a subprocess (it keeps FMU libraries loaded for good)."""
+    code = textwrap.dedent(f"""
+        import json, sys
+        from libcosimpy.CosimExecution import CosimExecution
+        from libcosimpy.CosimSlave import CosimLocalSlave
+        from libcosimpy.CosimObserver import CosimObserver
+        from libcosimpy.CosimLogging import log_output_level, CosimLogLevel
+        log_output_level(CosimLogLevel.ERROR)
+        paths = {json.dumps({k: str(v) for k, v in fmu_paths.items()})}
+        ex = CosimExecution.from_step_size(step_size=int(round({step_size} * 1e9)))
+        idx = {{name: ex.add_local_slave(CosimLocalSlave(fmu_path=p, instance_name=name))
+               for name, p in paths.items()}}
+        refs = {{name: {{v.name.decode(): v.reference for v in ex.slave_variables(i)}} for name, i in idx.items()}}
+        obs = CosimObserver.create_last_value()
+        ex.add_observer(obs)
+    """) + textwrap.dedent(script) + textwrap.dedent(f"""
+        ok = ex.step({steps})
+        out = {{"ok": bool(ok), "values": {{}}}}
+        for name, i in idx.items():
+            names = sorted(refs[name])
+            reals = [n for n in names if "[" in n]
+            out["values"][name] = dict(zip(reals, obs.last_real_values(i, [refs[name][n] for n in reals])))
+        print("RESULT" + json.dumps(out))
+    """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=False)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    line = next(x for x in proc.stdout.splitlines() if x.startswith("RESULT"))
+    return json.loads(line[len("RESULT"):])
+
+
+def test_every_fmu_loads_and_steps_in_libcosim(fmus):
+    names = sorted(EXPECTED)
+    result = _cosim_run({n: fmus[n] for n in names}, steps=5, step_size=0.1, script="")
+    assert result["ok"]
+    for name in names:
+        values = result["values"][name]
+        assert values and all(np.isfinite(v) for v in values.values()), name
+
+
+def test_libcosim_connects_scheduler_source_and_plant_like_the_library(fmus):
+    """Scheduler -> Plant and Source -> Plant in libcosim: the plant's y equals the
+    library simulation with theta_k = sin(0.25 k) and the paper's w."""
+    script = """
+        for port in ("p[1]",):
+            ex.connect_real_variables(idx["sched"], refs["sched"][port], idx["plant"], refs["plant"][port])
+        ex.connect_real_variables(idx["src"], refs["src"]["w[1]"], idx["plant"], refs["plant"]["w[1]"])
+    """
+    steps = 30
+    result = _cosim_run({"sched": fmus["PeixotoEx1Scheduler"], "src": fmus["PeixotoEx1Source"],
+                         "plant": fmus["PeixotoEx1Plant"]}, steps=steps, step_size=1.0, script=script)
+    assert result["ok"]
+    plant = load_system("peixoto-ex1").model()
+    k = np.arange(steps + 1)
+    ref = plant.simulate(plant.alpha_batch(theta(k)[:, None]), paper_w(k)[:, None])
+    values = result["values"]
+    # the plant got p_k and w_k in step k (x_steps right, no one-step delay)
+    np.testing.assert_allclose([values["plant"]["x[1]"], values["plant"]["x[2]"]], ref.x[steps], rtol=1e-13)
+    # libcosim observes the outputs after the last step, before it passes the
+    # new inputs on: y = Cy x_steps + Dy w_(steps-1) with the inputs still held
+    m = plant.at(plant.alpha(theta(steps - 1)[None]))
+    expected_y = m.Cy @ ref.x[steps] + m.Dy @ paper_w(steps - 1)[None]
+    assert values["plant"]["y[1]"] == pytest.approx(expected_y[0], rel=1e-13)
+
+
+# -- a long run: no growth in memory -------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_100000_steps_of_the_plant_fmu_do_not_grow_memory(fmus):
+    code = textwrap.dedent(f"""
+        import resource, sys
+        sys.path.insert(0, {str(ROOT)!r})
+        import numpy as np
+        from tests.fmu_driver import Driver
+        def rss():
+            with open("/proc/self/statm") as f:
+                return int(f.read().split()[1]) * resource.getpagesize()
+        d = Driver({str(fmus["PeixotoEx1Plant"])!r})
+        assert d.initialize() == 0
+        fmu, vin, vout = d.fmu, [d.vr["p[1]"], d.vr["w[1]"]], [d.vr["y[1]"], d.vr["x[1]"]]
+        marks = {{}}
+        for k in range(100_000):
+            fmu.setReal(vin, [np.sin(0.25 * k), np.sin(0.5 * k) * np.exp(-0.1 * (k % 50))])
+            fmu.getReal(vout)
+            fmu.doStep(float(k), 1.0)
+            if k + 1 in (20_000, 100_000):
+                marks[k + 1] = rss()
+        d.free()
+        print(marks[20_000], marks[100_000])
+    """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, check=False)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    rss_20k, rss_100k = map(int, proc.stdout.split())
+    growth = rss_100k - rss_20k
+    print(f"RSS after 20,000 steps {rss_20k / 2**20:.1f} MiB, after 100,000 {rss_100k / 2**20:.1f} MiB")
+    # 80,000 further steps: a leak of even 16 bytes per step would show as 1.2 MiB
+    assert growth < 1 * 2**20
+
+
+# -- a fresh Python without lpvest ------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_fmus_run_in_a_fresh_virtual_environment_without_lpvest(fmus, tmp_path):
+    env_dir = tmp_path / "fresh"
+    venv.create(env_dir, with_pip=True)
+    py = env_dir / "bin" / "python"
+    pip = subprocess.run([str(py), "-m", "pip", "install", "--quiet", "numpy", "scipy", "fmpy"],
+                         capture_output=True, text=True, timeout=600, check=False)
+    assert pip.returncode == 0, pip.stderr[-3000:]
+    k = np.arange(40)
+    inputs = {"p": theta(k).tolist(), "w": paper_w(k).tolist()}
+    code = textwrap.dedent(f"""
+        import json, sys
+        try:
+            import lpvest
+            sys.exit("lpvest is importable in the fresh environment")
+        except ImportError:
+            pass
+        from fmpy import read_model_description, extract
+        from fmpy.fmi2 import FMU2Slave
+        out = {{}}
+        for name, path in {json.dumps({n: str(fmus[n]) for n in ("PeixotoEx1Plant", "SridharLtvPlant")})}.items():
+            md = read_model_description(path)
+            vr = {{v.name: v.valueReference for v in md.modelVariables}}
+            fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path),
+                            modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
+            fmu.instantiate()
+            fmu.setupExperiment(startTime=0.0)
+            fmu.enterInitializationMode()
+            fmu.exitInitializationMode()
+            ys = []
+            inputs = json.loads({json.dumps(json.dumps(inputs))})
+            for k in range(40):
+                if name == "PeixotoEx1Plant":
+                    fmu.setReal([vr["p[1]"], vr["w[1]"]], [inputs["p"][k], inputs["w"][k]])
+                    ys.append(fmu.getReal([vr["y[1]"]])[0])
+                    fmu.doStep(float(k), 1.0)
+                else:
+                    ys.append(fmu.getReal([vr["y[1]"]])[0])
+                    fmu.doStep(0.25 * k, 0.25)
+            fmu.terminate()
+            fmu.freeInstance()
+            out[name] = ys
+        import lpvest
+        out["lpvest"] = lpvest.__file__
+        print("RESULT" + json.dumps(out))
+    """)
+    proc = subprocess.run([str(py), "-c", code], capture_output=True, text=True, timeout=300, check=False,
+                          cwd=tmp_path, env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    result = json.loads(next(x for x in proc.stdout.splitlines() if x.startswith("RESULT"))[len("RESULT"):])
+    assert "resources" in result["lpvest"]  # the copy bundled in the FMU served it
+    plant = load_system("peixoto-ex1").model()
+    ref = plant.simulate(plant.alpha_batch(theta(k)[:, None]), paper_w(k)[:, None])
+    assert np.array_equal(result["PeixotoEx1Plant"], ref.y[:, 0])
+    ltv = load_system("sridhar-ltv").model().to_state_space().simulate(0.25 * np.arange(40))
+    np.testing.assert_allclose(result["SridharLtvPlant"], ltv.y, rtol=0, atol=1e-9 * np.max(np.abs(ltv.y)))
+
+
+# -- command line ----------------------------------------------------------------------------
+
+
+def test_lpvest_build_for_a_users_model_file(fmus, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["build", "--out", str(out), "--model", str(fmus.affine_model)]) == 0
+    text = capsys.readouterr().out
+    for name in ("AffineDemoPlant.fmu", "AffineDemoScheduler.fmu", "AffineDemoSource.fmu"):
+        assert (out / name).is_file()
+        assert any(line.startswith(name) and line.rstrip().endswith("ok") for line in text.splitlines())
+    assert "3 FMU(s)" in text and "all valid" in text
+
+
+def test_build_fmus_script_builds_every_example(tmp_path):
+    proc = subprocess.run([sys.executable, str(ROOT / "build_fmus.py"), "--out", str(tmp_path)],
+                          capture_output=True, text=True, timeout=300, check=False, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    built = {p.stem for p in tmp_path.glob("*.fmu")}
+    assert built == {n for n in EXPECTED if not n.startswith("AffineDemo") and n != "PeixotoEx1MovingAverage"}
+    assert proc.stdout.splitlines()[0].split() == ["FMU", "variables", "(in/out/par)", "size", "validation"]
+
+
+def test_lpvest_validate_fails_on_a_broken_fmu(fmus, tmp_path, capsys):
+    broken = tmp_path / "Broken.fmu"
+    with zipfile.ZipFile(fmus["PeixotoEx1Plant"]) as src, zipfile.ZipFile(broken, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item)
+            if item.filename == "modelDescription.xml":
+                data = data.replace(b"<InitialUnknowns>", b"<InitialUnknowns>\n<Unknown index=\"1\"/>")
+            dst.writestr(item, data)
+    assert main(["validate", str(fmus["PeixotoEx1Plant"])]) == 0
+    assert main(["validate", str(broken)]) == 1
+    assert "InitialUnknowns" in capsys.readouterr().out
+
+
+def test_lpvest_build_of_a_bad_model_file_is_one_line(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[system]\nname = 'bad'\n[models.m]\ntype = 'polytopic'\n")
+    proc = subprocess.run([sys.executable, "-m", "lpvest.cli", "build", "--out", str(tmp_path), "--model", str(bad)],
+                          capture_output=True, text=True, check=False)
+    assert proc.returncode == 2
+    assert proc.stderr.startswith(f"lpvest: error: {bad}") and proc.stderr.count("\n") == 1
+
+
+# -- a C host -----------------------------------------------------------------------------
+
+
+def test_a_c_host_runs_the_fmu_with_libpython_preloaded(fmus, tmp_path):
+    """What a non-Python host needs: libpython loaded first (LD_PRELOAD) and a
+    Python path where numpy is found; without libpython the FMU says so."""
+    import shutil
+    import sysconfig
+
+    cc = shutil.which("cc") or shutil.which("gcc")
+    libpython = Path(sysconfig.get_config_var("LIBDIR") or "") / (sysconfig.get_config_var("INSTSONAME") or "")
+    if cc is None or not libpython.is_file():
+        pytest.skip("needs a C compiler and a shared libpython")
+    host = tmp_path / "c_host"
+    subprocess.run([cc, "-O2", "-o", str(host), str(ROOT / "tests" / "data" / "c_host.c"), "-ldl", "-lm"], check=True)
+    unzip = tmp_path / "fmu"
+    with zipfile.ZipFile(fmus["PeixotoEx1Plant"]) as z:
+        z.extractall(unzip)
+    from fmpy import read_model_description
+
+    md = read_model_description(str(fmus["PeixotoEx1Plant"]))
+    vr = {v.name: str(v.valueReference) for v in md.modelVariables}
+    args = [str(host), str(unzip), "PeixotoEx1Plant", md.guid, vr["p[1]"], vr["w[1]"], vr["y[1]"], "20"]
+    env = {k: v for k, v in os.environ.items() if k not in ("LD_PRELOAD", "PYTHONPATH", "PYTHONHOME")}
+    bare = subprocess.run(args, capture_output=True, text=True, env=env, timeout=120, check=False)
+    assert bare.returncode == 4 and "LD_PRELOAD" in bare.stdout
+    site = str(Path(np.__file__).resolve().parent.parent)  # where numpy is installed
+    env.update(LD_PRELOAD=str(libpython), PYTHONPATH=site)
+    proc = subprocess.run(args, capture_output=True, text=True, env=env, timeout=120, check=False, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    ys = [float(line.split()[2]) for line in proc.stdout.splitlines() if line.startswith("Y ")]
+    plant = load_system("peixoto-ex1").model()
+    k = np.arange(20)
+    ref = plant.simulate(plant.alpha_batch(theta(k)[:, None]), np.full((20, 1), 0.3))
+    assert np.array_equal(ys, ref.y[:, 0])
+    assert "BADSTATUS 3" in proc.stdout and "p[1] (theta) = 1.5 is outside" in proc.stdout
+    assert "FREED" in proc.stdout
