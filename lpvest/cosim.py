@@ -292,17 +292,22 @@ class CoSimulation:
             for m in outs:
                 indeg[m] = indeg.get(m, 0) + 1
         # Kahn's algorithm; among ready nodes prefer the lowest component index
-        # and "get" before "set" to keep per-component batches together.
-        ready = sorted([n for n, d in indeg.items() if d == 0], key=lambda n: (n[1], n[0] == "i", n[2]))
+        # and, within a component, "set" before "get": every input of a
+        # component is then set before any of its outputs is read, so it
+        # computes its outputs once per step, and batches stay together.
+        def key(n: tuple) -> tuple:
+            return (n[1], n[0] == "o", n[2])
+
+        ready = sorted([n for n, d in indeg.items() if d == 0], key=key)
         order = []
         while ready:
             n = ready.pop(0)
             order.append(n)
-            for m in sorted(edges.get(n, ()), key=lambda n: (n[1], n[0] == "i", n[2])):
+            for m in sorted(edges.get(n, ()), key=key):
                 indeg[m] -= 1
                 if indeg[m] == 0:
                     ready.append(m)
-            ready.sort(key=lambda n: (n[1], n[0] == "i", n[2]))
+            ready.sort(key=key)
         if len(order) < len(indeg):
             stuck = [n for n, d in indeg.items() if d > 0]
             names = sorted(f"{self._units[n[1]].spec.name}.{n[2]}" for n in stuck)

@@ -25,7 +25,7 @@ import numpy as np
 
 from .errors import ExpressionError
 
-__all__ = ["Expression", "FormulaMatrix", "FUNCTIONS", "CONSTANTS", "shift_name"]
+__all__ = ["Expression", "FormulaMatrix", "FormulaVector", "FUNCTIONS", "CONSTANTS", "shift_name"]
 
 #: Functions a formula may call (numpy ufuncs, so formulas work on arrays).
 FUNCTIONS: dict[str, Any] = {
@@ -45,6 +45,8 @@ FUNCTIONS: dict[str, Any] = {
 CONSTANTS: dict[str, float] = {"pi": math.pi, "e": math.e}
 
 _BINOPS = (ast.Add, ast.Sub, ast.Mult, ast.Div, ast.Pow)
+# the only globals a formula sees: the whitelisted functions, no builtins
+_GLOBALS: dict[str, Any] = {"__builtins__": {}, **FUNCTIONS}
 _SHIFT_PREFIX = "__shift__"
 
 
@@ -171,6 +173,7 @@ class Expression:
     text: str
     tree: ast.Expression = field(repr=False)
     _code: Any = field(repr=False)
+    _names: frozenset[str] = field(repr=False, default=frozenset())
 
     @classmethod
     def parse(
@@ -221,7 +224,7 @@ class Expression:
     @classmethod
     def _from_tree(cls, text: str, tree: ast.Expression) -> Expression:
         code = compile(tree, "<lpvest formula>", "eval")
-        return cls(text, tree, code)
+        return cls(text, tree, code, _free_names(tree))
 
     @classmethod
     def constant(cls, value: float) -> Expression:
@@ -232,7 +235,7 @@ class Expression:
     @property
     def names(self) -> frozenset[str]:
         """Free variable names (shifted variables under their internal names)."""
-        return _free_names(self.tree)
+        return self._names
 
     @property
     def shifts(self) -> dict[str, set[int]]:
@@ -266,15 +269,13 @@ class Expression:
 
     def evaluate(self, values: Mapping[str, Any]) -> Any:
         """Evaluate with ``values`` for the free names (arrays broadcast)."""
-        missing = self.names - values.keys()
+        missing = self._names - values.keys()
         if missing:
             n = sorted(missing)[0]
             shown = f"shift({_unshift(n)[0]}, {_unshift(n)[1]})" if n.startswith(_SHIFT_PREFIX) else n
             raise ExpressionError(f"formula {self.text!r} needs a value for {shown!r}")
-        namespace = dict(FUNCTIONS)
-        namespace.update(values)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            return eval(self._code, {"__builtins__": {}}, namespace)  # noqa: S307 (whitelisted AST)
+            return eval(self._code, _GLOBALS, values)  # noqa: S307 (whitelisted AST)
 
     def value(self) -> float:
         """The value of a constant formula."""
@@ -530,3 +531,34 @@ class FormulaMatrix:
     def to_list(self) -> list[list[float | str]]:
         """Entries as numbers (constants) or formula text, for model files."""
         return [[e.value() if e.is_constant else e.source for e in row] for row in self.entries]
+
+
+class FormulaVector:
+    """Several formulas evaluated together by one compiled expression (the fast
+    path for a per-sample evaluation, e.g. a simplex map inside an FMU).
+
+    >>> v = FormulaVector([Expression.parse("(1 - x)/2"), Expression.parse("(1 + x)/2")])
+    >>> v.evaluate({"x": 0.5})
+    array([0.25, 0.75])
+    """
+
+    def __init__(self, formulas: Iterable[Expression]) -> None:
+        self.formulas = tuple(formulas)
+        body = ast.Tuple([f.tree.body for f in self.formulas], ast.Load())
+        tree = ast.fix_missing_locations(ast.Expression(body))
+        self._code = compile(tree, "<lpvest formulas>", "eval")
+        self._names = frozenset().union(*(f.names for f in self.formulas))
+
+    def evaluate(self, values: Mapping[str, Any]) -> np.ndarray:
+        """The formulas' values, shape ``(n,)`` for scalar values or
+        ``(*shape, n)`` for arrays of a common ``shape``."""
+        missing = self._names - values.keys()
+        if missing:
+            for f in self.formulas:
+                f.evaluate(values)  # raises naming the formula
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            vals = eval(self._code, _GLOBALS, values)  # noqa: S307 (whitelisted AST)
+        if all(isinstance(v, float | int) for v in vals):
+            return np.array(vals, dtype=float)
+        shape = np.broadcast_shapes(*(np.shape(v) for v in vals))
+        return np.stack([np.broadcast_to(v, shape) for v in vals], axis=-1).astype(float)

@@ -20,7 +20,7 @@ from typing import NamedTuple, Protocol, runtime_checkable
 import numpy as np
 
 from ..errors import DimensionError, ExpressionError, SchedulingRangeError
-from ..expressions import Expression
+from ..expressions import Expression, FormulaVector
 from ..scheduling import BasisFunction, Monomial, SchedulingSpace, box_vertices
 from ..validation import as_matrix, as_signal, as_vector, check_simplex
 from .affine import AffineDependence
@@ -110,6 +110,7 @@ class FormulaSimplexMap:
             raise ExpressionError("a simplex map needs at least one formula")
         object.__setattr__(self, "space", space)
         object.__setattr__(self, "formulas", exprs)
+        object.__setattr__(self, "_vector", FormulaVector(exprs))
         pts = _validation_points(space)
         alpha = self.evaluate(pts)
         for k in range(pts.shape[0]):
@@ -124,13 +125,13 @@ class FormulaSimplexMap:
         return len(self.formulas)
 
     def __call__(self, p: np.ndarray) -> np.ndarray:
-        return self.evaluate(np.asarray(p, dtype=float).reshape(1, -1))[0]
+        p = np.asarray(p, dtype=float).reshape(-1)
+        return self._vector.evaluate({n: float(v) for n, v in zip(self.space.names, p, strict=True)})  # type: ignore[attr-defined]
 
     def evaluate(self, p: np.ndarray) -> np.ndarray:
         p = np.asarray(p, dtype=float)
-        vals = self.space.as_dict(p)
-        cols = [np.broadcast_to(f.evaluate(vals), p.shape[:-1]) for f in self.formulas]
-        return np.stack(cols, axis=-1).astype(float)
+        out = self._vector.evaluate(self.space.as_dict(p))  # type: ignore[attr-defined]
+        return np.broadcast_to(out, (*p.shape[:-1], self.n_vertices)).astype(float)
 
 
 @dataclass(frozen=True, eq=False)
