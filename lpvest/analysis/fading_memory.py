@@ -26,9 +26,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError
+from ..errors import DimensionError, NumericalError
 from ..estimators.kalman import KalmanModel, _initial, _riccati_sweep, covariance_step
-from ..estimators.truncated import restart_covariance, start_covariance, steady_state
+from ..estimators.truncated import restart_covariance, start_covariance
 from ..systems.affine import AffineLPV
 from ..validation import as_rng, as_signal
 
@@ -338,24 +338,45 @@ def _psd_factor(P: np.ndarray) -> np.ndarray:
     return V * np.sqrt(np.clip(lam, 0.0, None))
 
 
-def frozen_gains(model: AffineLPV | KalmanModel, p: object) -> np.ndarray:
+def frozen_gains(
+    model: AffineLPV | KalmanModel, p: object, *, tol: float = 1e-13, max_iter: int = 20000
+) -> np.ndarray:
     """``K_inf(p_t)``: the steady-state gain of the model frozen at each
-    ``p_t`` (scipy's DARE with the cross term), shape (T, n_x, n_y).
+    ``p_t``, shape (T, n_x, n_y).
 
-    This is the static, p_t-only gain that an LTI Kalman design scheduled on
-    ``p`` gives; (4c) shows the exact gain is dynamic in ``p``.
+    This is the static, p_t-only gain of an LTI Kalman design scheduled on
+    ``p``; (4c) shows the exact gain is dynamic in ``p``. All frozen models are
+    iterated together with the recursion (4c)-(4e) from ``P = I`` until the
+    largest change of ``P`` is below ``tol`` times its size (the fixed point
+    is the solution of the discrete Riccati equation with the cross term,
+    which :func:`~lpvest.estimators.truncated.steady_state` gets from scipy).
+
+    Raises
+    ------
+    NumericalError
+        The iteration does not settle within ``max_iter`` steps (no
+        stabilising solution for some frozen model).
     """
     km = model if isinstance(model, KalmanModel) else KalmanModel(model)
     p = as_signal(p, "p", km.n_p)
-    cache: dict[bytes, np.ndarray] = {}
-    out = np.empty((p.shape[0], km.nx, km.ny))
-    for t in range(p.shape[0]):
-        key = p[t].tobytes()
-        if key not in cache:
-            cache[key] = steady_state(km, p[t]).K
-        out[t] = cache[key]
-    return out
-
-
-
-
+    uniq, inverse = np.unique(p, axis=0, return_inverse=True)
+    n = km.nx
+    sms = km.step_matrices_batch(uniq)
+    P = np.broadcast_to(np.eye(n), (uniq.shape[0], n, n)).copy()
+    for _ in range(max_iter):
+        cs = covariance_step(P, sms)
+        P_new = cs.joint[:, :n, :n]
+        change = np.max(np.abs(P_new - P), axis=(1, 2))
+        P = P_new
+        size = np.max(np.abs(P), axis=(1, 2))
+        if not np.all(size < 1e100):  # diverging (or NaN): no stabilising solution
+            bad = int(np.argmax(~(size < 1e100)))
+            raise NumericalError(
+                f"the frozen Riccati recursion at p = {uniq[bad].tolist()} diverges: no stabilising solution"
+            )
+        if np.all(change <= tol * np.maximum(1.0, size)):
+            return covariance_step(P, sms).gains[:, :n][inverse.reshape(-1)]
+    bad = int(np.argmax(change))
+    raise NumericalError(
+        f"the frozen Riccati recursion at p = {uniq[bad].tolist()} did not settle in {max_iter} steps"
+    )
