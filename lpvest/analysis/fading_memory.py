@@ -119,7 +119,7 @@ def truncation_errors(
     n, m = km.nx, km.ny
     _, P_init = _initial(km, None, P0)
     sms = km.step_matrices_batch(p)
-    Pp, _, _, _, Gm = _riccati_sweep(km, sms, P_init)
+    Pp, _, _, Gm = _riccati_sweep(km, sms, P_init)
     K_exact = Gm[:, :n]
     P_exact = Pp[:T]
     P_start = start_covariance(km, start, start_p=start_p, start_fraction=start_fraction)

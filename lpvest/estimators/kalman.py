@@ -18,23 +18,29 @@ all matrices at ``p_t``. The filtered estimate uses the *filter* gain
 
 Numerics
 --------
-- Gains come from a Cholesky factor of ``Omega_t`` (for ``n_y = 1`` that is a
-  division by the positive scalar ``Omega_t``); a factor that fails raises
+With ``e = x_t - x^_{t|t-1}`` (covariance ``P``), the stacked vector
+``z = [A e + G w_t; e; C e + H v_t]`` has covariance
+``V = E P E^T + W``, ``E = [A; I; C]``,
+``W = [[G Q G^T, 0, G S H^T], [0, 0, 0], [H S^T G^T, 0, H R H^T]]``.
+Its blocks hold ``Omega_t`` and ``[A P C^T + G S H^T; P C^T]``, so
+``[K_t; L_t] = V_{12} Omega_t^-1``; and for *any* gains, the prediction and
+filter errors are ``[I_2n, -[K; L]] z``, so
+
+    [[P_{t+1|t}, .], [., P_{t|t}]] = M V M^T,   M = [I_2n, -[K; L]],
+
+which is the Joseph form of both updates: ``(A - K C) P (A - K C)^T +
+[G, -K H] Sigma [G, -K H]^T`` (the paper's (32) with ERRATA's
+``K Omega K^T``) and ``(I - L C) P (I - L C)^T + L H R H^T L^T``; positive
+semidefinite by construction, then symmetrised.
+
+- Gains come from the Cholesky factor of ``Omega_t`` (for ``n_y = 1`` a
+  division by the positive scalar); a factor that fails raises
   :class:`~lpvest.errors.NumericalError` naming ``t``. No inverse, no jitter.
-- Both covariances are propagated in Joseph form, valid for any gain and
-  positive semidefinite by construction, then symmetrised:
-  ``P_{t+1|t} = (A - K C) P (A - K C)^T + [G, -K H] Sigma [G, -K H]^T``
-  (the paper's (32), with ERRATA's ``K Omega K^T``), and
-  ``P_{t|t} = (I - L C) P (I - L C)^T + L H R H^T L^T``.
-- Both come from one product ``M W M^T`` with
-  ``M = [[A - K C, I, K], [I - L C, 0, L]]`` and
-  ``W = blockdiag(P, [[G Q G^T, -G S H^T], [-H S^T G^T, H R H^T]])``; the
-  p-dependent blocks (``G Q G^T`` etc. are quadratic in the basis functions)
-  are evaluated with one matrix product from coefficients packed once
-  (:class:`KalmanModel`). This keeps a streaming step to about twenty small
-  numpy calls; the same kernel (:func:`covariance_step`) serves the
-  streaming filter, the batch filter, the truncated filter and the
-  fading-memory analysis.
+- ``[E, [B; 0; D], W]`` is one matrix of degree two in the basis functions
+  (``G Q G^T`` is quadratic); :class:`KalmanModel` packs its coefficients
+  once, so a sample's matrices are one product ``z(p) @ coefficients``.
+- One kernel (:func:`covariance_step`) serves the streaming filter, the batch
+  filter, the truncated filter and the fading-memory analysis.
 
 Runtime code: imports only numpy.
 """
@@ -105,42 +111,42 @@ class KalmanMatrices(NamedTuple):
 
 
 class StepMatrices(NamedTuple):
-    """One sample's matrices (or a stack along time) in the layout the
-    recursion uses; with ``n = n_x``, ``m = n_y``:
+    """One sample's matrices (or a stack along time) in the layout of the
+    recursion (module notes). With ``n = n_x``, ``m = n_y``::
 
-    - ``Hm`` (m + 2n, n + n_u + m) = ``[[C, D, HRH], [A, B, GSH], [I, 0, 0]]``
-    - ``ER`` (2n + m, 2n + m) = ``[[A, I, 0], [I, 0, 0], [C, 0, -I]]``
-    - ``Wn`` (2n + m, 2n + m) = ``[[0, 0, 0], [0, GQG, -GSH], [0, -GSH^T, HRH]]``
+        F = [[A, B, GQG, 0, GSH],
+             [I, 0, 0,   0, 0  ],
+             [C, D, GSH^T, 0, HRH]]     shape (2n + m, n + n_u + 2n + m)
+
+    i.e. ``F = [E, [B; 0; D], W]``.
     """
 
-    Hm: np.ndarray
-    ER: np.ndarray
-    Wn: np.ndarray
+    F: np.ndarray
     nx: int
     nu: int
     ny: int
 
     def readable(self) -> KalmanMatrices:
         """The same matrices as :class:`KalmanMatrices` (views)."""
-        n, nu, m = self.nx, self.nu, self.ny
-        Hm = self.Hm
+        n, nu = self.nx, self.nu
+        F, w = self.F, n + nu
         return KalmanMatrices(
-            A=Hm[..., m : m + n, :n],
-            B=Hm[..., m : m + n, n : n + nu],
-            C=Hm[..., :m, :n],
-            D=Hm[..., :m, n : n + nu],
-            GQG=self.Wn[..., n : 2 * n, n : 2 * n],
-            GSH=Hm[..., m : m + n, n + nu :],
-            HRH=Hm[..., :m, n + nu :],
+            A=F[..., :n, :n],
+            B=F[..., :n, n:w],
+            C=F[..., 2 * n :, :n],
+            D=F[..., 2 * n :, n:w],
+            GQG=F[..., :n, w : w + n],
+            GSH=F[..., :n, w + 2 * n :],
+            HRH=F[..., 2 * n :, w + 2 * n :],
         )
 
     def at(self, t: int) -> StepMatrices:
         """Sample ``t`` of a stack."""
-        return StepMatrices(self.Hm[t], self.ER[t], self.Wn[t], self.nx, self.nu, self.ny)
+        return StepMatrices(self.F[t], self.nx, self.nu, self.ny)
 
     def window(self, start: int, stop: int) -> StepMatrices:
         """Samples ``start..stop-1`` of a stack."""
-        return StepMatrices(self.Hm[start:stop], self.ER[start:stop], self.Wn[start:stop], self.nx, self.nu, self.ny)
+        return StepMatrices(self.F[start:stop], self.nx, self.nu, self.ny)
 
 
 def _monomial_pairs(k: int) -> list[tuple[int, int]]:
@@ -233,7 +239,6 @@ class KalmanModel:
         const = np.zeros(nz)
         const[0] = 1.0
         eye_n = const[:, None, None] * np.eye(n)
-        eye_m = const[:, None, None] * np.eye(m)
 
         def z(r: int, c: int) -> np.ndarray:
             return np.zeros((nz, r, c))
@@ -241,17 +246,14 @@ class KalmanModel:
         def block(rows: list[list[np.ndarray]]) -> np.ndarray:
             return np.concatenate([np.concatenate(row, axis=2) for row in rows], axis=1)
 
-        Hm = block([[C, D, HRH], [A, B, GSH], [eye_n, z(n, nu), z(n, m)]])
-        ER = block([[A, eye_n, z(n, m)], [eye_n, z(n, n), z(n, m)], [C, z(m, n), -eye_m]])
-        Wn = block(
+        F = block(
             [
-                [z(n, n), z(n, n), z(n, m)],
-                [z(n, n), GQG, -GSH],
-                [z(m, n), -np.swapaxes(GSH, 1, 2), HRH],
+                [A, B, GQG, z(n, n), GSH],
+                [eye_n, z(n, nu), z(n, n), z(n, n), z(n, m)],
+                [C, D, np.swapaxes(GSH, 1, 2), z(m, n), HRH],
             ]
         )
-        packed = np.concatenate([Hm.reshape(nz, -1), ER.reshape(nz, -1), Wn.reshape(nz, -1)], axis=1)
-        sizes = (Hm[0].size, ER[0].size, Wn[0].size)
+        packed = F.reshape(nz, -1)
         plain = np.concatenate([M.reshape(nz, -1) for M in (A, B, C, D, GQG, GSH, HRH)], axis=1)
         plain_shapes = [M.shape[1:] for M in (A, B, C, D, GQG, GSH, HRH)]
         for arr in (packed, plain):
@@ -269,8 +271,7 @@ class KalmanModel:
                 "packed": packed,
                 "plain": plain,
                 "plain_shapes": plain_shapes,
-                "sizes": sizes,
-                "shapes": (Hm.shape[1:], ER.shape[1:], Wn.shape[1:]),
+                "shape": F.shape[1:],
                 "pairs": pairs,
                 "k": k,
                 "basis": basis,
@@ -343,12 +344,7 @@ class KalmanModel:
 
     def _step_matrices(self, p: np.ndarray) -> StepMatrices:
         c = self._c  # type: ignore[attr-defined]
-        flat = np.dot(self.z(p), c["packed"])
-        a, b, _ = c["sizes"]
-        sh, se, sw = c["shapes"]
-        return StepMatrices(
-            flat[:a].reshape(sh), flat[a : a + b].reshape(se), flat[a + b :].reshape(sw), self.nx, self.nu, self.ny
-        )
+        return StepMatrices(np.dot(self.z(p), c["packed"]).reshape(c["shape"]), self.nx, self.nu, self.ny)
 
     def step_matrices_batch(self, p: np.ndarray, *, check: bool = True) -> StepMatrices:
         """:class:`StepMatrices` stacked along a trajectory ``p`` (T, n_p)."""
@@ -356,18 +352,8 @@ class KalmanModel:
         if check:
             self.check_box_batch(p)
         c = self._c  # type: ignore[attr-defined]
-        flat = self.z_batch(p) @ c["packed"]
-        a, b, _ = c["sizes"]
-        sh, se, sw = c["shapes"]
-        T = p.shape[0]
-        return StepMatrices(
-            flat[:, :a].reshape(T, *sh),
-            flat[:, a : a + b].reshape(T, *se),
-            flat[:, a + b :].reshape(T, *sw),
-            self.nx,
-            self.nu,
-            self.ny,
-        )
+        F = (self.z_batch(p) @ c["packed"]).reshape(p.shape[0], *c["shape"])
+        return StepMatrices(F, self.nx, self.nu, self.ny)
 
     def check_box_batch(self, p: np.ndarray) -> None:
         """Range-check a trajectory (T, n_p); the error names the first bad ``t``."""
@@ -414,15 +400,63 @@ class CovarianceStep(NamedTuple):
     """What :func:`covariance_step` computes at one sample (or a stack)."""
 
     Omega: np.ndarray  #: (n_y, n_y) ``Omega_t``, (4e)
-    chol: np.ndarray  #: (n_y, n_y) lower Cholesky factor of ``Omega_t``
     gains: np.ndarray  #: (2 n_x, n_y) ``[K_t; L_t]``, (4c) and ERRATA (7)
     joint: np.ndarray  #: (2 n_x, 2 n_x) symmetric; blocks ``[:n, :n] = P_{t+1|t}``, ``[n:, n:] = P_{t|t}``
-    whitened: np.ndarray | None  #: ``chol^-1 rhs`` when ``rhs`` was given
+    whitened: np.ndarray | None  #: ``chol(Omega)^-1 rhs`` when ``rhs`` was given
+    logdet: float | np.ndarray  #: ``log det Omega_t``
 
 
 def _singular(t: int | None, detail: str) -> NumericalError:
     where = "" if t is None else f" at t={t}"
     return NumericalError(f"the innovation covariance Omega_t is not positive definite{where}: {detail}")
+
+
+_EYE: dict[int, np.ndarray] = {}
+
+
+def _eye(k: int) -> np.ndarray:
+    e = _EYE.get(k)
+    if e is None:
+        e = np.eye(k)
+        e.setflags(write=False)
+        _EYE[k] = e
+    return e
+
+
+_SMALL = 3  #: largest n_y handled by :func:`_small_chol_inverse`
+
+
+def _small_chol_inverse(Omega: np.ndarray, t: int | None) -> tuple[np.ndarray, float]:
+    """``chol^-1`` and ``log det`` of a small symmetric positive definite
+    matrix: the Cholesky factor by the textbook recurrence, its inverse by
+    forward substitution on the identity, in Python floats."""
+    a = Omega.tolist()
+    m = len(a)
+    L = [[0.0] * m for _ in range(m)]
+    logdet = 0.0
+    for i in range(m):
+        Li = L[i]
+        for j in range(i + 1):
+            Lj = L[j]
+            s = a[i][j]
+            for k in range(j):
+                s -= Li[k] * Lj[k]
+            if i == j:
+                if not 0.0 < s < math.inf:
+                    raise _singular(t, f"Cholesky pivot {i + 1} is {s:.3g}")
+                Li[i] = math.sqrt(s)
+                logdet += math.log(s)
+            else:
+                Li[j] = s / Lj[j]
+    Ci = [[0.0] * m for _ in range(m)]
+    for c in range(m):
+        for i in range(c, m):
+            Li = L[i]
+            s = 1.0 if i == c else 0.0
+            for k in range(c, i):
+                s -= Li[k] * Ci[k][c]
+            Ci[i][c] = s / Li[i]
+    return np.array(Ci), logdet
 
 
 def covariance_step(
@@ -435,12 +469,12 @@ def covariance_step(
 ) -> CovarianceStep:
     """Gains and Joseph-form covariances from ``P_{t|t-1}``; pure.
 
-    Computes ``Omega_t`` (4e), the gains ``K_t`` (4c) and ``L_t`` (ERRATA (7))
-    by Cholesky solves, and in one product ``M W M^T`` (module notes)
-    ``P_{t+1|t} = (A - K C) P (A - K C)^T + [G, -K H] Sigma [G, -K H]^T``
-    ((32) with ERRATA) and ``P_{t|t} = (I - L C) P (I - L C)^T + L H R H^T L^T``,
-    symmetrised. Both Joseph forms hold for any gains, so ``gains`` may be
-    given (a suboptimal filter); the covariances are then those of that filter.
+    ``V = E P E^T + W`` (module notes) gives ``Omega_t`` (4e) and the optimal
+    gains ``[K_t; L_t] = V_12 Omega_t^-1`` ((4c), ERRATA (7)), by Cholesky
+    solves; ``M V M^T`` with ``M = [I, -[K; L]]`` gives ``P_{t+1|t}`` and
+    ``P_{t|t}`` in Joseph form ((32) with ERRATA), symmetrised. The Joseph
+    forms hold for any gains, so ``gains`` may be given (a suboptimal filter):
+    the covariances are then the true error covariances of that filter.
 
     Parameters
     ----------
@@ -453,7 +487,7 @@ def covariance_step(
     gains : ndarray, shape (2 n_x, n_y) or (N, 2 n_x, n_y), optional
         ``[K; L]`` to use instead of the optimal ones.
     rhs : ndarray, shape (n_y,), optional
-        A vector to whiten, ``chol^-1 rhs`` (one Cholesky solve shared with
+        A vector to whiten, ``chol(Omega)^-1 rhs`` (one solve shared with
         the gains); unstacked use only.
 
     Raises
@@ -469,64 +503,70 @@ def covariance_step(
     >>> cs.gains.shape, cs.joint.shape
     ((4, 2), (4, 4))
     """
-    n, nu, m = sm.nx, sm.nu, sm.ny
-    Hm, ER = sm.Hm, sm.ER
     if P.ndim > 2:
         return _covariance_step_stack(P, sm, t, gains)
-    CAI = Hm[:, :n]
-    U = CAI @ (P @ CAI[:m].T)
-    U += Hm[:, n + nu :]  # [Omega; N; P C^T] with N = A P C^T + G S H^T
+    n, m = sm.nx, sm.ny
+    F = sm.F
+    n2 = 2 * n
+    E = F[:, :n]
+    V = E @ P @ E.T
+    V += F[:, n + sm.nu :]
     whitened = None
     if m == 1:
-        w = float(U[0, 0])
+        w = float(V[n2, n2])
         if not 0.0 < w < math.inf:
             raise _singular(t, f"Omega_t = {w:.6g}")
-        s = math.sqrt(w)
-        chol = np.array([[s]])
         if gains is None:
-            gains = U[1:] / w
-        M = ER[: 2 * n] - gains @ ER[2 * n :]
+            gains = V[:n2, n2:] / w
         if rhs is not None:
-            whitened = rhs / s
+            whitened = rhs / math.sqrt(w)
+        logdet = math.log(w)
+    elif m <= _SMALL:
+        # tiny Omega: its Cholesky factor and the factor's inverse (forward
+        # substitution on I) in Python floats beat two LAPACK calls
+        Ci, logdet = _small_chol_inverse(V[n2:, n2:], t)
+        if gains is None:
+            Z = Ci @ V[n2:, :n2]  # chol^-1 V_21
+            gains = Z.T @ Ci  # V_12 chol^-T chol^-1 = V_12 Omega^-1
+        if rhs is not None:
+            whitened = Ci @ rhs
     else:
-        Omega = U[:m]
+        Omega = V[n2:, n2:]
         try:
             chol = np.linalg.cholesky(Omega)
         except np.linalg.LinAlgError as exc:
             raise _singular(t, f"smallest eigenvalue {np.linalg.eigvalsh(Omega)[0]:.3g}") from exc
         if not np.all(np.isfinite(chol)):
             raise _singular(t, "it holds non-finite values")
+        logdet = 2.0 * float(np.sum(np.log(np.diagonal(chol))))
         if gains is None:
-            # One solve: Zall = chol^-1 [[N; P C^T]^T, [C, 0, -I], rhs]. Then
-            # [K; L] [C, 0, -I] = Z^T Rw, and [K; L] is the last n_y columns of M.
-            parts = [U[m:].T, ER[2 * n :]]
+            # one forward substitution: chol^-1 [V_21, I, rhs]; then
+            # [K; L] = V_12 chol^-T chol^-1 = (chol^-1 V_21)^T chol^-1
+            parts = [V[n2:, :n2], _eye(m)]
             if rhs is not None:
                 parts.append(rhs[:, None])
-            Zall = np.linalg.solve(chol, np.concatenate(parts, axis=1))
-            M = ER[: 2 * n] - Zall[:, : 2 * n].T @ Zall[:, 2 * n : 4 * n + m]
-            gains = M[:, 2 * n :]
+            Z = np.linalg.solve(chol, np.concatenate(parts, axis=1))
+            gains = Z[:, :n2].T @ Z[:, n2 : n2 + m]
             if rhs is not None:
-                whitened = Zall[:, -1]
-        else:
-            M = ER[: 2 * n] - gains @ ER[2 * n :]
-            if rhs is not None:
-                whitened = np.linalg.solve(chol, rhs)
-    W = sm.Wn.copy()
-    W[:n, :n] = P
-    PP = M @ W @ M.T
+                whitened = Z[:, -1]
+        elif rhs is not None:
+            whitened = np.linalg.solve(chol, rhs)
+    M = np.concatenate((_eye(n2), -gains), axis=1)
+    PP = M @ V @ M.T
     PP = PP + PP.T
     PP *= 0.5
-    return CovarianceStep(U[:m], chol, gains, PP, whitened)
+    return CovarianceStep(V[n2:, n2:], gains, PP, whitened, logdet)
 
 
 def _covariance_step_stack(
     P: np.ndarray, sm: StepMatrices, t: int | None, gains: np.ndarray | None
 ) -> CovarianceStep:
-    n, nu, m = sm.nx, sm.nu, sm.ny
-    Hm, ER = sm.Hm, sm.ER
-    CAI = Hm[..., :n]
-    U = CAI @ (P @ _mT(CAI[..., :m, :])) + Hm[..., n + nu :]
-    Omega = U[..., :m, :]
+    n = sm.nx
+    n2 = 2 * n
+    F = sm.F
+    E = F[..., :n]
+    V = E @ P @ _mT(E) + F[..., n + sm.nu :]
+    Omega = V[..., n2:, n2:]
     try:
         chol = np.linalg.cholesky(Omega)
     except np.linalg.LinAlgError as exc:
@@ -535,12 +575,11 @@ def _covariance_step_stack(
     if not np.all(np.isfinite(chol)):
         raise _singular(t, "it holds non-finite values")
     if gains is None:
-        gains = _mT(np.linalg.solve(_mT(chol), np.linalg.solve(chol, _mT(U[..., m:, :]))))
-    M = ER[..., : 2 * n, :] - gains @ ER[..., 2 * n :, :]
-    W = sm.Wn.copy()
-    W[..., :n, :n] = P
-    PP = M @ W @ _mT(M)
-    return CovarianceStep(Omega, chol, gains, 0.5 * (PP + _mT(PP)), None)
+        gains = _mT(np.linalg.solve(_mT(chol), np.linalg.solve(chol, V[..., n2:, :n2])))
+    M = np.concatenate((np.broadcast_to(_eye(n2), (*gains.shape[:-2], n2, n2)), -gains), axis=-1)
+    PP = M @ V @ _mT(M)
+    logdet = 2.0 * np.sum(np.log(np.diagonal(chol, axis1=-2, axis2=-1)), axis=-1)
+    return CovarianceStep(Omega, gains, 0.5 * (PP + _mT(PP)), None, logdet)
 
 
 # ---------------------------------------------------------------------------
@@ -604,22 +643,20 @@ def kalman_step(
     (1, (2, 2))
     """
     n, nu, m = sm.nx, sm.nu, sm.ny
-    Hm = sm.Hm
-    h = Hm[:, :n] @ state.x  # [C x; A x; x]
+    F = sm.F
     if nu:
-        h += Hm[:, n : n + nu] @ u
-    y_pred = h[:m]
+        h = F[:, : n + nu] @ np.concatenate((state.x, u))  # [A x + B u; x; C x + D u]
+    else:
+        h = F[:, :n] @ state.x
+    n2 = 2 * n
+    y_pred = h[n2:]
     xi = y - y_pred
     cs = covariance_step(state.P, sm, t=state.t, gains=gains, rhs=xi)
     G = cs.gains
-    xs = h[m:] + G @ xi  # [x^_{t+1|t}; x^_{t|t}]
+    xs = h[:n2] + G @ xi  # [x^_{t+1|t}; x^_{t|t}]
     z = cs.whitened
     assert z is not None
-    if m == 1:
-        e = float(z[0])
-        ll = -0.5 * (_LOG_2PI + 2.0 * math.log(float(cs.chol[0, 0])) + e * e)
-    else:
-        ll = -0.5 * (m * _LOG_2PI + 2.0 * float(np.sum(np.log(np.diagonal(cs.chol)))) + float(z @ z))
+    ll = -0.5 * (m * _LOG_2PI + cs.logdet + float(z @ z))
     PP = cs.joint
     return KalmanStep(
         t=state.t,
@@ -666,28 +703,28 @@ def _initial(km: KalmanModel, x0: object | None, P0: object | None) -> tuple[np.
 
 def _riccati_sweep(
     km: KalmanModel, sms: StepMatrices, P0: np.ndarray, *, t0: int = 0
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The covariance recursion alone along stacked matrices: returns
-    ``P_{t|t-1}`` (T + 1), ``P_{t|t}``, ``Omega_t``, Cholesky factors, ``[K_t; L_t]``."""
-    T = sms.Hm.shape[0]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The covariance recursion alone along stacked matrices (the only part
+    of the filter that must run sample by sample): returns ``P_{t|t-1}``
+    (T + 1), ``P_{t|t}`` (T), ``Omega_t`` (T), ``[K_t; L_t]`` (T)."""
+    T = sms.F.shape[0]
     n, nu, m = km.nx, km.nu, km.ny
     Pp = np.empty((T + 1, n, n))
     Pf = np.empty((T, n, n))
     Om = np.empty((T, m, m))
-    Ch = np.empty((T, m, m))
     Gm = np.empty((T, 2 * n, m))
     P = P0
     Pp[0] = P
-    for t in range(T):
-        cs = covariance_step(P, StepMatrices(sms.Hm[t], sms.ER[t], sms.Wn[t], n, nu, m), t=t0 + t)
+    step = covariance_step
+    for t, F in enumerate(sms.F):
+        cs = step(P, StepMatrices(F, n, nu, m), t=t0 + t)
         PP = cs.joint
         P = PP[:n, :n]
         Pp[t + 1] = P
         Pf[t] = PP[n:, n:]
         Om[t] = cs.Omega
-        Ch[t] = cs.chol
         Gm[t] = cs.gains
-    return Pp, Pf, Om, Ch, Gm
+    return Pp, Pf, Om, Gm
 
 
 def kalman_filter(
@@ -751,7 +788,7 @@ def kalman_filter(
     y = as_signal(y, "y", m, T)
     x, P = _initial(km, x0, P0)
     sms = km.step_matrices_batch(p)
-    Pp, Pf, Om, Ch, Gm = _riccati_sweep(km, sms, P)
+    Pp, Pf, Om, Gm = _riccati_sweep(km, sms, P)
     K = Gm[:, :n]
     L = Gm[:, n:]
     mats = sms.readable()
@@ -760,16 +797,16 @@ def kalman_filter(
     c = np.einsum("tij,tj->ti", K, y - Du)
     if nu:
         c += np.einsum("tij,tj->ti", mats.B, u)
-    F = mats.A - K @ mats.C
-    xp = np.empty((T + 1, n))
-    xp[0] = x
-    for t in range(T):
-        x = F[t] @ x + c[t]
-        xp[t + 1] = x
+    xs = [x]
+    for Ft, ct in zip(mats.A - K @ mats.C, c, strict=True):
+        x = Ft @ x
+        x += ct
+        xs.append(x)
+    xp = np.array(xs)
     y_pred = np.einsum("tij,tj->ti", mats.C, xp[:T]) + Du
     xi = y - y_pred
     xf = xp[:T] + np.einsum("tij,tj->ti", L, xi)
-    terms = _loglik_terms(xi, Ch)
+    terms = _loglik_terms(xi, Om)
     return KalmanResult(
         predicted_means=xp,
         predicted_covariances=Pp,
@@ -785,12 +822,13 @@ def kalman_filter(
     )
 
 
-def _loglik_terms(xi: np.ndarray, chol: np.ndarray) -> np.ndarray:
-    """``log N(xi_t; 0, Omega_t)`` for all t, from the Cholesky factors."""
+def _loglik_terms(xi: np.ndarray, Omega: np.ndarray) -> np.ndarray:
+    """``log N(xi_t; 0, Omega_t)`` for all t, by Cholesky factors."""
     m = xi.shape[1]
     if m == 1:
-        w = chol[:, 0, 0] ** 2
+        w = Omega[:, 0, 0]
         return -0.5 * (_LOG_2PI + np.log(w) + xi[:, 0] ** 2 / w)
+    chol = np.linalg.cholesky(Omega)
     z = np.linalg.solve(chol, xi[..., None])[..., 0]
     logdet = 2.0 * np.sum(np.log(np.diagonal(chol, axis1=1, axis2=2)), axis=1)
     return -0.5 * (m * _LOG_2PI + logdet + np.sum(z * z, axis=1))
@@ -850,9 +888,9 @@ def simulate_innovation_form(
     u = as_signal(u if u is not None else np.zeros((T, nu)), "u", nu, T)
     x, P = _initial(km, x0, P0)
     sms = km.step_matrices_batch(p)
-    _, _, Om, Ch, Gm = _riccati_sweep(km, sms, P)
+    _, _, Om, Gm = _riccati_sweep(km, sms, P)
     K = Gm[:, :n]
-    xi = np.einsum("tij,tj->ti", Ch, as_rng(rng).standard_normal((T, m)))
+    xi = np.einsum("tij,tj->ti", np.linalg.cholesky(Om), as_rng(rng).standard_normal((T, m)))
     mats = sms.readable()
     X = np.empty((T, n))
     Y = np.empty((T, m))
