@@ -14,6 +14,9 @@ simulated from the model. Rows:
 - ``lpvest run_streaming``: the same through :func:`run_streaming` (the
   streaming loop: it also slices the inputs and stacks the outputs);
 - ``lpvest batch``: :func:`kalman_filter` over the whole trajectory;
+- ``lpvest kalman_step (matrices given)``: the pure step function on
+  matrices evaluated beforehand for the whole trajectory, no validation: the
+  like-for-like comparison with the next row;
 - ``filterpy (matrices given)``: ``predict(); update(z)`` with F, H, Q, R
   precomputed for every step (filterpy never evaluates the LPV model);
 - ``filterpy + model.at(p)``: the same, evaluating the model at ``p_t`` each
@@ -43,7 +46,13 @@ import numpy as np  # noqa: E402
 
 from lpvest import AffineLPV, Monomial, SchedulingSpace  # noqa: E402
 from lpvest.estimators import run_streaming  # noqa: E402
-from lpvest.estimators.kalman import LPVKalmanFilter, kalman_filter  # noqa: E402
+from lpvest.estimators.kalman import (  # noqa: E402
+    KalmanModel,
+    KalmanState,
+    LPVKalmanFilter,
+    kalman_filter,
+    kalman_step,
+)
 
 
 def random_model(nx: int, ny: int, nu: int, rng: np.random.Generator) -> AffineLPV:
@@ -109,6 +118,15 @@ def bench(nx: int, ny: int, steps: int, repeat: int, seed: int) -> dict[str, flo
     def lp_batch() -> None:
         kalman_filter(model, p, u, y)
 
+    km = KalmanModel(model)
+    sms = km.step_matrices_batch(p)
+    given = [(sms.at(t), u[t], y[t]) for t in range(steps)]
+
+    def lp_given() -> None:
+        state = KalmanState(model.x0, model.P0, 0)
+        for sm, ut, yt in given:
+            state = kalman_step(state, sm, ut, yt).next
+
     fp = KalmanFilter(dim_x=nx, dim_z=ny, dim_u=nu)
     zs = [y[t].reshape(ny, 1) for t in range(steps)]
     us = [u[t].reshape(nu, 1) for t in range(steps)]
@@ -161,6 +179,7 @@ def bench(nx: int, ny: int, steps: int, repeat: int, seed: int) -> dict[str, flo
         "lpvest step": lp_step,
         "lpvest run_streaming": lp_stream,
         "lpvest batch": lp_batch,
+        "lpvest kalman_step (given)": lp_given,
         "filterpy (matrices given)": fp_given,
         "filterpy + model.at(p)": fp_eval,
     }
@@ -186,6 +205,9 @@ def main() -> None:
         res = {nx: bench(nx, ny, args.steps, args.repeat, args.seed) for nx in (2, 4, 10)}
         for name in res[2]:
             print(f"{name:<28}" + "".join(f"{res[nx][name]:>12.1f}" for nx in (2, 4, 10)))
+        print(f"{'kalman_step / filterpy (given)':<28}" + "".join(
+            f"{res[nx]['lpvest kalman_step (given)'] / res[nx]['filterpy (matrices given)']:>12.2f}"
+            for nx in (2, 4, 10)))
         print(f"{'step / filterpy (given)':<28}" + "".join(
             f"{res[nx]['lpvest step'] / res[nx]['filterpy (matrices given)']:>12.2f}" for nx in (2, 4, 10)))
         print(f"{'step / filterpy + at(p)':<28}" + "".join(

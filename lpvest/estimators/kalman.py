@@ -912,6 +912,7 @@ class _Reader:
         self.names = ("p", "u", "y") if km.nu else ("p", "y")
         self.sizes = {"p": km.n_p, "u": km.nu, "y": km.ny}
         self._nu = km.nu
+        self._keys = frozenset(self.names)
 
     def _vec(self, inputs: Mapping[str, Any], name: str) -> np.ndarray:
         try:
@@ -930,8 +931,8 @@ class _Reader:
         return a
 
     def read(self, inputs: Mapping[str, Any], t: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        if len(inputs) != len(self.names) or any(k not in self.sizes for k in inputs):
-            extra = sorted(set(inputs) - set(self.names))
+        if len(inputs) != len(self.names) or not self._keys.issuperset(inputs):
+            extra = sorted(set(inputs) - self._keys)
             if extra:
                 raise DimensionError(f"unknown input {extra[0]!r}; the inputs are {', '.join(self.names)}")
         p = self._vec(inputs, "p")
@@ -1049,15 +1050,16 @@ class LPVKalmanFilter:
         """``log p(y_0, ..., y_{t-1})`` of the samples consumed so far."""
         return self._loglik
 
-    def _compute(self, inputs: Mapping[str, Any]) -> tuple[bytes, KalmanStep]:
+    def _compute(self, inputs: Mapping[str, Any], keep: bool = False) -> tuple[bytes, KalmanStep]:
         st = self._state
         p, u, y = self._reader.read(inputs, st.t)
-        key = p.tobytes() + u.tobytes() + y.tobytes()
         pend = self._pending
-        if pend is not None and pend[0] == key and pend[1].t == st.t:
-            return pend
-        res = kalman_step(st, self._km._step_matrices(p), u, y)
-        return key, res
+        key = b""
+        if keep or pend is not None:  # outputs() then step() on the same sample: compute once
+            key = p.tobytes() + u.tobytes() + y.tobytes()
+            if pend is not None and pend[0] == key and pend[1].t == st.t:
+                return pend
+        return key, kalman_step(st, self._km._step_matrices(p), u, y)
 
     def process(self, p: object, u: object | None, y: object) -> KalmanStep:
         """Consume sample ``t`` and advance; returns every quantity of the step
@@ -1094,7 +1096,7 @@ class LPVKalmanFilter:
 
     def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
         """Estimates at the current sample; no state change."""
-        key, res = self._compute(inputs)
+        key, res = self._compute(inputs, keep=True)
         self._pending = (key, res)
         return self._as_dict(res)
 

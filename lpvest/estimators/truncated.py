@@ -459,12 +459,16 @@ class TruncatedKalmanFilter:
             return truncated_prior(win, self._start, P0=self._P0, t=self._t)
         return truncated_prior(win, self._start, t=self._t)
 
-    def _compute(self, inputs: Mapping[str, Any]) -> tuple[bytes, KalmanStep, StepMatrices, np.ndarray]:
+    def _compute(
+        self, inputs: Mapping[str, Any], keep: bool = False
+    ) -> tuple[bytes, KalmanStep, StepMatrices, np.ndarray]:
         p, u, y = self._reader.read(inputs, self._t)
-        key = p.tobytes() + u.tobytes() + y.tobytes()
         pend = self._pending
-        if pend is not None and pend[0] == key and pend[1].t == self._t:
-            return pend
+        key = b""
+        if keep or pend is not None:  # outputs() then step() on the same sample: compute once
+            key = p.tobytes() + u.tobytes() + y.tobytes()
+            if pend is not None and pend[0] == key and pend[1].t == self._t:
+                return pend
         sm = self._km._step_matrices(p)
         res = kalman_step(KalmanState(self._x, self._prior(), self._t), sm, u, y)
         return key, res, sm, p
@@ -503,7 +507,7 @@ class TruncatedKalmanFilter:
         }
 
     def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
-        item = self._compute(inputs)
+        item = self._compute(inputs, keep=True)
         self._pending = item
         return self._as_dict(item[1])
 
