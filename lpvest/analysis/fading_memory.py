@@ -186,6 +186,15 @@ def monotonicity(errors: TruncationErrors, *, which: str = "K", floor: float = 1
 
     Errors at or below ``floor`` are round-off; pairs involving them are not
     compared.
+
+    Examples
+    --------
+    >>> from lpvest import load_system
+    >>> model = load_system("cox-toth-truncation").model()
+    >>> err = truncation_errors(model, np.sin(0.25 * np.arange(100))[:, None], range(12))
+    >>> m = monotonicity(err)
+    >>> m.sup_monotone, m.violations
+    (True, 0)
     """
     if which not in ("K", "P"):
         raise DimensionError(f"which must be 'K' or 'P'; found {which!r}")
@@ -217,7 +226,16 @@ def monotonicity(errors: TruncationErrors, *, which: str = "K", floor: float = 1
 
 def tau_needed(errors: TruncationErrors, tol: float, *, which: str = "K") -> int | None:
     """Smallest listed ``tau`` from which ``max_t`` error stays below ``tol``
-    for every larger listed ``tau`` (``None`` if never)."""
+    for every larger listed ``tau`` (``None`` if never).
+
+    Examples
+    --------
+    >>> from lpvest import load_system
+    >>> model = load_system("cox-toth-truncation").model()
+    >>> err = truncation_errors(model, np.sin(0.25 * np.arange(200))[:, None], range(30))
+    >>> tau_needed(err, 1e-3), tau_needed(err, 1e-30)
+    (11, None)
+    """
     sup = errors.max_K_error if which == "K" else errors.max_P_error
     below = sup < tol
     for i in range(len(below)):
@@ -228,7 +246,16 @@ def tau_needed(errors: TruncationErrors, tol: float, *, which: str = "K") -> int
 
 def decay_rate(errors: TruncationErrors, *, which: str = "K", floor: float = 1e-13) -> float:
     """Geometric rate ``rho`` of ``max_t error ~ c rho^tau`` (least squares on
-    the logarithm over the listed ``tau`` with errors above ``floor``)."""
+    the logarithm over the listed ``tau`` with errors above ``floor``).
+
+    Examples
+    --------
+    >>> from lpvest import load_system
+    >>> model = load_system("cox-toth-truncation").model()
+    >>> err = truncation_errors(model, np.sin(0.25 * np.arange(200))[:, None], range(40))
+    >>> round(decay_rate(err), 2)
+    0.55
+    """
     sup = errors.max_K_error if which == "K" else errors.max_P_error
     ok = sup > floor
     if np.count_nonzero(ok) < 2:
@@ -268,6 +295,16 @@ def prediction_error_covariance(
         Covariance of ``x_0`` (default: the model's).
     burn_in : int
         Samples left out of :attr:`PredictionError.mean_trace`.
+
+    Examples
+    --------
+    >>> from lpvest import load_system
+    >>> model = load_system("cox-toth-truncation").model()
+    >>> p = np.zeros((50, 1))
+    >>> K = frozen_gains(model, p)
+    >>> pe = prediction_error_covariance(model, p, K, burn_in=10)
+    >>> pe.output.shape
+    (50, 2, 2)
     """
     km = model if isinstance(model, KalmanModel) else KalmanModel(model)
     p = as_signal(p, "p", km.n_p)
@@ -306,6 +343,14 @@ def empirical_prediction_error(
     model (1) (initial state drawn from ``N(x0, P0)``), filtered together.
 
     Returns the sample covariances ``E[e_t e_t^T]``, shape (T, n_y, n_y).
+
+    Examples
+    --------
+    >>> from lpvest import load_system
+    >>> model = load_system("cox-toth-truncation").model()
+    >>> p = np.zeros((20, 1))
+    >>> empirical_prediction_error(model, p, None, frozen_gains(model, p), runs=100, rng=0).shape
+    (20, 2, 2)
     """
     km = KalmanModel(model)
     p = as_signal(p, "p", km.n_p)
@@ -356,6 +401,12 @@ def frozen_gains(
     NumericalError
         The iteration does not settle within ``max_iter`` steps (no
         stabilising solution for some frozen model).
+
+    Examples
+    --------
+    >>> from lpvest import load_system
+    >>> frozen_gains(load_system("cox-toth-truncation").model(), [[0.0], [0.5]]).shape
+    (2, 2, 2)
     """
     km = model if isinstance(model, KalmanModel) else KalmanModel(model)
     p = as_signal(p, "p", km.n_p)

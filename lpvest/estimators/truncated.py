@@ -214,6 +214,13 @@ def theorem_start_covariance(
     NotPositiveDefiniteError
         ``G Qbar G^T`` is singular somewhere (``alpha_2 <= 0``, (5f) fails):
         the bound (6b) admits no positive definite ``P^_0``.
+
+    Examples
+    --------
+    >>> from lpvest import load_system
+    >>> P0 = theorem_start_covariance(load_system("cox-toth-truncation").model())
+    >>> bool(np.allclose(P0, P0[0, 0] * np.eye(2)) and P0[0, 0] > 0)
+    True
     """
     if not 0.0 < fraction < 1.0:
         raise DimensionError(f"start_fraction must lie in (0, 1); found {fraction}")
@@ -280,7 +287,15 @@ def start_covariance(
     start_grid: int = 21,
 ) -> np.ndarray:
     """``P^_0`` for (6a): ``"theorem"``, ``"steady-state"`` (at ``start_p``)
-    or a positive semidefinite matrix (module notes)."""
+    or a positive semidefinite matrix (module notes).
+
+    Examples
+    --------
+    >>> from lpvest import load_system
+    >>> model = load_system("cox-toth-truncation").model()
+    >>> start_covariance(model, "steady-state", start_p=[0.0]).shape
+    (2, 2)
+    """
     km = model if isinstance(model, KalmanModel) else KalmanModel(model)
     if isinstance(start, str):
         if start == "theorem":
@@ -296,7 +311,15 @@ def start_covariance(
 
 def restart_covariance(m: KalmanMatrices, P_start: np.ndarray, *, where: str = "") -> np.ndarray:
     """(6a) with ERRATA: ``Abar P^_0 Abar^T + G Qbar G^T`` at ``p_{s-1}``
-    (``m`` may be a stack)."""
+    (``m`` may be a stack).
+
+    Examples
+    --------
+    >>> from lpvest import load_system
+    >>> km = KalmanModel(load_system("cox-toth-truncation").model())
+    >>> restart_covariance(km.matrices([0.2]), np.zeros((2, 2))).shape
+    (2, 2)
+    """
     d = decorrelate(m, where=where)
     P = d.Abar @ P_start @ _mT(d.Abar) + d.GQbarG
     return 0.5 * (P + _mT(P))
@@ -323,6 +346,14 @@ def truncated_prior(
     P0 : ndarray, shape (n_x, n_x), optional
     t : int, optional
         Time of the prior (named in errors).
+
+    Examples
+    --------
+    >>> from lpvest import load_system
+    >>> km = KalmanModel(load_system("cox-toth-truncation").model())
+    >>> window = [km.step_matrices([v]) for v in (0.1, 0.2, 0.3)]  # p_{t-3}, p_{t-2}, p_{t-1}
+    >>> truncated_prior(window, np.zeros((2, 2)), t=10).shape  # P^(2)_{10|9}
+    (2, 2)
     """
     k = len(window)
     if P0 is not None:
