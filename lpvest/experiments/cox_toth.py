@@ -121,9 +121,12 @@ def _plot_example1(out_dir: Path, p: np.ndarray, y_io: np.ndarray, y_min: np.nda
     ax[1].plot(t, y_aug, ":", label="(21c) augmented, static K")
     ax[1].set_ylabel("y")
     ax[1].legend(fontsize="small", loc="upper right")
-    tiny = np.finfo(float).tiny
-    ax[2].semilogy(t, np.abs(y_min - y_io) + tiny, label="|(21b) - (21a)|")
-    ax[2].semilogy(t, np.abs(y_aug - y_io) + tiny, label="|(21c) - (21a)|")
+    floor = 1e-18  # exact zeros are drawn at this floor
+    ax[2].semilogy(t, np.maximum(np.abs(y_min - y_io), floor), ".", ms=3, label="|(21b) - (21a)|")
+    ax[2].semilogy(t, np.maximum(np.abs(y_aug - y_io), floor), ".", ms=3, label="|(21c) - (21a)|")
+    eps = np.finfo(float).eps * float(np.max(np.abs(y_io)))
+    ax[2].axhline(eps, color="gray", lw=0.8, ls="--", label="eps * max|y|")
+    ax[2].set_ylim(floor / 3, 1e-12)
     ax[2].set_ylabel("difference")
     ax[2].set_xlabel("t")
     ax[2].legend(fontsize="small", loc="upper right")
