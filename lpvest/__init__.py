@@ -57,8 +57,10 @@ from .systems import (
 # Kalman (issue 3)
 # isort: split
 from .analysis.fading_memory import (
+    FilterComparison as FilterComparison,
     PredictionError as PredictionError,
     TruncationErrors as TruncationErrors,
+    compare_filters as compare_filters,
     decay_rate as decay_rate,
     frozen_gains as frozen_gains,
     monotonicity as monotonicity,
@@ -123,8 +125,10 @@ __all__ = [
     "TimeFunction",
     "affine_to_polytopic",
     # Kalman (issue 3)
+    "FilterComparison",
     "PredictionError",
     "TruncationErrors",
+    "compare_filters",
     "decay_rate",
     "frozen_gains",
     "monotonicity",

@@ -454,3 +454,18 @@ def test_docstring_examples_run():
     for mod in (truncated_module, fading_memory):
         failures, tried = doctest.testmod(mod, optionflags=doctest.ELLIPSIS)
         assert tried > 0 and failures == 0
+
+
+def test_compare_filters(model):
+    from lpvest import compare_filters
+
+    p = np.sin(0.25 * np.arange(150))[:, None]
+    cmp = compare_filters(model, p, [0, 3, 40], constant_p=[0.5], burn_in=30)
+    assert cmp.names == (
+        "exact", "truncated tau=0", "truncated tau=3", "truncated tau=40", "frozen K_inf(p_t)", "constant K_inf(0.5)"
+    )
+    assert cmp.excess["exact"] == 0.0
+    assert abs(cmp.excess["truncated tau=40"]) < 1e-12
+    assert cmp.excess["truncated tau=0"] > cmp.excess["truncated tau=3"] > 0
+    assert min(cmp.excess.values()) >= -1e-12  # nothing beats the Kalman filter
+    np.testing.assert_allclose(cmp.gains["constant K_inf(0.5)"][7], steady_state(model, [0.5]).K, atol=1e-11)

@@ -43,6 +43,8 @@ __all__ = [
     "prediction_error_covariance",
     "empirical_prediction_error",
     "frozen_gains",
+    "FilterComparison",
+    "compare_filters",
 ]
 
 
@@ -431,3 +433,55 @@ def frozen_gains(
     raise NumericalError(
         f"the frozen Riccati recursion at p = {uniq[bad].tolist()} did not settle in {max_iter} steps"
     )
+
+
+class FilterComparison(NamedTuple):
+    """One-step prediction-error variances of several filters on one trajectory."""
+
+    names: tuple[str, ...]  #: ``"exact"``, ``"truncated tau=..."``, ``"frozen K_inf(p_t)"``, ``"constant K_inf(p*)"``
+    gains: dict[str, np.ndarray]  #: name -> (T, n_x, n_y) gain sequence
+    errors: dict[str, PredictionError]  #: name -> exact second moments
+    mean_trace: dict[str, float]  #: name -> mean over t >= burn_in of trace var(y - yhat)
+    excess: dict[str, float]  #: name -> mean_trace / mean_trace["exact"] - 1
+
+
+def compare_filters(
+    model: AffineLPV | KalmanModel,
+    p: object,
+    taus: Sequence[int] = (0, 1, 2, 5, 10),
+    *,
+    start: str | object = "theorem",
+    start_p: object | None = None,
+    constant_p: object | None = None,
+    burn_in: int = 0,
+) -> FilterComparison:
+    """Prediction-error variances of the exact filter, the truncated filters
+    ``K^(tau)`` for each ``tau``, the frozen-gain filter ``K_inf(p_t)`` and
+    (with ``constant_p``) the constant gain ``K_inf(constant_p)``.
+
+    Examples
+    --------
+    >>> from lpvest import load_system
+    >>> model = load_system("cox-toth-truncation").model()
+    >>> cmp = compare_filters(model, np.sin(0.25 * np.arange(100))[:, None], [1], burn_in=20)
+    >>> cmp.names
+    ('exact', 'truncated tau=1', 'frozen K_inf(p_t)')
+    >>> bool(cmp.excess["truncated tau=1"] > 0)
+    True
+    """
+    km = model if isinstance(model, KalmanModel) else KalmanModel(model)
+    p = as_signal(p, "p", km.n_p)
+    tau_list = sorted({int(t) for t in taus})
+    err = truncation_errors(km, p, tau_list, start=start, start_p=start_p)
+    gains = {"exact": err.exact_gains}
+    for i, tau in enumerate(tau_list):
+        gains[f"truncated tau={tau}"] = err.truncated_gains[i]
+    gains["frozen K_inf(p_t)"] = frozen_gains(km, p)
+    if constant_p is not None:
+        cp = as_signal(np.atleast_2d(np.asarray(constant_p, dtype=float)), "constant_p", km.n_p, 1)
+        K = frozen_gains(km, cp)[0]
+        gains[f"constant K_inf({', '.join(f'{v:g}' for v in cp[0])})"] = np.broadcast_to(K, err.exact_gains.shape)
+    errors = {name: prediction_error_covariance(km, p, K, burn_in=burn_in) for name, K in gains.items()}
+    mean = {name: e.mean_trace for name, e in errors.items()}
+    excess = {name: v / mean["exact"] - 1.0 for name, v in mean.items()}
+    return FilterComparison(tuple(gains), gains, errors, mean, excess)

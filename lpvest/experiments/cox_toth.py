@@ -22,16 +22,15 @@ from typing import Any
 import numpy as np
 
 from ..analysis.fading_memory import (
+    compare_filters,
     decay_rate,
     empirical_prediction_error,
-    frozen_gains,
     monotonicity,
-    prediction_error_covariance,
     tau_needed,
     truncation_errors,
 )
 from ..estimators.kalman import KalmanModel, kalman_filter
-from ..estimators.truncated import assumption_bounds, steady_state
+from ..estimators.truncated import assumption_bounds
 from ..modelfile import load_system
 from ..systems.innovation import _window_values
 from . import Experiment, ExperimentResult
@@ -207,33 +206,24 @@ def run_truncation(
         }
 
     # prediction-error variances of exact, truncated (theorem start) and frozen-gain filters
-    theorem = errs_by_start["theorem"]
-    gains = {"exact": theorem.exact_gains}
-    for tau in PREDICTION_TAUS:
-        gains[f"truncated tau={tau}"] = theorem.truncated_gains[list(theorem.taus).index(tau)]
-    gains["frozen K_inf(p_t)"] = frozen_gains(km, p)
-    gains["constant K_inf(0)"] = np.broadcast_to(steady_state(km, [0.0]).K, theorem.exact_gains.shape)
+    cmp = compare_filters(km, p, PREDICTION_TAUS, constant_p=[0.0], burn_in=burn_in)
     variance: dict[str, Any] = {}
-    items = list(gains.items())
+    items = list(cmp.gains.items())
     if progress:
         from tqdm import tqdm
 
         items = tqdm(items, desc="prediction error (Monte Carlo)", unit="filter", leave=False)
-    exact_mean = None
     curves = {}
     for name, K in items:
-        pe = prediction_error_covariance(km, p, K, burn_in=burn_in)
         # common random numbers: every filter sees the same trajectories
         emp = empirical_prediction_error(model, p, u, K, runs=runs, rng=seed + 1)
         emp_mean = float(np.mean(np.trace(emp[burn_in:], axis1=1, axis2=2)))
-        if exact_mean is None:
-            exact_mean = pe.mean_trace
-        curves[name] = np.trace(pe.output, axis1=1, axis2=2)
+        curves[name] = np.trace(cmp.errors[name].output, axis1=1, axis2=2)
         variance[name] = {
-            "mean_trace": pe.mean_trace,
-            "excess_over_exact": pe.mean_trace / exact_mean - 1.0,
+            "mean_trace": cmp.mean_trace[name],
+            "excess_over_exact": cmp.excess[name],
             "monte_carlo_mean_trace": emp_mean,
-            "monte_carlo_relative_difference": emp_mean / pe.mean_trace - 1.0,
+            "monte_carlo_relative_difference": emp_mean / cmp.mean_trace[name] - 1.0,
         }
 
     results: dict[str, Any] = {
