@@ -8,6 +8,7 @@ from typing import NamedTuple
 import numpy as np
 
 from lpvest import AffineLPV, Monomial, SchedulingSpace
+from lpvest.scheduling import parse_basis
 
 
 def random_system(
@@ -19,14 +20,22 @@ def random_system(
     nw: int | None = None,
     nv: int | None = None,
     P0_scale: float = 1.0,
+    basis: str = "monomials",
 ) -> AffineLPV:
-    """A random model with two scheduling variables and basis ``p1, p2, p1*p2``:
-    every matrix, G and H included, depends on p; S != 0; Sigma and P0 positive
-    definite; x0 != 0."""
+    """A random model with two scheduling variables and basis ``p1, p2, p1*p2``
+    (``basis="monomials"``), ``p1, p2`` (``"components"``) or ``sin(p1),
+    exp(p2)`` (``"formulas"``): every matrix, G and H included, depends on p;
+    S != 0; Sigma and P0 positive definite; x0 != 0."""
     nw = nx if nw is None else nw
     nv = ny if nv is None else nv
     space = SchedulingSpace(["p1", "p2"], [-1.0, -0.5], [1.0, 2.0])
-    basis = [Monomial.parse("p1", space), Monomial.parse("p2", space), Monomial.parse("p1*p2", space)]
+    if basis == "monomials":
+        basis_fns = [Monomial.parse("p1", space), Monomial.parse("p2", space), Monomial.parse("p1*p2", space)]
+    elif basis == "components":
+        basis_fns = [Monomial.component(0, space), Monomial.component(1, space)]
+    else:
+        basis_fns = [parse_basis("sin(p1)", space), parse_basis("exp(-p2)", space)]
+    basis = basis_fns
 
     def aff(r: int, c: int, s0: float, s1: float) -> dict[str, np.ndarray]:
         out = {"1": s0 * rng.standard_normal((r, c))}

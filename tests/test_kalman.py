@@ -45,6 +45,8 @@ def truncation_model():
         {"nx": 3, "ny": 2, "nu": 0, "nw": 2, "nv": 3},  # G, H not square
         {"nx": 4, "ny": 3, "nu": 1, "nw": 5, "nv": 3},
         {"nx": 3, "ny": 5, "nu": 1, "nw": 2, "nv": 6},  # n_y > 3: the LAPACK path
+        {"nx": 2, "ny": 2, "nu": 1, "basis": "components"},  # psi_i = p_j, the fast path
+        {"nx": 3, "ny": 1, "nu": 1, "basis": "formulas"},  # sin(p1), exp(-p2)
     ],
 )
 @pytest.mark.parametrize("seed", [0, 1])

@@ -262,6 +262,10 @@ class KalmanModel:
         from ..scheduling import Monomial
 
         monomial = all(isinstance(b, Monomial) for b in basis)
+        # the common case psi_i(p) = p_j: read the components directly
+        components = None
+        if monomial and all(sorted(b.exponents) == [0] * (len(b.exponents) - 1) + [1] for b in basis):
+            components = [b.exponents.index(1) for b in basis]
         space = self.model.space
         tol = 1e-12 * np.maximum(1.0, np.maximum(np.abs(space.lower), np.abs(space.upper)))
         object.__setattr__(
@@ -276,6 +280,7 @@ class KalmanModel:
                 "k": k,
                 "basis": basis,
                 "exponents": [b.exponents for b in basis] if monomial else None,
+                "components": components,
                 "lo": (space.lower - tol).tolist(),
                 "hi": (space.upper + tol).tolist(),
             },
@@ -311,8 +316,12 @@ class KalmanModel:
     def z(self, p: np.ndarray) -> list[float]:
         """``z(p) = [1, psi_1, ..., psi_k, psi_i psi_j (i <= j)]``."""
         c = self._c  # type: ignore[attr-defined]
+        comps = c["components"]
         exps = c["exponents"]
-        if exps is not None:
+        if comps is not None:
+            pl = p.tolist()
+            psi = [pl[j] for j in comps]
+        elif exps is not None:
             pl = p.tolist()
             psi = []
             for ex in exps:
