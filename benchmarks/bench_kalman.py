@@ -190,12 +190,44 @@ def bench(nx: int, ny: int, steps: int, repeat: int, seed: int) -> dict[str, flo
     return {name: 1e6 * t / steps for name, t in best.items()}
 
 
+def bench_truncated(nx: int, ny: int, taus: list[int], steps: int, repeat: int, seed: int) -> dict[int, float]:
+    """Per-step cost of TruncatedKalmanFilter.step against tau (O(tau) expected),
+    timed after the window has filled."""
+    from lpvest.estimators.truncated import TruncatedKalmanFilter
+
+    rng = np.random.default_rng(seed)
+    model = random_model(nx, ny, 1, rng)
+    warm = max(taus) + 1
+    k = np.arange(warm + steps)
+    p = np.sin(0.25 * k)[:, None]
+    u = np.sin(0.1 * k)[:, None]
+    y = model.simulate(p, u, rng=rng).y
+    rows = [{"p": p[t], "u": u[t], "y": y[t]} for t in range(warm + steps)]
+    filters, states = {}, {}
+    for tau in taus:
+        tf = TruncatedKalmanFilter(model, tau, start=np.zeros((nx, nx)))
+        for r in rows[:warm]:
+            tf.step(r)
+        filters[tau], states[tau] = tf, tf.get_state()
+    best = dict.fromkeys(taus, np.inf)
+    for _ in range(repeat):
+        for tau, tf in filters.items():
+            def run(tf=tf, st=states[tau]) -> None:
+                tf.set_state(st)
+                for r in rows[warm:]:
+                    tf.step(r)
+            best[tau] = min(best[tau], _best(run, 1))
+    return {tau: 1e6 * t / steps for tau, t in best.items()}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=2000)
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--ny", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--taus", type=int, nargs="+", default=[1, 10, 50],
+                        help="memories for the truncated-filter rows (n_x = 4, n_y = 1)")
     args = parser.parse_args()
     print(f"microseconds per step, best of {args.repeat} interleaved rounds, {args.steps} steps")
     for ny in args.ny:
@@ -216,6 +248,13 @@ def main() -> None:
             f"{res[nx]['lpvest run_streaming'] / res[nx]['lpvest batch']:>12.2f}" for nx in (2, 4, 10)))
         print(f"{'step / batch':<28}" + "".join(
             f"{res[nx]['lpvest step'] / res[nx]['lpvest batch']:>12.2f}" for nx in (2, 4, 10)))
+
+
+    steps = max(args.steps // 10, 20)
+    tr = bench_truncated(4, 1, args.taus, steps, args.repeat, args.seed)
+    print(f"\nTruncatedKalmanFilter.step, n_x = 4, n_y = 1, {steps} steps (cost O(tau))")
+    for tau, us in tr.items():
+        print(f"  tau = {tau:<4} {us:10.1f} us/step   {us / (tau + 1):8.1f} us per window sample (tau + 1)")
 
 
 if __name__ == "__main__":

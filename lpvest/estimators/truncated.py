@@ -65,6 +65,7 @@ from ..systems.affine import AffineLPV, NoiseCovariance
 from ..validation import as_matrix, as_signal, as_vector, check_positive_definite
 from .base import Port
 from .kalman import (
+    _SMALL,
     KalmanMatrices,
     KalmanModel,
     KalmanState,
@@ -73,6 +74,7 @@ from .kalman import (
     _initial,
     _ports_in,
     _Reader,
+    _small_chol_inverse,
     covariance_step,
     kalman_step,
 )
@@ -121,16 +123,23 @@ def decorrelate(m: KalmanMatrices, *, where: str = "") -> Decorrelated:
     >>> bool(np.all(np.linalg.eigvalsh(d.GQbarG) > 0))
     True
     """
-    try:
-        L = np.linalg.cholesky(m.HRH)
-    except np.linalg.LinAlgError as exc:
-        raise NotPositiveDefiniteError(
-            f"H(p) R H(p)^T is singular{where}: the decorrelated form (5c)/(5e) needs it "
-            "invertible (H of full row rank)"
-        ) from exc
-    # J^T = (H R H^T)^-1 (G S H^T)^T by two triangular solves with the factor
-    Jt = np.linalg.solve(_mT(L), np.linalg.solve(L, _mT(m.GSH)))
-    J = _mT(Jt)
+    msg = (
+        f"H(p) R H(p)^T is singular{where}: the decorrelated form (5c)/(5e) needs it "
+        "invertible (H of full row rank)"
+    )
+    if m.HRH.ndim == 2 and m.HRH.shape[0] <= _SMALL:
+        try:
+            Ci, _ = _small_chol_inverse(m.HRH, None)
+        except NumericalError as exc:
+            raise NotPositiveDefiniteError(msg) from exc
+        J = (Ci @ m.GSH.T).T @ Ci  # G S H^T chol^-T chol^-1
+    else:
+        try:
+            L = np.linalg.cholesky(m.HRH)
+        except np.linalg.LinAlgError as exc:
+            raise NotPositiveDefiniteError(msg) from exc
+        # J^T = (H R H^T)^-1 (G S H^T)^T by two triangular solves with the factor
+        J = _mT(np.linalg.solve(_mT(L), np.linalg.solve(L, _mT(m.GSH))))
     Abar = m.A - J @ m.C
     GQG = m.GQG - J @ _mT(m.GSH)
     return Decorrelated(Abar, 0.5 * (GQG + _mT(GQG)), J)
