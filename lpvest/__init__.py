@@ -81,6 +81,40 @@ from .estimators.kernels import KernelIdentity as KernelIdentity, kernel_identit
 # FMU area: streaming plants
 from .systems.streaming import DiscretePlant as DiscretePlant, LTVPlant as LTVPlant
 
+# Kalman (issue 3)
+# isort: split
+from .analysis.fading_memory import (
+    FilterComparison as FilterComparison,
+    PredictionError as PredictionError,
+    TruncationErrors as TruncationErrors,
+    compare_filters as compare_filters,
+    decay_rate as decay_rate,
+    frozen_gains as frozen_gains,
+    monotonicity as monotonicity,
+    prediction_error_covariance as prediction_error_covariance,
+    tau_needed as tau_needed,
+    truncation_errors as truncation_errors,
+)
+from .estimators.kalman import (
+    InnovationFormData as InnovationFormData,
+    KalmanModel as KalmanModel,
+    KalmanResult as KalmanResult,
+    KalmanState as KalmanState,
+    KalmanStep as KalmanStep,
+    LPVKalmanFilter as LPVKalmanFilter,
+    kalman_filter as kalman_filter,
+    kalman_step as kalman_step,
+    simulate_innovation_form as simulate_innovation_form,
+)
+from .estimators.truncated import (
+    AssumptionBounds as AssumptionBounds,
+    SteadyState as SteadyState,
+    TruncatedKalmanFilter as TruncatedKalmanFilter,
+    assumption_bounds as assumption_bounds,
+    steady_state as steady_state,
+    theorem_start_covariance as theorem_start_covariance,
+)
+
 __all__ = [
     "__version__",
     "example_systems",
@@ -137,4 +171,30 @@ __all__ = [
     "sample_signal",
     "DiscretePlant",
     "LTVPlant",
+    # Kalman (issue 3)
+    "FilterComparison",
+    "PredictionError",
+    "TruncationErrors",
+    "compare_filters",
+    "decay_rate",
+    "frozen_gains",
+    "monotonicity",
+    "prediction_error_covariance",
+    "tau_needed",
+    "truncation_errors",
+    "InnovationFormData",
+    "KalmanModel",
+    "KalmanResult",
+    "KalmanState",
+    "KalmanStep",
+    "LPVKalmanFilter",
+    "kalman_filter",
+    "kalman_step",
+    "simulate_innovation_form",
+    "AssumptionBounds",
+    "SteadyState",
+    "TruncatedKalmanFilter",
+    "assumption_bounds",
+    "steady_state",
+    "theorem_start_covariance",
 ]

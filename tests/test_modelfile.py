@@ -22,8 +22,8 @@ from lpvest import (
 EXAMPLES = [e.name for e in example_systems()]
 
 
-def test_the_four_example_systems_are_there():
-    assert EXAMPLES == ["cox-toth-ex1", "peixoto-ex1", "peixoto-ex2", "sridhar-ltv"]
+def test_the_example_systems_are_there():
+    assert EXAMPLES == ["cox-toth-ex1", "cox-toth-truncation", "peixoto-ex1", "peixoto-ex2", "sridhar-ltv"]
 
 
 def _same_model(a, b, rng):

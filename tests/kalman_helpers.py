@@ -1,0 +1,149 @@
+"""Random affine LPV systems and an independent Gaussian-conditioning oracle
+for the Kalman filter tests."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from lpvest import AffineLPV, Monomial, SchedulingSpace
+from lpvest.scheduling import parse_basis
+
+
+def random_system(
+    rng: np.random.Generator,
+    *,
+    nx: int = 3,
+    ny: int = 2,
+    nu: int = 1,
+    nw: int | None = None,
+    nv: int | None = None,
+    P0_scale: float = 1.0,
+    basis: str = "monomials",
+) -> AffineLPV:
+    """A random model with two scheduling variables and basis ``p1, p2, p1*p2``
+    (``basis="monomials"``), ``p1, p2`` (``"components"``) or ``sin(p1),
+    exp(p2)`` (``"formulas"``): every matrix, G and H included, depends on p;
+    S != 0; Sigma and P0 positive definite; x0 != 0."""
+    nw = nx if nw is None else nw
+    nv = ny if nv is None else nv
+    space = SchedulingSpace(["p1", "p2"], [-1.0, -0.5], [1.0, 2.0])
+    if basis == "monomials":
+        basis_fns = [Monomial.parse("p1", space), Monomial.parse("p2", space), Monomial.parse("p1*p2", space)]
+    elif basis == "components":
+        basis_fns = [Monomial.component(0, space), Monomial.component(1, space)]
+    else:
+        basis_fns = [parse_basis("sin(p1)", space), parse_basis("exp(-p2)", space)]
+    basis = basis_fns
+
+    def aff(r: int, c: int, s0: float, s1: float) -> dict[str, np.ndarray]:
+        out = {"1": s0 * rng.standard_normal((r, c))}
+        for b in basis:
+            out[b.name] = s1 * rng.standard_normal((r, c))
+        return out
+
+    A = aff(nx, nx, 0.4, 0.1)
+    F = rng.standard_normal((nw + nv, nw + nv))
+    joint = F @ F.T + 0.5 * np.eye(nw + nv)
+    Pf = rng.standard_normal((nx, nx))
+    return AffineLPV.from_matrices(
+        space,
+        basis,
+        A=A,
+        B=aff(nx, nu, 1.0, 0.3),
+        C=aff(ny, nx, 1.0, 0.3),
+        D=aff(ny, nu, 0.5, 0.2),
+        G=aff(nx, nw, 0.8, 0.2),
+        H=aff(ny, nv, 0.8, 0.2),
+        Q=joint[:nw, :nw],
+        R=joint[nw:, nw:],
+        S=joint[:nw, nw:],
+        x0=rng.standard_normal(nx),
+        P0=P0_scale * (Pf @ Pf.T + 0.2 * np.eye(nx)),
+    )
+
+
+def random_schedule(model: AffineLPV, rng: np.random.Generator, T: int) -> np.ndarray:
+    return model.space.sample(rng, T)
+
+
+class Oracle(NamedTuple):
+    """Moments of the joint Gaussian of states and outputs, by brute force."""
+
+    mean_x: np.ndarray  # (T + 1, nx)
+    mean_y: np.ndarray  # (T, ny)
+    Mx: list  # x_t = mean_x[t] + Mx[t] (z - mu_z): linear maps (nx, nz)
+    Ny: list  # y_t = mean_y[t] + Ny[t] (z - mu_z): (ny, nz)
+    Sz: np.ndarray  # covariance of z
+
+    def _cond(self, rows: np.ndarray, mean: np.ndarray, y: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """E and Cov of (mean + rows (z - mu)) given y_0..y_{k-1}."""
+        if k == 0:
+            return mean, rows @ self.Sz @ rows.T
+        Ny = np.vstack(self.Ny[:k])
+        Syy = Ny @ self.Sz @ Ny.T
+        Sxy = rows @ self.Sz @ Ny.T
+        resid = (y[:k] - self.mean_y[:k]).reshape(-1)
+        gain = np.linalg.solve(Syy, Sxy.T).T
+        return mean + gain @ resid, rows @ self.Sz @ rows.T - gain @ Sxy.T
+
+    def predicted(self, y: np.ndarray, t: int) -> tuple[np.ndarray, np.ndarray]:
+        """E and Cov of x_t given y_0..y_{t-1}."""
+        return self._cond(self.Mx[t], self.mean_x[t], y, t)
+
+    def filtered(self, y: np.ndarray, t: int) -> tuple[np.ndarray, np.ndarray]:
+        """E and Cov of x_t given y_0..y_t."""
+        return self._cond(self.Mx[t], self.mean_x[t], y, t + 1)
+
+    def output(self, y: np.ndarray, t: int) -> tuple[np.ndarray, np.ndarray]:
+        """E and Cov of y_t given y_0..y_{t-1} (Omega_t)."""
+        return self._cond(self.Ny[t], self.mean_y[t], y, t)
+
+    def gain(self, y: np.ndarray, t: int) -> np.ndarray:
+        """K_t = Cov(x_{t+1}, y_t | y_0..y_{t-1}) Omega_t^-1."""
+        rows = np.vstack([self.Mx[t + 1], self.Ny[t]])
+        mean = np.concatenate([self.mean_x[t + 1], self.mean_y[t]])
+        _, S = self._cond(rows, mean, y, t)
+        nx = self.Mx[0].shape[0]
+        return np.linalg.solve(S[nx:, nx:], S[nx:, :nx]).T
+
+    def log_density(self, y: np.ndarray) -> float:
+        Ny = np.vstack(self.Ny)
+        S = Ny @ self.Sz @ Ny.T
+        r = (y - self.mean_y).reshape(-1)
+        sign, logdet = np.linalg.slogdet(S)
+        assert sign > 0
+        return float(-0.5 * (r.size * np.log(2 * np.pi) + logdet + r @ np.linalg.solve(S, r)))
+
+
+def oracle(model: AffineLPV, p: np.ndarray, u: np.ndarray) -> Oracle:
+    """Stack z = [x_0, w_0, v_0, ..., w_{T-1}, v_{T-1}] ~ N(mu_z, blockdiag(P0, Sigma, ...)),
+    write every x_t and y_t as an affine function of z by running (1) on the
+    matrices, never on the filter."""
+    T = p.shape[0]
+    nx, nw, nv = model.nx, model.nw, model.nv
+    nz = nx + T * (nw + nv)
+    Sz = np.zeros((nz, nz))
+    Sz[:nx, :nx] = model.P0
+    for t in range(T):
+        a = nx + t * (nw + nv)
+        Sz[a : a + nw + nv, a : a + nw + nv] = model.noise.joint
+    M = np.zeros((nx, nz))
+    M[:, :nx] = np.eye(nx)
+    mx = model.x0.copy()
+    mean_x, mean_y, Mx, Ny = [mx], [], [M], []
+    for t in range(T):
+        A, B, C, D, G, H = model.at(p[t])
+        a = nx + t * (nw + nv)
+        Ew = np.zeros((nw, nz))
+        Ew[:, a : a + nw] = np.eye(nw)
+        Ev = np.zeros((nv, nz))
+        Ev[:, a + nw : a + nw + nv] = np.eye(nv)
+        Ny.append(C @ M + H @ Ev)
+        mean_y.append(C @ mx + D @ u[t])
+        M = A @ M + G @ Ew
+        mx = A @ mx + B @ u[t]
+        Mx.append(M)
+        mean_x.append(mx)
+    return Oracle(np.array(mean_x), np.array(mean_y), Mx, Ny, Sz)

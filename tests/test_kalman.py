@@ -1,0 +1,466 @@
+"""The exact LPV Kalman filter (Cox & Toth (4a)-(4e)): oracle, statistics,
+steady state, bad input, state handling."""
+
+import doctest
+
+import numpy as np
+import pytest
+
+from lpvest import (
+    AffineLPV,
+    DimensionError,
+    Monomial,
+    NonFiniteError,
+    NotPositiveDefiniteError,
+    NumericalError,
+    SchedulingRangeError,
+    SchedulingSpace,
+    load_system,
+)
+from lpvest.estimators import StreamingEstimator, kalman as kalman_module, run_streaming
+from lpvest.estimators.kalman import (
+    KalmanModel,
+    KalmanState,
+    LPVKalmanFilter,
+    kalman_filter,
+    kalman_step,
+    simulate_innovation_form,
+)
+from tests.kalman_helpers import oracle, random_schedule, random_system
+
+
+@pytest.fixture(scope="module")
+def truncation_model():
+    return load_system("cox-toth-truncation").model()
+
+
+# ---------------------------------------------------------------------------
+# against the independent oracle (joint Gaussian of states and outputs)
+# ---------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    "dims",
+    [
+        {"nx": 3, "ny": 2, "nu": 1},
+        {"nx": 2, "ny": 1, "nu": 2},
+        {"nx": 3, "ny": 2, "nu": 0, "nw": 2, "nv": 3},  # G, H not square
+        {"nx": 4, "ny": 3, "nu": 1, "nw": 5, "nv": 3},
+        {"nx": 3, "ny": 5, "nu": 1, "nw": 2, "nv": 6},  # n_y > 3: the LAPACK path
+        {"nx": 2, "ny": 2, "nu": 1, "basis": "components"},  # psi_i = p_j, the fast path
+        {"nx": 3, "ny": 1, "nu": 1, "basis": "formulas"},  # sin(p1), exp(-p2)
+    ],
+)
+@pytest.mark.parametrize("seed", [0, 1])
+def test_filter_matches_gaussian_conditioning(dims, seed):
+    rng = np.random.default_rng(1000 + seed)
+    model = random_system(rng, **dims)
+    T = 7
+    p = random_schedule(model, rng, T)
+    u = rng.standard_normal((T, model.nu))
+    y = model.simulate(p, u, rng=rng).y
+    orc = oracle(model, p, u)
+    res = kalman_filter(model, p, u if model.nu else None, y)
+    for t in range(T + 1):
+        m, S = orc.predicted(y, t)
+        np.testing.assert_allclose(res.predicted_means[t], m, rtol=0, atol=1e-10)
+        np.testing.assert_allclose(res.predicted_covariances[t], S, rtol=0, atol=1e-10)
+    for t in range(T):
+        m, S = orc.filtered(y, t)
+        np.testing.assert_allclose(res.filtered_means[t], m, rtol=0, atol=1e-10)
+        np.testing.assert_allclose(res.filtered_covariances[t], S, rtol=0, atol=1e-10)
+        my, Om = orc.output(y, t)
+        np.testing.assert_allclose(res.predicted_outputs[t], my, rtol=0, atol=1e-10)
+        np.testing.assert_allclose(res.innovation_covariances[t], Om, rtol=0, atol=1e-10)
+        np.testing.assert_allclose(res.gains[t], orc.gain(y, t), rtol=0, atol=1e-10)
+    # log p(y_0..y_{T-1}) against the oracle's Gaussian density
+    assert res.log_likelihood == pytest.approx(orc.log_density(y), abs=1e-9)
+    # the streaming filter gives the same numbers (it shares the kernel, not the loop)
+    kf = LPVKalmanFilter(model)
+    inputs = {"p": p, "y": y} | ({"u": u} if model.nu else {})
+    out = run_streaming(kf, inputs)
+    np.testing.assert_allclose(out["xpred"], res.predicted_means[1:], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(out["Ppred"], res.predicted_covariances[1:], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(out["xhat"], res.filtered_means, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(out["P"], res.filtered_covariances, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(out["K"], res.gains, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(out["Omega"], res.innovation_covariances, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(out["yhat"], res.predicted_outputs, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(out["innovation"], res.innovations, rtol=0, atol=1e-12)
+    assert kf.log_likelihood == pytest.approx(res.log_likelihood, abs=1e-10)
+
+
+def test_oracle_catches_a_wrong_cross_covariance(rng):
+    # the oracle test is able to fail: ignoring S gives different predictions
+    model = random_system(rng, nx=2, ny=1, nu=1)
+    T = 5
+    p = random_schedule(model, rng, T)
+    u = rng.standard_normal((T, 1))
+    y = model.simulate(p, u, rng=rng).y
+    noise = model.noise
+    no_s = np.block([[noise.Q, 0 * noise.S], [0 * noise.S.T, noise.R]])
+    res = kalman_filter(model, p, u, y, noise=no_s)
+    m, _ = oracle(model, p, u).predicted(y, T)
+    assert np.max(np.abs(res.predicted_means[T] - m)) > 1e-3
+
+
+def test_filtered_state_uses_the_filter_gain(truncation_model, rng):
+    # ERRATA (7): P_{t|t} = (I - L C) P with L = P C^T Omega^-1, not the predictor gain K
+    model = truncation_model
+    T = 30
+    p = np.sin(0.25 * np.arange(T))[:, None]
+    u = rng.standard_normal((T, 1))
+    y = model.simulate(p, u, rng=rng).y
+    res = kalman_filter(model, p, u, y)
+    for t in (0, 5, 29):
+        C = model.at(p[t]).C
+        P = res.predicted_covariances[t]
+        L = P @ C.T @ np.linalg.inv(res.innovation_covariances[t])
+        np.testing.assert_allclose(res.filter_gains[t], L, atol=1e-13)
+        np.testing.assert_allclose(res.filtered_covariances[t], (np.eye(2) - L @ C) @ P, atol=1e-13)
+    # (7) as printed, with the predictor gain K_t, is a different matrix
+    C, P = model.at(p[0]).C, res.predicted_covariances[0]
+    wrong = (np.eye(2) - res.gains[0] @ C) @ P
+    assert np.max(np.abs(wrong - res.filtered_covariances[0])) > 0.05
+
+
+# ---------------------------------------------------------------------------
+# statistics
+# ---------------------------------------------------------------------------
+def _normalized_innovations(model, p, u, runs, seed, noise=None):
+    gen = np.random.default_rng(seed)
+    out = []
+    for _ in range(runs):
+        y = model.simulate(p, u, rng=gen).y  # x_0 ~ N(x0, P0)
+        res = kalman_filter(model, p, u, y, noise=noise)
+        chol = np.linalg.cholesky(res.innovation_covariances)
+        out.append(np.linalg.solve(chol, res.innovations[..., None])[..., 0])
+    return np.array(out)  # (runs, T, ny)
+
+
+def test_normalized_innovations_are_white_with_unit_variance(truncation_model):
+    # Seeded Monte Carlo, 300 runs x 60 samples x 2 outputs of the model with S != 0.
+    # Pooled over runs and t, each entry of E[e_t e_t^T] is estimated from M = 18000
+    # products: standard error sqrt(2/M) = 0.011 on the diagonal, sqrt(1/M) = 0.0075
+    # off it and at lags 1..5. Tolerance 4.5 standard errors (two-sided false-alarm
+    # probability 7e-6 per entry), and the seed is fixed.
+    model = truncation_model
+    runs, T = 300, 60
+    k = np.arange(T)
+    p = np.sin(0.25 * k)[:, None]
+    u = np.sin(0.1 * k)[:, None]
+    e = _normalized_innovations(model, p, u, runs, seed=11)
+    M = runs * T
+    cov0 = np.einsum("rti,rtj->ij", e, e) / M
+    np.testing.assert_allclose(np.diag(cov0), 1.0, atol=4.5 * np.sqrt(2 / M))
+    assert abs(cov0[0, 1]) < 4.5 * np.sqrt(1 / M)
+    assert np.max(np.abs(e.mean(axis=(0, 1)))) < 4.5 * np.sqrt(1 / M)
+    for lag in range(1, 6):
+        n = runs * (T - lag)
+        c = np.einsum("rti,rtj->ij", e[:, lag:], e[:, :-lag]) / n
+        assert np.max(np.abs(c)) < 4.5 * np.sqrt(1 / n), (lag, c)
+
+
+def test_whiteness_check_detects_a_filter_that_ignores_s():
+    # the statistical test above can fail: a filter that assumes S = 0 on data
+    # with strong cross-correlation leaves a lag-1 correlation
+    space = SchedulingSpace(["p"], [-1.0], [1.0])
+    model = AffineLPV.from_matrices(
+        space, [Monomial.component(0, space)],
+        A={"1": [[0.8]], "p": [[0.1]]}, C=[[1.0]], Q=[[1.0]], R=[[1.0]], S=[[0.9]],
+    )
+    runs, T = 200, 60
+    p = np.sin(0.25 * np.arange(T))[:, None]
+    wrong = np.array([[1.0, 0.0], [0.0, 1.0]])
+    e = _normalized_innovations(model, p, None, runs, seed=5, noise=wrong)
+    n = runs * (T - 1)
+    c1 = float(np.einsum("rt,rt->", e[:, 1:, 0], e[:, :-1, 0]) / n)
+    assert abs(c1) > 4.5 * np.sqrt(1 / n)
+    good = _normalized_innovations(model, p, None, runs, seed=5)
+    c1 = float(np.einsum("rt,rt->", good[:, 1:, 0], good[:, :-1, 0]) / n)
+    assert abs(c1) < 4.5 * np.sqrt(1 / n)
+
+
+def test_constant_scheduling_converges_to_the_dare_gain(rng):
+    from scipy.linalg import solve_discrete_are
+
+    model = random_system(rng, nx=3, ny=2, nu=1)
+    p0 = np.array([0.4, 1.1])
+    T = 400
+    p = np.tile(p0, (T, 1))
+    y = model.simulate(p, np.zeros((T, 1)), rng=rng).y
+    res = kalman_filter(model, p, np.zeros((T, 1)), y)
+    A, B, C, D, G, H = model.at(p0)
+    Q, S, R = model.noise.Q, model.noise.S, model.noise.R
+    P = solve_discrete_are(A.T, C.T, G @ Q @ G.T, H @ R @ H.T, s=G @ S @ H.T)
+    K = (A @ P @ C.T + G @ S @ H.T) @ np.linalg.inv(C @ P @ C.T + H @ R @ H.T)
+    np.testing.assert_allclose(res.predicted_covariances[-1], P, rtol=1e-9, atol=1e-10)
+    np.testing.assert_allclose(res.gains[-1], K, rtol=1e-9, atol=1e-10)
+
+
+# ---------------------------------------------------------------------------
+# innovation-form simulator
+# ---------------------------------------------------------------------------
+def test_innovation_simulator_is_inverted_by_the_filter(truncation_model):
+    model = truncation_model
+    T = 80
+    p = np.sin(0.25 * np.arange(T))[:, None]
+    u = np.cos(0.1 * np.arange(T))[:, None]
+    sim = simulate_innovation_form(model, p, u, rng=3)
+    res = kalman_filter(model, p, u, sim.y)
+    np.testing.assert_allclose(res.innovations, sim.innovations, atol=1e-12)
+    np.testing.assert_allclose(res.predicted_means[:T], sim.x, atol=1e-12)
+    np.testing.assert_allclose(res.gains, sim.gains, atol=1e-14)
+    again = simulate_innovation_form(model, p, u, rng=3)
+    np.testing.assert_array_equal(again.y, sim.y)
+
+
+def test_innovation_simulator_has_the_distribution_of_the_general_model(rng):
+    # Lemma 1: data from (4) and from (1) have the same Gaussian law. Compare the
+    # sample covariance of the stacked outputs over N runs with the oracle's.
+    # Each entry's standard error is at most sqrt((S_ii S_jj + S_ij^2)/N); tolerance
+    # 5 standard errors.
+    model = random_system(rng, nx=2, ny=1, nu=1)
+    T, N = 5, 4000
+    p = random_schedule(model, rng, T)
+    u = rng.standard_normal((T, 1))
+    gen = np.random.default_rng(99)
+    Y = np.empty((N, T))
+    for i in range(N):
+        Y[i] = simulate_innovation_form(model, p, u, rng=gen).y[:, 0]
+    orc = oracle(model, p, u)
+    Ny = np.vstack(orc.Ny)
+    S = Ny @ orc.Sz @ Ny.T
+    d = np.sqrt(np.diag(S))
+    se = np.sqrt((np.outer(d, d) ** 2 + S**2) / N)
+    np.testing.assert_array_less(np.abs(np.cov(Y.T) - S), 5 * se)
+    np.testing.assert_array_less(np.abs(Y.mean(axis=0) - orc.mean_y[:, 0]), 5 * d / np.sqrt(N))
+
+
+# ---------------------------------------------------------------------------
+# the streaming protocol
+# ---------------------------------------------------------------------------
+def test_ports(truncation_model):
+    kf = LPVKalmanFilter(truncation_model)
+    assert isinstance(kf, StreamingEstimator)
+    assert [(q.name, q.shape) for q in kf.input_ports] == [("p", (1,)), ("u", (1,)), ("y", (2,))]
+    assert [(q.name, q.shape) for q in kf.output_ports] == [
+        ("xhat", (2,)), ("P", (2, 2)), ("xpred", (2,)), ("Ppred", (2, 2)),
+        ("yhat", (2,)), ("innovation", (2,)), ("K", (2, 2)), ("Omega", (2, 2)),
+    ]
+    no_input = LPVKalmanFilter(random_system(np.random.default_rng(0), nu=0))
+    assert [q.name for q in no_input.input_ports] == ["p", "y"]
+
+
+def test_outputs_do_not_change_the_state(truncation_model, monkeypatch):
+    calls = []
+    original = kalman_module.kalman_step
+    monkeypatch.setattr(kalman_module, "kalman_step", lambda *a, **k: calls.append(1) or original(*a, **k))
+    kf = LPVKalmanFilter(truncation_model)
+    sample = {"p": [0.3], "u": [1.0], "y": [0.2, -0.1]}
+    before = kf.get_state()
+    a = kf.outputs(sample)
+    b = kf.outputs(sample)
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k])
+    _assert_same_state(kf.get_state(), before)
+    assert len(calls) == 1  # the second outputs() of the same sample reuses the first
+    c = kf.step(sample)  # the FMU's outputs-then-doStep: step reuses the computed sample
+    assert len(calls) == 1
+    for k in a:
+        np.testing.assert_array_equal(a[k], c[k])
+    assert kf.t == 1
+    # outputs() followed by step() with different inputs uses the new inputs
+    kf2 = LPVKalmanFilter(truncation_model)
+    kf2.outputs(sample)
+    d = kf2.step({"p": [0.3], "u": [1.0], "y": [0.5, -0.1]})
+    assert not np.allclose(d["xhat"], c["xhat"])
+
+
+def test_process_and_peek_expose_the_gains(truncation_model):
+    kf = LPVKalmanFilter(truncation_model)
+    peek = kf.peek([0.2], [1.0], [0.1, 0.3])
+    assert kf.t == 0
+    step = kf.process([0.2], [1.0], [0.1, 0.3])
+    np.testing.assert_array_equal(peek.K, step.K)
+    np.testing.assert_array_equal(peek.Omega, step.Omega)
+    assert step.L.shape == (2, 2) and step.next.t == 1
+    assert kf.log_likelihood == pytest.approx(step.log_likelihood)
+
+
+def test_state_round_trip(truncation_model, rng):
+    model = truncation_model
+    T = 30
+    p = np.sin(0.25 * np.arange(T))[:, None]
+    u = rng.standard_normal((T, 1))
+    y = model.simulate(p, u, rng=rng).y
+    kf = LPVKalmanFilter(model)
+    for t in range(10):
+        kf.step({"p": p[t], "u": u[t], "y": y[t]})
+    saved = kf.get_state()
+    first = [kf.step({"p": p[t], "u": u[t], "y": y[t]}) for t in range(10, T)]
+    kf.reset()
+    assert kf.t == 0 and kf.log_likelihood == 0.0
+    kf.set_state(saved)
+    second = [kf.step({"p": p[t], "u": u[t], "y": y[t]}) for t in range(10, T)]
+    for a, b in zip(first, second, strict=True):
+        for k in a:
+            np.testing.assert_array_equal(a[k], b[k])
+    assert kf.t == T
+    saved["x"][0] = 123.0  # get_state returns copies
+    assert kf.get_state()["x"][0] != 123.0
+
+
+def test_set_state_rejects_bad_states(truncation_model):
+    kf = LPVKalmanFilter(truncation_model)
+    good = kf.get_state()
+    with pytest.raises(DimensionError, match=r"state x has shape \(3,\); expected \(2,\)"):
+        kf.set_state(good | {"x": np.zeros(3)})
+    with pytest.raises(NotPositiveDefiniteError, match="state P is not positive semidefinite"):
+        kf.set_state(good | {"P": -np.eye(2)})
+    with pytest.raises(DimensionError, match="state is missing 'P'"):
+        kf.set_state({k: v for k, v in good.items() if k != "P"})
+    with pytest.raises(NonFiniteError, match="state x holds a non-finite value"):
+        kf.set_state(good | {"x": np.array([np.nan, 0.0])})
+    _assert_same_state(kf.get_state(), good)
+
+
+def test_initial_state_overrides(truncation_model):
+    x0 = np.array([1.0, -2.0])
+    kf = LPVKalmanFilter(truncation_model, x0=x0, P0=0.5 * np.eye(2))
+    np.testing.assert_array_equal(kf.state.x, x0)
+    np.testing.assert_array_equal(kf.state.P, 0.5 * np.eye(2))
+    default = LPVKalmanFilter(truncation_model)
+    np.testing.assert_array_equal(default.state.P, truncation_model.P0)
+
+
+# ---------------------------------------------------------------------------
+# bad input: a typed error, and the state is not touched
+# ---------------------------------------------------------------------------
+def _assert_same_state(a, b):
+    assert a.keys() == b.keys()
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k])
+
+
+GOOD = {"p": [0.3], "u": [1.0], "y": [0.2, -0.1]}
+
+
+@pytest.mark.parametrize(
+    ("bad", "error", "match"),
+    [
+        ({"y": [0.2, -0.1, 0.0]}, DimensionError, r"y has shape \(3,\); expected \(2,\)"),
+        ({"p": [0.3, 0.1]}, DimensionError, r"p has shape \(2,\); expected \(1,\)"),
+        ({"u": [[1.0]]}, DimensionError, r"u has shape \(1, 1\); expected \(1,\)"),
+        ({"y": "abc"}, DimensionError, "y is not a numeric array"),
+        ({"y": [np.nan, 0.0]}, NonFiniteError, r"y at t=3 holds a non-finite value \(nan\) at index \(0,\)"),
+        ({"u": [np.inf]}, NonFiniteError, r"u at t=3 holds a non-finite value \(inf\)"),
+        ({"p": [np.nan]}, NonFiniteError, "p at t=3 holds a non-finite value"),
+        ({"p": [1.5]}, SchedulingRangeError,
+         r"scheduling value at t=3: p = 1.5 is outside its declared range \[-1, 1\]"),
+        ({"p": [-1.0000001]}, SchedulingRangeError, "outside its declared range"),
+        ({"z": [1.0]}, DimensionError, "unknown input 'z'; the inputs are p, u, y"),
+    ],
+)
+def test_bad_sample_raises_and_leaves_the_filter_unchanged(truncation_model, bad, error, match):
+    kf = LPVKalmanFilter(truncation_model)
+    ref = LPVKalmanFilter(truncation_model)
+    for f in (kf, ref):
+        for _ in range(3):
+            f.step(GOOD)
+    before = kf.get_state()
+    for method in (kf.step, kf.outputs):
+        with pytest.raises(error, match=match):
+            method(GOOD | bad)
+        _assert_same_state(kf.get_state(), before)
+    a, b = kf.step(GOOD), ref.step(GOOD)
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k])
+
+
+def test_missing_input(truncation_model):
+    kf = LPVKalmanFilter(truncation_model)
+    with pytest.raises(DimensionError, match="input 'y' is missing; the inputs are p, u, y"):
+        kf.step({"p": [0.0], "u": [0.0]})
+    assert kf.t == 0
+
+
+def _singular_model(ny):
+    # C(p) = p C1, H(p) = p I: at p = 0, Omega_t = 0 whatever P is
+    space = SchedulingSpace(["p"], [-1.0], [1.0])
+    return AffineLPV.from_matrices(
+        space, [Monomial.component(0, space)],
+        A=0.5 * np.eye(2), C={"p": np.ones((ny, 2))}, H={"p": np.eye(ny)},
+        Q=np.eye(2), R=np.eye(ny), S=0.1 * np.ones((2, ny)), P0=np.eye(2),
+    )
+
+
+@pytest.mark.parametrize("ny", [1, 2, 4])  # scalar, small and LAPACK Cholesky paths
+def test_singular_innovation_covariance_names_t(ny):
+    model = _singular_model(ny)
+    kf = LPVKalmanFilter(model)
+    for _ in range(2):
+        kf.step({"p": [0.5], "y": np.ones(ny)})
+    before = kf.get_state()
+    with pytest.raises(NumericalError, match="Omega_t is not positive definite at t=2"):
+        kf.step({"p": [0.0], "y": np.ones(ny)})
+    _assert_same_state(kf.get_state(), before)
+    p = np.array([[0.5], [0.5], [0.5], [0.0], [0.5]])
+    with pytest.raises(NumericalError, match="Omega_t is not positive definite at t=3"):
+        kalman_filter(model, p, None, np.ones((5, ny)))
+
+
+def test_non_positive_definite_noise_covariance(truncation_model):
+    joint = truncation_model.noise.joint.copy()
+    joint[0, 2] = joint[2, 0] = 1.0  # |S_11| > sqrt(Q_11 R_11): Sigma indefinite
+    msg = r"the joint noise covariance Sigma = \[\[Q, S\], \[S\^T, R\]\] is not positive definite"
+    with pytest.raises(NotPositiveDefiniteError, match=msg):
+        LPVKalmanFilter(truncation_model, noise=joint)
+    p = np.zeros((3, 1))
+    with pytest.raises(NotPositiveDefiniteError, match="the joint noise covariance"):
+        kalman_filter(truncation_model, p, np.zeros((3, 1)), np.zeros((3, 2)), noise=joint)
+    with pytest.raises(DimensionError, match=r"noise covariance Sigma has shape \(3, 3\); expected \(4, 4\)"):
+        LPVKalmanFilter(truncation_model, noise=np.eye(3))
+
+
+def test_bad_initial_covariance_and_model(truncation_model):
+    with pytest.raises(NotPositiveDefiniteError, match="P0 is not positive semidefinite"):
+        LPVKalmanFilter(truncation_model, P0=np.diag([1.0, -1.0]))
+    with pytest.raises(DimensionError, match=r"x0 has shape \(3,\); expected \(2,\)"):
+        LPVKalmanFilter(truncation_model, x0=np.zeros(3))
+    with pytest.raises(TypeError, match="needs an AffineLPV model, not InnovationLPV"):
+        LPVKalmanFilter(load_system("cox-toth-ex1").model("minimal"))
+
+
+def test_batch_bad_input(truncation_model):
+    T = 6
+    p = np.zeros((T, 1))
+    u = np.zeros((T, 1))
+    y = np.zeros((T, 2))
+    with pytest.raises(DimensionError, match=r"y has shape \(6, 3\); expected \(6, 2\)"):
+        kalman_filter(truncation_model, p, u, np.zeros((T, 3)))
+    with pytest.raises(DimensionError, match=r"u has shape \(5, 1\); expected \(6, 1\)"):
+        kalman_filter(truncation_model, p, u[:5], y)
+    bad = y.copy()
+    bad[4, 1] = np.inf
+    with pytest.raises(NonFiniteError, match=r"y holds a non-finite value \(inf\) at index \(4, 1\)"):
+        kalman_filter(truncation_model, p, u, bad)
+    pb = p.copy()
+    pb[2] = 3.0
+    with pytest.raises(SchedulingRangeError, match="scheduling value at t=2: p = 3 is outside"):
+        kalman_filter(truncation_model, pb, u, y)
+
+
+def test_kalman_step_is_pure(truncation_model):
+    km = KalmanModel(truncation_model)
+    s0 = KalmanState(truncation_model.x0.copy(), truncation_model.P0.copy())
+    sm = km.step_matrices([0.1])
+    F = sm.F.copy()
+    a = kalman_step(s0, sm, np.ones(1), np.ones(2))
+    b = kalman_step(s0, sm, np.ones(1), np.ones(2))
+    np.testing.assert_array_equal(a.next.P, b.next.P)
+    np.testing.assert_array_equal(sm.F, F)
+    np.testing.assert_array_equal(s0.P, truncation_model.P0)
+
+
+def test_docstring_examples_run():
+    failures, tried = doctest.testmod(kalman_module, optionflags=doctest.ELLIPSIS)
+    assert tried > 0 and failures == 0

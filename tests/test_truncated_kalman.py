@@ -1,0 +1,471 @@
+"""The truncated-memory Kalman filter (Cox & Toth Theorem 1, ERRATA (6a)) and
+the fading-memory analysis."""
+
+import doctest
+
+import numpy as np
+import pytest
+
+from lpvest import (
+    AffineLPV,
+    DimensionError,
+    Monomial,
+    NonFiniteError,
+    NotPositiveDefiniteError,
+    NumericalError,
+    SchedulingRangeError,
+    SchedulingSpace,
+    load_system,
+)
+from lpvest.analysis import fading_memory
+from lpvest.analysis.fading_memory import (
+    empirical_prediction_error,
+    frozen_gains,
+    monotonicity,
+    prediction_error_covariance,
+    tau_needed,
+    truncation_errors,
+)
+from lpvest.estimators import StreamingEstimator, run_streaming, truncated as truncated_module
+from lpvest.estimators.kalman import KalmanModel, kalman_filter
+from lpvest.estimators.truncated import (
+    TruncatedKalmanFilter,
+    assumption_bounds,
+    decorrelate,
+    start_covariance,
+    steady_state,
+    theorem_start_covariance,
+)
+from tests.kalman_helpers import random_schedule, random_system
+
+
+@pytest.fixture(scope="module")
+def model():
+    return load_system("cox-toth-truncation").model()
+
+
+@pytest.fixture(scope="module")
+def data(model):
+    T = 120
+    k = np.arange(T)
+    p = np.sin(0.25 * k)[:, None]
+    u = np.sin(0.1 * k)[:, None]
+    y = model.simulate(p, u, rng=4).y
+    return p, u, y
+
+
+def _literal_truncated_gain(model, p, t, tau, P_start):
+    """K^(tau)_t written out from the paper with plain numpy (no lpvest kernel):
+    (6a) as corrected in ERRATA.md, then (4c)-(4e)."""
+    Q, S, R = model.noise.Q, model.noise.S, model.noise.R
+
+    def riccati(P, pt):
+        A, B, C, D, G, H = model.at(pt)
+        Om = C @ P @ C.T + H @ R @ H.T
+        K = (A @ P @ C.T + G @ S @ H.T) @ np.linalg.inv(Om)
+        return A @ P @ A.T - K @ Om @ K.T + G @ Q @ G.T, K
+
+    if t <= tau:
+        P = model.P0
+        for i in range(t):
+            P, _ = riccati(P, p[i])
+    else:
+        s = t - tau
+        A, B, C, D, G, H = model.at(p[s - 1])
+        # general decorrelation: J = G S H^T (H R H^T)^-1; for square invertible H
+        # this is G S R^-1 H^-1 of (5a)/(5c)
+        J = G @ S @ H.T @ np.linalg.inv(H @ R @ H.T)
+        Abar = A - J @ C
+        Qbar = Q - S @ H.T @ np.linalg.inv(H @ R @ H.T) @ H @ S.T
+        P = Abar @ P_start @ Abar.T + G @ Qbar @ G.T
+        for i in range(s, t):
+            P, _ = riccati(P, p[i])
+    _, K = riccati(P, p[t])
+    return K, P
+
+
+# ---------------------------------------------------------------------------
+# the decorrelated form and ERRATA's corrections, numerically
+# ---------------------------------------------------------------------------
+def test_square_h_decorrelation_is_the_papers(model):
+    # (5c), (5e) with ERRATA: Abar = A - G S R^-1 H^-1 C, Qbar = Q - S R^-1 S^T
+    km = KalmanModel(model)
+    for pv in ([-1.0], [0.3], [1.0]):
+        A, B, C, D, G, H = model.at(pv)
+        Q, S, R = model.noise.Q, model.noise.S, model.noise.R
+        d = decorrelate(km.matrices(pv))
+        Ri = np.linalg.inv(R)
+        np.testing.assert_allclose(d.Abar, A - G @ S @ Ri @ np.linalg.inv(H) @ C, atol=1e-13)
+        np.testing.assert_allclose(d.GQbarG, G @ (Q - S @ Ri @ S.T) @ G.T, atol=1e-14)
+
+
+@pytest.mark.parametrize("dims", [{"nx": 2, "ny": 2, "nv": 2}, {"nx": 3, "ny": 1, "nv": 2, "nw": 4}])
+def test_errata_9_prior_from_posterior(dims):
+    # ERRATA (9): P_{t+1|t} = Abar P_{t|t} Abar^T + G Qbar G^T, with the general
+    # (H R H^T)^-1 form for a non-square H (n_v > n_y)
+    rng = np.random.default_rng(31)
+    m = random_system(rng, nu=1, **dims)
+    T = 20
+    p = random_schedule(m, rng, T)
+    u = rng.standard_normal((T, 1))
+    res = kalman_filter(m, p, u, m.simulate(p, u, rng=rng).y)
+    d = decorrelate(KalmanModel(m).matrices_batch(p))
+    P9 = d.Abar @ res.filtered_covariances @ np.swapaxes(d.Abar, 1, 2) + d.GQbarG
+    np.testing.assert_allclose(P9, res.predicted_covariances[1:], rtol=0, atol=1e-12)
+    # (9) read literally as printed, Abar P Abar^T + Qbar (no G), is not it
+    literal = d.Abar @ res.filtered_covariances @ np.swapaxes(d.Abar, 1, 2) + (
+        m.noise.Q - m.noise.S @ np.linalg.solve(m.noise.R, m.noise.S.T)
+    )[: dims["nx"], : dims["nx"]]
+    assert np.max(np.abs(literal - res.predicted_covariances[1:])) > 1e-3
+
+
+def test_exact_posterior_start_reproduces_the_exact_gain(model, data):
+    # (6a) with P^_0 = the true P_{s-1|s-1} gives back P_{t|t-1} exactly: this pins
+    # down the corrected (6a) (index s-1, G(p_{s-1}) Qbar G^T)
+    from lpvest.estimators.truncated import truncated_prior
+
+    p, u, y = data
+    res = kalman_filter(model, p, u, y)
+    sms = KalmanModel(model).step_matrices_batch(p)
+    for tau in (0, 1, 4):
+        for t in range(tau + 1, 60, 7):
+            win = [sms.at(i) for i in range(t - tau - 1, t)]
+            P = truncated_prior(win, res.filtered_covariances[t - tau - 1], t=t)
+            np.testing.assert_allclose(P, res.predicted_covariances[t], rtol=0, atol=1e-13)
+
+
+# ---------------------------------------------------------------------------
+# the streaming truncated filter
+# ---------------------------------------------------------------------------
+@pytest.mark.parametrize("tau", [0, 1, 3, 8])
+@pytest.mark.parametrize("start", ["theorem", "zero"])
+def test_truncated_filter_matches_the_literal_formula(model, data, tau, start):
+    p, u, y = data
+    P_start = np.zeros((2, 2)) if start == "zero" else theorem_start_covariance(model)
+    tf = TruncatedKalmanFilter(model, tau, start=P_start if start == "zero" else "theorem")
+    np.testing.assert_allclose(tf.start, P_start, atol=1e-15)
+    out = run_streaming(tf, {"p": p, "u": u, "y": y})
+    for t in (0, tau, tau + 1, tau + 2, 40, 119):
+        K, _ = _literal_truncated_gain(model, p, t, tau, P_start)
+        np.testing.assert_allclose(out["K"][t], K, rtol=0, atol=1e-12)
+
+
+def test_truncated_filter_equals_exact_for_t_up_to_tau_and_converges(model, data):
+    p, u, y = data
+    res = kalman_filter(model, p, u, y)
+    worst = []
+    for tau in (2, 10, 25, 60):
+        out = run_streaming(TruncatedKalmanFilter(model, tau), {"p": p, "u": u, "y": y})
+        err = np.max(np.abs(out["K"] - res.gains), axis=(1, 2))
+        assert np.max(err[: tau + 1]) < 1e-14  # t <= tau: exact by construction
+        worst.append(float(np.max(err)))
+        if tau == 60:
+            np.testing.assert_allclose(out["xpred"], res.predicted_means[1:], atol=1e-12)
+    assert worst[0] > worst[1] > worst[2] > worst[3]
+    assert worst[0] > 1e-2 and worst[3] < 1e-13  # geometric decay, rate ~0.55 per step
+
+
+def test_truncated_matches_the_analysis(model, data):
+    p, u, y = data
+    err = truncation_errors(model, p, [3, 7])
+    for i, tau in enumerate((3, 7)):
+        out = run_streaming(TruncatedKalmanFilter(model, tau), {"p": p, "u": u, "y": y})
+        np.testing.assert_allclose(out["K"], err.truncated_gains[i], rtol=0, atol=1e-13)
+
+
+def test_truncated_ports_and_state(model, data):
+    p, u, y = data
+    tf = TruncatedKalmanFilter(model, 4)
+    assert isinstance(tf, StreamingEstimator)
+    assert [(q.name, q.shape) for q in tf.input_ports] == [("p", (1,)), ("u", (1,)), ("y", (2,))]
+    assert [(q.name, q.shape) for q in tf.output_ports] == [
+        ("xhat", (2,)), ("P", (2, 2)), ("xpred", (2,)), ("yhat", (2,)),
+        ("innovation", (2,)), ("K", (2, 2)), ("Omega", (2, 2)),
+    ]
+    for t in range(3):
+        tf.step({"p": p[t], "u": u[t], "y": y[t]})
+    early = tf.get_state()
+    assert early["window_length"] == 3 and early["window_p"].shape == (5, 1)
+    for t in range(3, 20):
+        tf.step({"p": p[t], "u": u[t], "y": y[t]})
+    saved = tf.get_state()
+    assert saved["window_length"] == 5
+    np.testing.assert_array_equal(saved["window_p"], p[15:20])
+    first = [tf.step({"p": p[t], "u": u[t], "y": y[t]}) for t in range(20, 30)]
+    tf.reset()
+    tf.set_state(saved)
+    second = [tf.step({"p": p[t], "u": u[t], "y": y[t]}) for t in range(20, 30)]
+    for a, b in zip(first, second, strict=True):
+        for k in a:
+            np.testing.assert_array_equal(a[k], b[k])
+    tf.set_state(early)  # a state from before the window filled
+    assert tf.t == 3
+    with pytest.raises(DimensionError, match="window_length = 2 does not fit t = 20"):
+        tf.set_state(saved | {"window_length": 2})
+    bad = saved | {"window_p": np.full((5, 1), 3.0)}
+    with pytest.raises(SchedulingRangeError, match="outside its declared range"):
+        tf.set_state(bad)
+    assert tf.t == 3
+
+
+def test_truncated_outputs_and_bad_samples_leave_the_state(model):
+    tf = TruncatedKalmanFilter(model, 3)
+    good = {"p": [0.3], "u": [1.0], "y": [0.2, -0.1]}
+    for _ in range(5):
+        tf.step(good)
+    before = tf.get_state()
+    tf.outputs(good)
+    for bad, err in (
+        ({"p": [2.0]}, SchedulingRangeError),
+        ({"y": [np.nan, 0.0]}, NonFiniteError),
+        ({"y": [1.0]}, DimensionError),
+    ):
+        with pytest.raises(err):
+            tf.step(good | bad)
+    after = tf.get_state()
+    for k in before:
+        np.testing.assert_array_equal(before[k], after[k])
+
+
+def test_truncated_singular_omega_names_t():
+    # C(p) = p [1, 1], H(p) = p: Omega_t = 0 at p = 0 whatever the covariance
+    space = SchedulingSpace(["p"], [-1.0], [1.0])
+    m = AffineLPV.from_matrices(
+        space, [Monomial.component(0, space)],
+        A=0.5 * np.eye(2), C={"p": np.ones((1, 2))}, H={"p": [[1.0]]}, Q=np.eye(2), R=np.eye(1),
+    )
+    tf = TruncatedKalmanFilter(m, 2, start=np.eye(2))
+    tf.step({"p": [0.5], "y": [1.0]})
+    before = tf.get_state()
+    with pytest.raises(NumericalError, match="Omega_t is not positive definite at t=1"):
+        tf.step({"p": [0.0], "y": [1.0]})
+    after = tf.get_state()
+    for k in before:
+        np.testing.assert_array_equal(before[k], after[k])
+
+
+def test_truncated_constructor_errors(model):
+    with pytest.raises(DimensionError, match="tau must be a non-negative integer; found -1"):
+        TruncatedKalmanFilter(model, -1)
+    with pytest.raises(DimensionError, match="tau must be a non-negative integer; found 2.5"):
+        TruncatedKalmanFilter(model, 2.5)
+    with pytest.raises(DimensionError, match="start='steady-state' needs start_p"):
+        TruncatedKalmanFilter(model, 2, start="steady-state")
+    with pytest.raises(DimensionError, match="start must be 'theorem', 'steady-state' or a matrix"):
+        TruncatedKalmanFilter(model, 2, start="bogus")
+    with pytest.raises(NotPositiveDefiniteError, match="start covariance is not positive semidefinite"):
+        TruncatedKalmanFilter(model, 2, start=-np.eye(2))
+    with pytest.raises(DimensionError, match="start_fraction must lie in"):
+        TruncatedKalmanFilter(model, 2, start_fraction=1.0)
+
+
+def test_theorem_start_needs_full_rank_process_noise():
+    # (5f): G Qbar G^T > 0 fails for a rank-one G; (6b) admits no P^_0
+    space = SchedulingSpace(["p"], [-1.0], [1.0])
+    m = AffineLPV.from_matrices(
+        space, [Monomial.component(0, space)],
+        A={"1": 0.5 * np.eye(2), "p": 0.1 * np.eye(2)}, C=np.eye(2), G=[[1.0], [0.0]], Q=[[1.0]], R=np.eye(2),
+    )
+    with pytest.raises(NotPositiveDefiniteError, match=r"assumption \(5f\) fails"):
+        TruncatedKalmanFilter(m, 3)
+    TruncatedKalmanFilter(m, 3, start="steady-state", start_p=[0.0])  # other starts still work
+
+
+def test_decorrelation_needs_invertible_hrh():
+    # H(p) = p: H R H^T = 0 at p = 0, where (6a) cannot be formed
+    space = SchedulingSpace(["p"], [-1.0], [1.0])
+    m = AffineLPV.from_matrices(
+        space, [Monomial.component(0, space)],
+        A=0.5 * np.eye(2), C=np.eye(2), H={"p": np.eye(2)}, Q=np.eye(2), R=np.eye(2), P0=np.eye(2),
+    )
+    tf = TruncatedKalmanFilter(m, 1, start=np.eye(2))
+    for pv in (0.0, 0.5):
+        tf.step({"p": [pv], "y": [0.0, 0.0]})
+    with pytest.raises(NotPositiveDefiniteError, match=r"H\(p\) R H\(p\)\^T is singular at t=0"):
+        tf.step({"p": [0.5], "y": [0.0, 0.0]})
+    assert tf.t == 2
+
+
+# ---------------------------------------------------------------------------
+# start covariances
+# ---------------------------------------------------------------------------
+def test_theorem_start_is_below_the_posterior(model, data):
+    # (6b) and (8): P^_0 < alpha_2/(alpha_2 beta_2 + 1) I <= P_{t|t} for t >= 1
+    p, u, y = data
+    b = assumption_bounds(model)
+    assert b.hold
+    P0 = theorem_start_covariance(model)
+    np.testing.assert_allclose(P0, 0.5 * b.posterior_lower_bound * np.eye(2))
+    res = kalman_filter(model, p, u, y)
+    lam = np.linalg.eigvalsh(res.filtered_covariances[1:])
+    assert lam.min() >= b.posterior_lower_bound
+    # the grid bounds bracket the ones along the trajectory
+    bt = assumption_bounds(model, p)
+    assert b.alpha2 <= bt.alpha2 and b.beta2 >= bt.beta2 and b.beta1 <= bt.beta1
+
+
+def test_lemma2_ordering_for_the_theorem_start(model, data):
+    # Lemma 2: 0 <= P - P^(tau) for a start below the posterior covariance
+    p, _, _ = data
+    err = truncation_errors(model, p, [0, 1, 2, 5, 10])
+    assert np.all(err.min_ordering_eigenvalue > -1e-15)
+    too_big = truncation_errors(model, p, [1, 2], start=np.eye(2))
+    assert np.all(too_big.min_ordering_eigenvalue < -1e-4)
+
+
+def test_steady_state_start_reproduces_the_dare_at_constant_p(model):
+    from scipy.linalg import solve_discrete_are
+
+    pv = np.array([0.4])
+    A, B, C, D, G, H = model.at(pv)
+    Q, S, R = model.noise.Q, model.noise.S, model.noise.R
+    P = solve_discrete_are(A.T, C.T, G @ Q @ G.T, H @ R @ H.T, s=G @ S @ H.T)
+    ss = steady_state(model, pv)
+    np.testing.assert_allclose(ss.P_pred, P, atol=1e-12)
+    Om = C @ P @ C.T + H @ R @ H.T
+    np.testing.assert_allclose(ss.K, (A @ P @ C.T + G @ S @ H.T) @ np.linalg.inv(Om), atol=1e-12)
+    # at constant p the steady-state posterior start makes K^(tau) = K_inf for every tau
+    T = 30
+    p = np.tile(pv, (T, 1))
+    tf = TruncatedKalmanFilter(model, 2, start="steady-state", start_p=pv, P0=P)
+    out = run_streaming(tf, {"p": p, "u": np.zeros((T, 1)), "y": np.zeros((T, 2))})
+    np.testing.assert_allclose(out["K"], np.broadcast_to(ss.K, (T, 2, 2)), atol=1e-12)
+    np.testing.assert_allclose(start_covariance(model, "steady-state", start_p=pv), ss.P_filt)
+
+
+def test_steady_state_without_a_solution():
+    # an unstable mode that no output sees: no stabilising DARE solution
+    space = SchedulingSpace(["p"], [-1.0], [1.0])
+    m = AffineLPV.from_matrices(
+        space, [Monomial.component(0, space)], A=np.diag([2.0, 0.5]), C=[[0.0, 1.0]], Q=np.eye(2), R=[[1.0]],
+    )
+    with pytest.raises(NumericalError, match=r"no stabilising steady-state Riccati solution at p = \[0.0\]"):
+        steady_state(m, [0.0])
+    with pytest.raises(NumericalError, match=r"recursion at p = \[0.0\] diverges: no stabilising solution"):
+        frozen_gains(m, np.zeros((3, 1)))
+
+
+# ---------------------------------------------------------------------------
+# fading-memory analysis
+# ---------------------------------------------------------------------------
+def test_truncation_errors_against_the_literal_formula(model, data):
+    p, _, _ = data
+    err = truncation_errors(model, p, [0, 2, 6])
+    P_start = err.start
+    Kex = kalman_filter(model, p, data[1], data[2]).gains
+    for i, tau in enumerate((0, 2, 6)):
+        for t in (0, tau, tau + 1, 50, 119):
+            K, P = _literal_truncated_gain(model, p, t, tau, P_start)
+            np.testing.assert_allclose(err.truncated_gains[i, t], K, atol=1e-12)
+            assert err.K_error[i, t] == pytest.approx(np.linalg.norm(Kex[t] - K, 2), abs=1e-12)
+    assert np.all(err.K_error[2, :7] == 0.0)
+
+
+def test_random_system_truncation_converges():
+    rng = np.random.default_rng(8)
+    m = random_system(rng, nx=3, ny=2, nu=1)
+    p = random_schedule(m, rng, 150)
+    err = truncation_errors(m, p, range(0, 41, 5), start="steady-state", start_p=[0.0, 0.5])
+    assert err.max_K_error[0] > 1e-3
+    assert err.max_K_error[-1] < 1e-10 * err.max_K_error[0]
+
+
+def test_monotonicity_and_tau_needed(model, data):
+    p, _, _ = data
+    err = truncation_errors(model, p, range(0, 31))
+    mono = monotonicity(err)
+    assert mono.sup_monotone and mono.pairs > 1000
+    assert mono.violations == 0  # theorem start, this example: Conjecture 1 holds
+    ss = truncation_errors(model, p, range(0, 31), start="steady-state", start_p=[0.0])
+    m2 = monotonicity(ss)
+    assert m2.violations > 0  # not for every start and every t (ERRATA)
+    t, tau, ratio = m2.worst
+    assert ratio >= 1.0 and ss.K_error[tau + 1, t] >= ss.K_error[tau, t]
+    n1, n6 = tau_needed(err, 1e-3), tau_needed(err, 1e-6)
+    assert err.max_K_error[n1] < 1e-3 <= err.max_K_error[n1 - 1]
+    assert err.max_K_error[n6] < 1e-6 <= err.max_K_error[n6 - 1]
+    assert tau_needed(err, 1e-30) is None
+
+
+def test_monotonicity_on_a_made_up_curve():
+    # a constructed error table: sup increases at tau 2 -> 3; pointwise one violation
+    E = np.array([[0.0, 1.0, 1.0], [0.0, 0.5, 0.6], [0.0, 0.1, 0.05], [0.0, 0.2, 0.01]])
+    err = fading_memory.TruncationErrors(
+        np.arange(4), E, E, E.max(axis=1), E.max(axis=1), np.zeros(4),
+        np.zeros((3, 1, 1)), np.zeros((3, 1, 1)), np.zeros((4, 3, 1, 1)), np.zeros((1, 1)),
+    )
+    m = monotonicity(err)
+    assert not m.sup_monotone and m.sup_increases == ((2, 3),)
+    assert m.pairs == 6 and m.violations == 1 and m.worst == (1, 2, pytest.approx(2.0))
+
+
+def test_prediction_error_of_the_exact_gain_is_omega(model, data):
+    p, u, y = data
+    res = kalman_filter(model, p, u, y)
+    pe = prediction_error_covariance(model, p, res.gains)
+    np.testing.assert_allclose(pe.output, res.innovation_covariances, atol=1e-13)
+    np.testing.assert_allclose(pe.state, res.predicted_covariances, atol=1e-13)
+
+
+def test_prediction_error_matches_monte_carlo(model):
+    # The exact second moments of a suboptimal (frozen-gain) predictor against
+    # simulation: 16 independent batches of 250 trajectories; the standard error
+    # of the mean of trace E[e e^T] over t comes from the spread of the batch
+    # means; tolerance 5 standard errors (the seeds are fixed).
+    T = 40
+    p = np.sin(0.25 * np.arange(T))[:, None]
+    u = np.ones((T, 1))
+    K = frozen_gains(model, p)
+    a = float(np.mean(np.trace(prediction_error_covariance(model, p, K).output, axis1=1, axis2=2)))
+    means = [
+        float(np.mean(np.trace(empirical_prediction_error(model, p, u, K, runs=250, rng=100 + i), axis1=1, axis2=2)))
+        for i in range(16)
+    ]
+    se = float(np.std(means, ddof=1) / np.sqrt(len(means)))
+    assert se < 0.01 * a
+    assert abs(np.mean(means) - a) < 5 * se
+    # the same check rejects the moments of a different gain sequence
+    wrong = float(np.mean(np.trace(prediction_error_covariance(model, p, 0.5 * K).output, axis1=1, axis2=2)))
+    assert abs(np.mean(means) - wrong) > 5 * se
+    # and the Kalman gain is optimal at every t
+    exact = prediction_error_covariance(model, p, kalman_filter(model, p, u, np.zeros((T, 2))).gains)
+    frozen = prediction_error_covariance(model, p, K)
+    assert np.all(np.trace(exact.output, axis1=1, axis2=2) <= np.trace(frozen.output, axis1=1, axis2=2) + 1e-12)
+
+
+def test_frozen_gains_are_steady_state_gains(model):
+    # fixed-point iteration of all frozen models against scipy's DARE
+    p = np.array([[0.0], [0.5], [0.0], [-0.9]])
+    K = frozen_gains(model, p)
+    np.testing.assert_array_equal(K[0], K[2])
+    for t in range(4):
+        np.testing.assert_allclose(K[t], steady_state(model, p[t]).K, rtol=0, atol=1e-11)
+
+
+def test_analysis_input_errors(model):
+    p = np.zeros((10, 1))
+    with pytest.raises(DimensionError, match="taus must be non-negative integers"):
+        truncation_errors(model, p, [-1, 2])
+    with pytest.raises(DimensionError, match=r"gains has shape \(10, 2, 1\); expected \(10, 2, 2\)"):
+        prediction_error_covariance(model, p, np.zeros((10, 2, 1)))
+
+
+def test_docstring_examples_run():
+    for mod in (truncated_module, fading_memory):
+        failures, tried = doctest.testmod(mod, optionflags=doctest.ELLIPSIS)
+        assert tried > 0 and failures == 0
+
+
+def test_compare_filters(model):
+    from lpvest import compare_filters
+
+    p = np.sin(0.25 * np.arange(150))[:, None]
+    cmp = compare_filters(model, p, [0, 3, 40], constant_p=[0.5], burn_in=30)
+    assert cmp.names == (
+        "exact", "truncated tau=0", "truncated tau=3", "truncated tau=40", "frozen K_inf(p_t)", "constant K_inf(0.5)"
+    )
+    assert cmp.excess["exact"] == 0.0
+    assert abs(cmp.excess["truncated tau=40"]) < 1e-12
+    assert cmp.excess["truncated tau=0"] > cmp.excess["truncated tau=3"] > 0
+    assert min(cmp.excess.values()) >= -1e-12  # nothing beats the Kalman filter
+    np.testing.assert_allclose(cmp.gains["constant K_inf(0.5)"][7], steady_state(model, [0.5]).K, atol=1e-11)
