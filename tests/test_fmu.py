@@ -21,6 +21,7 @@ from tests.fmu_driver import Driver
 
 EXPECTED = {
     "CoxTothEx1Plant", "CoxTothEx1Scheduler", "CoxTothEx1Source",
+    "CoxTothTruncationPlant", "CoxTothTruncationScheduler", "CoxTothTruncationSource",
     "PeixotoEx1Plant", "PeixotoEx1Scheduler", "PeixotoEx1Source",
     "PeixotoEx2Plant", "PeixotoEx2Scheduler", "PeixotoEx2Source",
     "SridharLtvPlant",
