@@ -22,10 +22,11 @@ from tests.fmu_driver import Driver
 EXPECTED = {
     "CoxTothEx1Plant", "CoxTothEx1Scheduler", "CoxTothEx1Source",
     "CoxTothTruncationPlant", "CoxTothTruncationScheduler", "CoxTothTruncationSource",
+    "CoxTothTruncationKalman", "CoxTothTruncationTruncatedKalman",
     "PeixotoEx1Plant", "PeixotoEx1Scheduler", "PeixotoEx1Source",
     "PeixotoEx2Plant", "PeixotoEx2Scheduler", "PeixotoEx2Source",
     "SridharLtvPlant",
-    "AffineDemoPlant", "AffineDemoScheduler", "AffineDemoSource",
+    "AffineDemoPlant", "AffineDemoScheduler", "AffineDemoSource", "AffineDemoKalman", "AffineDemoTruncatedKalman",
     "PeixotoEx1MovingAverage",
 }
 

@@ -92,8 +92,17 @@ def test_libcosim_connects_scheduler_source_and_plant_like_the_library(fmus):
 # -- a long run: no growth in memory -------------------------------------------------------
 
 
+LONG_RUNS = {
+    # FMU: (inputs, outputs read each step)
+    "PeixotoEx1Plant": (["p[1]", "w[1]"], ["y[1]", "x[1]"]),
+    "CoxTothTruncationKalman": (["p[1]", "u[1]", "y[1]", "y[2]"], ["xhat[1]", "xhat[2]", "P[1,1]", "innovation[1]"]),
+}
+
+
 @pytest.mark.slow
-def test_100000_steps_of_the_plant_fmu_do_not_grow_memory(fmus):
+@pytest.mark.parametrize("name", sorted(LONG_RUNS))
+def test_100000_steps_do_not_grow_memory(fmus, name):
+    ins, outs = LONG_RUNS[name]
     code = textwrap.dedent(f"""
         import resource, sys
         sys.path.insert(0, {str(ROOT)!r})
@@ -102,12 +111,14 @@ def test_100000_steps_of_the_plant_fmu_do_not_grow_memory(fmus):
         def rss():
             with open("/proc/self/statm") as f:
                 return int(f.read().split()[1]) * resource.getpagesize()
-        d = Driver({str(fmus["PeixotoEx1Plant"])!r})
+        d = Driver({str(fmus[name])!r})
         assert d.initialize() == 0
-        fmu, vin, vout = d.fmu, [d.vr["p[1]"], d.vr["w[1]"]], [d.vr["y[1]"], d.vr["x[1]"]]
+        fmu, vin, vout = d.fmu, [d.vr[n] for n in {ins!r}], [d.vr[n] for n in {outs!r}]
+        n_in = len(vin)
         marks = {{}}
         for k in range(100_000):
-            fmu.setReal(vin, [np.sin(0.25 * k), np.sin(0.5 * k) * np.exp(-0.1 * (k % 50))])
+            v = [np.sin(0.25 * k)] + [np.sin(0.5 * k + i) * np.exp(-0.1 * (k % 50)) for i in range(n_in - 1)]
+            fmu.setReal(vin, v)
             fmu.getReal(vout)
             fmu.doStep(float(k), 1.0)
             if k + 1 in (20_000, 100_000):
@@ -119,7 +130,7 @@ def test_100000_steps_of_the_plant_fmu_do_not_grow_memory(fmus):
     assert proc.returncode == 0, proc.stderr[-3000:]
     rss_20k, rss_100k = map(int, proc.stdout.split())
     growth = rss_100k - rss_20k
-    print(f"RSS after 20,000 steps {rss_20k / 2**20:.1f} MiB, after 100,000 {rss_100k / 2**20:.1f} MiB")
+    print(f"{name}: RSS after 20,000 steps {rss_20k / 2**20:.1f} MiB, after 100,000 {rss_100k / 2**20:.1f} MiB")
     # 80,000 further steps: a leak of even 16 bytes per step would show as 1.2 MiB
     assert growth < 1 * 2**20
 
@@ -192,10 +203,13 @@ def test_lpvest_build_for_a_users_model_file(fmus, tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["build", "--out", str(out), "--model", str(fmus.affine_model)]) == 0
     text = capsys.readouterr().out
-    for name in ("AffineDemoPlant.fmu", "AffineDemoScheduler.fmu", "AffineDemoSource.fmu"):
+    # the plant, its signal sources, and every filter that applies to an affine model
+    names = ("AffineDemoPlant.fmu", "AffineDemoScheduler.fmu", "AffineDemoSource.fmu",
+             "AffineDemoKalman.fmu", "AffineDemoTruncatedKalman.fmu")
+    for name in names:
         assert (out / name).is_file()
         assert any(line.startswith(name) and line.rstrip().endswith("ok") for line in text.splitlines())
-    assert "3 FMU(s)" in text and "all valid" in text
+    assert f"{len(names)} FMU(s)" in text and "all valid" in text
 
 
 def test_build_fmus_script_builds_every_example(tmp_path):

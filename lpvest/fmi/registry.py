@@ -95,7 +95,13 @@ def resolve(target: str) -> Callable[..., Any]:
 
 #: The estimator FMUs built for every applicable model: one line per filter.
 ESTIMATOR_KINDS: list[EstimatorKind] = [
-    # EstimatorKind("Kalman", "lpvest.estimators.kalman:fmu_estimator", models=("affine",)),
+    EstimatorKind("Kalman", "lpvest.fmi.factories:kalman", models=("affine",),
+                  description="exact LPV Kalman filter in innovation form (Cox & Toth (4a)-(4e))"),
+    EstimatorKind("TruncatedKalman", "lpvest.fmi.factories:truncated_kalman", models=("affine",),
+                  parameters=(Parameter("tau", 10, "memory: the gain uses p_(t-tau)..p_t", minimum=0),
+                              Parameter("start", "theorem", "start covariance of the restarted recursion: "
+                                        "theorem | steady-state")),
+                  description="truncated-memory LPV Kalman filter (Cox & Toth Theorem 1)"),
 ]
 
 
