@@ -25,7 +25,7 @@ EXPECTED = {
     "CoxTothTruncationKalman", "CoxTothTruncationTruncatedKalman",
     "PeixotoEx1Plant", "PeixotoEx1Scheduler", "PeixotoEx1Source",
     "PeixotoEx2Plant", "PeixotoEx2Scheduler", "PeixotoEx2Source",
-    "SridharLtvPlant",
+    "SridharLtvPlant", "SridharLtvBSplineObserver",
     "AffineDemoPlant", "AffineDemoScheduler", "AffineDemoSource", "AffineDemoKalman", "AffineDemoTruncatedKalman",
     "PeixotoEx1MovingAverage",
 }

@@ -37,10 +37,27 @@ def _truncated(tau: int = 4) -> StreamingEstimator:
     return TruncatedKalmanFilter(load_system("cox-toth-truncation").model(), tau, start="theorem")
 
 
-#: FMU -> (library estimator, FMU parameters, data)
+def _sridhar_data(T: int) -> dict[str, np.ndarray]:
+    io = load_system("sridhar-ltv").model()
+    t = np.arange(T) * 1e-3
+    traj = io.simulate(t)
+    return {"u": traj.u[:, None], "y": traj.y[:, None]}
+
+
+def _observer() -> StreamingEstimator:
+    from lpvest.estimators.bspline import BSplineObserver, KernelModel, UnknownConstant, UnknownSpline
+
+    io = load_system("sridhar-ltv").model()
+    model = KernelModel.from_io(io, a0=UnknownSpline(18), a1=UnknownConstant())
+    return BSplineObserver(model, dt=1e-3, window=0.4, hop=0.1, on_unidentifiable="hold")
+
+
+#: FMU -> (library estimator, FMU parameters, data, number of samples, step size)
 FILTERS = {
-    "CoxTothTruncationKalman": (_kalman, {}, _truncation_data),
-    "CoxTothTruncationTruncatedKalman": (lambda: _truncated(4), {"tau": 4}, _truncation_data),
+    "CoxTothTruncationKalman": (_kalman, {}, _truncation_data, 60, 1.0),
+    "CoxTothTruncationTruncatedKalman": (lambda: _truncated(4), {"tau": 4}, _truncation_data, 60, 1.0),
+    # a short window (0.4 s) so that the test sees several refits in 700 samples
+    "SridharLtvBSplineObserver": (_observer, {"window": 0.4, "hop": 0.1}, _sridhar_data, 700, 1e-3),
 }
 
 
@@ -55,26 +72,27 @@ def _read(d: Driver, est: StreamingEstimator) -> dict[str, np.ndarray]:
 
 @pytest.mark.parametrize("name", sorted(FILTERS))
 def test_filter_fmu_gives_the_library_numbers(fmus, name):
-    make, params, data = FILTERS[name]
+    make, params, data, T, h = FILTERS[name]
     est = make()
-    inputs = data(60)
+    inputs = data(T)
     d = Driver(fmus[name])
     assert d.initialize(**params) == 0, d.errors()
-    for k in range(60):
+    for k in range(T):
         _feed(d, inputs, k)
         got = _read(d, est)
         want = est.step({n: v[k] for n, v in inputs.items()})
         for port in est.output_ports:
             # the same operations in the same order: bit for bit
             assert np.array_equal(got[port.name], np.asarray(want[port.name]).reshape(port.shape)), (k, port.name)
-        assert d.step(float(k), 1.0) == 0, d.errors()
+        assert d.step(k * h, h) == 0, d.errors()
     d.free()
 
 
 @pytest.mark.parametrize("name", sorted(FILTERS))
 def test_filter_fmu_state_round_trips(fmus, name):
-    make, params, data = FILTERS[name]
-    inputs = data(40)
+    make, params, data, T, h = FILTERS[name]
+    half = T // 2 if T < 100 else 450  # the observer: save mid-way, after its first refit
+    inputs = data(T)
     est = make()
 
     def run(d: Driver, k0: int, k1: int) -> np.ndarray:
@@ -82,24 +100,24 @@ def test_filter_fmu_state_round_trips(fmus, name):
         for k in range(k0, k1):
             _feed(d, inputs, k)
             rows.append(np.concatenate([d.vector(p.name).ravel() for p in est.output_ports]))
-            assert d.step(float(k), 1.0) == 0
+            assert d.step(k * h, h) == 0
         return np.array(rows)
 
     d = Driver(fmus[name], "a")
     assert d.initialize(**params) == 0
-    run(d, 0, 20)
+    run(d, 0, half)
     state = d.fmu.getFMUstate()
     blob = d.fmu.serializeFMUstate(state)
-    first = run(d, 20, 40)
+    first = run(d, half, T)
     d.fmu.setFMUstate(state)
-    assert np.array_equal(first, run(d, 20, 40))
+    assert np.array_equal(first, run(d, half, T))
     d.fmu.freeFMUstate(state)
     d.free()
     fresh = Driver(fmus[name], "b")
     assert fresh.initialize(**params) == 0
     restored = fresh.fmu.deSerializeFMUstate(blob)
     fresh.fmu.setFMUstate(restored)
-    assert np.array_equal(first, run(fresh, 20, 40))
+    assert np.array_equal(first, run(fresh, half, T))
     fresh.fmu.freeFMUstate(restored)
     fresh.free()
 
@@ -110,7 +128,7 @@ def test_filter_fmu_state_round_trips(fmus, name):
     ("CoxTothTruncationTruncatedKalman", "y", np.inf, r"y\[1\]"),
 ])
 def test_bad_sample_is_fmi2error_and_the_filter_continues_unharmed(fmus, name, port, value, expected):
-    make, params, data = FILTERS[name]
+    make, params, data, _, _ = FILTERS[name]
     inputs = data(12)
     est = make()
     d = Driver(fmus[name])
@@ -136,4 +154,29 @@ def test_invalid_filter_parameter_is_fmi2error(fmus):
     status = d.initialize(start="sometimes")
     assert status == 3
     assert any("start" in m and "sometimes" in m for m in d.errors()), d.errors()
+    d.free()
+
+
+def test_observer_fmu_refuses_a_communication_step_other_than_dt(fmus):
+    d = Driver(fmus["SridharLtvBSplineObserver"])
+    assert d.initialize() == 0
+    d.set_vector("u", 0.0)
+    d.set_vector("y", 0.0)
+    assert d.step(0.0, 0.01) >= 2
+    assert any("communication step 0.01 s differs from the observer's sample time dt = 0.001 s" in m
+               for m in d.errors()), d.errors()
+    d.free()
+
+
+@pytest.mark.parametrize(("param", "value", "expected"), [
+    ("a0", "spline", "a0 = 'spline'; expected 'known', 'constant', 'spline:N' or 'spline:N:ORDER'"),
+    ("a1", "known", "no unknown"),
+])
+def test_observer_fmu_invalid_declaration_is_fmi2error(fmus, param, value, expected):
+    d = Driver(fmus["SridharLtvBSplineObserver"])
+    params = {param: value}
+    if param == "a1":
+        params["a0"] = "known"
+    assert d.initialize(**params) == 3
+    assert any(expected in m for m in d.errors()), d.errors()
     d.free()

@@ -57,7 +57,8 @@ def _cosim_run(fmu_paths: dict[str, Path], steps: int, step_size: float, script:
 
 def test_every_fmu_loads_and_steps_in_libcosim(fmus):
     names = sorted(EXPECTED)
-    result = _cosim_run({n: fmus[n] for n in names}, steps=5, step_size=0.1, script="")
+    # 1 ms: the B-spline observer's default sample time (one step is one sample)
+    result = _cosim_run({n: fmus[n] for n in names}, steps=5, step_size=0.001, script="")
     assert result["ok"]
     for name in names:
         values = result["values"][name]
@@ -147,7 +148,10 @@ def test_fmus_run_in_a_fresh_virtual_environment_without_lpvest(fmus, tmp_path):
                          capture_output=True, text=True, timeout=600, check=False)
     assert pip.returncode == 0, pip.stderr[-3000:]
     k = np.arange(40)
-    inputs = {"p": theta(k).tolist(), "w": paper_w(k).tolist()}
+    kf_model = load_system("cox-toth-truncation").model()
+    kf_u = np.sin(0.1 * k)[:, None]
+    kf_y = kf_model.simulate(theta(k)[:, None], kf_u, rng=1).y
+    inputs = {"p": theta(k).tolist(), "w": paper_w(k).tolist(), "u": kf_u[:, 0].tolist(), "y": kf_y.tolist()}
     code = textwrap.dedent(f"""
         import json, sys
         try:
@@ -158,7 +162,8 @@ def test_fmus_run_in_a_fresh_virtual_environment_without_lpvest(fmus, tmp_path):
         from fmpy import read_model_description, extract
         from fmpy.fmi2 import FMU2Slave
         out = {{}}
-        for name, path in {json.dumps({n: str(fmus[n]) for n in ("PeixotoEx1Plant", "SridharLtvPlant")})}.items():
+        for name, path in {json.dumps({n: str(fmus[n]) for n in ("PeixotoEx1Plant", "SridharLtvPlant",
+                                                                   "CoxTothTruncationKalman")})}.items():
             md = read_model_description(path)
             vr = {{v.name: v.valueReference for v in md.modelVariables}}
             fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path),
@@ -173,6 +178,11 @@ def test_fmus_run_in_a_fresh_virtual_environment_without_lpvest(fmus, tmp_path):
                 if name == "PeixotoEx1Plant":
                     fmu.setReal([vr["p[1]"], vr["w[1]"]], [inputs["p"][k], inputs["w"][k]])
                     ys.append(fmu.getReal([vr["y[1]"]])[0])
+                    fmu.doStep(float(k), 1.0)
+                elif name == "CoxTothTruncationKalman":
+                    fmu.setReal([vr["p[1]"], vr["u[1]"], vr["y[1]"], vr["y[2]"]],
+                                [inputs["p"][k], inputs["u"][k], *inputs["y"][k]])
+                    ys.append(fmu.getReal([vr["xhat[1]"], vr["xhat[2]"]]))
                     fmu.doStep(float(k), 1.0)
                 else:
                     ys.append(fmu.getReal([vr["y[1]"]])[0])
@@ -194,6 +204,10 @@ def test_fmus_run_in_a_fresh_virtual_environment_without_lpvest(fmus, tmp_path):
     assert np.array_equal(result["PeixotoEx1Plant"], ref.y[:, 0])
     ltv = load_system("sridhar-ltv").model().to_state_space().simulate(0.25 * np.arange(40))
     np.testing.assert_allclose(result["SridharLtvPlant"], ltv.y, rtol=0, atol=1e-9 * np.max(np.abs(ltv.y)))
+    from lpvest.estimators.kalman import kalman_filter
+
+    kf = kalman_filter(kf_model, theta(k)[:, None], kf_u, kf_y)
+    np.testing.assert_allclose(result["CoxTothTruncationKalman"], kf.filtered_means, rtol=0, atol=1e-12)
 
 
 # -- command line ----------------------------------------------------------------------------

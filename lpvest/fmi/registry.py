@@ -102,6 +102,16 @@ ESTIMATOR_KINDS: list[EstimatorKind] = [
                               Parameter("start", "theorem", "start covariance of the restarted recursion: "
                                         "theorem | steady-state")),
                   description="truncated-memory LPV Kalman filter (Cox & Toth Theorem 1)"),
+    EstimatorKind("BSplineObserver", "lpvest.fmi.factories:bspline_observer", models=("ltv-io",),
+                  parameters=(Parameter("dt", 0.001, "sample time = communication step (s)", minimum=0.0),
+                              Parameter("window", 4.0, "window length (s)", minimum=0.0),
+                              Parameter("hop", 0.5, "time between refits (s)", minimum=0.0),
+                              Parameter("a0", "spline:18", "a0: known | constant | spline:N[:order]"),
+                              Parameter("a1", "constant", "a1: known | constant | spline:N[:order]"),
+                              Parameter("b0", "known", "b0: known | constant | spline:N[:order]"),
+                              Parameter("b1", "known", "b1: known | constant | spline:N[:order]"),
+                              Parameter("penalty", 0.0, "P-spline penalty (0: none, < 0: by GCV)")),
+                  description="sliding-window B-spline joint parameter and state observer (Sridhar et al.)"),
 ]
 
 
