@@ -67,6 +67,7 @@ from __future__ import annotations
 import functools
 import math
 import time
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -301,8 +302,9 @@ def lmi_matrices(
 @dataclass(frozen=True)
 class _Attempt:
     design: HinfDesign | None
-    status: str
-    gamma: float  # inf when no certified design
+    status: str  #: final status: the solver's (cvxpy vocabulary), "...; LMI check failed", or "infeasible"
+    gamma: float  #: inf when no certified design
+    detail: str = ""  #: every solve tried and why it was rejected
 
 
 class HinfProgram:
@@ -463,16 +465,21 @@ class HinfProgram:
             raise LMIInfeasibleError("the program has no solution yet", status=str(self._problem.status))
         return self._values()
 
-    def _run_solver(self) -> tuple[str, float]:
+    def _run_solver(self) -> tuple[str, float, str]:
+        """``(status, seconds, message)``: a solver failure is status ``"solver_error"``."""
         import cvxpy as cp
 
         t0 = time.perf_counter()
         try:
-            self._problem.solve(solver=self.solver, **{**_DEFAULT_OPTIONS.get(self.solver, {}), **self.solver_options})
-            status = str(self._problem.status)
+            with warnings.catch_warnings():
+                # "Solution may be inaccurate": the status says so, and the check decides
+                warnings.simplefilter("ignore", UserWarning)
+                options = {**_DEFAULT_OPTIONS.get(self.solver, {}), **self.solver_options}
+                self._problem.solve(solver=self.solver, **options)
+            status, message = str(self._problem.status), ""
         except cp.error.SolverError as exc:
-            status = f"solver_error: {exc}"
-        return status, time.perf_counter() - t0
+            status, message = "solver_error", f" ({exc})"
+        return status, time.perf_counter() - t0, message
 
     def _check(
         self, plant: PolytopicLPV, values: Mapping[str, Any], a: float, b: float
@@ -521,39 +528,50 @@ class HinfProgram:
             eps = float(epsilon)  # type: ignore[arg-type]
             a, b = multiplier(eps)
             eps = abs(eps) if math.isinf(eps) else eps
+        unstable = _unstable_vertex(plant)
+        if unstable is not None:
+            i, radius = unstable
+            detail = (
+                f"not solved: vertex {i + 1} of the plant has spectral radius {radius:.6g} >= 1, and the LMIs "
+                f"(6)-(7) with P_i > 0 imply that every vertex A_i is Schur (at alpha_k = alpha_(k+1) = e_i they "
+                f"are a Lyapunov inequality for the block-triangular plant-filter matrix)"
+            )
+            return _Attempt(None, "infeasible", math.inf, detail)
         self._set_parameters(plant.vertices._asdict(), a, b)
         attempts: list[str] = []
+        status = ""
         elapsed = 0.0
         # first the requested margin; if the answer fails the check (solvers
         # stop within their tolerances, which may overshoot a small margin),
         # once more with a margin RETRY_MARGIN_FACTOR times larger
         for margin in (self.margin, self.margin * RETRY_MARGIN_FACTOR):
             self._margin.value = margin
-            status, more = self._run_solver()
+            status, more, message = self._run_solver()
             elapsed += more
-            label = status if margin == self.margin else f"retry with margin {margin:.1e}: {status}"
+            label = f"margin {margin:.1e}: {status}{message}"
             if status in _ACCEPTED:
                 values = self._values()
                 ok, lmi_margin, lyap_margin, why = self._check(plant, values, a, b)
                 if ok:
-                    design = self._design(
-                        plant, values, eps, a, b, "; ".join([*attempts, label]), elapsed, lmi_margin, lyap_margin
-                    )
-                    return _Attempt(design, design.status, design.gamma)
-                label += f" but the LMI check failed: {why}"
+                    design = self._design(plant, values, eps, a, b, status, elapsed, lmi_margin, lyap_margin)
+                    return _Attempt(design, status, design.gamma, "; ".join([*attempts, label]))
+                label += f", but the LMI check failed: {why}"
+                status += "; LMI check failed"
             attempts.append(label)
             if status.startswith(("infeasible", "unbounded")):
                 break
-        return _Attempt(None, "; ".join(attempts), math.inf)
+        return _Attempt(None, status, math.inf, "; ".join(attempts))
 
     def solve(self, plant: PolytopicLPV, epsilon: float) -> HinfDesign:
         """The design at ``epsilon`` (``math.inf`` allowed); raises
-        :class:`~lpvest.errors.LMIInfeasibleError` (with the solver status) when
-        the LMIs are infeasible or the returned point fails the check."""
+        :class:`~lpvest.errors.LMIInfeasibleError` (``.status`` = the final
+        solver status) when the LMIs are infeasible or the returned point fails
+        the check even after the retry."""
         res = self.attempt(plant, epsilon)
         if res.design is None:
-            raise LMIInfeasibleError(_infeasible_message(plant, self.kind, f"epsilon = {epsilon:g}", res.status),
-                                     status=res.status)
+            raise LMIInfeasibleError(
+                _infeasible_message(plant, self.kind, f"epsilon = {epsilon:g}", res.detail), status=res.status
+            )
         return res.design
 
     def _design(
@@ -601,15 +619,18 @@ def _check_plant(plant: object) -> None:
         raise TypeError(f"the plant must be a PolytopicLPV; found {type(plant).__name__}")
 
 
-def _infeasible_message(plant: PolytopicLPV, kind: str, where: str, status: str) -> str:
+def _unstable_vertex(plant: PolytopicLPV) -> tuple[int, float] | None:
+    """The first vertex whose ``A_i`` is not Schur, with its spectral radius."""
+    for i, a in enumerate(plant.vertices.A):
+        radius = float(np.max(np.abs(np.linalg.eigvals(a))))
+        if radius >= 1.0:
+            return i, radius
+    return None
+
+
+def _infeasible_message(plant: PolytopicLPV, kind: str, where: str, detail: str) -> str:
     name = plant.name or "(unnamed plant)"
-    msg = f"{kind} H-infinity LMIs for {name} at {where}: no certified solution ({status})"
-    radii = [float(np.max(np.abs(np.linalg.eigvals(a)))) for a in plant.vertices.A]
-    bad = [(i + 1, r) for i, r in enumerate(radii) if r >= 1.0]
-    if bad:
-        i, r = bad[0]
-        msg += f"; the plant is unstable at vertex {i} (spectral radius {r:.4g}), so no filter can be certified"
-    return msg
+    return f"{kind} H-infinity LMIs for {name} at {where}: no certified solution ({detail})"
 
 
 @functools.lru_cache(maxsize=16)
@@ -829,9 +850,12 @@ def search_epsilon(
     gam = [evaluate(p) for p in grid]
     finite = [g for g in gam if math.isfinite(g)]
     if not finite:
-        status = "; ".join(sorted({points[_canonical_phi(p)].status for p in grid}))
+        tried = [points[_canonical_phi(p)] for p in grid]
+        statuses = sorted({t.status for t in tried})
+        detail = "; ".join(sorted({t.detail for t in tried}))[:2000]
         raise LMIInfeasibleError(
-            _infeasible_message(plant, prog.kind, f"every epsilon tried ({n_grid} values)", status), status=status
+            _infeasible_message(plant, prog.kind, f"every epsilon tried ({n_grid} values)", detail),
+            status=statuses[0] if len(statuses) == 1 else " | ".join(statuses),
         )
     penalty = 10.0 * max(finite) + 1.0
     minima = [
