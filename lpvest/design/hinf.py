@@ -570,7 +570,7 @@ class HinfProgram:
         res = self.attempt(plant, epsilon)
         if res.design is None:
             raise LMIInfeasibleError(
-                _infeasible_message(plant, self.kind, f"epsilon = {epsilon:g}", res.detail), status=res.status
+                _infeasible_message(plant, self, f"epsilon = {epsilon:g}", res.detail), status=res.status
             )
         return res.design
 
@@ -628,9 +628,9 @@ def _unstable_vertex(plant: PolytopicLPV) -> tuple[int, float] | None:
     return None
 
 
-def _infeasible_message(plant: PolytopicLPV, kind: str, where: str, detail: str) -> str:
+def _infeasible_message(plant: PolytopicLPV, prog: HinfProgram, where: str, detail: str) -> str:
     name = plant.name or "(unnamed plant)"
-    return f"{kind} H-infinity LMIs for {name} at {where}: no certified solution ({detail})"
+    return f"{prog.kind} H-infinity LMIs for {name} at {where}, solver {prog.solver}: no certified solution ({detail})"
 
 
 @functools.lru_cache(maxsize=16)
@@ -854,7 +854,7 @@ def search_epsilon(
         statuses = sorted({t.status for t in tried})
         detail = "; ".join(sorted({t.detail for t in tried}))[:2000]
         raise LMIInfeasibleError(
-            _infeasible_message(plant, prog.kind, f"every epsilon tried ({n_grid} values)", detail),
+            _infeasible_message(plant, prog, f"every epsilon tried ({n_grid} values)", detail),
             status=statuses[0] if len(statuses) == 1 else " | ".join(statuses),
         )
     penalty = 10.0 * max(finite) + 1.0
