@@ -72,11 +72,14 @@ def simplex_grid(n: int, steps: int) -> np.ndarray:
     return np.array(pts)
 
 
-def worst_case_gain(plant, design, rng, *, horizon: int = 80, max_period: int = 5, n_random: int = 20):
+def worst_case_gain(plant, design, rng, *, horizon: int = 80, max_period: int | None = None, n_random: int = 20):
     """Search for the worst l2 gain of (3): frozen alpha on a simplex grid,
-    every periodic vertex-switching word up to ``max_period``, random vertex
-    switching and random alpha sequences. Returns ``(gain, description)``."""
+    every periodic vertex-switching word up to ``max_period`` (default 5 for
+    two vertices, 3 for more: about 60 words), random vertex switching and
+    random alpha sequences. Returns ``(gain, description)``."""
     N = plant.n_vertices
+    if max_period is None:
+        max_period = 5 if N == 2 else 3
     best, where = 0.0, ""
     vertex_sys = [augmented(plant, design, e) for e in np.eye(N)]
 

@@ -244,7 +244,7 @@ def test_search_curve_is_exposed():
     plant = ex1()
     s = search_epsilon(plant, kind=KIND_PD, n_grid=8, n_refine=1)
     c = s.curve
-    assert len(c.epsilon) == len(c.gamma) == len(c.status) == len(c.phi) == s.n_solves
+    assert len(c.epsilon) == len(c.gamma) == len(c.status) == len(c.phi) == s.n_evaluations
     assert np.all(np.diff(c.phi) > 0) and c.phi[-1] == pytest.approx(np.pi / 2)
     assert math.isinf(c.epsilon[-1])
     assert c.best()[1] == s.design.gamma == min(c.gamma)

@@ -743,7 +743,7 @@ class EpsilonSearch:
 
     design: HinfDesign
     curve: EpsilonCurve  #: every evaluated point, sorted by ``phi``
-    n_solves: int
+    n_evaluations: int  #: epsilon values evaluated (a retry with a larger margin counts once)
 
 
 def _curve(points: Mapping[float, _Attempt]) -> EpsilonCurve:
@@ -817,7 +817,7 @@ def search_epsilon(
     -------
     EpsilonSearch
         ``design`` at the best ``epsilon`` found, ``curve`` of every evaluated
-        point, ``n_solves``.
+        point, ``n_evaluations``.
 
     Raises
     ------
@@ -873,4 +873,4 @@ def search_epsilon(
     best_phi = min(points, key=lambda p: points[p].gamma)
     design = points[best_phi].design
     assert design is not None
-    return EpsilonSearch(design=design, curve=_curve(points), n_solves=len(points))
+    return EpsilonSearch(design=design, curve=_curve(points), n_evaluations=len(points))

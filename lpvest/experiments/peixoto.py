@@ -117,8 +117,8 @@ def run_table1(out_dir: Path | None = None) -> ExperimentResult:
                   "table1": [{"method": m, "filter": f, "gamma": g} for m, f, g in PAPER_TABLE1]},
         "theorem1": _design_summary(pd150),
         "corollary1": _design_summary(rob150),
-        "theorem1_best": {**_design_summary(pd_best.design), "n_solves": pd_best.n_solves},
-        "corollary1_best": {**_design_summary(rob_best.design), "n_solves": rob_best.n_solves},
+        "theorem1_best": {**_design_summary(pd_best.design), "n_evaluations": pd_best.n_evaluations},
+        "corollary1_best": {**_design_summary(rob_best.design), "n_evaluations": rob_best.n_evaluations},
         "curves": {
             name: {"epsilon": [_eps(e) for e in s.curve.epsilon], "phi": s.curve.phi,
                    "gamma": [g if math.isfinite(g) else None for g in s.curve.gamma]}
@@ -383,7 +383,7 @@ def run_example2(
             program = HinfProgram.for_plant(plant, kind=KIND_PD)
         s = search_epsilon(plant, kind=KIND_PD, program=program)
         rows.append({"rho": float(rho), "epsilon": _eps(s.design.epsilon), "gamma": s.design.gamma,
-                     "status": s.design.status, "n_solves": s.n_solves})
+                     "status": s.design.status, "n_evaluations": s.n_evaluations})
         bar.set_postfix(gamma=f"{s.design.gamma:.4f}")
     bar.close()
     lim = stability_limits()
