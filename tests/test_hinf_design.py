@@ -26,7 +26,7 @@ from lpvest.design import (
     multiplier,
     search_epsilon,
 )
-from lpvest.errors import DimensionError
+from lpvest.errors import DimensionError, NonFiniteError
 from tests import hinf_oracle as oracle
 
 
@@ -381,7 +381,7 @@ def test_wrong_dimensions_and_types():
         design_hinf(np.eye(2), epsilon=1.0)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="kind must be"):
         design_hinf(ex1(), epsilon=1.0, kind="gain-scheduled")
-    with pytest.raises(ValueError, match="epsilon is NaN"):
+    with pytest.raises(NonFiniteError, match="epsilon is NaN"):
         design_hinf(ex1(), epsilon=float("nan"))
     _, d = get_design("ex1-pd-150")
     with pytest.raises(DimensionError, match=r"Df has shape \(2, 2, 1\); expected \(2, 2, 3\)"):

@@ -4,6 +4,7 @@ need it, so importing this package needs only numpy)."""
 from .hinf import (
     DEFAULT_MARGIN as DEFAULT_MARGIN,
     DEFAULT_SOLVER as DEFAULT_SOLVER,
+    DesignAttempt as DesignAttempt,
     EpsilonCurve as EpsilonCurve,
     EpsilonSearch as EpsilonSearch,
     HinfProgram as HinfProgram,
@@ -26,6 +27,7 @@ from .result import (
 __all__ = [
     "DEFAULT_MARGIN",
     "DEFAULT_SOLVER",
+    "DesignAttempt",
     "EpsilonCurve",
     "EpsilonSearch",
     "HinfProgram",

@@ -35,18 +35,26 @@ Two further deviations, both sound:
 
 * **Exact rescaling.** At large ``epsilon`` the printed LMIs are badly
   conditioned (the filter variables scale like ``1/epsilon`` and
-  ``1/epsilon^2``). The congruence ``T = diag(I, sI, I, sI, I, I)`` with
-  ``s = 1/b`` and the change of variables ``P2 -> s^2 P2``, ``P3, X2, X4 -> s (.)``,
-  ``H, Af -> s^2 (.)``, ``Bf, Cf -> s (.)`` maps the paper's LMIs at
-  ``epsilon`` one-to-one onto the LMIs above with any ``(a, b)``,
-  ``a / b = epsilon``: they are feasible for the same ``delta``, and the new
-  filter matrices are the same filter in the state coordinates
-  ``x_f / s = b x_f`` (same input-output map). We use ``a = sin(phi)``,
-  ``b = cos(phi)``, ``epsilon = tan(phi)``: every coefficient is at most 1 in
-  size, and ``b = 0`` is the limit ``epsilon -> infinity`` (still a valid
-  Finsler multiplier). ``a`` and ``b`` enter as ``cp.Parameter`` (with the
+  ``1/epsilon^2``). Take ``(a, b)`` with ``a / b = epsilon``, ``s = 1/b``, the
+  congruence ``T = diag(I, sI, I, sI, I, I)`` and the change of variables
+  ``P2 -> s^2 P2``, ``P3, X2, X4 -> s (.)``, ``H, Af -> s^2 (.)``,
+  ``Bf, Cf -> s (.)`` (the others unchanged). Block by block, ``T Phi T`` of
+  the paper's LMI at ``epsilon`` is the LMI above at ``(a, b)`` in the new
+  variables (e.g. ``s (-X2 - eps H' + P3') = -X2^ - a H^' + P3^'`` and
+  ``s (-H + ...) = -b H^ + ...``). ``T`` is nonsingular and the variable map is
+  a bijection, ``T diag(P, P) T > 0`` iff ``P > 0``, and ``delta`` is
+  untouched: both problems have the same feasible ``delta``, hence the same
+  optimal ``gamma``. The new filter matrices are the same filter in the state
+  coordinates ``x_f / s = b x_f`` (``H^-1 Af`` is unchanged, ``H^-1 Bf`` and
+  ``Cf`` scale by ``1/s`` and ``s``): same input-output map, same ``gamma``.
+  We use ``a = sin(phi)``, ``b = cos(phi)``, ``epsilon = tan(phi)``: every
+  coefficient is at most 1 in size, and ``b = 0`` is the limit
+  ``epsilon -> infinity`` (still a valid Finsler multiplier, so its ``gamma``
+  is certified too). ``a`` and ``b`` enter as ``cp.Parameter`` (with the
   plant's vertex matrices), so a program compiles once (DPP) and serves every
-  ``epsilon`` and every plant of the same dimensions.
+  ``epsilon`` and every plant of the same dimensions. ``test_hinf_design.py``
+  checks ``Phi_paper = T^-1 Phi T^-1`` at a solution and that both
+  realizations filter identically.
 * **P(alpha) > 0.** The proof needs ``V >= 0``; ``P1, P2 > 0`` alone do not
   give it (an unstable plant can satisfy the LMIs with an indefinite ``P``).
   We impose ``P_i > 0`` at each vertex. When the plant is stable under
@@ -74,7 +82,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError, LMIInfeasibleError
+from ..errors import DimensionError, LMIInfeasibleError, NonFiniteError
 from ..systems.polytopic import PolytopicLPV
 from .result import KIND_PD, KIND_ROBUST, HinfDesign
 
@@ -88,6 +96,7 @@ __all__ = [
     "multiplier",
     "lmi_matrices",
     "LMIBlock",
+    "DesignAttempt",
     "DEFAULT_SOLVER",
     "DEFAULT_MARGIN",
 ]
@@ -124,7 +133,7 @@ def multiplier(epsilon: float) -> tuple[float, float]:
     """
     eps = float(epsilon)
     if math.isnan(eps):
-        raise ValueError("epsilon is NaN")
+        raise NonFiniteError("epsilon is NaN")
     if math.isinf(eps):
         return (1.0, 0.0)
     r = math.hypot(1.0, eps)
@@ -300,7 +309,10 @@ def lmi_matrices(
 # the compiled program
 # ---------------------------------------------------------------------------
 @dataclass(frozen=True)
-class _Attempt:
+class DesignAttempt:
+    """One solve of the LMIs at one ``epsilon`` (:meth:`HinfProgram.attempt`),
+    which does not raise when no certified design is found."""
+
     design: HinfDesign | None
     status: str  #: final status: the solver's (cvxpy vocabulary), "...; LMI check failed", or "infeasible"
     gamma: float  #: inf when no certified design
@@ -515,7 +527,7 @@ class HinfProgram:
         )
         return ok, -worst, lyap_min, why
 
-    def attempt(self, plant: PolytopicLPV, epsilon: float | None = None, *, phi: float | None = None) -> _Attempt:
+    def attempt(self, plant: PolytopicLPV, epsilon: float | None = None, *, phi: float | None = None) -> DesignAttempt:
         """Solve at ``epsilon`` (or the angle ``phi = atan(epsilon)``) without
         raising on failure: the certified design or ``None`` and the status."""
         self._check_dims(plant)
@@ -536,7 +548,7 @@ class HinfProgram:
                 f"(6)-(7) with P_i > 0 imply that every vertex A_i is Schur (at alpha_k = alpha_(k+1) = e_i they "
                 f"are a Lyapunov inequality for the block-triangular plant-filter matrix)"
             )
-            return _Attempt(None, "infeasible", math.inf, detail)
+            return DesignAttempt(None, "infeasible", math.inf, detail)
         self._set_parameters(plant.vertices._asdict(), a, b)
         attempts: list[str] = []
         status = ""
@@ -554,13 +566,13 @@ class HinfProgram:
                 ok, lmi_margin, lyap_margin, why = self._check(plant, values, a, b)
                 if ok:
                     design = self._design(plant, values, eps, a, b, status, elapsed, lmi_margin, lyap_margin)
-                    return _Attempt(design, status, design.gamma, "; ".join([*attempts, label]))
+                    return DesignAttempt(design, status, design.gamma, "; ".join([*attempts, label]))
                 label += f", but the LMI check failed: {why}"
                 status += "; LMI check failed"
             attempts.append(label)
             if status.startswith(("infeasible", "unbounded")):
                 break
-        return _Attempt(None, status, math.inf, "; ".join(attempts))
+        return DesignAttempt(None, status, math.inf, "; ".join(attempts))
 
     def solve(self, plant: PolytopicLPV, epsilon: float) -> HinfDesign:
         """The design at ``epsilon`` (``math.inf`` allowed); raises
@@ -746,7 +758,7 @@ class EpsilonSearch:
     n_evaluations: int  #: epsilon values evaluated (a retry with a larger margin counts once)
 
 
-def _curve(points: Mapping[float, _Attempt]) -> EpsilonCurve:
+def _curve(points: Mapping[float, DesignAttempt]) -> EpsilonCurve:
     phis = sorted(points)
     return EpsilonCurve(
         epsilon=np.array([_epsilon_of_phi(p) for p in phis]),
@@ -837,7 +849,7 @@ def search_epsilon(
     if n_grid < 3:
         raise ValueError(f"n_grid must be at least 3; found {n_grid}")
     prog = _program_for(plant, kind, solver, margin, solver_options, program)
-    points: dict[float, _Attempt] = {}
+    points: dict[float, DesignAttempt] = {}
 
     def evaluate(phi: float) -> float:
         key = _canonical_phi(phi)

@@ -391,6 +391,10 @@ def run_example2(
     for r in rows:
         eps = "inf" if r["epsilon"] is None else f"{r['epsilon']:.4g}"
         lines.append(f"{r['rho']:>6g} {eps:>10} {r['gamma']:>9.4f}")
+    lines.append(
+        "epsilon: the search's best point; gamma(epsilon) often has a flat minimum (rho = 1 and 11: constant "
+        "to ~1e-6 over wide ranges of epsilon), so it is one point of that minimum."
+    )
     explanation = (
         f"plant stability limit: rho = {lim.frozen:.6f} (paper: 21.4). Vertex 1 has the eigenvalue "
         f"{lim.eigenvalue_at_limit.real:+.6f} there: det(-I - A_1) = 2.1935 - 0.1025 rho = 0. "
@@ -442,6 +446,8 @@ def _plot_example2(path: Path, rows: list[dict[str, Any]], lim: StabilityLimits)
     ticks = [-100, -3, -1, 0, 1, 3, 100]
     ax2.set_yticks([math.atan(t) for t in ticks], [f"{t:g}" for t in ticks])
     ax2.set_ylabel("best epsilon")
+    ax2.set_title("epsilon found by the search (where gamma(epsilon) has a flat minimum, one point of it)",
+                  fontsize="small")
     ax2.set_xlabel("rho")
     ax2.axvline(lim.frozen, color="r", ls="--")
     ax2.grid(alpha=0.3)
