@@ -198,3 +198,27 @@ __all__ = [
     "steady_state",
     "theorem_start_covariance",
 ]
+
+# H-infinity (issue 4)
+from .design import (
+    EpsilonCurve as EpsilonCurve,
+    EpsilonSearch as EpsilonSearch,
+    HinfDesign as HinfDesign,
+    HinfProgram as HinfProgram,
+    design_hinf as design_hinf,
+    epsilon_curve as epsilon_curve,
+    search_epsilon as search_epsilon,
+)
+from .estimators.hinf import HinfFilter as HinfFilter, hinf_filter_batch as hinf_filter_batch
+
+__all__ += [
+    "EpsilonCurve",
+    "EpsilonSearch",
+    "HinfDesign",
+    "HinfProgram",
+    "design_hinf",
+    "epsilon_curve",
+    "search_epsilon",
+    "HinfFilter",
+    "hinf_filter_batch",
+]

@@ -1,0 +1,46 @@
+"""Filter design (at build time; cvxpy is imported inside the functions that
+need it, so importing this package needs only numpy)."""
+
+from .hinf import (
+    DEFAULT_MARGIN as DEFAULT_MARGIN,
+    DEFAULT_SOLVER as DEFAULT_SOLVER,
+    DesignAttempt as DesignAttempt,
+    EpsilonCurve as EpsilonCurve,
+    EpsilonSearch as EpsilonSearch,
+    HinfProgram as HinfProgram,
+    LMIBlock as LMIBlock,
+    design_hinf as design_hinf,
+    epsilon_curve as epsilon_curve,
+    lmi_matrices as lmi_matrices,
+    multiplier as multiplier,
+    search_epsilon as search_epsilon,
+)
+from .result import (
+    DESIGN_FORMAT as DESIGN_FORMAT,
+    DESIGN_FORMAT_VERSION as DESIGN_FORMAT_VERSION,
+    KIND_PD as KIND_PD,
+    KIND_ROBUST as KIND_ROBUST,
+    FilterMatrices as FilterMatrices,
+    HinfDesign as HinfDesign,
+)
+
+__all__ = [
+    "DEFAULT_MARGIN",
+    "DEFAULT_SOLVER",
+    "DesignAttempt",
+    "EpsilonCurve",
+    "EpsilonSearch",
+    "HinfProgram",
+    "design_hinf",
+    "epsilon_curve",
+    "LMIBlock",
+    "lmi_matrices",
+    "multiplier",
+    "search_epsilon",
+    "DESIGN_FORMAT",
+    "DESIGN_FORMAT_VERSION",
+    "KIND_PD",
+    "KIND_ROBUST",
+    "FilterMatrices",
+    "HinfDesign",
+]

@@ -1,0 +1,888 @@
+r"""H-infinity filter design by LMIs: Theorem 1 and Corollary 1 of Peixoto et al.
+
+Paper: 001_00f62b5a0c49ad87.txt ("A novel H-infinity filter design condition for
+discrete-time LPV systems"). For the polytopic plant (1) and the filter (2),
+the LMIs (6)-(7) certify ``||e||_2 < gamma ||w||_2`` (zero initial state) for
+every parameter sequence ``alpha_k`` on the simplex, varying arbitrarily fast.
+:func:`design_hinf` solves them at a given ``epsilon``; :func:`search_epsilon`
+finds the best ``epsilon`` over the whole real line (and its limit
+``epsilon -> infinity``); :func:`epsilon_curve` gives ``gamma(epsilon)``.
+
+How the LMIs are built (and where they differ from the printed text)
+--------------------------------------------------------------------
+Every block comes from the proof, which is Finsler's lemma: with
+``zeta = (x_{k+1}, x_{f,k+1}, x_k, x_{f,k}, e_k, w_k)`` (block sizes
+``nx, nx, nx, nx, nz, nw``), the closed loop (3) is ``G zeta = 0`` with ::
+
+    G = [[-I,  0,  A,              0,   0,  Bw            ],   x_{k+1} = A x + Bw w
+         [ 0, -H,  Bf Cy,          Af,  0,  Bf Dy         ],   H x_{f,k+1} = Af x_f + Bf y
+         [ 0,  0,  Cz - Df Cy,    -Cf, -I,  Dz - Df Dy    ]]   e = z - z_f
+
+and the dissipation inequality ``V(xi_{k+1}) - V(xi_k) + e'e - delta w'w < 0``
+is ``zeta' Q zeta < 0`` with ``Q = diag(P(alpha_{k+1}), -P(alpha_k), I, -delta I)``,
+``P = [[P1, P3], [P3', P2]]``. Finsler: ``Q + He{X G} < 0`` implies it on
+``ker G``, for the multiplier ::
+
+    X = [[X1, a I, 0], [X2, I, 0], [X3, b I, 0], [X4, 0, 0], [X5, 0, I], [X6, 0, 0]].
+
+With ``(a, b) = (epsilon, 1)`` this is the paper's ``Phi`` block for block,
+except ``Phi_21``: it is ``-X2 - eps H' + P3(alpha_{k+1})'`` (vertex ``l``),
+not ``P_{3,j}'`` as printed (``test_hinf_design.py`` checks the identity on
+random data, and shows that the printed block certifies a gamma far below the
+filter's true worst-case gain).
+
+Two further deviations, both sound:
+
+* **Exact rescaling.** At large ``epsilon`` the printed LMIs are badly
+  conditioned (the filter variables scale like ``1/epsilon`` and
+  ``1/epsilon^2``). Take ``(a, b)`` with ``a / b = epsilon``, ``s = 1/b``, the
+  congruence ``T = diag(I, sI, I, sI, I, I)`` and the change of variables
+  ``P2 -> s^2 P2``, ``P3, X2, X4 -> s (.)``, ``H, Af -> s^2 (.)``,
+  ``Bf, Cf -> s (.)`` (the others unchanged). Block by block, ``T Phi T`` of
+  the paper's LMI at ``epsilon`` is the LMI above at ``(a, b)`` in the new
+  variables (e.g. ``s (-X2 - eps H' + P3') = -X2^ - a H^' + P3^'`` and
+  ``s (-H + ...) = -b H^ + ...``). ``T`` is nonsingular and the variable map is
+  a bijection, ``T diag(P, P) T > 0`` iff ``P > 0``, and ``delta`` is
+  untouched: both problems have the same feasible ``delta``, hence the same
+  optimal ``gamma``. The new filter matrices are the same filter in the state
+  coordinates ``x_f / s = b x_f`` (``H^-1 Af`` is unchanged, ``H^-1 Bf`` and
+  ``Cf`` scale by ``1/s`` and ``s``): same input-output map, same ``gamma``.
+  We use ``a = sin(phi)``, ``b = cos(phi)``, ``epsilon = tan(phi)``: every
+  coefficient is at most 1 in size, and ``b = 0`` is the limit
+  ``epsilon -> infinity`` (still a valid Finsler multiplier, so its ``gamma``
+  is certified too). ``a`` and ``b`` enter as ``cp.Parameter`` (with the
+  plant's vertex matrices), so a program compiles once (DPP) and serves every
+  ``epsilon`` and every plant of the same dimensions. ``test_hinf_design.py``
+  checks ``Phi_paper = T^-1 Phi T^-1`` at a solution and that both
+  realizations filter identically.
+* **P(alpha) > 0.** The proof needs ``V >= 0``; ``P1, P2 > 0`` alone do not
+  give it (an unstable plant can satisfy the LMIs with an indefinite ``P``).
+  We impose ``P_i > 0`` at each vertex. When the plant is stable under
+  arbitrary switching this loses nothing: the LMIs then make ``V`` strictly
+  decrease along every trajectory of a stable system, hence ``V > 0``.
+
+The Lemma 1 relaxation (``Phi_iil < 0``, ``Phi_ijl + Phi_jil < 0`` for
+``i < j``) is applied for any number of vertices ``N``: ``N^2 (N + 1) / 2``
+LMIs of size ``4 nx + nz + nw``. Strict inequalities are ``M << -margin I``.
+Every returned point is checked: the eigenvalues of every assembled LMI and of
+every ``P_i`` (numpy, float64) must be strictly negative / positive. A failed
+check is retried with tighter solver settings, then raises
+:class:`~lpvest.errors.LMIInfeasibleError`.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import time
+import warnings
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from ..errors import DimensionError, LMIInfeasibleError, NonFiniteError
+from ..systems.polytopic import PolytopicLPV
+from .result import KIND_PD, KIND_ROBUST, HinfDesign
+
+__all__ = [
+    "design_hinf",
+    "search_epsilon",
+    "epsilon_curve",
+    "HinfProgram",
+    "EpsilonCurve",
+    "EpsilonSearch",
+    "multiplier",
+    "lmi_matrices",
+    "LMIBlock",
+    "DesignAttempt",
+    "DEFAULT_SOLVER",
+    "DEFAULT_MARGIN",
+]
+
+#: Solver used unless told otherwise.
+DEFAULT_SOLVER = "CLARABEL"
+#: Strict LMIs are imposed as ``M << -DEFAULT_MARGIN * I`` (``P_i >> margin I``).
+DEFAULT_MARGIN = 1e-6
+
+#: Solver settings used unless the caller overrides them: one thread is about
+#: twice as fast as two for these small problems.
+_DEFAULT_OPTIONS: dict[str, dict[str, Any]] = {"CLARABEL": {"max_threads": 1}}
+
+#: A point that fails the check is solved again with the margin this much larger.
+RETRY_MARGIN_FACTOR = 30.0
+
+_ACCEPTED = ("optimal", "optimal_inaccurate")
+
+
+# ---------------------------------------------------------------------------
+# epsilon <-> multiplier
+# ---------------------------------------------------------------------------
+def multiplier(epsilon: float) -> tuple[float, float]:
+    """The normalized multiplier ``(a, b) = (sin phi, cos phi)``, ``phi = atan(epsilon)``.
+
+    ``epsilon = a / b``; ``epsilon = +-inf`` gives ``(1, 0)``.
+
+    Examples
+    --------
+    >>> multiplier(0.0)
+    (0.0, 1.0)
+    >>> multiplier(float("inf"))
+    (1.0, 0.0)
+    """
+    eps = float(epsilon)
+    if math.isnan(eps):
+        raise NonFiniteError("epsilon is NaN")
+    if math.isinf(eps):
+        return (1.0, 0.0)
+    r = math.hypot(1.0, eps)
+    return (eps / r, 1.0 / r)
+
+
+def _canonical_phi(phi: float) -> float:
+    """``phi`` modulo pi, in ``(-pi/2, pi/2]``."""
+    p = math.remainder(phi, math.pi)  # in [-pi/2, pi/2]
+    return math.pi / 2 if p <= -math.pi / 2 + 1e-15 else p
+
+
+def _epsilon_of_phi(phi: float) -> float:
+    p = _canonical_phi(phi)
+    return math.inf if abs(math.pi / 2 - p) < 1e-12 else math.tan(p)
+
+
+def _ab_of_phi(phi: float) -> tuple[float, float]:
+    p = _canonical_phi(phi)
+    if abs(math.pi / 2 - p) < 1e-12:
+        return (1.0, 0.0)
+    return (math.sin(p), math.cos(p))
+
+
+# ---------------------------------------------------------------------------
+# the LMIs, written once for numpy arrays and for cvxpy expressions
+# ---------------------------------------------------------------------------
+def _xg_rows(d: Mapping[str, Any], v: Mapping[str, Any], a: Any, b: Any) -> list[list[Any]]:
+    """The 6 x 6 blocks of ``X G`` (see the module documentation) for plant
+    vertex data ``d`` (with ``aCy = a Cy`` etc. precomputed, so that cvxpy sees
+    parameter x variable products only) and variables ``v`` of one vertex."""
+    nx, nw = d["Bw"].shape
+    nz = d["Cz"].shape[0]
+    X1, X2, X3, X4, X5, X6 = (v[k] for k in ("X1", "X2", "X3", "X4", "X5", "X6"))
+    H, Af, Bf, Cf, Df = (v[k] for k in ("H", "Af", "Bf", "Cf", "Df"))
+    A, Bw, Cz, Dz, Cy, Dy = (d[k] for k in ("A", "Bw", "Cz", "Dz", "Cy", "Dy"))
+    zxx, zxz = np.zeros((nx, nx)), np.zeros((nx, nz))
+    zzx, zwx, zwz = np.zeros((nz, nx)), np.zeros((nw, nx)), np.zeros((nw, nz))
+    return [
+        [-X1, -a * H, X1 @ A + Bf @ d["aCy"], a * Af, zxz, X1 @ Bw + Bf @ d["aDy"]],
+        [-X2, -H, X2 @ A + Bf @ Cy, Af, zxz, X2 @ Bw + Bf @ Dy],
+        [-X3, -b * H, X3 @ A + Bf @ d["bCy"], b * Af, zxz, X3 @ Bw + Bf @ d["bDy"]],
+        [-X4, zxx, X4 @ A, zxx, zxz, X4 @ Bw],
+        [-X5, zzx, X5 @ A + Cz - Df @ Cy, -Cf, -np.eye(nz), X5 @ Bw + Dz - Df @ Dy],
+        [-X6, zwx, X6 @ A, zwx, zwz, X6 @ Bw],
+    ]
+
+
+def _q_next(P1: Any, P2: Any, P3: Any, n_rest: int, bmat: Callable[[list[list[Any]]], Any]) -> Any:
+    """``diag(P(alpha_{k+1}), 0)``: the ``V(xi_{k+1})`` part of ``Q``."""
+    nx = P3.shape[0]
+    z = np.zeros((2 * nx, n_rest))
+    return bmat([[bmat([[P1, P3], [P3.T, P2]]), z], [z.T, np.zeros((n_rest, n_rest))]])
+
+
+def _q_now(P1: Any, P2: Any, P3: Any, delta: Any, nz: int, nw: int, bmat: Callable[..., Any]) -> Any:
+    """``diag(0, -P(alpha_k), I, -delta I)``: the rest of ``Q``."""
+    nx = P3.shape[0]
+    zxx = np.zeros((nx, nx))
+    zxz, zxw, zzw = np.zeros((nx, nz)), np.zeros((nx, nw)), np.zeros((nz, nw))
+    rows = [
+        [zxx, zxx, zxx, zxx, zxz, zxw],
+        [zxx, zxx, zxx, zxx, zxz, zxw],
+        [zxx, zxx, -P1, -P3, zxz, zxw],
+        [zxx, zxx, -P3.T, -P2, zxz, zxw],
+        [zxz.T, zxz.T, zxz.T, zxz.T, np.eye(nz), zzw],
+        [zxw.T, zxw.T, zxw.T, zxw.T, zzw.T, -delta * np.eye(nw)],
+    ]
+    return bmat(rows)
+
+
+class LMIBlock(NamedTuple):
+    """One LMI of (6)-(7): ``matrix < 0`` with ``matrix = Phi_iil`` (``i == j``)
+    or ``Phi_ijl + Phi_jil`` (``i < j``); indices are 0-based."""
+
+    label: str
+    i: int
+    j: int
+    l: int  # noqa: E741 - the paper's index
+    matrix: Any
+
+
+def _lmis(
+    data: Sequence[Mapping[str, Any]],
+    var: Mapping[str, Any],
+    a: Any,
+    b: Any,
+    *,
+    robust: bool,
+    bmat: Callable[..., Any],
+    printed_phi21: bool = False,
+) -> list[LMIBlock]:
+    """The LMIs (6)-(7) after Lemma 1, each matrix required ``< 0``.
+
+    ``var`` maps names to per-vertex lists (``P1, P2, P3, X1..X6`` of length
+    ``N``; ``H, Af, Bf, Cf, Df`` of length ``N``, or 1 when ``robust``) and
+    ``delta`` to the scalar. ``printed_phi21`` reproduces the paper's misprint
+    (``P_{3,j}`` in ``Phi_21``); it exists to document that trap in the tests.
+    """
+    n = len(data)
+    nx, nw = data[0]["Bw"].shape
+    nz = data[0]["Cz"].shape[0]
+    n_rest = 2 * nx + nz + nw
+
+    def vertex_vars(j: int) -> dict[str, Any]:
+        f = 0 if robust else j
+        out = {k: var[k][j] for k in ("X1", "X2", "X3", "X4", "X5", "X6")}
+        out.update({k: var[k][f] for k in ("H", "Af", "Bf", "Cf", "Df")})
+        return out
+
+    K: dict[tuple[int, int], Any] = {}
+    for i in range(n):
+        for j in range(n):
+            L = bmat(_xg_rows(data[i], vertex_vars(j), a, b))
+            K[i, j] = L + L.T
+    Qc = [_q_now(var["P1"][j], var["P2"][j], var["P3"][j], var["delta"], nz, nw, bmat) for j in range(n)]
+
+    def qn(j: int, nxt: int) -> Any:
+        # P(alpha_{k+1}) at vertex nxt (the paper's l); the misprint puts P_{3,j} in Phi_21
+        m = j if printed_phi21 else nxt
+        return _q_next(var["P1"][nxt], var["P2"][nxt], var["P3"][m], n_rest, bmat)
+
+    out: list[LMIBlock] = []
+    for l in range(n):  # noqa: E741 - the paper's index
+        for i in range(n):
+            out.append(LMIBlock(f"Phi_{i + 1}{i + 1}{l + 1}", i, i, l, qn(i, l) + Qc[i] + K[i, i]))
+            for j in range(i + 1, n):
+                phi_ijl = qn(j, l) + Qc[j] + K[i, j]
+                phi_jil = qn(i, l) + Qc[i] + K[j, i]
+                label = f"Phi_{i + 1}{j + 1}{l + 1} + Phi_{j + 1}{i + 1}{l + 1}"
+                out.append(LMIBlock(label, i, j, l, phi_ijl + phi_jil))
+    return out
+
+
+def _vertex_data(plant: PolytopicLPV, a: float, b: float) -> list[dict[str, np.ndarray]]:
+    v = plant.vertices
+    out = []
+    for i in range(plant.n_vertices):
+        d = {"A": v.A[i], "Bw": v.Bw[i], "Cz": v.Cz[i], "Dz": v.Dz[i], "Cy": v.Cy[i], "Dy": v.Dy[i]}
+        d.update(aCy=a * v.Cy[i], bCy=b * v.Cy[i], aDy=a * v.Dy[i], bDy=b * v.Dy[i])
+        out.append(d)
+    return out
+
+
+def _np_bmat(rows: list[list[Any]]) -> np.ndarray:
+    return np.block([[np.asarray(x, dtype=float) for x in row] for row in rows])
+
+
+def lmi_matrices(
+    plant: PolytopicLPV,
+    variables: Mapping[str, Any],
+    epsilon: float | None = None,
+    *,
+    multiplier_ab: tuple[float, float] | None = None,
+    robust: bool = False,
+    printed_phi21: bool = False,
+) -> list[LMIBlock]:
+    """The LMIs (6)-(7) (after Lemma 1) evaluated with numpy at given variables.
+
+    Used to check a solver's answer, and by the tests. ``variables`` maps
+    ``P1, P2, P3, X1..X6, H, Af, Bf, Cf, Df`` to per-vertex sequences and
+    ``delta`` to a float. Give ``epsilon`` for the paper's form
+    ``(a, b) = (epsilon, 1)``, or ``multiplier_ab`` for the rescaled form.
+    """
+    if (epsilon is None) == (multiplier_ab is None):
+        raise ValueError("give exactly one of epsilon and multiplier_ab")
+    a, b = (float(epsilon), 1.0) if multiplier_ab is None else multiplier_ab  # type: ignore[arg-type]
+    var = {k: ([np.asarray(m, dtype=float) for m in v] if k != "delta" else float(v)) for k, v in variables.items()}
+    return _lmis(_vertex_data(plant, a, b), var, a, b, robust=robust, bmat=_np_bmat, printed_phi21=printed_phi21)
+
+
+# ---------------------------------------------------------------------------
+# the compiled program
+# ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class DesignAttempt:
+    """One solve of the LMIs at one ``epsilon`` (:meth:`HinfProgram.attempt`),
+    which does not raise when no certified design is found."""
+
+    design: HinfDesign | None
+    status: str  #: final status: the solver's (cvxpy vocabulary), "...; LMI check failed", or "infeasible"
+    gamma: float  #: inf when no certified design
+    detail: str = ""  #: every solve tried and why it was rejected
+
+
+class HinfProgram:
+    """The LMI program of Theorem 1 (``kind="parameter-dependent"``) or
+    Corollary 1 (``kind="robust"``) for plants of given dimensions, compiled once.
+
+    The plant's vertex matrices and the multiplier ``(a, b)`` are
+    ``cp.Parameter``: one program serves every ``epsilon`` and every plant of
+    the same ``(N, nx, ny, nz, nw)`` (the Example 2 sweep over ``rho``
+    compiles once). Not thread-safe (the parameters are shared).
+
+    Parameters
+    ----------
+    n_vertices, nx, ny, nz, nw : int
+        Plant dimensions.
+    kind : {"parameter-dependent", "robust"}
+    solver : str
+        A cvxpy solver name able to handle semidefinite constraints
+        (``"CLARABEL"``, ``"SCS"``, ``"MOSEK"``, ...).
+    margin : float
+        Strict inequalities as ``M << -margin I``, ``P_i >> margin I``.
+    solver_options : mapping, optional
+        Extra keyword arguments for the solver.
+    printed_phi21 : bool
+        Use the paper's misprinted ``Phi_21`` (for tests documenting the trap).
+
+    Examples
+    --------
+    >>> import lpvest
+    >>> plant = lpvest.load_system("peixoto-ex1").model()
+    >>> program = HinfProgram.for_plant(plant)
+    >>> round(program.solve(plant, 150.0).gamma, 2)
+    1.21
+    """
+
+    def __init__(
+        self,
+        n_vertices: int,
+        nx: int,
+        ny: int,
+        nz: int,
+        nw: int,
+        *,
+        kind: str = KIND_PD,
+        solver: str = DEFAULT_SOLVER,
+        margin: float = DEFAULT_MARGIN,
+        solver_options: Mapping[str, Any] | None = None,
+        printed_phi21: bool = False,
+    ) -> None:
+        import cvxpy as cp
+
+        if kind not in (KIND_PD, KIND_ROBUST):
+            raise ValueError(f"kind must be {KIND_PD!r} or {KIND_ROBUST!r}; found {kind!r}")
+        dims = {"n_vertices": n_vertices, "nx": nx, "ny": ny, "nz": nz, "nw": nw}
+        for name, value in dims.items():
+            if int(value) != value or value < 1:
+                raise DimensionError(f"{name} must be a positive integer; found {value!r}")
+        if not margin > 0:
+            raise ValueError(f"margin must be positive; found {margin!r}")
+        t0 = time.perf_counter()
+        self.n_vertices, self.nx, self.ny, self.nz, self.nw = (int(v) for v in dims.values())
+        self.kind = kind
+        self.solver = str(solver).upper()
+        self.margin = float(margin)
+        self.solver_options = dict(solver_options or {})
+        self.printed_phi21 = bool(printed_phi21)
+        N = self.n_vertices
+        nf = 1 if kind == KIND_ROBUST else N
+
+        self._a = cp.Parameter(name="a")
+        self._b = cp.Parameter(name="b")
+        self._margin = cp.Parameter(nonneg=True, name="margin", value=self.margin)
+        shapes = {"A": (nx, nx), "Bw": (nx, nw), "Cz": (nz, nx), "Dz": (nz, nw), "Cy": (ny, nx), "Dy": (ny, nw)}
+        shapes.update(aCy=(ny, nx), bCy=(ny, nx), aDy=(ny, nw), bDy=(ny, nw))
+        self._data = [{k: cp.Parameter(s, name=f"{k}_{i + 1}") for k, s in shapes.items()} for i in range(N)]
+
+        def vars_(name: str, shape: tuple[int, int], count: int, **kw: Any) -> list[Any]:
+            return [cp.Variable(shape, name=f"{name}_{i + 1}", **kw) for i in range(count)]
+
+        self._var: dict[str, Any] = {
+            "P1": vars_("P1", (nx, nx), N, symmetric=True),
+            "P2": vars_("P2", (nx, nx), N, symmetric=True),
+            "P3": vars_("P3", (nx, nx), N),
+            "X1": vars_("X1", (nx, nx), N),
+            "X2": vars_("X2", (nx, nx), N),
+            "X3": vars_("X3", (nx, nx), N),
+            "X4": vars_("X4", (nx, nx), N),
+            "X5": vars_("X5", (nz, nx), N),
+            "X6": vars_("X6", (nw, nx), N),
+            "H": vars_("H", (nx, nx), nf),
+            "Af": vars_("Af", (nx, nx), nf),
+            "Bf": vars_("Bf", (nx, ny), nf),
+            "Cf": vars_("Cf", (nz, nx), nf),
+            "Df": vars_("Df", (nz, ny), nf),
+            "delta": cp.Variable(name="delta"),
+        }
+        lmis = _lmis(
+            self._data, self._var, self._a, self._b,
+            robust=(kind == KIND_ROBUST), bmat=cp.bmat, printed_phi21=self.printed_phi21,
+        )
+        size = 4 * nx + nz + nw
+        constraints = [blk.matrix << -self._margin * np.eye(size) for blk in lmis]
+        for j in range(N):
+            P = cp.bmat([[self._var["P1"][j], self._var["P3"][j]], [self._var["P3"][j].T, self._var["P2"][j]]])
+            constraints.append(P >> self._margin * np.eye(2 * nx))
+        self.n_lmis = len(lmis)
+        self._problem = cp.Problem(cp.Minimize(self._var["delta"]), constraints)
+        if not self._problem.is_dpp():  # pragma: no cover - a construction bug, not user input
+            raise RuntimeError("the H-infinity LMI program is not DPP")
+        # compile now (placeholder parameter values), so that every solve only
+        # substitutes parameters: the compile time is paid once, here
+        self._set_parameters({k: np.zeros((N, *sh)) for k, sh in shapes.items()}, 1.0, 0.0)
+        self._problem.get_problem_data(self.solver)
+        self.compile_time = time.perf_counter() - t0
+
+    @classmethod
+    def for_plant(cls, plant: PolytopicLPV, **options: Any) -> HinfProgram:
+        """A program for the dimensions of ``plant`` (options as in the constructor)."""
+        _check_plant(plant)
+        return cls(plant.n_vertices, plant.nx, plant.ny, plant.nz, plant.nw, **options)
+
+    # -- parameters -----------------------------------------------------------------
+    def _set_parameters(self, vertices: Mapping[str, np.ndarray], a: float, b: float) -> None:
+        self._a.value = a
+        self._b.value = b
+        for i, d in enumerate(self._data):
+            for k in ("A", "Bw", "Cz", "Dz", "Cy", "Dy"):
+                d[k].value = vertices[k][i]
+            d["aCy"].value = a * vertices["Cy"][i]
+            d["bCy"].value = b * vertices["Cy"][i]
+            d["aDy"].value = a * vertices["Dy"][i]
+            d["bDy"].value = b * vertices["Dy"][i]
+
+    def _check_dims(self, plant: PolytopicLPV) -> None:
+        _check_plant(plant)
+        have = (plant.n_vertices, plant.nx, plant.ny, plant.nz, plant.nw)
+        want = (self.n_vertices, self.nx, self.ny, self.nz, self.nw)
+        if have != want:
+            raise DimensionError(
+                f"plant has (N, nx, ny, nz, nw) = {have}; this program was compiled for {want}"
+            )
+
+    # -- solving --------------------------------------------------------------------
+    def _values(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for k, v in self._var.items():
+            if k == "delta":
+                out[k] = float(v.value)
+            else:
+                out[k] = [np.array(x.value, dtype=float) for x in v]
+        return out
+
+    def last_variables(self) -> dict[str, Any]:
+        """Every decision variable of the last solve (``P1, P2, P3, X1..X6``
+        per vertex, the filter matrices, ``delta``), in the rescaled
+        coordinates of the module documentation; raises if none is available."""
+        if self._var["delta"].value is None:
+            raise LMIInfeasibleError("the program has no solution yet", status=str(self._problem.status))
+        return self._values()
+
+    def _run_solver(self) -> tuple[str, float, str]:
+        """``(status, seconds, message)``: a solver failure is status ``"solver_error"``."""
+        import cvxpy as cp
+
+        t0 = time.perf_counter()
+        try:
+            with warnings.catch_warnings():
+                # "Solution may be inaccurate": the status says so, and the check decides
+                warnings.simplefilter("ignore", UserWarning)
+                options = {**_DEFAULT_OPTIONS.get(self.solver, {}), **self.solver_options}
+                self._problem.solve(solver=self.solver, **options)
+            status, message = str(self._problem.status), ""
+        except cp.error.SolverError as exc:
+            status, message = "solver_error", f" ({exc})"
+        return status, time.perf_counter() - t0, message
+
+    def _check(
+        self, plant: PolytopicLPV, values: Mapping[str, Any], a: float, b: float
+    ) -> tuple[bool, float, float, str]:
+        """Eigenvalues of every LMI and of every P_i at ``values``."""
+        if not all(np.all(np.isfinite(m)) for k, v in values.items() if k != "delta" for m in v) or not np.isfinite(
+            values["delta"]
+        ):
+            return False, -math.inf, -math.inf, "the solver returned non-finite values"
+        lmis = lmi_matrices(
+            plant, values, multiplier_ab=(a, b), robust=(self.kind == KIND_ROBUST), printed_phi21=self.printed_phi21
+        )
+        worst, worst_label = -math.inf, ""
+        ok = True
+        for label, *_, m in lmis:
+            eig = np.linalg.eigvalsh(m)
+            tol = 100.0 * np.finfo(float).eps * max(1.0, float(np.max(np.abs(eig))))
+            if eig[-1] > worst:
+                worst, worst_label = float(eig[-1]), label
+            if not eig[-1] < -tol:
+                ok = False
+        lyap_min = math.inf
+        for j in range(self.n_vertices):
+            P = np.block([[values["P1"][j], values["P3"][j]], [values["P3"][j].T, values["P2"][j]]])
+            eig = np.linalg.eigvalsh(0.5 * (P + P.T))
+            lyap_min = min(lyap_min, float(eig[0]))
+            if not eig[0] > 100.0 * np.finfo(float).eps * max(1.0, float(np.max(np.abs(eig)))):
+                ok = False
+        if values["delta"] <= 0:
+            ok = False
+        why = "" if ok else (
+            f"largest LMI eigenvalue {worst:.3g} ({worst_label}), smallest Lyapunov eigenvalue {lyap_min:.3g}"
+        )
+        return ok, -worst, lyap_min, why
+
+    def attempt(self, plant: PolytopicLPV, epsilon: float | None = None, *, phi: float | None = None) -> DesignAttempt:
+        """Solve at ``epsilon`` (or the angle ``phi = atan(epsilon)``) without
+        raising on failure: the certified design or ``None`` and the status."""
+        self._check_dims(plant)
+        if (epsilon is None) == (phi is None):
+            raise ValueError("give exactly one of epsilon and phi")
+        if phi is not None:
+            a, b = _ab_of_phi(phi)
+            eps = _epsilon_of_phi(phi)
+        else:
+            eps = float(epsilon)  # type: ignore[arg-type]
+            a, b = multiplier(eps)
+            eps = abs(eps) if math.isinf(eps) else eps
+        unstable = _unstable_vertex(plant)
+        if unstable is not None:
+            i, radius = unstable
+            detail = (
+                f"not solved: vertex {i + 1} of the plant has spectral radius {radius:.6g} >= 1, and the LMIs "
+                f"(6)-(7) with P_i > 0 imply that every vertex A_i is Schur (at alpha_k = alpha_(k+1) = e_i they "
+                f"are a Lyapunov inequality for the block-triangular plant-filter matrix)"
+            )
+            return DesignAttempt(None, "infeasible", math.inf, detail)
+        self._set_parameters(plant.vertices._asdict(), a, b)
+        attempts: list[str] = []
+        status = ""
+        elapsed = 0.0
+        # first the requested margin; if the answer fails the check (solvers
+        # stop within their tolerances, which may overshoot a small margin),
+        # once more with a margin RETRY_MARGIN_FACTOR times larger
+        for margin in (self.margin, self.margin * RETRY_MARGIN_FACTOR):
+            self._margin.value = margin
+            status, more, message = self._run_solver()
+            elapsed += more
+            label = f"margin {margin:.1e}: {status}{message}"
+            if status in _ACCEPTED:
+                values = self._values()
+                ok, lmi_margin, lyap_margin, why = self._check(plant, values, a, b)
+                if ok:
+                    design = self._design(plant, values, eps, a, b, status, elapsed, lmi_margin, lyap_margin)
+                    return DesignAttempt(design, status, design.gamma, "; ".join([*attempts, label]))
+                label += f", but the LMI check failed: {why}"
+                status += "; LMI check failed"
+            attempts.append(label)
+            if status.startswith(("infeasible", "unbounded")):
+                break
+        return DesignAttempt(None, status, math.inf, "; ".join(attempts))
+
+    def solve(self, plant: PolytopicLPV, epsilon: float) -> HinfDesign:
+        """The design at ``epsilon`` (``math.inf`` allowed); raises
+        :class:`~lpvest.errors.LMIInfeasibleError` (``.status`` = the final
+        solver status) when the LMIs are infeasible or the returned point fails
+        the check even after the retry."""
+        res = self.attempt(plant, epsilon)
+        if res.design is None:
+            raise LMIInfeasibleError(
+                _infeasible_message(plant, self, f"epsilon = {epsilon:g}", res.detail), status=res.status
+            )
+        return res.design
+
+    def _design(
+        self,
+        plant: PolytopicLPV,
+        values: Mapping[str, Any],
+        eps: float,
+        a: float,
+        b: float,
+        status: str,
+        elapsed: float,
+        lmi_margin: float,
+        lyap_margin: float,
+    ) -> HinfDesign:
+        lyap = np.stack([
+            np.block([[values["P1"][j], values["P3"][j]], [values["P3"][j].T, values["P2"][j]]])
+            for j in range(self.n_vertices)
+        ])
+        lyap = 0.5 * (lyap + np.transpose(lyap, (0, 2, 1)))
+        return HinfDesign(
+            kind=self.kind,
+            H=np.stack(values["H"]),
+            Af=np.stack(values["Af"]),
+            Bf=np.stack(values["Bf"]),
+            Cf=np.stack(values["Cf"]),
+            Df=np.stack(values["Df"]),
+            gamma=math.sqrt(values["delta"]),
+            epsilon=eps,
+            multiplier=(a, b),
+            lyapunov=lyap,
+            solver=self.solver,
+            status=status,
+            compile_time=self.compile_time,
+            solve_time=elapsed,
+            lmi_margin=lmi_margin,
+            lyapunov_margin=lyap_margin,
+            n_lmis=self.n_lmis,
+            nw=self.nw,
+            plant=plant.name,
+        )
+
+
+def _check_plant(plant: object) -> None:
+    if not isinstance(plant, PolytopicLPV):
+        raise TypeError(f"the plant must be a PolytopicLPV; found {type(plant).__name__}")
+
+
+def _unstable_vertex(plant: PolytopicLPV) -> tuple[int, float] | None:
+    """The first vertex whose ``A_i`` is not Schur, with its spectral radius."""
+    for i, a in enumerate(plant.vertices.A):
+        radius = float(np.max(np.abs(np.linalg.eigvals(a))))
+        if radius >= 1.0:
+            return i, radius
+    return None
+
+
+def _infeasible_message(plant: PolytopicLPV, prog: HinfProgram, where: str, detail: str) -> str:
+    name = plant.name or "(unnamed plant)"
+    return f"{prog.kind} H-infinity LMIs for {name} at {where}, solver {prog.solver}: no certified solution ({detail})"
+
+
+@functools.lru_cache(maxsize=16)
+def _cached_program(
+    dims: tuple[int, int, int, int, int], kind: str, solver: str, margin: float, options: tuple[tuple[str, Any], ...]
+) -> HinfProgram:
+    return HinfProgram(*dims, kind=kind, solver=solver, margin=margin, solver_options=dict(options))
+
+
+def _program_for(
+    plant: PolytopicLPV,
+    kind: str,
+    solver: str,
+    margin: float,
+    solver_options: Mapping[str, Any] | None,
+    program: HinfProgram | None,
+) -> HinfProgram:
+    _check_plant(plant)
+    if program is not None:
+        program._check_dims(plant)
+        if program.kind != kind:
+            raise ValueError(f"the program is for a {program.kind} filter, not {kind}")
+        return program
+    if kind not in (KIND_PD, KIND_ROBUST):
+        raise ValueError(f"kind must be {KIND_PD!r} or {KIND_ROBUST!r}; found {kind!r}")
+    dims = (plant.n_vertices, plant.nx, plant.ny, plant.nz, plant.nw)
+    opts = tuple(sorted((solver_options or {}).items()))
+    return _cached_program(dims, kind, str(solver).upper(), float(margin), opts)
+
+
+# ---------------------------------------------------------------------------
+# public entry points
+# ---------------------------------------------------------------------------
+def design_hinf(
+    plant: PolytopicLPV,
+    *,
+    epsilon: float,
+    kind: str = KIND_PD,
+    solver: str = DEFAULT_SOLVER,
+    margin: float = DEFAULT_MARGIN,
+    solver_options: Mapping[str, Any] | None = None,
+    program: HinfProgram | None = None,
+) -> HinfDesign:
+    """Design the filter of Theorem 1 (``kind="parameter-dependent"``) or
+    Corollary 1 (``kind="robust"``) at a given ``epsilon``.
+
+    Parameters
+    ----------
+    plant : PolytopicLPV
+        The plant (1), any ``N``, ``nx``, ``ny``, ``nz``, ``nw``.
+    epsilon : float
+        The paper's scalar; any real number, or ``math.inf``.
+    kind : {"parameter-dependent", "robust"}
+    solver : str
+        cvxpy solver (default ``"CLARABEL"``).
+    margin : float
+        Strictness margin of the LMIs.
+    solver_options : mapping, optional
+        Passed to the solver.
+    program : HinfProgram, optional
+        A compiled program to reuse (by default one is compiled for the plant's
+        dimensions and cached for the process).
+
+    Returns
+    -------
+    HinfDesign
+        Certified: every LMI was checked by its eigenvalues at the returned point.
+
+    Raises
+    ------
+    LMIInfeasibleError
+        The LMIs are infeasible at ``epsilon`` (e.g. an unstable plant), or the
+        solver's answer failed the check even after a retry; ``.status`` holds
+        the solver status.
+
+    Examples
+    --------
+    >>> import lpvest
+    >>> plant = lpvest.load_system("peixoto-ex1").model()
+    >>> d = design_hinf(plant, epsilon=150.0, kind="robust")
+    >>> round(d.gamma, 1)
+    8.2
+    """
+    prog = _program_for(plant, kind, solver, margin, solver_options, program)
+    return prog.solve(plant, epsilon)
+
+
+@dataclass(frozen=True, eq=False)
+class EpsilonCurve:
+    """``gamma(epsilon)`` sampled: the certified bound at each ``epsilon``.
+
+    ``gamma`` is ``inf`` where no certified design exists (``status`` says why).
+    ``phi = atan(epsilon)`` in ``(-pi/2, pi/2]`` (``epsilon = inf`` at ``pi/2``).
+    """
+
+    epsilon: np.ndarray  #: shape (M,)
+    phi: np.ndarray  #: shape (M,)
+    gamma: np.ndarray  #: shape (M,)
+    status: tuple[str, ...]
+
+    def best(self) -> tuple[float, float]:
+        """``(epsilon, gamma)`` of the smallest sampled ``gamma``."""
+        k = int(np.argmin(self.gamma))
+        return float(self.epsilon[k]), float(self.gamma[k])
+
+
+@dataclass(frozen=True, eq=False)
+class EpsilonSearch:
+    """Result of :func:`search_epsilon`: the best design and every point tried."""
+
+    design: HinfDesign
+    curve: EpsilonCurve  #: every evaluated point, sorted by ``phi``
+    n_evaluations: int  #: epsilon values evaluated (a retry with a larger margin counts once)
+
+
+def _curve(points: Mapping[float, DesignAttempt]) -> EpsilonCurve:
+    phis = sorted(points)
+    return EpsilonCurve(
+        epsilon=np.array([_epsilon_of_phi(p) for p in phis]),
+        phi=np.array([_canonical_phi(p) for p in phis]),
+        gamma=np.array([points[p].gamma for p in phis]),
+        status=tuple(points[p].status for p in phis),
+    )
+
+
+def epsilon_curve(
+    plant: PolytopicLPV,
+    epsilons: Sequence[float] | np.ndarray,
+    *,
+    kind: str = KIND_PD,
+    solver: str = DEFAULT_SOLVER,
+    margin: float = DEFAULT_MARGIN,
+    solver_options: Mapping[str, Any] | None = None,
+    program: HinfProgram | None = None,
+) -> EpsilonCurve:
+    """``gamma(epsilon)`` at the given ``epsilons`` (one compiled program).
+
+    Examples
+    --------
+    >>> import lpvest
+    >>> plant = lpvest.load_system("peixoto-ex1").model()
+    >>> c = epsilon_curve(plant, [1.0, 150.0])
+    >>> c.gamma.shape
+    (2,)
+    """
+    prog = _program_for(plant, kind, solver, margin, solver_options, program)
+    eps = np.asarray(epsilons, dtype=float).ravel()
+    out = []
+    for e in eps:
+        res = prog.attempt(plant, float(e))
+        out.append(res)
+    return EpsilonCurve(
+        epsilon=eps.copy(),
+        phi=np.array([math.pi / 2 if math.isinf(e) else math.atan(e) for e in eps]),
+        gamma=np.array([r.gamma for r in out]),
+        status=tuple(r.status for r in out),
+    )
+
+
+def search_epsilon(
+    plant: PolytopicLPV,
+    *,
+    kind: str = KIND_PD,
+    n_grid: int = 24,
+    n_refine: int = 2,
+    xatol: float = 1e-3,
+    solver: str = DEFAULT_SOLVER,
+    margin: float = DEFAULT_MARGIN,
+    solver_options: Mapping[str, Any] | None = None,
+    program: HinfProgram | None = None,
+) -> EpsilonSearch:
+    """The best ``gamma`` over every real ``epsilon`` (and ``epsilon -> inf``).
+
+    ``epsilon = tan(phi)`` maps the whole line plus infinity onto the circle
+    ``phi in (-pi/2, pi/2]``, and the LMIs depend continuously on
+    ``(sin phi, cos phi)`` (see the module documentation). The search
+    evaluates a uniform grid of ``n_grid`` angles (both signs of epsilon,
+    magnitudes from ``~pi/(2 n_grid)`` up to infinity), then refines the
+    ``n_refine`` best local minima of the grid by a bounded Brent search
+    (``scipy.optimize.minimize_scalar``) between their grid neighbours, to
+    ``xatol`` in ``phi``. Every evaluation reuses the compiled program.
+
+    Returns
+    -------
+    EpsilonSearch
+        ``design`` at the best ``epsilon`` found, ``curve`` of every evaluated
+        point, ``n_evaluations``.
+
+    Raises
+    ------
+    LMIInfeasibleError
+        No grid point gives a certified design.
+
+    Examples
+    --------
+    >>> import lpvest
+    >>> plant = lpvest.load_system("peixoto-ex1").model()
+    >>> best = search_epsilon(plant, kind="robust")
+    >>> best.design.gamma < 8.18
+    True
+    """
+    from scipy.optimize import minimize_scalar
+
+    if n_grid < 3:
+        raise ValueError(f"n_grid must be at least 3; found {n_grid}")
+    prog = _program_for(plant, kind, solver, margin, solver_options, program)
+    points: dict[float, DesignAttempt] = {}
+
+    def evaluate(phi: float) -> float:
+        key = _canonical_phi(phi)
+        if key not in points:
+            points[key] = prog.attempt(plant, phi=key)
+        return points[key].gamma
+
+    step = math.pi / n_grid
+    grid = [-math.pi / 2 + step * (k + 1) for k in range(n_grid)]
+    gam = [evaluate(p) for p in grid]
+    finite = [g for g in gam if math.isfinite(g)]
+    if not finite:
+        tried = [points[_canonical_phi(p)] for p in grid]
+        statuses = sorted({t.status for t in tried})
+        detail = "; ".join(sorted({t.detail for t in tried}))[:2000]
+        raise LMIInfeasibleError(
+            _infeasible_message(plant, prog, f"every epsilon tried ({n_grid} values)", detail),
+            status=statuses[0] if len(statuses) == 1 else " | ".join(statuses),
+        )
+    penalty = 10.0 * max(finite) + 1.0
+    minima = [
+        k for k in range(n_grid)
+        if math.isfinite(gam[k]) and gam[k] <= gam[k - 1] and gam[k] <= gam[(k + 1) % n_grid]
+    ]
+    minima.sort(key=lambda k: gam[k])
+    for k in minima[: max(0, n_refine)]:
+        minimize_scalar(
+            lambda p: min(evaluate(p), penalty),
+            bounds=(grid[k] - step, grid[k] + step),
+            method="bounded",
+            options={"xatol": xatol},
+        )
+    best_phi = min(points, key=lambda p: points[p].gamma)
+    design = points[best_phi].design
+    assert design is not None
+    return EpsilonSearch(design=design, curve=_curve(points), n_evaluations=len(points))

@@ -1,0 +1,336 @@
+"""The result of an H-infinity filter design, and its JSON file (numpy only).
+
+A :class:`HinfDesign` holds the filter of eq. (2) of Peixoto et al.
+(001_00f62b5a0c49ad87.txt)::
+
+    H(alpha_k) x_{f,k+1} = A_f(alpha_k) x_{f,k} + B_f(alpha_k) y_k
+    z_{f,k}              = C_f(alpha_k) x_{f,k} + D_f(alpha_k) y_k,
+
+by its vertex matrices ``H_i, A_{f,i}, B_{f,i}, C_{f,i}, D_{f,i}`` (one set for a
+robust filter, Corollary 1), the certified bound ``gamma``, the line-search
+scalar ``epsilon``, the Lyapunov matrices that certify it, how the solver fared
+and how the certificate checked. The filter FMU carries the JSON file written
+by :meth:`HinfDesign.to_json`; reading it needs only numpy.
+
+JSON format (``"format": "lpvest.hinf-design"``, ``"version": 1``)::
+
+    {
+      "format": "lpvest.hinf-design", "version": 1,
+      "kind": "parameter-dependent" | "robust",
+      "plant": "peixoto-ex1",                  # name of the plant (informative)
+      "n_vertices": N, "nx": nx, "ny": ny, "nz": nz, "nw": nw,
+      "gamma": 1.2087,                         # certified l2-gain bound
+      "epsilon": 150.0,                        # null when epsilon = infinity
+      "multiplier": [a, b],                    # epsilon = a / b, a^2 + b^2 = 1
+      "filter": {"H": [[[...]]], "Af": ..., "Bf": ..., "Cf": ..., "Df": ...},
+      "lyapunov": [[[...]]],                   # P_i, shape (N, 2 nx, 2 nx)
+      "solver": {"name": "CLARABEL", "status": "optimal",
+                 "compile_time": 0.12, "solve_time": 0.01},
+      "check": {"lmi_margin": 1.0e-6, "lyapunov_margin": 3.2e-3, "n_lmis": 6}
+    }
+
+Each filter matrix is a list over vertices (length ``N`` for a
+parameter-dependent filter, 1 for a robust one) of row lists. Floats are
+written with ``repr`` precision, so a round trip is exact.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from ..errors import DimensionError, ModelFileError
+from ..validation import as_vector, check_simplex
+
+__all__ = [
+    "HinfDesign",
+    "FilterMatrices",
+    "KIND_PD",
+    "KIND_ROBUST",
+    "DESIGN_FORMAT",
+    "DESIGN_FORMAT_VERSION",
+]
+
+#: ``kind`` of a parameter-dependent (gain-scheduled) filter, Theorem 1.
+KIND_PD = "parameter-dependent"
+#: ``kind`` of a robust filter (constant matrices), Corollary 1.
+KIND_ROBUST = "robust"
+#: ``format`` tag of the JSON file.
+DESIGN_FORMAT = "lpvest.hinf-design"
+#: Version of the JSON file format.
+DESIGN_FORMAT_VERSION = 1
+
+_FILTER_NAMES = ("H", "Af", "Bf", "Cf", "Df")
+
+
+class FilterMatrices(NamedTuple):
+    """The filter matrices of eq. (2) at one ``alpha``."""
+
+    H: np.ndarray  #: shape (nx, nx)
+    Af: np.ndarray  #: shape (nx, nx)
+    Bf: np.ndarray  #: shape (nx, ny)
+    Cf: np.ndarray  #: shape (nz, nx)
+    Df: np.ndarray  #: shape (nz, ny)
+
+
+@dataclass(frozen=True, eq=False)
+class HinfDesign:
+    """A designed H-infinity filter (Theorem 1 or Corollary 1) and its certificate.
+
+    Parameters
+    ----------
+    kind : {"parameter-dependent", "robust"}
+    H, Af : ndarray, shape (N_f, nx, nx)
+        Vertex matrices; ``N_f = N`` (parameter-dependent) or ``1`` (robust).
+    Bf : ndarray, shape (N_f, nx, ny)
+    Cf : ndarray, shape (N_f, nz, nx)
+    Df : ndarray, shape (N_f, nz, ny)
+    gamma : float
+        The certified bound on the l2-induced gain from ``w`` to ``e = z - z_f``.
+    epsilon : float
+        The paper's scalar (``math.inf`` for the limit ``epsilon -> infinity``).
+    multiplier : (float, float)
+        ``(a, b)`` with ``epsilon = a / b`` and ``a^2 + b^2 = 1``. The matrices
+        are the paper's filter at ``epsilon`` in the state coordinates
+        ``b * x_f`` (an exact rescaling, see :mod:`lpvest.design.hinf`).
+    lyapunov : ndarray, shape (N, 2 nx, 2 nx)
+        ``P_i = [[P_{1,i}, P_{3,i}], [P_{3,i}^T, P_{2,i}]]`` of the certificate
+        ``V = xi^T P(alpha) xi`` with ``xi = (x, x_f)`` in the same coordinates.
+    solver, status : str
+        Solver name and the final ``problem.status``.
+    compile_time, solve_time : float
+        Seconds: one-time compilation of the LMI program that produced this
+        design (shared by every solve of that program), and this solve.
+    lmi_margin : float
+        ``-max`` eigenvalue over every LMI (6)-(7) at the returned point (> 0).
+    lyapunov_margin : float
+        Smallest eigenvalue over the ``P_i`` (> 0).
+    n_lmis : int
+        Number of LMIs (6)-(7) checked.
+    nw : int
+        Disturbance dimension of the plant it was designed for.
+    plant : str
+        Name of the plant (informative).
+    """
+
+    kind: str
+    H: np.ndarray
+    Af: np.ndarray
+    Bf: np.ndarray
+    Cf: np.ndarray
+    Df: np.ndarray
+    gamma: float
+    epsilon: float
+    multiplier: tuple[float, float]
+    lyapunov: np.ndarray
+    solver: str
+    status: str
+    compile_time: float
+    solve_time: float
+    lmi_margin: float
+    lyapunov_margin: float
+    n_lmis: int
+    nw: int
+    plant: str = ""
+
+    def __post_init__(self) -> None:
+        if self.kind not in (KIND_PD, KIND_ROBUST):
+            raise ValueError(f"kind must be {KIND_PD!r} or {KIND_ROBUST!r}; found {self.kind!r}")
+        arrays = {}
+        for name in (*_FILTER_NAMES, "lyapunov"):
+            arr = np.array(getattr(self, name), dtype=float)
+            if arr.ndim != 3:
+                raise DimensionError(f"{name} has shape {arr.shape}; expected (vertices, rows, cols)")
+            if not np.all(np.isfinite(arr)):
+                raise DimensionError(f"{name} holds non-finite values")
+            arr.setflags(write=False)
+            arrays[name] = arr
+        nf, nx = arrays["H"].shape[0], arrays["H"].shape[1]
+        ny, nz = arrays["Bf"].shape[2], arrays["Cf"].shape[1]
+        n = arrays["lyapunov"].shape[0]
+        expected = {
+            "H": (nf, nx, nx),
+            "Af": (nf, nx, nx),
+            "Bf": (nf, nx, ny),
+            "Cf": (nf, nz, nx),
+            "Df": (nf, nz, ny),
+            "lyapunov": (n, 2 * nx, 2 * nx),
+        }
+        for name, shape in expected.items():
+            if arrays[name].shape != shape:
+                raise DimensionError(f"{name} has shape {arrays[name].shape}; expected {shape}")
+        want_nf = 1 if self.kind == KIND_ROBUST else n
+        if nf != want_nf:
+            raise DimensionError(
+                f"a {self.kind} design needs {want_nf} set(s) of filter matrices; found {nf}"
+            )
+        for name, arr in arrays.items():
+            object.__setattr__(self, name, arr)
+        a, b = (float(v) for v in self.multiplier)
+        object.__setattr__(self, "multiplier", (a, b))
+        object.__setattr__(self, "gamma", float(self.gamma))
+        object.__setattr__(self, "epsilon", float(self.epsilon))
+
+    # -- dimensions -------------------------------------------------------------
+    @property
+    def n_vertices(self) -> int:
+        """Number of vertices ``N`` of the plant's polytope."""
+        return int(self.lyapunov.shape[0])
+
+    @property
+    def nx(self) -> int:
+        return int(self.H.shape[1])
+
+    @property
+    def ny(self) -> int:
+        return int(self.Bf.shape[2])
+
+    @property
+    def nz(self) -> int:
+        return int(self.Cf.shape[1])
+
+    @property
+    def scheduled(self) -> bool:
+        """True for a parameter-dependent filter (it needs ``alpha``)."""
+        return self.kind == KIND_PD
+
+    # -- evaluation -------------------------------------------------------------
+    def matrices_at(self, alpha: object | None = None) -> FilterMatrices:
+        """The filter matrices at ``alpha`` (shape (N,), on the simplex).
+
+        A robust design ignores ``alpha`` (it may be ``None``).
+        """
+        if not self.scheduled:
+            return FilterMatrices(*(getattr(self, n)[0] for n in _FILTER_NAMES))
+        if alpha is None:
+            raise DimensionError(f"a {self.kind} filter needs alpha of shape ({self.n_vertices},)")
+        a = as_vector(alpha, "alpha", self.n_vertices)
+        check_simplex(a, "alpha")
+        return FilterMatrices(*(np.tensordot(a, getattr(self, n), axes=1) for n in _FILTER_NAMES))
+
+    # -- JSON -------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON-able dictionary described in the module documentation."""
+        return {
+            "format": DESIGN_FORMAT,
+            "version": DESIGN_FORMAT_VERSION,
+            "kind": self.kind,
+            "plant": self.plant,
+            "n_vertices": self.n_vertices,
+            "nx": self.nx,
+            "ny": self.ny,
+            "nz": self.nz,
+            "nw": self.nw,
+            "gamma": self.gamma,
+            "epsilon": None if math.isinf(self.epsilon) else self.epsilon,
+            "multiplier": list(self.multiplier),
+            "filter": {n: getattr(self, n).tolist() for n in _FILTER_NAMES},
+            "lyapunov": self.lyapunov.tolist(),
+            "solver": {
+                "name": self.solver,
+                "status": self.status,
+                "compile_time": self.compile_time,
+                "solve_time": self.solve_time,
+            },
+            "check": {
+                "lmi_margin": self.lmi_margin,
+                "lyapunov_margin": self.lyapunov_margin,
+                "n_lmis": self.n_lmis,
+            },
+        }
+
+    def to_json(self, path: str | Path | None = None) -> str:
+        """The design as JSON text; also written to ``path`` when given."""
+        text = json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n"
+        if path is not None:
+            Path(path).write_text(text, encoding="utf-8")
+        return text
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], *, source: str = "design") -> HinfDesign:
+        """Inverse of :meth:`to_dict`; raises :class:`~lpvest.errors.ModelFileError`
+        naming ``source`` and the field when the data are malformed."""
+
+        def field(mapping: Mapping[str, Any], key: str, where: str = "") -> Any:
+            if not isinstance(mapping, Mapping) or key not in mapping:
+                raise ModelFileError(f"{source}: missing field {where}{key!r}")
+            return mapping[key]
+
+        if not isinstance(data, Mapping) or data.get("format") != DESIGN_FORMAT:
+            raise ModelFileError(f"{source}: not an lpvest H-infinity design (format != {DESIGN_FORMAT!r})")
+        version = field(data, "version")
+        if version != DESIGN_FORMAT_VERSION:
+            raise ModelFileError(
+                f"{source}: design format version {version!r}; this lpvest reads {DESIGN_FORMAT_VERSION}"
+            )
+        filt = field(data, "filter")
+        solver = field(data, "solver")
+        check = field(data, "check")
+        eps = field(data, "epsilon")
+        try:
+            design = cls(
+                kind=field(data, "kind"),
+                H=np.array(field(filt, "H", "filter."), dtype=float),
+                Af=np.array(field(filt, "Af", "filter."), dtype=float),
+                Bf=np.array(field(filt, "Bf", "filter."), dtype=float),
+                Cf=np.array(field(filt, "Cf", "filter."), dtype=float),
+                Df=np.array(field(filt, "Df", "filter."), dtype=float),
+                gamma=float(field(data, "gamma")),
+                epsilon=math.inf if eps is None else float(eps),
+                multiplier=tuple(float(v) for v in field(data, "multiplier")),  # type: ignore[arg-type]
+                lyapunov=np.array(field(data, "lyapunov"), dtype=float),
+                solver=str(field(solver, "name", "solver.")),
+                status=str(field(solver, "status", "solver.")),
+                compile_time=float(field(solver, "compile_time", "solver.")),
+                solve_time=float(field(solver, "solve_time", "solver.")),
+                lmi_margin=float(field(check, "lmi_margin", "check.")),
+                lyapunov_margin=float(field(check, "lyapunov_margin", "check.")),
+                n_lmis=int(field(check, "n_lmis", "check.")),
+                nw=int(field(data, "nw")),
+                plant=str(data.get("plant", "")),
+            )
+        except ModelFileError:
+            raise
+        except (ValueError, TypeError) as exc:
+            raise ModelFileError(f"{source}: {exc}") from exc
+        for key in ("n_vertices", "nx", "ny", "nz"):
+            if field(data, key) != getattr(design, key):
+                raise ModelFileError(
+                    f"{source}: {key} = {data[key]!r} disagrees with the matrices ({getattr(design, key)})"
+                )
+        return design
+
+    @classmethod
+    def from_json(cls, source: str | Path) -> HinfDesign:
+        """Load a design from a JSON file path or from JSON text.
+
+        Examples
+        --------
+        >>> import lpvest
+        >>> from lpvest.design import design_hinf
+        >>> d = design_hinf(lpvest.load_system("peixoto-ex1").model(), epsilon=150.0)
+        >>> HinfDesign.from_json(d.to_json()).gamma == d.gamma
+        True
+        """
+        text: str
+        name = "design"
+        if isinstance(source, Path) or (isinstance(source, str) and not source.lstrip().startswith("{")):
+            path = Path(source)
+            name = str(path)
+            try:
+                text = path.read_text(encoding="utf-8")
+            except OSError as exc:
+                raise ModelFileError(f"{path}: cannot be read: {exc.strerror}") from exc
+        else:
+            text = str(source)
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ModelFileError(f"{name}: not valid JSON: {exc}") from exc
+        return cls.from_dict(data, source=name)

@@ -1,0 +1,236 @@
+"""The H-infinity filter (2) of Peixoto et al. running on streaming data.
+
+::
+
+    x_{f,k+1} = H(alpha_k)^{-1} (A_f(alpha_k) x_{f,k} + B_f(alpha_k) y_k)
+    z_{f,k}   = C_f(alpha_k) x_{f,k} + D_f(alpha_k) y_k
+
+(001_00f62b5a0c49ad87.txt, eq. (2)) with the matrices of a
+:class:`~lpvest.design.result.HinfDesign`; ``H(alpha)^{-1}`` is applied by a
+linear solve. ``z_{f,k}`` uses ``y_k`` (direct feedthrough), so
+:meth:`HinfFilter.outputs` reports it at sample ``k`` before the state advances.
+Only numpy is imported: this module runs inside the filter FMU.
+
+Ports (the FMU variables ``name[1]..name[n]``):
+
+============  =====================  =========================================
+port          shape                  when
+============  =====================  =========================================
+``alpha``     (N,)  input            parameter-dependent filter, default
+``p``         (n_p,) input           parameter-dependent filter built with the
+                                     plant's simplex map (physical scheduling,
+                                     range-checked, mapped to ``alpha``)
+``y``         (n_y,) input           always
+``zhat``      (n_z,) output          ``z_{f,k}``, the estimate of ``z_k``
+``xf``        (n_x,) output          the filter state ``x_{f,k}`` (in the
+                                     design's coordinates)
+============  =====================  =========================================
+
+A robust filter (Corollary 1) has constant matrices and no scheduling input.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from ..design.result import HinfDesign
+from ..errors import DimensionError, NumericalError
+from ..systems.polytopic import SimplexMap
+from ..validation import as_signal, as_vector, check_simplex
+from .base import Port
+
+__all__ = ["HinfFilter", "HinfStep", "HinfRun", "hinf_step", "hinf_filter_batch"]
+
+
+class HinfStep(NamedTuple):
+    """One step of filter (2)."""
+
+    zhat: np.ndarray  #: ``z_{f,k}``, shape (n_z,)
+    xf_next: np.ndarray  #: ``x_{f,k+1}``, shape (n_x,)
+
+
+class HinfRun(NamedTuple):
+    """Filter (2) over a whole record; row ``k`` is sample ``k``."""
+
+    zhat: np.ndarray  #: shape (T, n_z)
+    xf: np.ndarray  #: ``x_{f,k}`` (before the update with ``y_k``), shape (T, n_x)
+
+
+def hinf_step(design: HinfDesign, xf: np.ndarray, alpha: np.ndarray | None, y: np.ndarray) -> HinfStep:
+    """One step of (2) for validated inputs: ``alpha`` on the simplex (ignored
+    by a robust design), ``y`` of shape (n_y,), ``xf`` of shape (n_x,).
+
+    Raises :class:`~lpvest.errors.NumericalError` if ``H(alpha)`` is singular
+    (it cannot be for a certified design: ``H + H^T > P_2 > 0``).
+    """
+    m = design.matrices_at(alpha)
+    zhat = m.Cf @ xf + m.Df @ y
+    try:
+        nxt = np.linalg.solve(m.H, m.Af @ xf + m.Bf @ y)
+    except np.linalg.LinAlgError as exc:
+        raise NumericalError(f"H(alpha) is singular at alpha = {alpha}: {exc}") from exc
+    if not np.all(np.isfinite(nxt)):
+        raise NumericalError(f"the filter state became non-finite at alpha = {alpha}")
+    return HinfStep(zhat, nxt)
+
+
+def hinf_filter_batch(
+    design: HinfDesign, y: object, alpha: object | None = None, *, xf0: object | None = None
+) -> HinfRun:
+    """Run filter (2) over a record ``y`` (T, n_y) with ``alpha`` (T, N)
+    (``None`` for a robust design), from ``xf0`` (default zero).
+
+    Examples
+    --------
+    >>> import numpy as np, lpvest
+    >>> from lpvest.design import design_hinf
+    >>> plant = lpvest.load_system("peixoto-ex1").model()
+    >>> d = design_hinf(plant, epsilon=150.0, kind="robust")
+    >>> run = hinf_filter_batch(d, np.ones((5, 1)))
+    >>> run.zhat.shape
+    (5, 2)
+    """
+    yy = as_signal(y, "y", design.ny)
+    T = yy.shape[0]
+    if design.scheduled:
+        if alpha is None:
+            raise DimensionError(f"a {design.kind} filter needs alpha of shape ({T}, {design.n_vertices})")
+        aa = as_signal(alpha, "alpha", design.n_vertices, T)
+        for k in range(T):
+            check_simplex(aa[k], f"alpha at k={k}")
+    else:
+        aa = None
+    x = np.zeros(design.nx) if xf0 is None else as_vector(xf0, "xf0", design.nx)
+    Z = np.empty((T, design.nz))
+    X = np.empty((T, design.nx))
+    for k in range(T):
+        X[k] = x
+        Z[k], x = hinf_step(design, x, None if aa is None else aa[k], yy[k])
+    return HinfRun(Z, X)
+
+
+class HinfFilter:
+    """Streaming H-infinity filter (2), following the step protocol of
+    :mod:`lpvest.estimators.base`.
+
+    Parameters
+    ----------
+    design : HinfDesign
+        From :func:`lpvest.design.design_hinf` / :func:`~lpvest.design.search_epsilon`,
+        or :meth:`HinfDesign.from_json`.
+    simplex_map : SimplexMap, optional
+        The plant's map from the physical scheduling ``p`` to ``alpha``
+        (``plant.simplex_map``). When given, the scheduling input port is ``p``
+        (checked against the scheduling box) instead of ``alpha``. Only for a
+        parameter-dependent design.
+    xf0 : array_like, shape (n_x,), optional
+        Initial filter state (default zero).
+
+    Examples
+    --------
+    >>> import numpy as np, lpvest
+    >>> from lpvest.design import design_hinf
+    >>> plant = lpvest.load_system("peixoto-ex1").model()
+    >>> f = HinfFilter(design_hinf(plant, epsilon=150.0), simplex_map=plant.simplex_map)
+    >>> [p.name for p in f.input_ports], [p.name for p in f.output_ports]
+    (['p', 'y'], ['zhat', 'xf'])
+    >>> f.step({"p": np.array([0.5]), "y": np.array([1.0])})["zhat"].shape
+    (2,)
+    """
+
+    def __init__(
+        self, design: HinfDesign, *, simplex_map: SimplexMap | None = None, xf0: object | None = None
+    ) -> None:
+        if not isinstance(design, HinfDesign):
+            raise TypeError(f"design must be an HinfDesign; found {type(design).__name__}")
+        if simplex_map is not None:
+            if not design.scheduled:
+                raise TypeError("a robust filter takes no scheduling input: do not pass simplex_map")
+            if simplex_map.n_vertices != design.n_vertices:
+                raise DimensionError(
+                    f"the simplex map gives {simplex_map.n_vertices} weights; the design has "
+                    f"{design.n_vertices} vertices"
+                )
+        self.design = design
+        self.simplex_map = simplex_map
+        self._xf0 = np.zeros(design.nx) if xf0 is None else as_vector(xf0, "xf0", design.nx).copy()
+        ports = []
+        if design.scheduled:
+            if simplex_map is None:
+                ports.append(Port("alpha", (design.n_vertices,), "scheduling on the unit simplex"))
+            else:
+                ports.append(Port("p", (simplex_map.space.dim,), "physical scheduling (" +
+                                  ", ".join(simplex_map.space.names) + ")"))
+        ports.append(Port("y", (design.ny,), "measured output y_k"))
+        self._inputs = tuple(ports)
+        self._outputs = (
+            Port("zhat", (design.nz,), "estimate z_f,k of z_k"),
+            Port("xf", (design.nx,), "filter state x_f,k"),
+        )
+        self.reset()
+
+    @property
+    def input_ports(self) -> tuple[Port, ...]:
+        return self._inputs
+
+    @property
+    def output_ports(self) -> tuple[Port, ...]:
+        return self._outputs
+
+    def reset(self) -> None:
+        """Back to the initial filter state."""
+        self._xf = self._xf0.copy()
+        self._k = 0
+
+    def _parse(self, inputs: Mapping[str, Any]) -> tuple[np.ndarray | None, np.ndarray]:
+        names = {p.name for p in self._inputs}
+        unknown = sorted(set(inputs) - names)
+        missing = sorted(names - set(inputs))
+        if unknown or missing:
+            raise DimensionError(
+                f"HinfFilter ({self.design.kind}) inputs are {sorted(names)}; "
+                f"missing {missing}, unknown {unknown}"
+            )
+        y = as_vector(inputs["y"], "y", self.design.ny)
+        alpha: np.ndarray | None = None
+        if self.design.scheduled:
+            if self.simplex_map is None:
+                alpha = as_vector(inputs["alpha"], "alpha", self.design.n_vertices)
+            else:
+                space = self.simplex_map.space
+                p = space.check(as_vector(inputs["p"], "p", space.dim))
+                alpha = np.asarray(self.simplex_map(p), dtype=float)
+            check_simplex(alpha, "alpha")
+        return alpha, y
+
+    def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+        """``zhat`` and ``xf`` at the current sample; no state change."""
+        alpha, y = self._parse(inputs)
+        m = self.design.matrices_at(alpha)
+        return {"zhat": m.Cf @ self._xf + m.Df @ y, "xf": self._xf.copy()}
+
+    def step(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+        """Consume sample ``k``: return :meth:`outputs` and advance to ``k + 1``."""
+        alpha, y = self._parse(inputs)
+        res = hinf_step(self.design, self._xf, alpha, y)
+        out = {"zhat": res.zhat, "xf": self._xf.copy()}
+        self._xf = res.xf_next
+        self._k += 1
+        return out
+
+    def get_state(self) -> dict[str, Any]:
+        """``{"xf": x_f,k, "k": k}`` (copies)."""
+        return {"xf": self._xf.copy(), "k": self._k}
+
+    def set_state(self, state: Mapping[str, Any]) -> None:
+        """Restore a state from :meth:`get_state`."""
+        if "xf" not in state or "k" not in state:
+            raise DimensionError(f"a HinfFilter state needs 'xf' and 'k'; found {sorted(state)}")
+        xf = as_vector(state["xf"], "xf", self.design.nx).copy()
+        k = int(state["k"])
+        if k < 0:
+            raise DimensionError(f"the sample counter k of a HinfFilter state must be >= 0; found {k}")
+        self._xf, self._k = xf, k

@@ -1,0 +1,390 @@
+"""H-infinity filter design by LMIs (Peixoto et al., 001_00f62b5a0c49ad87.txt).
+
+Every certified design is checked against independent oracles
+(tests/hinf_oracle.py): the paper scenario's error ratio, a search for the
+worst-case l2 gain (exact on each fixed parameter sequence by the lifted
+system's largest singular value), and the dissipation inequality of the proof
+on a grid of (alpha_k, alpha_{k+1}).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from lpvest import LMIInfeasibleError, PolytopicLPV, load_system
+from lpvest.design import (
+    KIND_PD,
+    KIND_ROBUST,
+    HinfDesign,
+    HinfProgram,
+    design_hinf,
+    epsilon_curve,
+    lmi_matrices,
+    multiplier,
+    search_epsilon,
+)
+from lpvest.errors import DimensionError, NonFiniteError
+from tests import hinf_oracle as oracle
+
+
+# ---------------------------------------------------------------------------
+# plants and designs shared by the module (each design costs ~0.1 s, a search ~3 s)
+# ---------------------------------------------------------------------------
+def ex1():
+    return load_system("peixoto-ex1").model()
+
+
+def ex2(rho):
+    return load_system("peixoto-ex2", parameters={"rho": rho}).model()
+
+
+def random_stable_plant(seed=7, N=3, nx=3, ny=2, nz=2, nw=2):
+    """A 3-vertex plant with ||A_i||_2 = 0.7: P = I proves stability under switching."""
+    rng = np.random.default_rng(seed)
+    data = oracle.random_plant_data(rng, N, nx, ny, nz, nw)
+    data["A"] = np.array([0.7 * a / np.linalg.norm(a, 2) for a in data["A"]])
+    return PolytopicLPV(data, name="random-3-vertex")
+
+
+_CACHE: dict[str, tuple[PolytopicLPV, HinfDesign]] = {}
+
+
+def get_design(name):
+    if name not in _CACHE:
+        if name == "ex1-pd-150":
+            p = ex1()
+            _CACHE[name] = (p, design_hinf(p, epsilon=150.0, kind=KIND_PD))
+        elif name == "ex1-robust-150":
+            p = ex1()
+            _CACHE[name] = (p, design_hinf(p, epsilon=150.0, kind=KIND_ROBUST))
+        elif name == "ex1-pd-best":
+            p = ex1()
+            _CACHE[name] = (p, search_epsilon(p, kind=KIND_PD).design)
+        elif name == "ex1-robust-best":
+            p = ex1()
+            _CACHE[name] = (p, search_epsilon(p, kind=KIND_ROBUST).design)
+        elif name == "ex2-rho21-best":
+            p = ex2(21.0)
+            _CACHE[name] = (p, search_epsilon(p, kind=KIND_PD).design)
+        elif name == "random3-pd":
+            p = random_stable_plant()
+            _CACHE[name] = (p, design_hinf(p, epsilon=-0.5, kind=KIND_PD))
+        elif name == "random3-robust":
+            p = random_stable_plant()
+            _CACHE[name] = (p, design_hinf(p, epsilon=math.inf, kind=KIND_ROBUST))
+        else:  # pragma: no cover
+            raise KeyError(name)
+    return _CACHE[name]
+
+
+DESIGNS = ["ex1-pd-150", "ex1-robust-150", "ex1-pd-best", "ex1-robust-best", "ex2-rho21-best",
+           "random3-pd", "random3-robust"]
+
+
+def scenario_alpha(plant, k):
+    """The paper's scheduling theta_k = sin(0.25 k) (Figs. 1-2) through the
+    plant's map; for the random 3-vertex plant three phase-shifted sinusoids."""
+    if plant.simplex_map is not None:
+        return plant.alpha_batch(np.sin(0.25 * k)[:, None])
+    ph = 0.25 * k[:, None] + np.array([0.0, 2.0, 4.0]) * np.pi / 3
+    return (1.0 + np.sin(ph)) / 3.0
+
+
+# ---------------------------------------------------------------------------
+# the LMIs: Finsler identity, printed blocks, Lemma 1
+# ---------------------------------------------------------------------------
+@pytest.mark.parametrize("robust", [False, True])
+def test_lmis_are_q_plus_he_xg_on_random_data(rng, robust):
+    """Every assembled LMI equals Q + He{X G} built from the proof (Finsler form)."""
+    N, nx, ny, nz, nw = 3, 3, 2, 2, 2
+    plant = PolytopicLPV(oracle.random_plant_data(rng, N, nx, ny, nz, nw))
+    var = oracle.random_variables(rng, N, nx, ny, nz, nw, robust=robust)
+    a, b = rng.standard_normal(2)
+    lmis = lmi_matrices(plant, var, multiplier_ab=(a, b), robust=robust)
+    assert len(lmis) == N * N * (N + 1) // 2
+    data = [dict(zip(("A", "Bw", "Cz", "Dz", "Cy", "Dy"), (v[i] for v in plant.vertices), strict=True))
+            for i in range(N)]
+
+    def phi(i, j, nxt):  # Phi_ijl with l = nxt (the vertex of alpha_{k+1})
+        f = 0 if robust else j
+        v = {k: var[k][j] for k in ("X1", "X2", "X3", "X4", "X5", "X6")}
+        v.update({k: var[k][f] for k in ("H", "Af", "Bf", "Cf", "Df")})
+        Pn = (var["P1"][nxt], var["P2"][nxt], var["P3"][nxt])
+        Pc = (var["P1"][j], var["P2"][j], var["P3"][j])
+        return oracle.finsler_phi(data[i], v, Pn, Pc, var["delta"], a, b)
+
+    for blk in lmis:
+        want = phi(blk.i, blk.i, blk.l) if blk.i == blk.j else phi(blk.i, blk.j, blk.l) + phi(blk.j, blk.i, blk.l)
+        np.testing.assert_allclose(blk.matrix, want, rtol=1e-12, atol=1e-12)
+        np.testing.assert_array_equal(blk.matrix, blk.matrix.T)  # symmetric by construction
+
+
+def test_printed_blocks_agree_except_phi21(rng):
+    """At (a, b) = (epsilon, 1) our blocks are the printed ones with Phi_21 using
+    P_{3,l} (alpha_{k+1}); the printed P_{3,j} is what the misprint option builds."""
+    N, nx, ny, nz, nw = 2, 2, 1, 2, 1
+    plant = PolytopicLPV(oracle.random_plant_data(rng, N, nx, ny, nz, nw))
+    var = oracle.random_variables(rng, N, nx, ny, nz, nw)
+    eps = 150.0
+    data = [dict(zip(("A", "Bw", "Cz", "Dz", "Cy", "Dy"), (v[i] for v in plant.vertices), strict=True))
+            for i in range(N)]
+
+    def printed(i, j, nxt, p3):
+        v = {k: var[k][j] for k in var if k != "delta"}
+        Pn = (var["P1"][nxt], var["P2"][nxt], var["P3"][nxt])
+        Pc = (var["P1"][j], var["P2"][j], var["P3"][j])
+        return oracle.printed_phi(data[i], v, Pn, Pc, var["delta"], eps, phi21_p3=p3)
+
+    for misprint in (False, True):
+        lmis = lmi_matrices(plant, var, epsilon=eps, printed_phi21=misprint)
+        for blk in lmis:
+            def one(i, j, nxt):
+                return printed(i, j, nxt, var["P3"][j] if misprint else var["P3"][nxt])  # noqa: B023
+
+            want = one(blk.i, blk.i, blk.l) if blk.i == blk.j else one(blk.i, blk.j, blk.l) + one(blk.j, blk.i, blk.l)
+            np.testing.assert_allclose(blk.matrix, want, rtol=1e-12, atol=1e-12)
+    # and the two differ exactly where P_{3,j} != P_{3,l}
+    good = lmi_matrices(plant, var, epsilon=eps)
+    bad = lmi_matrices(plant, var, epsilon=eps, printed_phi21=True)
+    diffs = [np.max(np.abs(g.matrix - b.matrix)) for g, b in zip(good, bad, strict=True)]
+    assert [d > 0 for d in diffs] == [g.l != g.i or g.l != g.j for g in good]
+
+
+def test_lemma1_combinations_reproduce_phi_of_alpha(rng):
+    """sum_l a+_l [sum_i a_i^2 Phi_iil + sum_{i<j} a_i a_j (Phi_ijl + Phi_jil)]
+    equals Q(alpha, alpha+) + He{X(alpha) G(alpha)} with interpolated data (4)."""
+    N, nx, ny, nz, nw = 3, 2, 1, 2, 1
+    plant = PolytopicLPV(oracle.random_plant_data(rng, N, nx, ny, nz, nw))
+    var = oracle.random_variables(rng, N, nx, ny, nz, nw)
+    a, b = multiplier(0.7)
+    lmis = lmi_matrices(plant, var, multiplier_ab=(a, b))
+    for _ in range(3):
+        al, an = rng.dirichlet(np.ones(N)), rng.dirichlet(np.ones(N))
+        total = sum(an[blk.l] * al[blk.i] * al[blk.j] * blk.matrix for blk in lmis)
+        m = plant.at(al)
+        d = dict(zip(("A", "Bw", "Cz", "Dz", "Cy", "Dy"), m, strict=True))
+
+        def interp(name, w):
+            return sum(w[i] * var[name][i] for i in range(N))
+
+        v = {k: interp(k, al) for k in var if k != "delta"}
+        Pn = tuple(interp(k, an) for k in ("P1", "P2", "P3"))
+        Pc = tuple(interp(k, al) for k in ("P1", "P2", "P3"))
+        want = oracle.finsler_phi(d, v, Pn, Pc, var["delta"], a, b)
+        np.testing.assert_allclose(total, want, rtol=1e-10, atol=1e-10)
+
+
+def test_rescaling_is_exact():
+    """The rescaled LMIs at (a, b) and the paper's at epsilon = a/b are the same
+    up to the congruence T = diag(I, sI, I, sI, I, I), s = 1/b, and the two
+    filter realizations give the same output."""
+    plant = ex1()
+    eps = 150.0
+    prog = HinfProgram.for_plant(plant, kind=KIND_PD)
+    design = prog.solve(plant, eps)
+    hat = prog.last_variables()
+    a, b = design.multiplier
+    assert a / b == pytest.approx(eps, rel=1e-12)
+    s = 1.0 / b
+    paper = {k: v for k, v in hat.items()}
+    for k, p in (("P2", 2), ("P3", 1), ("X2", 1), ("X4", 1), ("H", 2), ("Af", 2), ("Bf", 1), ("Cf", 1)):
+        paper[k] = [m / s**p for m in hat[k]]
+    nx, nz, nw = plant.nx, plant.nz, plant.nw
+    T = np.diag(np.concatenate([np.ones(nx), s * np.ones(nx), np.ones(nx), s * np.ones(nx), np.ones(nz + nw)]))
+    Ti = np.linalg.inv(T)
+    for ours, theirs in zip(lmi_matrices(plant, hat, multiplier_ab=(a, b)),
+                            lmi_matrices(plant, paper, epsilon=eps), strict=True):
+        np.testing.assert_allclose(theirs.matrix, Ti @ ours.matrix @ Ti, rtol=1e-9, atol=1e-12)
+        assert np.max(np.linalg.eigvalsh(theirs.matrix)) < 0
+    # the paper's variables are badly scaled (filter ~ 1/eps^2), ours are not
+    assert np.max(np.abs(paper["H"])) < 1e-3 < np.max(np.abs(hat["H"]))
+    # same filter: simulate both realizations on the paper scenario
+    k = np.arange(60.0)
+    alpha = scenario_alpha(plant, k)
+    y = np.random.default_rng(0).standard_normal((60, 1))
+    paper_design = HinfDesign(**{**design.__dict__, **{n: np.stack(paper[n]) for n in ("H", "Af", "Bf", "Cf", "Df")}})
+    from lpvest.estimators.hinf import hinf_filter_batch
+
+    np.testing.assert_allclose(hinf_filter_batch(paper_design, y, alpha).zhat,
+                               hinf_filter_batch(design, y, alpha).zhat, rtol=1e-8, atol=1e-10)
+
+
+# ---------------------------------------------------------------------------
+# Table 1
+# ---------------------------------------------------------------------------
+def test_table1_theorem1():
+    _, d = get_design("ex1-pd-150")
+    assert d.gamma == pytest.approx(1.21, abs=0.01)  # paper Table 1 (printed to 2 decimals)
+    assert d.status in ("optimal", "optimal_inaccurate") and d.lmi_margin > 0 and d.lyapunov_margin > 0
+
+
+def test_table1_corollary1():
+    _, d = get_design("ex1-robust-150")
+    assert d.gamma == pytest.approx(8.18, rel=0.005)  # paper Table 1
+    assert d.H.shape == (1, 2, 2) and not d.scheduled
+
+
+def test_best_epsilon_beats_the_paper_and_a_grid():
+    """The search over all real epsilon finds gamma no worse than epsilon = 150
+    and within 0.5 % of the best of a dense grid (Corollary 1, Example 1)."""
+    plant, best = get_design("ex1-robust-best")
+    _, at150 = get_design("ex1-robust-150")
+    assert best.gamma <= at150.gamma
+    phis = np.linspace(-np.pi / 2, np.pi / 2, 61)[1:]
+    grid = epsilon_curve(plant, np.append(np.tan(phis[:-1]), math.inf), kind=KIND_ROBUST)
+    assert np.all(np.isfinite(grid.gamma))
+    assert best.gamma <= 1.005 * float(np.min(grid.gamma))
+    assert best.gamma == pytest.approx(8.016, abs=0.01)  # lpvest: epsilon ~ -0.02 (paper: 8.18 at 150)
+
+
+def test_search_curve_is_exposed():
+    plant = ex1()
+    s = search_epsilon(plant, kind=KIND_PD, n_grid=8, n_refine=1)
+    c = s.curve
+    assert len(c.epsilon) == len(c.gamma) == len(c.status) == len(c.phi) == s.n_evaluations
+    assert np.all(np.diff(c.phi) > 0) and c.phi[-1] == pytest.approx(np.pi / 2)
+    assert math.isinf(c.epsilon[-1])
+    assert c.best()[1] == s.design.gamma == min(c.gamma)
+    assert np.any(c.epsilon < 0) and np.any(c.epsilon > 0)
+
+
+# ---------------------------------------------------------------------------
+# every design: scenario, worst case, dissipation
+# ---------------------------------------------------------------------------
+@pytest.mark.parametrize("name", DESIGNS)
+def test_paper_scenario_ratio_below_gamma(name):
+    plant, d = get_design(name)
+    k = np.arange(100.0)
+    alpha = scenario_alpha(plant, k)
+    w = np.where(k >= 10, np.sin(0.5 * k) * np.exp(-0.1 * k), 0.0)[:, None] * np.ones((1, plant.nw))
+    e = oracle.simulate_error(plant, d, alpha, w)
+    assert np.linalg.norm(e) / np.linalg.norm(w) <= d.gamma
+
+
+@pytest.mark.parametrize("name", DESIGNS)
+def test_worst_case_gain_below_gamma(name, rng):
+    plant, d = get_design(name)
+    gain, where = oracle.worst_case_gain(plant, d, rng)
+    print(f"{name}: worst gain found {gain:.6g} ({where}), gamma {d.gamma:.6g}")
+    assert gain <= d.gamma, f"{name}: gain {gain} at {where} exceeds gamma {d.gamma}"
+
+
+@pytest.mark.parametrize("name", DESIGNS)
+def test_dissipation_inequality_on_alpha_grid(name):
+    plant, d = get_design(name)
+    grid = oracle.simplex_grid(plant.n_vertices, 10 if plant.n_vertices == 2 else 4)
+    worst = max(oracle.dissipation_max_eig(plant, d, a, an) for a in grid for an in grid)
+    assert worst < 0
+    assert np.all(np.linalg.eigvalsh(d.lyapunov) > 0)
+
+
+def test_printed_phi21_certifies_a_false_gamma(rng):
+    """The trap: with the printed Phi_21 (P_{3,j}) the robust design for Example 1
+    reports gamma ~ 2.63, but vertex switching drives the filter's gain far above."""
+    plant = ex1()
+    prog = HinfProgram.for_plant(plant, kind=KIND_ROBUST, printed_phi21=True)
+    d = prog.solve(plant, 150.0)
+    assert d.gamma == pytest.approx(2.63, abs=0.02)
+    gain, where = oracle.worst_case_gain(plant, d, rng, max_period=4, n_random=0)
+    assert gain > 4 * d.gamma, where  # > 10: the "certificate" is false
+    assert gain > get_design("ex1-robust-150")[1].gamma  # even above the true certified bound 8.17
+
+
+# ---------------------------------------------------------------------------
+# JSON
+# ---------------------------------------------------------------------------
+@pytest.mark.parametrize("name", ["ex1-pd-150", "ex1-robust-best"])
+def test_json_round_trip(name, tmp_path):
+    _, d = get_design(name)
+    path = tmp_path / "design.json"
+    text = d.to_json(path)
+    for back in (HinfDesign.from_json(path), HinfDesign.from_json(text)):
+        for field in ("H", "Af", "Bf", "Cf", "Df", "lyapunov"):
+            np.testing.assert_array_equal(getattr(back, field), getattr(d, field))
+        for field in ("kind", "gamma", "epsilon", "multiplier", "solver", "status", "compile_time",
+                      "solve_time", "lmi_margin", "lyapunov_margin", "n_lmis", "nw", "plant"):
+            assert getattr(back, field) == getattr(d, field), field
+
+
+def test_json_infinite_epsilon_and_errors(tmp_path):
+    from lpvest.errors import ModelFileError
+
+    _, d = get_design("random3-robust")
+    assert math.isinf(d.epsilon) and d.multiplier == (1.0, 0.0)
+    import json
+
+    data = json.loads(d.to_json())
+    assert data["epsilon"] is None
+    assert math.isinf(HinfDesign.from_json(d.to_json()).epsilon)
+    with pytest.raises(ModelFileError, match="not valid JSON"):
+        HinfDesign.from_json("{not json")
+    with pytest.raises(ModelFileError, match="not an lpvest H-infinity design"):
+        HinfDesign.from_json('{"format": "other"}')
+    data["filter"]["Bf"] = [[[1.0]]]
+    with pytest.raises(ModelFileError, match="Bf has shape"):
+        HinfDesign.from_dict(data)
+    del data["gamma"]
+    with pytest.raises(ModelFileError, match="missing field 'gamma'"):
+        HinfDesign.from_dict(data)
+    with pytest.raises(ModelFileError, match="cannot be read"):
+        HinfDesign.from_json(tmp_path / "missing.json")
+
+
+# ---------------------------------------------------------------------------
+# bad input
+# ---------------------------------------------------------------------------
+def test_unstable_plant_raises_infeasible():
+    plant = ex2(22.0)  # vertex 1 has an eigenvalue below -1 for rho > 21.4
+    with pytest.raises(LMIInfeasibleError, match="vertex 1 of the plant has spectral radius 1.03") as info:
+        design_hinf(plant, epsilon=1.0)
+    assert info.value.status == "infeasible"
+    with pytest.raises(LMIInfeasibleError, match="every epsilon tried") as info:
+        search_epsilon(plant, n_grid=4)
+    assert info.value.status == "infeasible"
+
+
+def test_switching_unstable_plant_is_infeasible_with_the_solver_status():
+    """Each frozen vertex is nilpotent (Schur), but switching between them is
+    unstable (A_1 A_2 has eigenvalue 2.25): no certificate can exist; the error
+    carries the solver's status."""
+    c = 1.5
+    plant = PolytopicLPV({
+        "A": [[[0, c], [0, 0]], [[0, 0], [c, 0]]], "Bw": [[[1], [0]], [[1], [0]]],
+        "Cz": [[[1, 0]], [[1, 0]]], "Dz": [[[0]], [[0]]], "Cy": [[[0, 1]], [[0, 1]]], "Dy": [[[1]], [[1]]],
+    }, name="switching-unstable")
+    for kind in (KIND_PD, KIND_ROBUST):
+        with pytest.raises(LMIInfeasibleError, match="switching-unstable at epsilon = 0") as info:
+            design_hinf(plant, epsilon=0.0, kind=kind)
+        assert info.value.status in ("infeasible", "infeasible_inaccurate", "solver_error")
+
+
+def test_failed_check_is_an_error_not_a_result():
+    """The solver is selectable; SCS (first order) stops at points that violate
+    the LMIs by more than the margin, here as in the issue's report: they are
+    rejected (twice, with the retry), never reported as a gamma."""
+    plant = ex1()
+    with pytest.raises(LMIInfeasibleError, match="solver SCS: no certified solution.*LMI check failed") as info:
+        design_hinf(plant, epsilon=150.0, solver="SCS", solver_options={"max_iters": 2000})
+    assert info.value.status.endswith("; LMI check failed")
+
+
+def test_wrong_dimensions_and_types():
+    prog = HinfProgram.for_plant(ex1())
+    with pytest.raises(DimensionError, match=r"plant has \(N, nx, ny, nz, nw\) = \(3, 3, 2, 2, 2\); this program"):
+        prog.solve(random_stable_plant(), 1.0)
+    with pytest.raises(DimensionError, match=r"program was compiled for"):
+        design_hinf(random_stable_plant(), epsilon=1.0, program=prog)
+    with pytest.raises(TypeError, match="must be a PolytopicLPV"):
+        design_hinf(np.eye(2), epsilon=1.0)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="kind must be"):
+        design_hinf(ex1(), epsilon=1.0, kind="gain-scheduled")
+    with pytest.raises(NonFiniteError, match="epsilon is NaN"):
+        design_hinf(ex1(), epsilon=float("nan"))
+    _, d = get_design("ex1-pd-150")
+    with pytest.raises(DimensionError, match=r"Df has shape \(2, 2, 1\); expected \(2, 2, 3\)"):
+        HinfDesign(**{**d.__dict__, "Bf": np.zeros((2, 2, 3))})
+    with pytest.raises(DimensionError, match="a robust design needs 1 set"):
+        HinfDesign(**{**d.__dict__, "kind": KIND_ROBUST})
