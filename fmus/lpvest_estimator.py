@@ -30,7 +30,11 @@ class LpvestEstimator(LpvestSlave):
         kind = self.spec["estimator"]
         design = None
         if self.spec.get("design_file"):
-            design = decode_state((Path(self.resources) / self.spec["design_file"]).read_bytes())
+            path = Path(self.resources) / self.spec["design_file"]
+            if self.spec.get("design_format") == "text":
+                design = path.read_text(encoding="utf-8")
+            else:
+                design = decode_state(path.read_bytes())
         options = {p["name"]: params[p["name"]] for p in kind["parameters"]}
         return resolve(kind["factory"])(self.model(params), design=design, **options)
 

@@ -52,12 +52,48 @@ def _observer() -> StreamingEstimator:
     return BSplineObserver(model, dt=1e-3, window=0.4, hop=0.1, on_unidentifiable="hold")
 
 
+def _peixoto_data(T: int) -> dict[str, np.ndarray]:
+    plant = load_system("peixoto-ex1").model()
+    k = np.arange(T)
+    theta = np.sin(0.25 * k)[:, None]
+    w = np.where(k >= 10, np.sin(0.5 * k) * np.exp(-0.1 * k), 0.0)[:, None]
+    y = plant.simulate(plant.alpha_batch(theta), w).y
+    return {"p": theta, "y": y}
+
+
+def _hinf_from_fmu(name: str) -> StreamingEstimator:
+    """The library's HinfFilter on the design the FMU carries (designed at build time)."""
+    import zipfile
+
+    from lpvest.design import HinfDesign
+    from lpvest.estimators.hinf import HinfFilter
+
+    with zipfile.ZipFile(FMU_PATHS[name]) as z:
+        design = HinfDesign.from_json(z.read("resources/design.json").decode())
+    plant = load_system("peixoto-ex1").model()
+    return HinfFilter(design, simplex_map=plant.simplex_map if design.scheduled else None)
+
+
+FMU_PATHS: dict[str, object] = {}
+
+
+@pytest.fixture(autouse=True)
+def _paths(fmus):
+    FMU_PATHS.update(fmus.paths)
+
+
+def _peixoto_robust_data(T: int) -> dict[str, np.ndarray]:
+    return {"y": _peixoto_data(T)["y"]}
+
+
 #: FMU -> (library estimator, FMU parameters, data, number of samples, step size)
 FILTERS = {
     "CoxTothTruncationKalman": (_kalman, {}, _truncation_data, 60, 1.0),
     "CoxTothTruncationTruncatedKalman": (lambda: _truncated(4), {"tau": 4}, _truncation_data, 60, 1.0),
     # a short window (0.4 s) so that the test sees several refits in 700 samples
     "SridharLtvBSplineObserver": (_observer, {"window": 0.4, "hop": 0.1}, _sridhar_data, 700, 1e-3),
+    "PeixotoEx1HinfPD": (lambda: _hinf_from_fmu("PeixotoEx1HinfPD"), {}, _peixoto_data, 60, 1.0),
+    "PeixotoEx1HinfRobust": (lambda: _hinf_from_fmu("PeixotoEx1HinfRobust"), {}, _peixoto_robust_data, 60, 1.0),
 }
 
 
@@ -126,6 +162,8 @@ def test_filter_fmu_state_round_trips(fmus, name):
     ("CoxTothTruncationKalman", "y", np.nan, r"y\[1\]"),
     ("CoxTothTruncationKalman", "p", 1.5, r"p\[1\].*outside its declared range"),
     ("CoxTothTruncationTruncatedKalman", "y", np.inf, r"y\[1\]"),
+    ("PeixotoEx1HinfPD", "p", -1.01, r"p\[1\].*outside its declared range"),
+    ("PeixotoEx1HinfRobust", "y", np.nan, r"y\[1\]"),
 ])
 def test_bad_sample_is_fmi2error_and_the_filter_continues_unharmed(fmus, name, port, value, expected):
     make, params, data, _, _ = FILTERS[name]
@@ -144,7 +182,8 @@ def test_bad_sample_is_fmi2error_and_the_filter_continues_unharmed(fmus, name, p
             _feed(d, inputs, k)
         got = _read(d, est)
         want = est.step({n: v[k] for n, v in inputs.items()})
-        np.testing.assert_array_equal(got["xhat"], want["xhat"])
+        for out in est.output_ports:
+            np.testing.assert_array_equal(got[out.name], np.asarray(want[out.name]).reshape(out.shape))
         assert d.step(float(k), 1.0) == 0, d.errors()
     d.free()
 
@@ -180,3 +219,21 @@ def test_observer_fmu_invalid_declaration_is_fmi2error(fmus, param, value, expec
     assert d.initialize(**params) == 3
     assert any(expected in m for m in d.errors()), d.errors()
     d.free()
+
+
+def test_hinf_fmu_design_is_certified_and_model_is_fixed(fmus):
+    """The design carried by the FMU is the best-epsilon design (gamma as the
+    library finds it); rho of Example 2 is not a parameter of its filter FMUs,
+    whose design holds for the build-time rho only."""
+    import zipfile
+
+    from lpvest.design import HinfDesign
+
+    with zipfile.ZipFile(fmus["PeixotoEx1HinfPD"]) as z:
+        d = HinfDesign.from_json(z.read("resources/design.json").decode())
+    assert d.kind == "parameter-dependent"
+    assert d.lmi_margin > 0 and d.lyapunov_margin > 0
+    assert d.gamma == pytest.approx(1.2137, abs=2e-4)  # best epsilon (Table 1 best row)
+    plant_vars = {v.name for v in Driver(fmus["PeixotoEx2Plant"]).md.modelVariables}
+    filt_vars = {v.name for v in Driver(fmus["PeixotoEx2HinfPD"]).md.modelVariables}
+    assert "rho" in plant_vars and "rho" not in filt_vars

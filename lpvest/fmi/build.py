@@ -188,9 +188,11 @@ def plan_system(
                                  description=f"Input u and disturbance w of {title}", **common))
     for ek in estimator_kinds() if kinds is None else kinds:
         if ek.applies_to(model):
+            # a filter designed at build time is designed for the model at the
+            # file's parameter values: those are then not FMU parameters
             plans.append(FmuPlan(f"{stem}{ek.role}", ek.role, "lpvest_estimator.py",
                                  description=ek.description or f"{ek.role} estimator for {title} (model {key!r})",
-                                 model_parameters=params, estimator=ek,
+                                 model_parameters=() if ek.design else params, estimator=ek,
                                  step_size=plans[0].step_size, stop_time=plans[0].stop_time, **common))
     return plans, notes
 
@@ -270,7 +272,11 @@ def _stage(plan: FmuPlan, staging: Path) -> None:
 
             model = load_system(plan.system_path).model(plan.model_key)
             design = resolve(plan.estimator.design)(model)
-            (staging / "design.json").write_bytes(encode_state(design))
+            if isinstance(design, str):  # a JSON document (e.g. an HinfDesign): kept readable
+                (staging / "design.json").write_text(design, encoding="utf-8")
+                spec["design_format"] = "text"
+            else:
+                (staging / "design.json").write_bytes(encode_state(design))
             spec["design_file"] = "design.json"
     (staging / SPEC_FILE).write_text(json.dumps(spec, indent=2))
 

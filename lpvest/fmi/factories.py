@@ -11,7 +11,15 @@ from typing import Any
 
 from ..errors import LpvestError
 
-__all__ = ["kalman", "truncated_kalman", "bspline_observer", "SampledObserver"]
+__all__ = [
+    "kalman",
+    "truncated_kalman",
+    "bspline_observer",
+    "SampledObserver",
+    "hinf",
+    "hinf_pd_design",
+    "hinf_robust_design",
+]
 
 #: Start covariances of the truncated filter selectable from an FMU parameter.
 TRUNCATED_STARTS = ("theorem", "steady-state")
@@ -127,3 +135,40 @@ def bspline_observer(
                                on_unidentifiable="hold")
 
     return SampledObserver(build, dt)
+
+
+def _hinf_design(model: Any, kind: str) -> str:
+    """The best design over every epsilon (:func:`lpvest.design.search_epsilon`), as JSON."""
+    from ..design import search_epsilon
+
+    return search_epsilon(model, kind=kind).design.to_json()
+
+
+def hinf_pd_design(model: Any) -> str:
+    """Build-time design of the parameter-dependent filter (Theorem 1), best epsilon."""
+    from ..design import KIND_PD
+
+    return _hinf_design(model, KIND_PD)
+
+
+def hinf_robust_design(model: Any) -> str:
+    """Build-time design of the robust filter (Corollary 1), best epsilon."""
+    from ..design import KIND_ROBUST
+
+    return _hinf_design(model, KIND_ROBUST)
+
+
+def hinf(model: Any, *, design: Any) -> Any:
+    """The H-infinity filter (2) of a design carried by the FMU (JSON text).
+
+    A parameter-dependent filter is scheduled by the plant's physical
+    scheduling ``p`` when the model has a map to ``alpha`` (range-checked),
+    else by ``alpha`` (checked on the simplex); a robust one takes only ``y``."""
+    from ..design import HinfDesign
+    from ..estimators.hinf import HinfFilter
+
+    if design is None:
+        raise LpvestError("this FMU carries no filter design (resources/design.json)")
+    d = design if isinstance(design, HinfDesign) else HinfDesign.from_json(design)
+    mapping = getattr(model, "simplex_map", None) if d.scheduled else None
+    return HinfFilter(d, simplex_map=mapping)

@@ -13,7 +13,10 @@ that this module imports nothing heavy and the FMU imports only what it runs:
 
 - ``factory(model, *, design=None, **parameters) -> StreamingEstimator``
   (``design`` is the dict the design function returned, or ``None``);
-- ``design(model) -> dict`` (numpy arrays allowed), at build time.
+- ``design(model) -> dict | str`` (numpy arrays allowed; a ``str`` is a JSON
+  document stored as readable ``resources/design.json``), at build time. The
+  model of such an FMU is fixed at the file's parameter values (they are not
+  FMU parameters: the design was made for them).
 
 Adding a filter FMU is one line in :data:`ESTIMATOR_KINDS` below, e.g.::
 
@@ -112,6 +115,12 @@ ESTIMATOR_KINDS: list[EstimatorKind] = [
                               Parameter("b1", "known", "b1: known | constant | spline:N[:order]"),
                               Parameter("penalty", 0.0, "P-spline penalty (0: none, < 0: by GCV)")),
                   description="sliding-window B-spline joint parameter and state observer (Sridhar et al.)"),
+    EstimatorKind("HinfPD", "lpvest.fmi.factories:hinf", models=("polytopic",),
+                  design="lpvest.fmi.factories:hinf_pd_design",
+                  description="gain-scheduled H-infinity filter (Peixoto et al. Theorem 1), best epsilon"),
+    EstimatorKind("HinfRobust", "lpvest.fmi.factories:hinf", models=("polytopic",),
+                  design="lpvest.fmi.factories:hinf_robust_design",
+                  description="robust H-infinity filter (Peixoto et al. Corollary 1), best epsilon"),
 ]
 
 
