@@ -163,7 +163,8 @@ def test_fmus_run_in_a_fresh_virtual_environment_without_lpvest(fmus, tmp_path):
         from fmpy.fmi2 import FMU2Slave
         out = {{}}
         for name, path in {json.dumps({n: str(fmus[n]) for n in ("PeixotoEx1Plant", "SridharLtvPlant",
-                                                                   "CoxTothTruncationKalman")})}.items():
+                                                                   "CoxTothTruncationKalman",
+                                                                   "PeixotoEx1HinfPD")})}.items():
             md = read_model_description(path)
             vr = {{v.name: v.valueReference for v in md.modelVariables}}
             fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path),
@@ -178,6 +179,10 @@ def test_fmus_run_in_a_fresh_virtual_environment_without_lpvest(fmus, tmp_path):
                 if name == "PeixotoEx1Plant":
                     fmu.setReal([vr["p[1]"], vr["w[1]"]], [inputs["p"][k], inputs["w"][k]])
                     ys.append(fmu.getReal([vr["y[1]"]])[0])
+                    fmu.doStep(float(k), 1.0)
+                elif name == "PeixotoEx1HinfPD":  # fed the plant's y recorded above
+                    fmu.setReal([vr["p[1]"], vr["y[1]"]], [inputs["p"][k], out["PeixotoEx1Plant"][k]])
+                    ys.append(fmu.getReal([vr["zhat[1]"], vr["zhat[2]"]]))
                     fmu.doStep(float(k), 1.0)
                 elif name == "CoxTothTruncationKalman":
                     fmu.setReal([vr["p[1]"], vr["u[1]"], vr["y[1]"], vr["y[2]"]],
@@ -208,6 +213,17 @@ def test_fmus_run_in_a_fresh_virtual_environment_without_lpvest(fmus, tmp_path):
 
     kf = kalman_filter(kf_model, theta(k)[:, None], kf_u, kf_y)
     np.testing.assert_allclose(result["CoxTothTruncationKalman"], kf.filtered_means, rtol=0, atol=1e-12)
+    # the H-infinity filter ran without cvxpy (not installed there): its design came from the FMU
+    import zipfile
+
+    from lpvest.design import HinfDesign
+    from lpvest.estimators.hinf import HinfFilter
+
+    with zipfile.ZipFile(fmus["PeixotoEx1HinfPD"]) as z:
+        design = HinfDesign.from_json(z.read("resources/design.json").decode())
+    hf = HinfFilter(design, simplex_map=plant.simplex_map)
+    zhat = [hf.step({"p": theta(k)[i:i + 1], "y": ref.y[i]})["zhat"] for i in range(40)]
+    np.testing.assert_array_equal(result["PeixotoEx1HinfPD"], zhat)
 
 
 # -- command line ----------------------------------------------------------------------------
