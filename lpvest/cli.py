@@ -305,6 +305,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except LpvestError as exc:
         print(f"lpvest: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # e.g. `lpvest systems show X | head`: the reader left
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":  # pragma: no cover
