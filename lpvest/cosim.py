@@ -29,7 +29,7 @@ import re
 import shutil
 import tempfile
 from collections.abc import Iterable, Mapping, Sequence
-from ctypes import byref, c_double, c_int
+from ctypes import byref
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -432,32 +432,39 @@ class CoSimulation:
             self._call(unit, "setupExperiment", lambda u=unit: u.fmu.setupExperiment(startTime=t0, stopTime=t_end))
             self._set_start_values(unit)
             self._call(unit, "enterInitializationMode", unit.fmu.enterInitializationMode)
-        dtype = [("time", "f8")] + [(f"{self._units[v.comp].spec.name}.{v.name}", "f8") for v in self._record]
-        out = np.zeros(n_steps + 1, dtype=dtype)
-        # pre-built ctypes buffers: one get and one set per batch, no per-step allocation
         plan = self._plan()
         self._exchange(plan, t0, initial=True)
         for unit in self._units:
             self._call(unit, "exitInitializationMode", unit.fmu.exitInitializationMode, t0)
-        rec = self._recorder()
+        # recorded values: one row per communication point, copied from the
+        # value store in one operation (Real) or element-wise (Integer, Boolean)
+        store = self._store
+        rec_cols = [self._values[(v.comp, v.name)] for v in self._record]
+        data = np.empty((n_steps + 1, store.size))
+        extra = [(i, buf, j) for i, (buf, j) in enumerate(rec_cols) if buf is not self._store_c]
+        extra_data = np.empty((n_steps + 1, len(extra))) if extra else None
+        steppers = [(u.funcs["fmi2DoStep"], u.fmu.component, u) for u in self._units]
         show = progress if progress is not None else n_steps > 20_000
         bar = None
         if show:
             from tqdm import tqdm
 
             bar = tqdm(total=n_steps, unit="step", desc="co-simulation")
+        exchange = self._exchange
         try:
             for k in range(n_steps + 1):
                 t = t0 + k * h
                 if k > 0:
-                    self._exchange(plan, t)
-                row = out[k]
-                row["time"] = t
-                rec(row)
+                    exchange(plan, t)
+                data[k] = store
+                if extra_data is not None:
+                    row = extra_data[k]
+                    for col, (_, buf, j) in enumerate(extra):
+                        row[col] = buf[j]
                 if k == n_steps:
                     break
-                for unit in self._units:
-                    status = unit.funcs["fmi2DoStep"](unit.fmu.component, c_double(t), c_double(h), c_int(1))
+                for do_step, component, unit in steppers:
+                    status = do_step(component, t, h, 1)
                     if status > 1:
                         self._fail(unit, "doStep", status, t)
                 if bar is not None:
@@ -465,6 +472,15 @@ class CoSimulation:
         finally:
             if bar is not None:
                 bar.close()
+        dtype = [("time", "f8")] + [(f"{self._units[v.comp].spec.name}.{v.name}", "f8") for v in self._record]
+        out = np.empty(n_steps + 1, dtype=dtype)
+        out["time"] = t0 + np.arange(n_steps + 1) * h
+        extra_col = {i: col for col, (i, _, _) in enumerate(extra)}
+        for i, (name, _) in enumerate(dtype[1:]):
+            if i in extra_col:
+                out[name] = extra_data[:, extra_col[i]]  # type: ignore[index]
+            else:
+                out[name] = data[:, rec_cols[i][1]]
         return out
 
     def _fail(self, unit: _Unit, what: str, status: int, t: float) -> None:
@@ -473,75 +489,100 @@ class CoSimulation:
         raise CoSimulationError(f"component {unit.spec.name}: {what} at t = {t:g} returned {label} ({log})")
 
     def _plan(self) -> list[tuple]:
-        """ctypes buffers per scheduled batch (Real variables on the fast path)."""
+        """The per-step FMI calls with their value references and buffers.
+
+        Every Real value read (for a connection or for the record) lands in one
+        numpy array, the value store: each ``fmi2GetReal`` writes straight into
+        its slice of it. A set whose sources are consecutive in the store passes
+        that slice itself to ``fmi2SetReal`` (no copy); other sets copy their
+        sources into a buffer of their own first.
+        """
         from fmpy.fmi2 import fmi2Boolean, fmi2Integer, fmi2Real, fmi2ValueReference
 
         ctype = {"Real": fmi2Real, "Integer": fmi2Integer, "Boolean": fmi2Boolean}
-        self._values: dict[tuple[int, str], tuple] = {}  # (comp, var) -> (buffer, index)
-        plan = []
+        # the gets: for connections in schedule order, then recorded-only ones
+        gets: list[tuple[int, str, list[_Var]]] = []
         for op, comp, items in self._schedule:
-            unit = self._units[comp]
-            for typ in _TYPES:
-                vars_ = [it for it in items if (it.type if op == "get" else it[1].type) == typ]
-                if not vars_:
-                    continue
-                n = len(vars_)
-                vrs = (fmi2ValueReference * n)(*[(v.vr if op == "get" else v[1].vr) for v in vars_])
-                buf = (ctype[typ] * n)()
-                fn = unit.fmu._functions[f"fmi2{'Get' if op == 'get' else 'Set'}{typ}"]
-                if op == "get":
-                    for j, v in enumerate(vars_):
-                        self._values[(comp, v.name)] = (buf, j)
-                    plan.append(("get", unit, fn, vrs, n, buf, None))
-                else:
-                    sources = [v[0] for v in vars_]
-                    plan.append(("set", unit, fn, vrs, n, buf, sources))
-        # recorded variables that are not already read for a connection
-        extra: dict[int, list[_Var]] = {}
+            if op == "get":
+                for typ in _TYPES:
+                    vars_ = [v for v in items if v.type == typ]
+                    if vars_:
+                        gets.append((comp, typ, vars_))
+        seen = {(v.comp, v.name) for _, _, vs in gets for v in vs}
+        extra: dict[tuple[int, str], list[_Var]] = {}
         for v in self._record:
-            if (v.comp, v.name) not in self._values:
-                extra.setdefault(v.comp, []).append(v)
-        for comp, vars_ in extra.items():
+            if (v.comp, v.name) not in seen:
+                seen.add((v.comp, v.name))
+                extra.setdefault((v.comp, v.type), []).append(v)
+        n_real = sum(len(vs) for _, typ, vs in gets if typ == "Real")
+        n_real += sum(len(vs) for (_, typ), vs in extra.items() if typ == "Real")
+        self._store = store = np.zeros(max(n_real, 1))
+        self._store_c = store_c = (fmi2Real * store.size).from_buffer(store)
+        self._values: dict[tuple[int, str], tuple[Any, int]] = {}  # (comp, var) -> (buffer, index)
+        offset = 0
+
+        def get_op(comp: int, typ: str, vars_: list[_Var]) -> tuple:
+            nonlocal offset
+            unit = self._units[comp]
+            n = len(vars_)
+            vrs = (fmi2ValueReference * n)(*[v.vr for v in vars_])
+            if typ == "Real":
+                buf = (fmi2Real * n).from_buffer(store, offset * store.itemsize)
+                for j, v in enumerate(vars_):
+                    self._values[(comp, v.name)] = (store_c, offset + j)
+                offset += n
+            else:
+                buf = (ctype[typ] * n)()
+                for j, v in enumerate(vars_):
+                    self._values[(comp, v.name)] = (buf, j)
+            return ("get", unit, unit.fmu._functions[f"fmi2Get{typ}"], vrs, n, buf, ())
+
+        ops: list[tuple] = []
+        get_iter = iter(gets)
+        for op, comp, items in self._schedule:
+            if op == "get":
+                for typ in _TYPES:
+                    if any(v.type == typ for v in items):
+                        ops.append(get_op(*next(get_iter)))
+            else:
+                ops.append(("set", comp, items))
+        # recorded variables that are not read for a connection: after every
+        # set (they may depend on inputs)
+        for (comp, typ), vars_ in extra.items():
+            ops.append(get_op(comp, typ, vars_))
+        plan = []
+        for op in ops:
+            if op[0] == "get":
+                plan.append(op)
+                continue
+            _, comp, items = op
             unit = self._units[comp]
             for typ in _TYPES:
-                vs = [v for v in vars_ if v.type == typ]
-                if not vs:
+                links = [it for it in items if it[1].type == typ]
+                if not links:
                     continue
-                n = len(vs)
-                vrs = (fmi2ValueReference * n)(*[v.vr for v in vs])
-                buf = (ctype[typ] * n)()
-                for j, v in enumerate(vs):
-                    self._values[(comp, v.name)] = (buf, j)
-                plan.append(("get", unit, unit.fmu._functions[f"fmi2Get{typ}"], vrs, n, buf, None))
-        # resolve set sources to (buffer, index) now that every get exists
-        resolved = []
-        for op, unit, fn, vrs, n, buf, sources in plan:
-            if op == "set":
-                sources = [self._values[(s.comp, s.name)] for s in sources]
-            resolved.append((op, unit, fn, vrs, n, buf, sources))
-        # (the recording-only gets come last: after every set, as they may
-        # depend on inputs)
-        return resolved
+                n = len(links)
+                vrs = (fmi2ValueReference * n)(*[d.vr for _, d in links])
+                sources = [self._values[(s.comp, s.name)] for s, _ in links]
+                fn = unit.fmu._functions[f"fmi2Set{typ}"]
+                first = sources[0][1]
+                if typ == "Real" and all(b is store_c and i == first + j for j, (b, i) in enumerate(sources)):
+                    buf = (fmi2Real * n).from_buffer(store, first * store.itemsize)
+                    copies: tuple = ()
+                else:
+                    buf = (ctype[typ] * n)()
+                    copies = tuple((j, b, i) for j, (b, i) in enumerate(sources))
+                plan.append(("set", unit, fn, vrs, n, buf, copies))
+        return [(op, unit, fn, unit.fmu.component, vrs, n, buf, copies) for op, unit, fn, vrs, n, buf, copies in plan]
 
     def _exchange(self, plan: list[tuple], t: float, *, initial: bool = False) -> None:
-        for op, unit, fn, vrs, n, buf, sources in plan:
-            if op == "set":
-                for j, (sbuf, si) in enumerate(sources):
-                    buf[j] = sbuf[si]
-            status = fn(unit.fmu.component, vrs, n, buf)
+        for op, unit, fn, component, vrs, n, buf, copies in plan:
+            for j, sbuf, si in copies:
+                buf[j] = sbuf[si]
+            status = fn(component, vrs, n, buf)
             if status > 1:
                 what = "reading outputs" if op == "get" else "setting inputs"
                 self._fail(unit, what + (" during initialization" if initial else ""), status, t)
-
-    def _recorder(self) -> Any:
-        refs = [self._values[(v.comp, v.name)] for v in self._record]
-        names = [f"{self._units[v.comp].spec.name}.{v.name}" for v in self._record]
-
-        def rec(row: np.void) -> None:
-            for name, (buf, j) in zip(names, refs, strict=True):
-                row[name] = buf[j]
-
-        return rec
 
     # -- inspection and clean-up ----------------------------------------------
     @property
