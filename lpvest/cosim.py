@@ -29,7 +29,6 @@ import re
 import shutil
 import tempfile
 from collections.abc import Iterable, Mapping, Sequence
-from ctypes import byref
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -49,7 +48,20 @@ __all__ = [
 
 
 class CoSimulationError(LpvestError, RuntimeError):
-    """A component failed, or the set-up is invalid (names, types, units)."""
+    """A component failed, or the set-up is invalid (names, types, units).
+
+    Attributes
+    ----------
+    where : str
+        What in the set-up the error is about, in the terms of a co-simulation
+        file (:mod:`lpvest.cosimfile`): ``"connections[2]"`` (1-based),
+        ``"components.plant"``, ``"components.plant.parameters.x0"``,
+        ``"record[1]"``, ``"step_size"``; ``""`` when it is about no one field.
+    """
+
+    def __init__(self, message: str, *, where: str = "") -> None:
+        super().__init__(message)
+        self.where = where
 
 
 class AlgebraicLoopError(CoSimulationError):
@@ -128,6 +140,35 @@ class _Unit:
     depends: dict[str, set[str]]  # output -> inputs it depends on
     log: list[str]
     funcs: dict[str, Any] = field(default_factory=dict)
+    start_values: list[tuple[_Var, Any, str]] = field(default_factory=list)  # (variable, value, parameter key)
+
+
+def _log_text(unit: _Unit) -> str:
+    """The component's last messages of status warning or worse (else its last
+    message), for an error."""
+    bad = [m for m in unit.log if not m.startswith("[OK]")]
+    return "; ".join((bad or unit.log)[-3:]) or "no log message"
+
+
+def _convert(value: Any, fmi_type: str, what: str, where: str) -> Any:
+    """A start value as the Python type of its FMI type; a clear error otherwise."""
+    kind = type(value).__name__
+    if fmi_type == "Real":
+        if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+            raise CoSimulationError(f"{what}: expected a number, found {kind} {value!r}", where=where)
+        return float(value)
+    if fmi_type == "Integer":
+        if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating) \
+                or float(value) != int(value):
+            raise CoSimulationError(f"{what}: expected an integer, found {kind} {value!r}", where=where)
+        return int(value)
+    if fmi_type == "Boolean":
+        if not isinstance(value, bool | np.bool_):
+            raise CoSimulationError(f"{what}: expected true or false, found {kind} {value!r}", where=where)
+        return bool(value)
+    if not isinstance(value, str):
+        raise CoSimulationError(f"{what}: expected a string, found {kind} {value!r}", where=where)
+    return value
 
 
 def _expand(names: Iterable[str], base: str) -> list[str]:
@@ -173,14 +214,14 @@ class CoSimulation:
         record: Sequence[str] | None = None,
     ) -> None:
         if not step_size > 0:
-            raise CoSimulationError(f"step_size must be positive; found {step_size}")
+            raise CoSimulationError(f"step_size must be positive; found {step_size}", where="step_size")
         names = [c.name for c in components]
         dup = {n for n in names if names.count(n) > 1}
         if dup:
-            raise CoSimulationError(f"component names are not unique: {sorted(dup)}")
+            raise CoSimulationError(f"component names are not unique: {sorted(dup)}", where="components")
         for n in names:
             if not n.isidentifier():
-                raise CoSimulationError(f"component name {n!r} is not an identifier")
+                raise CoSimulationError(f"component name {n!r} is not an identifier", where=f"components.{n}")
         self.step_size = float(step_size)
         self.start_time = float(start_time)
         self._tmp = Path(tempfile.mkdtemp(prefix="lpvest-cosim-"))
@@ -189,9 +230,11 @@ class CoSimulation:
         try:
             for i, c in enumerate(components):
                 self._units.append(self._load(i, c))
-            self._links = self._connect([Connection.parse(s) for s in connections])
-            self._schedule = self._order()
+            self._links = self._connect(connections)
             self._record = self._record_list(record)
+            self._schedule = self._order()
+            for unit in self._units:
+                self._check_parameters(unit)
             self._instantiate()
         except BaseException:
             self.close()
@@ -203,14 +246,15 @@ class CoSimulation:
         from fmpy.fmi2 import FMU2Slave
 
         path = Path(spec.fmu)
+        where = f"components.{spec.name}.fmu"
         if not path.is_file():
-            raise CoSimulationError(f"component {spec.name}: FMU file {path} does not exist")
+            raise CoSimulationError(f"component {spec.name}: FMU file {path} does not exist", where=where)
         try:
             md = read_model_description(str(path))
         except Exception as exc:  # fmpy raises plain exceptions for bad files
-            raise CoSimulationError(f"component {spec.name}: {path} is not a valid FMU: {exc}") from exc
+            raise CoSimulationError(f"component {spec.name}: {path} is not a valid FMU: {exc}", where=where) from exc
         if md.fmiVersion != "2.0" or md.coSimulation is None:
-            raise CoSimulationError(f"component {spec.name}: {path} is not an FMI 2.0 co-simulation FMU")
+            raise CoSimulationError(f"component {spec.name}: {path} is not an FMI 2.0 co-simulation FMU", where=where)
         unzip = extract(str(path), unzipdir=str(self._tmp / spec.name))
         variables: dict[str, _Var] = {}
         for v in md.modelVariables:
@@ -235,43 +279,55 @@ class CoSimulation:
         )
         return _Unit(spec, md, fmu, variables, inputs, outputs, depends, [])
 
-    def _var(self, qualified: str, what: str) -> list[_Var]:
+    def _var(self, qualified: str, what: str, where: str = "") -> list[_Var]:
         comp, sep, name = qualified.partition(".")
         if not sep:
-            raise CoSimulationError(f"{what} {qualified!r}: expected 'component.variable'")
+            raise CoSimulationError(f"{what} {qualified!r}: expected 'component.variable'", where=where)
         unit = next((u for u in self._units if u.spec.name == comp), None)
         if unit is None:
             known = ", ".join(u.spec.name for u in self._units)
-            raise CoSimulationError(f"{what} {qualified!r}: no component {comp!r} (components: {known})")
+            raise CoSimulationError(f"{what} {qualified!r}: no component {comp!r} (components: {known})",
+                                    where=where)
         elems = _expand(unit.variables, name)
         if not elems:
-            raise CoSimulationError(f"{what} {qualified!r}: {comp} has no variable {name!r}")
+            raise CoSimulationError(f"{what} {qualified!r}: {comp} has no variable {name!r}", where=where)
         return [unit.variables[e] for e in elems]
 
-    def _connect(self, connections: list[Connection]) -> list[tuple[_Var, _Var]]:
+    def _connect(self, connections: Sequence[str | tuple[str, str] | Connection]) -> list[tuple[_Var, _Var]]:
         links: list[tuple[_Var, _Var]] = []
         driven: dict[tuple[int, str], str] = {}
-        for c in connections:
-            src = self._var(c.source, "connection source")
-            dst = self._var(c.target, "connection target")
-            if len(src) != len(dst):
-                raise CoSimulationError(
-                    f"connection {c.source} -> {c.target}: {len(src)} source and {len(dst)} target elements"
-                )
-            for s, d in zip(src, dst, strict=True):
-                sname = f"{self._units[s.comp].spec.name}.{s.name}"
-                dname = f"{self._units[d.comp].spec.name}.{d.name}"
-                if s.causality != "output":
-                    raise CoSimulationError(f"connection source {sname} is not an output ({s.causality})")
-                if d.causality != "input":
-                    raise CoSimulationError(f"connection target {dname} is not an input ({d.causality})")
-                if s.type != d.type or s.type not in _TYPES:
-                    raise CoSimulationError(f"connection {sname} -> {dname}: types {s.type} and {d.type}")
-                key = (d.comp, d.name)
-                if key in driven:
-                    raise CoSimulationError(f"{dname} is driven twice (by {driven[key]} and {sname})")
-                driven[key] = sname
-                links.append((s, d))
+        for i, spec in enumerate(connections):
+            where = f"connections[{i + 1}]"
+            try:
+                links += self._link(Connection.parse(spec), driven)
+            except CoSimulationError as exc:
+                if exc.where:
+                    raise
+                raise CoSimulationError(str(exc), where=where) from None
+        return links
+
+    def _link(self, c: Connection, driven: dict[tuple[int, str], str]) -> list[tuple[_Var, _Var]]:
+        links: list[tuple[_Var, _Var]] = []
+        src = self._var(c.source, "connection source")
+        dst = self._var(c.target, "connection target")
+        if len(src) != len(dst):
+            raise CoSimulationError(
+                f"connection {c.source} -> {c.target}: {len(src)} source and {len(dst)} target elements"
+            )
+        for s, d in zip(src, dst, strict=True):
+            sname = f"{self._units[s.comp].spec.name}.{s.name}"
+            dname = f"{self._units[d.comp].spec.name}.{d.name}"
+            if s.causality != "output":
+                raise CoSimulationError(f"connection source {sname} is not an output ({s.causality})")
+            if d.causality != "input":
+                raise CoSimulationError(f"connection target {dname} is not an input ({d.causality})")
+            if s.type != d.type or s.type not in _TYPES:
+                raise CoSimulationError(f"connection {sname} -> {dname}: types {s.type} and {d.type}")
+            key = (d.comp, d.name)
+            if key in driven:
+                raise CoSimulationError(f"{dname} is driven twice (by {driven[key]} and {sname})")
+            driven[key] = sname
+            links.append((s, d))
         return links
 
     def _order(self) -> list[tuple[str, int, list[tuple[_Var, _Var]]]]:
@@ -314,10 +370,13 @@ class CoSimulation:
             raise AlgebraicLoopError(
                 "algebraic loop: these variables depend on each other through direct feedthrough: "
                 + ", ".join(names)
-                + " (declare feedthrough=False for a component whose outputs do not depend on its inputs)"
+                + " (declare feedthrough=False for a component whose outputs do not depend on its inputs)",
+                where="connections",
             )
         # group into batches: consecutive ops on the same component and kind
+        # (outputs that are neither connected nor recorded are not read)
         link_of = {(d.comp, d.name): (s, d) for s, d in self._links}
+        needed = {(s.comp, s.name) for s, _ in self._links} | {(v.comp, v.name) for v in self._record}
         schedule: list[tuple[str, int, list]] = []
         for kind, comp, name in order:
             if kind == "i":
@@ -326,6 +385,8 @@ class CoSimulation:
                 item = link_of[(comp, name)]
                 op = "set"
             else:
+                if (comp, name) not in needed:
+                    continue
                 item = self._units[comp].variables[name]
                 op = "get"
             if schedule and schedule[-1][0] == op and schedule[-1][1] == comp:
@@ -338,9 +399,36 @@ class CoSimulation:
         if record is None:
             return [u.variables[o] for u in self._units for o in u.outputs if u.variables[o].type in _TYPES]
         out: list[_Var] = []
-        for r in record:
-            out.extend(v for v in self._var(r, "recorded variable") if v.type in _TYPES)
+        seen: set[tuple[int, str]] = set()
+        for i, r in enumerate(record):
+            for v in self._var(r, "recorded variable", f"record[{i + 1}]"):
+                if v.type in _TYPES and (v.comp, v.name) not in seen:
+                    seen.add((v.comp, v.name))
+                    out.append(v)
         return out
+
+    def _check_parameters(self, unit: _Unit) -> None:
+        """Every start value names settable variables and fits their type."""
+        name = unit.spec.name
+        values: list[tuple[_Var, Any, str]] = []
+        for par, value in unit.spec.parameters.items():
+            where = f"components.{name}.parameters.{par}"
+            elems = _expand(unit.variables, par)
+            if not elems:
+                raise CoSimulationError(f"component {name}: no variable {par!r} to set", where=where)
+            items = value if isinstance(value, list | tuple | np.ndarray) else [value]
+            flat = np.asarray(items, dtype=object).ravel().tolist()
+            if len(flat) != len(elems):
+                raise CoSimulationError(
+                    f"component {name}: {par} has {len(elems)} element(s); {len(flat)} value(s) given", where=where
+                )
+            for e, val in zip(elems, flat, strict=True):
+                v = unit.variables[e]
+                if v.causality not in ("parameter", "input"):
+                    raise CoSimulationError(f"component {name}: {e} is an {v.causality}; it cannot be set",
+                                            where=where)
+                values.append((v, _convert(val, v.type, f"component {name}: {e}", where), par))
+        unit.start_values = values
 
     def _instantiate(self) -> None:
         from fmpy import calloc, free
@@ -351,23 +439,23 @@ class CoSimulation:
             fmi2CallbackLoggerTYPE,
         )
 
+        # One logger per instance, called by the FMU directly. (fmpy's
+        # addLoggerProxy, which would format printf-style arguments, keeps a
+        # single global callback: with several instances, or any FMU
+        # instantiated later in the process, messages would reach the wrong log.)
+        # Messages arrive as format strings: lpvest FMUs double every '%'.
         for unit in self._units:
 
             def logger(_env, _inst, status, category, message, _log=unit.log):  # type: ignore[no-untyped-def]
                 label = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"][status] if 0 <= status < 6 else "?"
-                _log.append(f"[{label}] {message.decode('utf-8', 'replace')}")
+                text = (message or b"").decode("utf-8", "replace").replace("%%", "%")
+                _log.append(f"[{label}] {text}")
                 del _log[:-50]
 
             callbacks = fmi2CallbackFunctions()
             callbacks.logger = fmi2CallbackLoggerTYPE(logger)
             callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
             callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-            try:
-                from fmpy.logging import addLoggerProxy
-
-                addLoggerProxy(byref(callbacks))
-            except Exception:  # noqa: BLE001 - optional nicety: printf-style messages stay raw
-                pass
             unit.callbacks = callbacks  # type: ignore[attr-defined] (keep alive)
             self._call(
                 unit, "instantiate", lambda u=unit, cb=callbacks: u.fmu.instantiate(callbacks=cb, loggingOn=True)
@@ -375,7 +463,7 @@ class CoSimulation:
             unit.funcs = {n: unit.fmu._functions[n] for n in ("fmi2GetReal", "fmi2SetReal", "fmi2DoStep")}
 
     # -- running --------------------------------------------------------------
-    def _call(self, unit: _Unit, what: str, fn: Any, t: float | None = None) -> Any:
+    def _call(self, unit: _Unit, what: str, fn: Any, t: float | None = None, *, where: str | None = None) -> Any:
         from fmpy.fmi1 import FMICallException
 
         try:
@@ -384,25 +472,16 @@ class CoSimulation:
             if isinstance(exc, LpvestError):
                 raise
             at = "" if t is None else f" at t = {t:g}"
-            log = "; ".join(unit.log[-5:]) or "no log message"
-            raise CoSimulationError(f"component {unit.spec.name}: {what} failed{at}: {exc} ({log})") from exc
+            log = _log_text(unit)
+            raise CoSimulationError(f"component {unit.spec.name}: {what} failed{at}: {exc} ({log})",
+                                    where=f"components.{unit.spec.name}" if where is None else where) from exc
 
     def _set_start_values(self, unit: _Unit) -> None:
-        for name, value in unit.spec.parameters.items():
-            elems = _expand(unit.variables, name)
-            if not elems:
-                raise CoSimulationError(f"component {unit.spec.name}: no variable {name!r} to set")
-            values = np.atleast_1d(np.asarray(value, dtype=object)).ravel()
-            if values.size != len(elems):
-                raise CoSimulationError(
-                    f"component {unit.spec.name}: {name} has {len(elems)} elements; {values.size} values given"
-                )
-            for e, val in zip(elems, values, strict=True):
-                v = unit.variables[e]
-                setter = {"Real": unit.fmu.setReal, "Integer": unit.fmu.setInteger,
-                          "Boolean": unit.fmu.setBoolean, "String": unit.fmu.setString}[v.type]
-                x = {"Real": float, "Integer": int, "Boolean": bool, "String": str}[v.type](val)
-                self._call(unit, f"setting {e} = {val!r}", lambda s=setter, r=v.vr, x=x: s([r], [x]))
+        setters = {"Real": unit.fmu.setReal, "Integer": unit.fmu.setInteger,
+                   "Boolean": unit.fmu.setBoolean, "String": unit.fmu.setString}
+        for v, x, par in unit.start_values:
+            self._call(unit, f"setting {v.name} = {x!r}", lambda s=setters[v.type], r=v.vr, x=x: s([r], [x]),
+                       where=f"components.{unit.spec.name}.parameters.{par}")
 
     def run(
         self,
@@ -485,8 +564,9 @@ class CoSimulation:
 
     def _fail(self, unit: _Unit, what: str, status: int, t: float) -> None:
         label = ["ok", "warning", "discard", "error", "fatal", "pending"][status] if 0 <= status < 6 else "?"
-        log = "; ".join(unit.log[-5:]) or "no log message"
-        raise CoSimulationError(f"component {unit.spec.name}: {what} at t = {t:g} returned {label} ({log})")
+        log = _log_text(unit)
+        raise CoSimulationError(f"component {unit.spec.name}: {what} at t = {t:g} returned {label} ({log})",
+                                where=f"components.{unit.spec.name}")
 
     def _plan(self) -> list[tuple]:
         """The per-step FMI calls with their value references and buffers.
@@ -585,6 +665,11 @@ class CoSimulation:
                 self._fail(unit, what + (" during initialization" if initial else ""), status, t)
 
     # -- inspection and clean-up ----------------------------------------------
+    @property
+    def recorded(self) -> list[str]:
+        """The recorded variables, ``"comp.var"`` per element (the result's columns after ``"time"``)."""
+        return [f"{self._units[v.comp].spec.name}.{v.name}" for v in self._record]
+
     @property
     def execution_order(self) -> list[str]:
         """The per-step operations, e.g. ``["get sched: p[1]", "set plant: p[1]", ...]``."""
