@@ -346,9 +346,7 @@ def _run_fmpy(path: Path, system: SspSystem, n_steps: int) -> dict[str, np.ndarr
                         parameter_set=ParameterSet(parameters=params) if params else None)
     if res.shape[0] != n_steps:
         raise CoSimulationError(f"fmpy took {res.shape[0]} steps; expected {n_steps}")
-    prefix = f"{system.name}."
-    return {n[len(prefix):] if n.startswith(prefix) else n: np.asarray(res[n], dtype=float)
-            for n in res.dtype.names if n != "time"}
+    return {n: np.asarray(res[n], dtype=float) for n in res.dtype.names if n != "time"}
 
 
 def _start_values(path: Path, source: str) -> dict[str, str | None]:
