@@ -69,9 +69,12 @@ def hinf_step(design: HinfDesign, xf: np.ndarray, alpha: np.ndarray | None, y: n
     return _step_with(design.matrices_at(alpha), xf, alpha, y)
 
 
-def _step_with(m: Any, xf: np.ndarray, alpha: np.ndarray | None, y: np.ndarray) -> HinfStep:
-    """:func:`hinf_step` with the matrices at ``alpha`` already evaluated."""
-    zhat = m.Cf @ xf + m.Df @ y
+def _step_with(
+    m: Any, xf: np.ndarray, alpha: np.ndarray | None, y: np.ndarray, zhat: np.ndarray | None = None
+) -> HinfStep:
+    """:func:`hinf_step` with the matrices at ``alpha`` (and ``zhat``) already evaluated."""
+    if zhat is None:
+        zhat = m.Cf @ xf + m.Df @ y
     try:
         nxt = np.linalg.solve(m.H, m.Af @ xf + m.Bf @ y)
     except np.linalg.LinAlgError as exc:
@@ -230,7 +233,7 @@ class HinfFilter:
         """Consume sample ``k``: return :meth:`outputs` and advance to ``k + 1``."""
         memo = self._memo
         if memo is not None and memo[0] == input_key(inputs):
-            res = _step_with(memo[1], self._xf, memo[2], memo[3])
+            res = _step_with(memo[1], self._xf, memo[2], memo[3], memo[4])
         else:
             alpha, y = self._parse(inputs)
             res = hinf_step(self.design, self._xf, alpha, y)

@@ -334,11 +334,12 @@ class LpvestSlave(Fmi2Slave):
     def _store_outputs(self, values: Mapping[str, Any]) -> None:
         """Keep a copy of the component's outputs, and the flat list of their
         values in the order of the output variables (what fmi2GetReal reads)."""
-        outputs = {p.name: np.asarray(values[p.name], dtype=float).reshape(p.shape).copy()
-                   for p in self._output_ports}
+        outputs = {}
         flat: list[float] = []
         for p in self._output_ports:
-            flat.extend(outputs[p.name].reshape(-1).tolist())
+            a = np.array(values[p.name], dtype=float).reshape(p.shape)  # a copy
+            outputs[p.name] = a
+            flat += a.ravel().tolist()
         self._outputs, self._output_values = outputs, flat
 
     def _refresh(self) -> None:
