@@ -229,3 +229,13 @@ def test_fmu_dir_of_the_file_is_relative_to_the_file(fmus, tmp_path):
     assert spec.fmu_dir == sub / rel
     assert re.fullmatch(r"PeixotoEx1Plant\.fmu", spec.components[2].fmu.name)
     assert spec.run().data.shape == (11,)
+
+
+def test_the_readme_scripting_example_runs(fmus, capsys):
+    text = (ROOT / "README.md").read_text()
+    block = text.split("## Co-simulation", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+    assert len(block.strip().splitlines()) <= 15
+    exec(compile(block.replace('"fmu-build/', f'"{fmus.out.as_posix()}/'), "README.md", "exec"), {})
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("['get sched: ") and "'set filter: p[1], y[1]'" in out[0]
+    assert float(out[1]) == pytest.approx(1.07, abs=0.005)

@@ -216,3 +216,27 @@ def test_command_line_writes_the_ssp_of_a_cosim_file(fmus, tmp_path, capsys):
     assert system.stop_time == 100.0 and system.step_size == 1.0
     assert ("omega[1]", "Real", "0.25") in system.parameters["sched"]
     assert simulate_ssp(out, importer="fmpy", n_steps=5).shape == (5,)
+
+
+def test_the_readme_numbers_for_the_example_file(fmus, tmp_path):
+    """README, SSP export: on examples/peixoto_ex1_hinf.toml fmpy and libcosim
+    agree, and ||z - zhat|| / ||w|| is 1.07 with our master, 1.60 with Jacobi
+    stepping (certified gamma = 1.21)."""
+    from pathlib import Path
+
+    from lpvest.cosimfile import load_cosim
+
+    spec = load_cosim(Path(__file__).resolve().parent.parent / "examples" / "peixoto_ex1_hinf.toml",
+                      fmu_dir=fmus.out)
+    m = spec.run().data
+    path = spec.to_ssp(tmp_path / "example.ssp")
+    f, lc = simulate_ssp(path, importer="fmpy"), simulate_ssp(path, importer="libcosim")
+    for name in lc.dtype.names:
+        np.testing.assert_array_equal(f[name], lc[name], err_msg=name)
+    w = np.linalg.norm(m["src.w[1]"])
+    e_master = np.column_stack([m[f"plant.z[{i}]"] - m[f"filter.zhat[{i}]"] for i in (1, 2)])
+    e_jacobi = np.column_stack([m[f"plant.z[{i}]"][1:] - lc[f"filter.zhat[{i}]"] for i in (1, 2)])
+    assert np.linalg.norm(e_master) / w == pytest.approx(1.07, abs=0.005)
+    assert np.linalg.norm(e_jacobi) / w == pytest.approx(1.60, abs=0.005)
+    with zipfile.ZipFile(fmus["PeixotoEx1HinfPD"]) as z:
+        assert HinfDesign.from_json(z.read("resources/design.json").decode()).gamma == pytest.approx(1.21, abs=0.005)
