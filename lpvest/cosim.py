@@ -10,6 +10,13 @@ component. Direct feedthrough is read from each FMU's ``ModelStructure``
 says) and can be overridden per component. A cycle through feedthrough paths is
 an algebraic loop and a clear error.
 
+Per step the master makes one ``fmi2SetReal`` and one ``fmi2GetReal`` per
+component at most (value references looked up once; only outputs that are
+connected or recorded are read), writes every value it reads into one numpy
+array (a set whose sources lie next to each other there passes that memory to
+the FMU as is), and records a row by one copy. Set-up errors carry the field
+of a co-simulation file they are about (:attr:`CoSimulationError.where`).
+
 Examples
 --------
 >>> sim = CoSimulation(
