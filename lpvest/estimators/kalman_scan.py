@@ -577,8 +577,12 @@ def scan_filter(
         if m > 1:
             Om = _sym(Om)
         Om_[sl] = Om
-        Lo = _chol(Om)
-        if Lo is None:
+        if m == 1:  # a positive finite scalar; no factor needed
+            ok = bool(np.all(Om > 0.0) and np.all(np.isfinite(Om)))
+        else:
+            Lo = _chol(Om)
+            ok = Lo is not None
+        if not ok:
             bad = _first_not_pd(Om)
             raise NumericalError(
                 f"the innovation covariance Omega_t is not positive definite at t={bad * ell + j}"
