@@ -449,24 +449,45 @@ def _take(g: _General, s: slice) -> _General:
     return _General(*(a[s] for a in g))
 
 
-def _prefix_scan(el: _General) -> _General:
-    """Inclusive prefixes ``el[0] ⊗ ... ⊗ el[k]`` by the work-efficient
-    recursive scan: ``2 log2 N`` levels of batched :func:`_combine`."""
+def _combine_prefix(b: np.ndarray, C: np.ndarray, j: _General) -> tuple[np.ndarray, np.ndarray]:
+    """``i ⊗ j`` when ``i`` is a prefix (``A_i = 0``, ``J_i = 0``,
+    ``eta_i = 0``): only ``b`` and ``C`` (the filtered moments) are needed,
+    from one solve with ``n_x + 1`` right-hand sides."""
+    n = C.shape[-1]
+    M = C @ j.J
+    M += np.eye(n)
+    try:
+        X = np.linalg.solve(M, np.concatenate(((b + _mv(C, j.eta))[..., None], C), axis=-1))
+    except np.linalg.LinAlgError:
+        k = next((k for k in range(M.shape[0]) if not _solvable(M[k])), 0)
+        raise NumericalError(
+            "the scan's combination matrix I + C_i J_j is singular when joining the samples up to "
+            f"t={int(j.last[k])} to their prefix (non-finite or overflowing values)"
+        ) from None
+    Aj = j.A
+    return _mv(Aj, X[..., 0]) + j.b, _sym(Aj @ X[..., 1:] @ _mT(Aj) + j.C)
+
+
+def _prefix_scan(el: _General) -> tuple[np.ndarray, np.ndarray]:
+    """``b`` and ``C`` of the inclusive prefixes ``el[0] ⊗ ... ⊗ el[k]`` (the
+    filtered moments at the end of element ``k``; ``el[0]`` must be a prefix
+    itself) by the work-efficient recursive scan: ``log2 N`` levels of
+    batched :func:`_combine` going up, ``log2 N`` of the cheaper
+    :func:`_combine_prefix` coming down."""
     N = el.A.shape[0]
     if N < 2:
-        return el
+        return el.b, el.C
     pairs = _combine(_take(el, slice(0, N - 1, 2)), _take(el, slice(1, N, 2)))
-    odd = _prefix_scan(pairs)  # prefixes ending at 1, 3, 5, ...
+    ob, oC = _prefix_scan(pairs)  # prefixes ending at 1, 3, 5, ...
     rest = _take(el, slice(2, N, 2))
-    even = _combine(_take(odd, slice(0, rest.A.shape[0])), rest)  # ending at 2, 4, ...
-    out = []
-    for a, o, v in zip(el, odd, even, strict=True):
-        r = np.empty_like(a)
-        r[0] = a[0]
-        r[1::2] = o
-        r[2::2] = v
-        out.append(r)
-    return _General(*out)
+    r = rest.A.shape[0]
+    eb, eC = _combine_prefix(ob[:r], oC[:r], rest)  # ending at 2, 4, ...
+    b = np.empty(el.b.shape)
+    C = np.empty(el.C.shape)
+    b[0], C[0] = el.b[0], el.C[0]
+    b[1::2], C[1::2] = ob, oC
+    b[2::2], C[2::2] = eb, eC
+    return b, C
 
 
 # ---------------------------------------------------------------------------
@@ -547,11 +568,11 @@ def scan_filter(
             acc = _fold(acc, AbarT[prev], GQbarG[prev], c[prev], C[cur], HRH[cur], yd[cur], acc.last + 1)
         acc = acc._replace(J=_sym(acc.J))  # J + V^T V: symmetric up to rounding
         # step 2: scan across blocks; prefix k = filtered moments at the end of block k
-        pre = _prefix_scan(acc)
+        pb, pC = _prefix_scan(acc)
         s = np.arange(1, nb) * ell  # block starts
         AT = AbarT[s - 1]
-        starts_x[1:] = _mv(_mT(AT), pre.b) + c[s - 1]
-        starts_P[1:] = _sym(_mT(AT) @ (pre.C @ AT) + GQbarG[s - 1])
+        starts_x[1:] = _mv(_mT(AT), pb) + c[s - 1]
+        starts_P[1:] = _sym(_mT(AT) @ (pC @ AT) + GQbarG[s - 1])
 
     # step 3: the filter within every block, all blocks at once; results are
     # written straight into the outputs (strided views, no copies)
