@@ -64,7 +64,9 @@ from lpvest.estimators.kalman import (  # noqa: E402
 )
 
 
-def random_model(nx: int, ny: int, nu: int, rng: np.random.Generator) -> AffineLPV:
+def random_model(nx: int, ny: int, nu: int, rng: np.random.Generator, *, cross: bool = False) -> AffineLPV:
+    """The benchmark problem; ``cross=True`` adds a cross-covariance
+    ``S != 0`` (then filterpy, which has none, does not apply)."""
     space = SchedulingSpace(["p"], [-1.0], [1.0])
     basis = [Monomial.component(0, space)]
     A0 = rng.standard_normal((nx, nx))
@@ -72,6 +74,12 @@ def random_model(nx: int, ny: int, nu: int, rng: np.random.Generator) -> AffineL
     qa = rng.standard_normal((nx, nx))
     qq = rng.standard_normal((nx, nx))
     qr = rng.standard_normal((ny, ny))
+    Q = 0.1 * (qq @ qq.T + nx * np.eye(nx))
+    R = 0.1 * (qr @ qr.T + ny * np.eye(ny))
+    S = np.zeros((nx, ny))
+    if cross:  # S = 0.5 Q^(1/2) E R^(1/2)^T with orthonormal E: Sigma stays positive definite
+        E = np.linalg.qr(rng.standard_normal((nx, max(nx, ny))))[0][:, :ny] if nx >= ny else np.eye(nx, ny)
+        S = 0.5 * np.linalg.cholesky(Q) @ E @ np.linalg.cholesky(R).T
     return AffineLPV.from_matrices(
         space,
         basis,
@@ -80,8 +88,9 @@ def random_model(nx: int, ny: int, nu: int, rng: np.random.Generator) -> AffineL
         C={"1": rng.standard_normal((ny, nx)), "p": 0.2 * rng.standard_normal((ny, nx))},
         G={"1": np.eye(nx), "p": 0.1 * qa},
         H={"1": np.eye(ny), "p": 0.2 * np.eye(ny)},
-        Q=0.1 * (qq @ qq.T + nx * np.eye(nx)),
-        R=0.1 * (qr @ qr.T + ny * np.eye(ny)),
+        Q=Q,
+        R=R,
+        S=S,
         P0=np.eye(nx),
     )
 
@@ -215,6 +224,37 @@ def bench(nx: int, ny: int, steps: int, repeat: int, seed: int) -> dict[str, flo
     return {name: 1e6 * t / steps for name, t in best.items()}
 
 
+def bench_cross(nx: int, ny: int, steps: int, repeat: int, seed: int) -> dict[str, float]:
+    """Microseconds per step with a cross-covariance S != 0 (the decorrelation
+    has work to do): the streaming step loop against the batch methods."""
+    rng = np.random.default_rng(seed)
+    model = random_model(nx, ny, 1, rng, cross=True)
+    k = np.arange(steps)
+    p = np.sin(0.25 * k)[:, None]
+    u = np.sin(0.1 * k)[:, None]
+    y = model.simulate(p, u, rng=rng).y
+    kf = LPVKalmanFilter(model)
+    rows = [{"p": p[t], "u": u[t], "y": y[t]} for t in range(steps)]
+
+    def lp_step() -> None:
+        kf.reset()
+        for r in rows:
+            kf.step(r)
+
+    fns = {"step": lp_step}
+    for mt in ("auto", "scan", "sequential"):
+        fns[mt] = lambda mt=mt: kalman_filter(model, p, u, y, method=mt)
+    scan, seq = (kalman_filter(model, p, u, y, method=mt) for mt in ("scan", "sequential"))
+    for a, b in zip(scan, seq, strict=True):
+        assert np.max(np.abs(np.asarray(a) - b)) <= 1e-9 * np.max(np.abs(b)), "scan and sequential disagree"
+    best = dict.fromkeys(fns, np.inf)
+    names = list(fns)
+    for r in range(repeat):
+        for name in names[r % len(names) :] + names[: r % len(names)]:
+            best[name] = min(best[name], _best(fns[name], 1))
+    return {name: 1e6 * t / steps for name, t in best.items()}
+
+
 def bench_methods(nx: int, ny: int, lengths: list[int], repeat: int, seed: int) -> dict[int, dict[str, float]]:
     """Seconds per call of kalman_filter(method=...) for trajectories of each length."""
     rng = np.random.default_rng(seed)
@@ -302,6 +342,15 @@ def main() -> None:
         ):
             label = f"{num[7:]} / {den[7:]}"
             print(f"{label:<28}" + "".join(f"{res[nx][num] / res[nx][den]:>12.2f}" for nx in (2, 4, 10)))
+
+    print(f"\nwith a cross-covariance S != 0 (no filterpy row), {args.steps} steps, us per step:")
+    print(f"{'':22}" + "".join(f"{'n_x = ' + str(n):>12}" for n in (2, 4, 10)))
+    for ny in args.ny:
+        cr = {nx: bench_cross(nx, ny, args.steps, args.repeat, args.seed) for nx in (2, 4, 10)}
+        for name in cr[2]:
+            print(f"n_y = {ny}  {name:<12}" + "".join(f"{cr[nx][name]:>12.1f}" for nx in (2, 4, 10)))
+        print(f"n_y = {ny}  {'step / auto':<12}" + "".join(f"{cr[nx]['step'] / cr[nx]['auto']:>12.2f}"
+                                                      for nx in (2, 4, 10)))
 
     print(f"\nscan vs sequential per call (ms) against T, n_y = 1 (best of {args.repeat}):")
     print(f"{'':14}" + "".join(f"{'T = ' + str(T):>16}" for T in args.crossover))
