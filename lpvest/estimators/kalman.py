@@ -762,7 +762,7 @@ def _riccati_sweep(
 #: ``kalman_filter(method="auto")`` runs the sequential recursion for fewer
 #: samples than this: the scan's fixed cost of a few hundred numpy calls is
 #: then not recovered (measured with ``benchmarks/bench_kalman.py``: the
-#: scan is faster from about 48 samples at n_x = 2 and 64 at n_x = 10).
+#: two break even at 32-48 samples for n_x = 2 and 48-64 for n_x = 10).
 #: There is no rule on n_x: per sample the scan does fewer flops than the
 #: sequential kernel, and it was faster at every n_x measured (2 to 100).
 SCAN_MIN_SAMPLES = 64
