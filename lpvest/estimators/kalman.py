@@ -768,10 +768,10 @@ def _riccati_sweep(
 SCAN_MIN_SAMPLES = 64
 
 #: ``kalman_filter(method="auto")`` runs the sequential recursion when
-#: ``max_t ||J_t C_t||_F`` exceeds this, ``J_t = G S H^T (H R H^T)^-1``:
-#: the decorrelated form amplifies rounding errors by about its square (a
-#: nearly singular ``H R H^T`` next to a strong cross-covariance), see
-#: :mod:`lpvest.estimators.kalman_scan`.
+#: ``max_t ||J_t||_F ||C_t||_F`` (a bound of ``||J_t C_t||_F``) exceeds this,
+#: ``J_t = G S H^T (H R H^T)^-1``: the decorrelated form amplifies rounding
+#: errors by about its square (a nearly singular ``H R H^T`` next to a strong
+#: cross-covariance), see :mod:`lpvest.estimators.kalman_scan`.
 SCAN_MAX_AMPLIFICATION = 100.0
 
 _METHODS = ("auto", "scan", "sequential")
@@ -806,7 +806,7 @@ def kalman_filter(
     - ``"auto"`` (default): the scan, except when it does not apply or does
       not pay: ``H R H^T`` singular at some sample, fewer than
       :data:`SCAN_MIN_SAMPLES` samples, or an error amplification
-      ``max_t ||J_t C_t||_F`` above :data:`SCAN_MAX_AMPLIFICATION` (module
+      ``max_t ||J_t||_F ||C_t||_F`` above :data:`SCAN_MAX_AMPLIFICATION` (module
       notes of :mod:`~lpvest.estimators.kalman_scan`); then the sequential
       recursion.
 
