@@ -808,7 +808,8 @@ def kalman_filter(
       :data:`SCAN_MIN_SAMPLES` samples, or an error amplification
       ``max_t ||J_t||_F ||C_t||_F`` above :data:`SCAN_MAX_AMPLIFICATION` (module
       notes of :mod:`~lpvest.estimators.kalman_scan`); then the sequential
-      recursion.
+      recursion. (An empty trajectory has nothing to scan: every method
+      returns the initial prediction.)
 
     Parameters
     ----------
