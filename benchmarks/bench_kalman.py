@@ -13,7 +13,10 @@ simulated from the model. Rows:
   the p-dependent matrices, Joseph forms, log-likelihood, output dict;
 - ``lpvest run_streaming``: the same through :func:`run_streaming` (the
   streaming loop: it also slices the inputs and stacks the outputs);
-- ``lpvest batch``: :func:`kalman_filter` over the whole trajectory;
+- ``lpvest batch (auto)``, ``(scan)``, ``(sequential)``: :func:`kalman_filter`
+  over the whole trajectory with ``method="auto"`` (what users get),
+  ``"scan"`` (the parallel-in-time blocked scan) and ``"sequential"`` (the
+  covariance recursion sample by sample);
 - ``lpvest kalman_step (matrices given)``: the pure step function on
   matrices evaluated beforehand for the whole trajectory, no validation: the
   like-for-like comparison with the next row;
@@ -22,11 +25,17 @@ simulated from the model. Rows:
 - ``filterpy + model.at(p)``: the same, evaluating the model at ``p_t`` each
   step as a streaming filterpy user would.
 
-The benchmark also checks that lpvest and filterpy agree on the estimates.
+The benchmark also checks that lpvest and filterpy agree on the estimates,
+and that the scan agrees with the sequential recursion.
+
+Two further tables: the per-call time of ``method="scan"`` and
+``"sequential"`` against the number of samples ``T`` (where ``"auto"``
+should switch: :data:`~lpvest.estimators.kalman.SCAN_MIN_SAMPLES`), and
+against larger ``n_x``.
 
 Run::
 
-    .venv/bin/python benchmarks/bench_kalman.py [--steps 2000] [--repeat 5]
+    .venv/bin/python benchmarks/bench_kalman.py [--steps 2000] [--repeat 8]
 """
 
 from __future__ import annotations
@@ -55,7 +64,9 @@ from lpvest.estimators.kalman import (  # noqa: E402
 )
 
 
-def random_model(nx: int, ny: int, nu: int, rng: np.random.Generator) -> AffineLPV:
+def random_model(nx: int, ny: int, nu: int, rng: np.random.Generator, *, cross: bool = False) -> AffineLPV:
+    """The benchmark problem; ``cross=True`` adds a cross-covariance
+    ``S != 0`` (then filterpy, which has none, does not apply)."""
     space = SchedulingSpace(["p"], [-1.0], [1.0])
     basis = [Monomial.component(0, space)]
     A0 = rng.standard_normal((nx, nx))
@@ -63,6 +74,12 @@ def random_model(nx: int, ny: int, nu: int, rng: np.random.Generator) -> AffineL
     qa = rng.standard_normal((nx, nx))
     qq = rng.standard_normal((nx, nx))
     qr = rng.standard_normal((ny, ny))
+    Q = 0.1 * (qq @ qq.T + nx * np.eye(nx))
+    R = 0.1 * (qr @ qr.T + ny * np.eye(ny))
+    S = np.zeros((nx, ny))
+    if cross:  # S = 0.5 Q^(1/2) E R^(1/2)^T with orthonormal E: Sigma stays positive definite
+        E = np.linalg.qr(rng.standard_normal((nx, max(nx, ny))))[0][:, :ny] if nx >= ny else np.eye(nx, ny)
+        S = 0.5 * np.linalg.cholesky(Q) @ E @ np.linalg.cholesky(R).T
     return AffineLPV.from_matrices(
         space,
         basis,
@@ -71,8 +88,9 @@ def random_model(nx: int, ny: int, nu: int, rng: np.random.Generator) -> AffineL
         C={"1": rng.standard_normal((ny, nx)), "p": 0.2 * rng.standard_normal((ny, nx))},
         G={"1": np.eye(nx), "p": 0.1 * qa},
         H={"1": np.eye(ny), "p": 0.2 * np.eye(ny)},
-        Q=0.1 * (qq @ qq.T + nx * np.eye(nx)),
-        R=0.1 * (qr @ qr.T + ny * np.eye(ny)),
+        Q=Q,
+        R=R,
+        S=S,
         P0=np.eye(nx),
     )
 
@@ -115,8 +133,19 @@ def bench(nx: int, ny: int, steps: int, repeat: int, seed: int) -> dict[str, flo
         kf.reset()
         run_streaming(kf, {"p": p, "u": u, "y": y})
 
-    def lp_batch() -> None:
+    def lp_auto() -> None:
         kalman_filter(model, p, u, y)
+
+    def lp_scan() -> None:
+        kalman_filter(model, p, u, y, method="scan")
+
+    def lp_seq() -> None:
+        kalman_filter(model, p, u, y, method="sequential")
+
+    scan, seq = (kalman_filter(model, p, u, y, method=mt) for mt in ("scan", "sequential"))
+    for a, b in zip(scan, seq, strict=True):
+        scale = np.max(np.abs(b))
+        assert np.max(np.abs(np.asarray(a) - b)) <= 1e-9 * scale, "scan and sequential disagree"
 
     km = KalmanModel(model)
     sms = km.step_matrices_batch(p)
@@ -178,16 +207,73 @@ def bench(nx: int, ny: int, steps: int, repeat: int, seed: int) -> dict[str, flo
     fns = {
         "lpvest step": lp_step,
         "lpvest run_streaming": lp_stream,
-        "lpvest batch": lp_batch,
+        "lpvest batch (auto)": lp_auto,
+        "lpvest batch (scan)": lp_scan,
+        "lpvest batch (sequential)": lp_seq,
         "lpvest kalman_step (given)": lp_given,
         "filterpy (matrices given)": fp_given,
         "filterpy + model.at(p)": fp_eval,
     }
     best = dict.fromkeys(fns, np.inf)
-    for _ in range(repeat):  # interleaved rounds: load changes hit every row alike
-        for name, fn in fns.items():
-            best[name] = min(best[name], _best(fn, 1))
+    names = list(fns)
+    for r in range(repeat):  # interleaved rounds: load changes hit every row alike
+        # rotate the order each round: the row run right after a long streaming
+        # loop starts with cold caches, and no row should always be that one
+        for name in names[r % len(names) :] + names[: r % len(names)]:
+            best[name] = min(best[name], _best(fns[name], 1))
     return {name: 1e6 * t / steps for name, t in best.items()}
+
+
+def bench_cross(nx: int, ny: int, steps: int, repeat: int, seed: int) -> dict[str, float]:
+    """Microseconds per step with a cross-covariance S != 0 (the decorrelation
+    has work to do): the streaming step loop against the batch methods."""
+    rng = np.random.default_rng(seed)
+    model = random_model(nx, ny, 1, rng, cross=True)
+    k = np.arange(steps)
+    p = np.sin(0.25 * k)[:, None]
+    u = np.sin(0.1 * k)[:, None]
+    y = model.simulate(p, u, rng=rng).y
+    kf = LPVKalmanFilter(model)
+    rows = [{"p": p[t], "u": u[t], "y": y[t]} for t in range(steps)]
+
+    def lp_step() -> None:
+        kf.reset()
+        for r in rows:
+            kf.step(r)
+
+    fns = {"step": lp_step}
+    for mt in ("auto", "scan", "sequential"):
+        fns[mt] = lambda mt=mt: kalman_filter(model, p, u, y, method=mt)
+    scan, seq = (kalman_filter(model, p, u, y, method=mt) for mt in ("scan", "sequential"))
+    for a, b in zip(scan, seq, strict=True):
+        assert np.max(np.abs(np.asarray(a) - b)) <= 1e-9 * np.max(np.abs(b)), "scan and sequential disagree"
+    best = dict.fromkeys(fns, np.inf)
+    names = list(fns)
+    for r in range(repeat):
+        for name in names[r % len(names) :] + names[: r % len(names)]:
+            best[name] = min(best[name], _best(fns[name], 1))
+    return {name: 1e6 * t / steps for name, t in best.items()}
+
+
+def bench_methods(nx: int, ny: int, lengths: list[int], repeat: int, seed: int) -> dict[int, dict[str, float]]:
+    """Seconds per call of kalman_filter(method=...) for trajectories of each length."""
+    rng = np.random.default_rng(seed)
+    model = random_model(nx, ny, 1, rng)
+    km = KalmanModel(model)
+    out = {}
+    for T in lengths:
+        k = np.arange(T)
+        p = np.sin(0.25 * k)[:, None]
+        u = np.sin(0.1 * k)[:, None]
+        y = model.simulate(p, u, rng=rng).y
+        best = {"sequential": np.inf, "scan": np.inf}
+        reps = max(repeat, 2000 // max(T, 1))  # short runs: more rounds
+        for _ in range(reps):
+            for mt in best:
+                run = lambda mt=mt, p=p, u=u, y=y: kalman_filter(km, p, u, y, method=mt)  # noqa: E731
+                best[mt] = min(best[mt], _best(run, 1))
+        out[T] = best
+    return out
 
 
 def bench_truncated(nx: int, ny: int, taus: list[int], steps: int, repeat: int, seed: int) -> dict[int, float]:
@@ -223,9 +309,13 @@ def bench_truncated(nx: int, ny: int, taus: list[int], steps: int, repeat: int, 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=2000)
-    parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--repeat", type=int, default=8)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--ny", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--crossover", type=int, nargs="+", default=[16, 32, 48, 64, 96, 128, 256],
+                        help="trajectory lengths for the scan/sequential crossover table")
+    parser.add_argument("--large", type=int, nargs="+", default=[20, 40],
+                        help="larger n_x for the scan/sequential comparison")
     parser.add_argument("--taus", type=int, nargs="+", default=[1, 10, 50],
                         help="memories for the truncated-filter rows (n_x = 4, n_y = 1)")
     args = parser.parse_args()
@@ -244,11 +334,35 @@ def main() -> None:
             f"{res[nx]['lpvest step'] / res[nx]['filterpy (matrices given)']:>12.2f}" for nx in (2, 4, 10)))
         print(f"{'step / filterpy + at(p)':<28}" + "".join(
             f"{res[nx]['lpvest step'] / res[nx]['filterpy + model.at(p)']:>12.2f}" for nx in (2, 4, 10)))
-        print(f"{'run_streaming / batch':<28}" + "".join(
-            f"{res[nx]['lpvest run_streaming'] / res[nx]['lpvest batch']:>12.2f}" for nx in (2, 4, 10)))
-        print(f"{'step / batch':<28}" + "".join(
-            f"{res[nx]['lpvest step'] / res[nx]['lpvest batch']:>12.2f}" for nx in (2, 4, 10)))
+        for num, den in (
+            ("lpvest step", "lpvest batch (auto)"),
+            ("lpvest run_streaming", "lpvest batch (auto)"),
+            ("lpvest step", "lpvest batch (sequential)"),
+            ("lpvest batch (sequential)", "lpvest batch (scan)"),
+        ):
+            label = f"{num[7:]} / {den[7:]}"
+            print(f"{label:<28}" + "".join(f"{res[nx][num] / res[nx][den]:>12.2f}" for nx in (2, 4, 10)))
 
+    print(f"\nwith a cross-covariance S != 0 (no filterpy row), {args.steps} steps, us per step:")
+    print(f"{'':22}" + "".join(f"{'n_x = ' + str(n):>12}" for n in (2, 4, 10)))
+    for ny in args.ny:
+        cr = {nx: bench_cross(nx, ny, args.steps, args.repeat, args.seed) for nx in (2, 4, 10)}
+        for name in cr[2]:
+            print(f"n_y = {ny}  {name:<12}" + "".join(f"{cr[nx][name]:>12.1f}" for nx in (2, 4, 10)))
+        print(f"n_y = {ny}  {'step / auto':<12}" + "".join(f"{cr[nx]['step'] / cr[nx]['auto']:>12.2f}"
+                                                      for nx in (2, 4, 10)))
+
+    print(f"\nscan vs sequential per call (ms) against T, n_y = 1 (best of {args.repeat}):")
+    print(f"{'':14}" + "".join(f"{'T = ' + str(T):>16}" for T in args.crossover))
+    for nx in (2, 10):
+        cr = bench_methods(nx, 1, args.crossover, args.repeat, args.seed)
+        for mt in ("sequential", "scan"):
+            print(f"n_x = {nx:<3}{mt:>10}" + "".join(f"{1e3 * cr[T][mt]:>16.3f}" for T in args.crossover))
+    print(f"\nscan vs sequential for larger n_x, n_y = 2, T = {args.steps} (us per step):")
+    for nx in args.large:
+        cr = bench_methods(nx, 2, [args.steps], max(2, args.repeat // 2), args.seed)[args.steps]
+        print(f"  n_x = {nx:<4} sequential {1e6 * cr['sequential'] / args.steps:8.1f}   "
+              f"scan {1e6 * cr['scan'] / args.steps:8.1f}   ratio {cr['sequential'] / cr['scan']:6.2f}")
 
     steps = max(args.steps // 10, 20)
     tr = bench_truncated(4, 1, args.taus, steps, args.repeat, args.seed)

@@ -28,6 +28,10 @@ from lpvest.estimators.kalman import (
 )
 from tests.kalman_helpers import oracle, random_schedule, random_system
 
+#: every batch test runs with both algorithms of kalman_filter (the "auto"
+#: choice between them: tests/test_kalman_scan.py)
+METHODS = ["sequential", "scan"]
+
 
 @pytest.fixture(scope="module")
 def truncation_model():
@@ -50,7 +54,8 @@ def truncation_model():
     ],
 )
 @pytest.mark.parametrize("seed", [0, 1])
-def test_filter_matches_gaussian_conditioning(dims, seed):
+@pytest.mark.parametrize("method", METHODS)
+def test_filter_matches_gaussian_conditioning(dims, seed, method):
     rng = np.random.default_rng(1000 + seed)
     model = random_system(rng, **dims)
     T = 7
@@ -58,7 +63,7 @@ def test_filter_matches_gaussian_conditioning(dims, seed):
     u = rng.standard_normal((T, model.nu))
     y = model.simulate(p, u, rng=rng).y
     orc = oracle(model, p, u)
-    res = kalman_filter(model, p, u if model.nu else None, y)
+    res = kalman_filter(model, p, u if model.nu else None, y, method=method)
     for t in range(T + 1):
         m, S = orc.predicted(y, t)
         np.testing.assert_allclose(res.predicted_means[t], m, rtol=0, atol=1e-10)
@@ -73,22 +78,25 @@ def test_filter_matches_gaussian_conditioning(dims, seed):
         np.testing.assert_allclose(res.gains[t], orc.gain(y, t), rtol=0, atol=1e-10)
     # log p(y_0..y_{T-1}) against the oracle's Gaussian density
     assert res.log_likelihood == pytest.approx(orc.log_density(y), abs=1e-9)
-    # the streaming filter gives the same numbers (it shares the kernel, not the loop)
+    # the streaming filter gives the same numbers (the sequential batch shares its
+    # kernel, not the loop: to rounding; the scan is another algorithm: to 1e-10)
+    tol = 1e-12 if method == "sequential" else 1e-10
     kf = LPVKalmanFilter(model)
     inputs = {"p": p, "y": y} | ({"u": u} if model.nu else {})
     out = run_streaming(kf, inputs)
-    np.testing.assert_allclose(out["xpred"], res.predicted_means[1:], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(out["Ppred"], res.predicted_covariances[1:], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(out["xhat"], res.filtered_means, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(out["P"], res.filtered_covariances, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(out["K"], res.gains, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(out["Omega"], res.innovation_covariances, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(out["yhat"], res.predicted_outputs, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(out["innovation"], res.innovations, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(out["xpred"], res.predicted_means[1:], rtol=0, atol=tol)
+    np.testing.assert_allclose(out["Ppred"], res.predicted_covariances[1:], rtol=0, atol=tol)
+    np.testing.assert_allclose(out["xhat"], res.filtered_means, rtol=0, atol=tol)
+    np.testing.assert_allclose(out["P"], res.filtered_covariances, rtol=0, atol=tol)
+    np.testing.assert_allclose(out["K"], res.gains, rtol=0, atol=tol)
+    np.testing.assert_allclose(out["Omega"], res.innovation_covariances, rtol=0, atol=tol)
+    np.testing.assert_allclose(out["yhat"], res.predicted_outputs, rtol=0, atol=tol)
+    np.testing.assert_allclose(out["innovation"], res.innovations, rtol=0, atol=tol)
     assert kf.log_likelihood == pytest.approx(res.log_likelihood, abs=1e-10)
 
 
-def test_oracle_catches_a_wrong_cross_covariance(rng):
+@pytest.mark.parametrize("method", METHODS)
+def test_oracle_catches_a_wrong_cross_covariance(rng, method):
     # the oracle test is able to fail: ignoring S gives different predictions
     model = random_system(rng, nx=2, ny=1, nu=1)
     T = 5
@@ -97,19 +105,20 @@ def test_oracle_catches_a_wrong_cross_covariance(rng):
     y = model.simulate(p, u, rng=rng).y
     noise = model.noise
     no_s = np.block([[noise.Q, 0 * noise.S], [0 * noise.S.T, noise.R]])
-    res = kalman_filter(model, p, u, y, noise=no_s)
+    res = kalman_filter(model, p, u, y, noise=no_s, method=method)
     m, _ = oracle(model, p, u).predicted(y, T)
     assert np.max(np.abs(res.predicted_means[T] - m)) > 1e-3
 
 
-def test_filtered_state_uses_the_filter_gain(truncation_model, rng):
+@pytest.mark.parametrize("method", METHODS)
+def test_filtered_state_uses_the_filter_gain(truncation_model, rng, method):
     # ERRATA (7): P_{t|t} = (I - L C) P with L = P C^T Omega^-1, not the predictor gain K
     model = truncation_model
     T = 30
     p = np.sin(0.25 * np.arange(T))[:, None]
     u = rng.standard_normal((T, 1))
     y = model.simulate(p, u, rng=rng).y
-    res = kalman_filter(model, p, u, y)
+    res = kalman_filter(model, p, u, y, method=method)
     for t in (0, 5, 29):
         C = model.at(p[t]).C
         P = res.predicted_covariances[t]
@@ -125,18 +134,19 @@ def test_filtered_state_uses_the_filter_gain(truncation_model, rng):
 # ---------------------------------------------------------------------------
 # statistics
 # ---------------------------------------------------------------------------
-def _normalized_innovations(model, p, u, runs, seed, noise=None):
+def _normalized_innovations(model, p, u, runs, seed, noise=None, method="auto"):
     gen = np.random.default_rng(seed)
     out = []
     for _ in range(runs):
         y = model.simulate(p, u, rng=gen).y  # x_0 ~ N(x0, P0)
-        res = kalman_filter(model, p, u, y, noise=noise)
+        res = kalman_filter(model, p, u, y, noise=noise, method=method)
         chol = np.linalg.cholesky(res.innovation_covariances)
         out.append(np.linalg.solve(chol, res.innovations[..., None])[..., 0])
     return np.array(out)  # (runs, T, ny)
 
 
-def test_normalized_innovations_are_white_with_unit_variance(truncation_model):
+@pytest.mark.parametrize("method", METHODS)
+def test_normalized_innovations_are_white_with_unit_variance(truncation_model, method):
     # Seeded Monte Carlo, 300 runs x 60 samples x 2 outputs of the model with S != 0.
     # Pooled over runs and t, each entry of E[e_t e_t^T] is estimated from M = 18000
     # products: standard error sqrt(2/M) = 0.011 on the diagonal, sqrt(1/M) = 0.0075
@@ -147,7 +157,7 @@ def test_normalized_innovations_are_white_with_unit_variance(truncation_model):
     k = np.arange(T)
     p = np.sin(0.25 * k)[:, None]
     u = np.sin(0.1 * k)[:, None]
-    e = _normalized_innovations(model, p, u, runs, seed=11)
+    e = _normalized_innovations(model, p, u, runs, seed=11, method=method)
     M = runs * T
     cov0 = np.einsum("rti,rtj->ij", e, e) / M
     np.testing.assert_allclose(np.diag(cov0), 1.0, atol=4.5 * np.sqrt(2 / M))
@@ -159,7 +169,8 @@ def test_normalized_innovations_are_white_with_unit_variance(truncation_model):
         assert np.max(np.abs(c)) < 4.5 * np.sqrt(1 / n), (lag, c)
 
 
-def test_whiteness_check_detects_a_filter_that_ignores_s():
+@pytest.mark.parametrize("method", METHODS)
+def test_whiteness_check_detects_a_filter_that_ignores_s(method):
     # the statistical test above can fail: a filter that assumes S = 0 on data
     # with strong cross-correlation leaves a lag-1 correlation
     space = SchedulingSpace(["p"], [-1.0], [1.0])
@@ -170,16 +181,17 @@ def test_whiteness_check_detects_a_filter_that_ignores_s():
     runs, T = 200, 60
     p = np.sin(0.25 * np.arange(T))[:, None]
     wrong = np.array([[1.0, 0.0], [0.0, 1.0]])
-    e = _normalized_innovations(model, p, None, runs, seed=5, noise=wrong)
+    e = _normalized_innovations(model, p, None, runs, seed=5, noise=wrong, method=method)
     n = runs * (T - 1)
     c1 = float(np.einsum("rt,rt->", e[:, 1:, 0], e[:, :-1, 0]) / n)
     assert abs(c1) > 4.5 * np.sqrt(1 / n)
-    good = _normalized_innovations(model, p, None, runs, seed=5)
+    good = _normalized_innovations(model, p, None, runs, seed=5, method=method)
     c1 = float(np.einsum("rt,rt->", good[:, 1:, 0], good[:, :-1, 0]) / n)
     assert abs(c1) < 4.5 * np.sqrt(1 / n)
 
 
-def test_constant_scheduling_converges_to_the_dare_gain(rng):
+@pytest.mark.parametrize("method", METHODS)
+def test_constant_scheduling_converges_to_the_dare_gain(rng, method):
     from scipy.linalg import solve_discrete_are
 
     model = random_system(rng, nx=3, ny=2, nu=1)
@@ -187,7 +199,7 @@ def test_constant_scheduling_converges_to_the_dare_gain(rng):
     T = 400
     p = np.tile(p0, (T, 1))
     y = model.simulate(p, np.zeros((T, 1)), rng=rng).y
-    res = kalman_filter(model, p, np.zeros((T, 1)), y)
+    res = kalman_filter(model, p, np.zeros((T, 1)), y, method=method)
     A, B, C, D, G, H = model.at(p0)
     Q, S, R = model.noise.Q, model.noise.S, model.noise.R
     P = solve_discrete_are(A.T, C.T, G @ Q @ G.T, H @ R @ H.T, s=G @ S @ H.T)
@@ -199,13 +211,14 @@ def test_constant_scheduling_converges_to_the_dare_gain(rng):
 # ---------------------------------------------------------------------------
 # innovation-form simulator
 # ---------------------------------------------------------------------------
-def test_innovation_simulator_is_inverted_by_the_filter(truncation_model):
+@pytest.mark.parametrize("method", METHODS)
+def test_innovation_simulator_is_inverted_by_the_filter(truncation_model, method):
     model = truncation_model
     T = 80
     p = np.sin(0.25 * np.arange(T))[:, None]
     u = np.cos(0.1 * np.arange(T))[:, None]
     sim = simulate_innovation_form(model, p, u, rng=3)
-    res = kalman_filter(model, p, u, sim.y)
+    res = kalman_filter(model, p, u, sim.y, method=method)
     np.testing.assert_allclose(res.innovations, sim.innovations, atol=1e-12)
     np.testing.assert_allclose(res.predicted_means[:T], sim.x, atol=1e-12)
     np.testing.assert_allclose(res.gains, sim.gains, atol=1e-14)
@@ -403,12 +416,19 @@ def test_singular_innovation_covariance_names_t(ny):
     with pytest.raises(NumericalError, match="Omega_t is not positive definite at t=2"):
         kf.step({"p": [0.0], "y": np.ones(ny)})
     _assert_same_state(kf.get_state(), before)
-    p = np.array([[0.5], [0.5], [0.5], [0.0], [0.5]])
-    with pytest.raises(NumericalError, match="Omega_t is not positive definite at t=3"):
-        kalman_filter(model, p, None, np.ones((5, ny)))
+    p = np.full((70, 1), 0.5)  # long enough for method="auto" to consider the scan
+    p[3] = 0.0
+    y = np.ones((70, ny))
+    for method in ("sequential", "auto"):  # auto: H R H^T is singular, the scan does not apply
+        with pytest.raises(NumericalError, match="Omega_t is not positive definite at t=3"):
+            kalman_filter(model, p, None, y, method=method)
+    with pytest.raises(NumericalError, match=r"method='scan' needs H\(p\) R H\(p\)\^T positive definite .* "
+                       r"it is not at t=3: use method='sequential' or 'auto'"):
+        kalman_filter(model, p, None, y, method="scan")
 
 
-def test_non_positive_definite_noise_covariance(truncation_model):
+@pytest.mark.parametrize("method", METHODS)
+def test_non_positive_definite_noise_covariance(truncation_model, method):
     joint = truncation_model.noise.joint.copy()
     joint[0, 2] = joint[2, 0] = 1.0  # |S_11| > sqrt(Q_11 R_11): Sigma indefinite
     msg = r"the joint noise covariance Sigma = \[\[Q, S\], \[S\^T, R\]\] is not positive definite"
@@ -416,7 +436,7 @@ def test_non_positive_definite_noise_covariance(truncation_model):
         LPVKalmanFilter(truncation_model, noise=joint)
     p = np.zeros((3, 1))
     with pytest.raises(NotPositiveDefiniteError, match="the joint noise covariance"):
-        kalman_filter(truncation_model, p, np.zeros((3, 1)), np.zeros((3, 2)), noise=joint)
+        kalman_filter(truncation_model, p, np.zeros((3, 1)), np.zeros((3, 2)), noise=joint, method=method)
     with pytest.raises(DimensionError, match=r"noise covariance Sigma has shape \(3, 3\); expected \(4, 4\)"):
         LPVKalmanFilter(truncation_model, noise=np.eye(3))
 
@@ -430,23 +450,24 @@ def test_bad_initial_covariance_and_model(truncation_model):
         LPVKalmanFilter(load_system("cox-toth-ex1").model("minimal"))
 
 
-def test_batch_bad_input(truncation_model):
+@pytest.mark.parametrize("method", METHODS)
+def test_batch_bad_input(truncation_model, method):
     T = 6
     p = np.zeros((T, 1))
     u = np.zeros((T, 1))
     y = np.zeros((T, 2))
     with pytest.raises(DimensionError, match=r"y has shape \(6, 3\); expected \(6, 2\)"):
-        kalman_filter(truncation_model, p, u, np.zeros((T, 3)))
+        kalman_filter(truncation_model, p, u, np.zeros((T, 3)), method=method)
     with pytest.raises(DimensionError, match=r"u has shape \(5, 1\); expected \(6, 1\)"):
-        kalman_filter(truncation_model, p, u[:5], y)
+        kalman_filter(truncation_model, p, u[:5], y, method=method)
     bad = y.copy()
     bad[4, 1] = np.inf
     with pytest.raises(NonFiniteError, match=r"y holds a non-finite value \(inf\) at index \(4, 1\)"):
-        kalman_filter(truncation_model, p, u, bad)
+        kalman_filter(truncation_model, p, u, bad, method=method)
     pb = p.copy()
     pb[2] = 3.0
     with pytest.raises(SchedulingRangeError, match="scheduling value at t=2: p = 3 is outside"):
-        kalman_filter(truncation_model, pb, u, y)
+        kalman_filter(truncation_model, pb, u, y, method=method)
 
 
 def test_kalman_step_is_pure(truncation_model):

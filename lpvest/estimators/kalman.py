@@ -39,8 +39,14 @@ semidefinite by construction, then symmetrised.
 - ``[E, [B; 0; D], W]`` is one matrix of degree two in the basis functions
   (``G Q G^T`` is quadratic); :class:`KalmanModel` packs its coefficients
   once, so a sample's matrices are one product ``z(p) @ coefficients``.
-- One kernel (:func:`covariance_step`) serves the streaming filter, the batch
-  filter, the truncated filter and the fading-memory analysis.
+- One kernel (:func:`covariance_step`) serves the streaming filter, the
+  sequential batch filter, the truncated filter and the fading-memory
+  analysis.
+- The batch filter :func:`kalman_filter` has a second algorithm, the
+  parallel-in-time scan of Särkkä & García-Fernández (2021) on the
+  decorrelated model (:mod:`lpvest.estimators.kalman_scan`): the same numbers
+  from a few hundred batched numpy calls instead of ~14 small calls per
+  sample; ``method="auto"`` chooses.
 
 Runtime code: imports only numpy.
 """
@@ -65,6 +71,7 @@ from ..validation import (
     check_positive_definite,
 )
 from .base import Port
+from .kalman_scan import decorrelate_stack, scan_amplification, scan_filter
 
 __all__ = [
     "KalmanModel",
@@ -256,7 +263,9 @@ class KalmanModel:
         packed = F.reshape(nz, -1)
         plain = np.concatenate([M.reshape(nz, -1) for M in (A, B, C, D, GQG, GSH, HRH)], axis=1)
         plain_shapes = [M.shape[1:] for M in (A, B, C, D, GQG, GSH, HRH)]
-        for arr in (packed, plain):
+        # the scan also wants A^T stored contiguously (see _scan_matrices_batch)
+        scan = np.concatenate((plain, np.swapaxes(A, 1, 2).reshape(nz, -1)), axis=1)
+        for arr in (packed, plain, scan):
             arr.setflags(write=False)
         basis = dep.basis
         from ..scheduling import Monomial
@@ -275,6 +284,7 @@ class KalmanModel:
                 "packed": packed,
                 "plain": plain,
                 "plain_shapes": plain_shapes,
+                "scan": scan,
                 "shape": F.shape[1:],
                 "pairs": pairs,
                 "k": k,
@@ -385,6 +395,19 @@ class KalmanModel:
             out.append(flat[pos : pos + size].reshape(shp))
             pos += size
         return KalmanMatrices(*out)
+
+    def _scan_matrices_batch(self, p: np.ndarray) -> tuple[KalmanMatrices, np.ndarray]:
+        """:class:`KalmanMatrices` along a checked trajectory and ``A^T``
+        (T, n_x, n_x), every matrix contiguous, from one product."""
+        c = self._c  # type: ignore[attr-defined]
+        flat = self.z_batch(p) @ c["scan"]
+        T = p.shape[0]
+        out, pos = [], 0
+        for shp in [*c["plain_shapes"], c["plain_shapes"][0]]:
+            size = int(np.prod(shp))
+            out.append(flat[:, pos : pos + size].reshape(T, *shp))
+            pos += size
+        return KalmanMatrices(*out[:-1]), out[-1]
 
     def matrices_batch(self, p: object, *, check: bool = True) -> KalmanMatrices:
         """:class:`KalmanMatrices` stacked along a trajectory ``p`` (T, n_p)."""
@@ -736,6 +759,24 @@ def _riccati_sweep(
     return Pp, Pf, Om, Gm
 
 
+#: ``kalman_filter(method="auto")`` runs the sequential recursion for fewer
+#: samples than this: the scan's fixed cost of a few hundred numpy calls is
+#: then not recovered (measured with ``benchmarks/bench_kalman.py``: the
+#: two break even at 32-48 samples for n_x = 2 and 48-64 for n_x = 10).
+#: There is no rule on n_x: per sample the scan does fewer flops than the
+#: sequential kernel, and it was faster at every n_x measured (2 to 100).
+SCAN_MIN_SAMPLES = 64
+
+#: ``kalman_filter(method="auto")`` runs the sequential recursion when
+#: ``max_t ||J_t||_F ||C_t||_F`` (a bound of ``||J_t C_t||_F``) exceeds this,
+#: ``J_t = G S H^T (H R H^T)^-1``: the decorrelated form amplifies rounding
+#: errors by about its square (a nearly singular ``H R H^T`` next to a strong
+#: cross-covariance), see :mod:`lpvest.estimators.kalman_scan`.
+SCAN_MAX_AMPLIFICATION = 100.0
+
+_METHODS = ("auto", "scan", "sequential")
+
+
 def kalman_filter(
     model: AffineLPV | KalmanModel,
     p: object,
@@ -745,12 +786,30 @@ def kalman_filter(
     x0: object | None = None,
     P0: object | None = None,
     noise: NoiseCovariance | object | None = None,
+    method: str = "auto",
 ) -> KalmanResult:
     """Run the exact filter (4a)-(4e) over a whole trajectory.
 
-    The matrices for every sample are evaluated at once; the covariance
-    recursion runs once over time; means, filtered estimates and the
-    log-likelihood are then computed for all samples together.
+    The matrices for every sample are evaluated at once. Two algorithms give
+    the same numbers (to rounding; the tests hold them to 1e-10 of each
+    other and of a Gaussian-conditioning oracle):
+
+    - ``"sequential"``: the covariance recursion (:func:`covariance_step`,
+      the streaming filter's kernel) runs sample by sample; means, filtered
+      estimates and the log-likelihood follow for all samples together.
+    - ``"scan"``: the parallel-in-time filter of Särkkä & García-Fernández
+      (2021) on the decorrelated model, as a blocked associative scan of
+      batched small-matrix operations
+      (:mod:`lpvest.estimators.kalman_scan`). It needs ``H R H^T`` positive
+      definite at every sample (raises :class:`~lpvest.errors.NumericalError`
+      naming the first ``t`` where it is not).
+    - ``"auto"`` (default): the scan, except when it does not apply or does
+      not pay: ``H R H^T`` singular at some sample, fewer than
+      :data:`SCAN_MIN_SAMPLES` samples, or an error amplification
+      ``max_t ||J_t||_F ||C_t||_F`` above :data:`SCAN_MAX_AMPLIFICATION` (module
+      notes of :mod:`~lpvest.estimators.kalman_scan`); then the sequential
+      recursion. (An empty trajectory has nothing to scan: every method
+      returns the initial prediction.)
 
     Parameters
     ----------
@@ -760,9 +819,12 @@ def kalman_filter(
     u : array_like, shape (T, n_u), or None when n_u = 0
     y : array_like, shape (T, n_y)
     x0, P0 : array_like, optional
-        Initial mean and covariance (default: the model's).
+        Initial mean and covariance (default: the model's). ``P0`` may be
+        singular.
     noise : NoiseCovariance or array_like, optional
         The noise covariance to assume (default: the model's).
+    method : {"auto", "scan", "sequential"}
+        The algorithm (above).
 
     Returns
     -------
@@ -773,7 +835,10 @@ def kalman_filter(
     DimensionError, NonFiniteError, SchedulingRangeError, NotPositiveDefiniteError
         Bad input.
     NumericalError
-        ``Omega_t`` is singular; the message names ``t``.
+        ``Omega_t`` is singular, or (``method="scan"``) ``H R H^T`` is; the
+        message names ``t``.
+    ValueError, TypeError
+        ``method`` is not one of the three names.
 
     Examples
     --------
@@ -786,21 +851,43 @@ def kalman_filter(
     >>> res = kalman_filter(model, p, u, data.y)
     >>> res.gains.shape, res.predicted_means.shape
     ((200, 2, 2), (201, 2))
+    >>> seq = kalman_filter(model, p, u, data.y, method="sequential")
+    >>> err = np.max(np.abs(res.predicted_covariances - seq.predicted_covariances))
+    >>> bool(err < 1e-12 * np.max(np.abs(seq.predicted_covariances)))
+    True
     """
+    if not isinstance(method, str):
+        raise TypeError(f"method must be a string, one of {', '.join(map(repr, _METHODS))}; found {method!r}")
+    if method not in _METHODS:
+        raise ValueError(f"method must be one of {', '.join(map(repr, _METHODS))}; found {method!r}")
     km = model if isinstance(model, KalmanModel) and noise is None else KalmanModel(
         model.model if isinstance(model, KalmanModel) else model, noise=noise
     )
-    n, nu, m = km.nx, km.nu, km.ny
     p = as_signal(p, "p", km.n_p)
     T = p.shape[0]
-    u = as_signal(u, "u", nu, T)
-    y = as_signal(y, "y", m, T)
+    u = as_signal(u, "u", km.nu, T)
+    y = as_signal(y, "y", km.ny, T)
     x, P = _initial(km, x0, P0)
-    sms = km.step_matrices_batch(p)
+    km.check_box_batch(p)
+    if method == "scan" or (method == "auto" and T >= SCAN_MIN_SAMPLES):
+        # the scan wants each matrix contiguous (the sequential kernel, one packed F)
+        mats, AT = km._scan_matrices_batch(p)
+        res = _kalman_filter_scan(mats, AT, u, y, x, P, strict=method == "scan")
+        if res is not None:
+            return res
+    sms = km.step_matrices_batch(p, check=False)
+    return _kalman_filter_sequential(km, sms, sms.readable(), u, y, x, P)
+
+
+def _kalman_filter_sequential(
+    km: KalmanModel, sms: StepMatrices, mats: KalmanMatrices, u: np.ndarray, y: np.ndarray,
+    x: np.ndarray, P: np.ndarray,
+) -> KalmanResult:
+    n, nu, m = km.nx, km.nu, km.ny
+    T = y.shape[0]
     Pp, Pf, Om, Gm = _riccati_sweep(km, sms, P)
     K = Gm[:, :n]
     L = Gm[:, n:]
-    mats = sms.readable()
     # means: x_{t+1} = (A - K C) x_t + B u + K (y - D u), one matrix-vector product per step
     Du = np.einsum("tij,tj->ti", mats.D, u) if nu else np.zeros((T, m))
     c = np.einsum("tij,tj->ti", K, y - Du)
@@ -815,6 +902,49 @@ def kalman_filter(
     y_pred = np.einsum("tij,tj->ti", mats.C, xp[:T]) + Du
     xi = y - y_pred
     xf = xp[:T] + np.einsum("tij,tj->ti", L, xi)
+    return _result(xp, Pp, xf, Pf, y_pred, xi, Om, K, L)
+
+
+def _kalman_filter_scan(
+    mats: KalmanMatrices, AT: np.ndarray, u: np.ndarray, y: np.ndarray, x: np.ndarray, P: np.ndarray,
+    *, strict: bool,
+) -> KalmanResult | None:
+    """The scan (:mod:`.kalman_scan`); ``None`` when ``strict`` is false and
+    the scan does not apply (``H R H^T`` singular somewhere, or the error
+    amplification is above :data:`SCAN_MAX_AMPLIFICATION`)."""
+    T = y.shape[0]
+    if T == 0:
+        return None
+    dec = decorrelate_stack(*mats, u, y, AT=AT)
+    if isinstance(dec, int):
+        if not strict:
+            return None
+        raise NumericalError(
+            f"method='scan' needs H(p) R H(p)^T positive definite (the decorrelation "
+            f"J = G S H^T (H R H^T)^-1); it is not at t={dec}: use method='sequential' or 'auto'"
+        )
+    if not strict and scan_amplification(dec, mats.C) > SCAN_MAX_AMPLIFICATION:
+        return None
+    s = scan_filter(dec, mats.C, mats.HRH, x, P)
+    return KalmanResult(
+        predicted_means=s.xp,
+        predicted_covariances=s.Pp,
+        filtered_means=s.xf,
+        filtered_covariances=s.Pf,
+        predicted_outputs=y - s.xi,
+        innovations=s.xi,
+        innovation_covariances=s.Omega,
+        gains=s.K,
+        filter_gains=s.L,
+        log_likelihood_terms=s.log_likelihood_terms,
+        log_likelihood=float(np.sum(s.log_likelihood_terms)),
+    )
+
+
+def _result(
+    xp: np.ndarray, Pp: np.ndarray, xf: np.ndarray, Pf: np.ndarray, y_pred: np.ndarray, xi: np.ndarray,
+    Om: np.ndarray, K: np.ndarray, L: np.ndarray,
+) -> KalmanResult:
     terms = _loglik_terms(xi, Om)
     return KalmanResult(
         predicted_means=xp,
