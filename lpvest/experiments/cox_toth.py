@@ -549,5 +549,6 @@ EXPERIMENTS = [
         "cox-toth-truncation",
         "Cox & Toth Theorem 1 / Conjecture 1: truncated-memory Kalman gain",
         run_truncation,
+        reduced={"runs": 200},
     ),
 ]

@@ -725,5 +725,6 @@ def _plot_example2(path: Path, rows: list[dict[str, Any]], lim: StabilityLimits)
 EXPERIMENTS = [
     Experiment("peixoto-table1", "Peixoto et al. Table 1: H-infinity bounds, Example 1", run_table1),
     Experiment("peixoto-fig1", "Peixoto et al. Figs. 1-2: estimation errors, Example 1", run_fig1),
-    Experiment("peixoto-example2", "Peixoto et al. Fig. 3: gamma(rho) of Theorem 1, Example 2", run_example2),
+    Experiment("peixoto-example2", "Peixoto et al. Fig. 3: gamma(rho) of Theorem 1, Example 2", run_example2,
+               reduced={"rhos": EXAMPLE2_FMU_RHOS}),
 ]
