@@ -20,6 +20,8 @@ and compare without writing with ``lpvest regress``.
 from __future__ import annotations
 
 import argparse
+import csv
+import io
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -159,6 +161,12 @@ def simulate_reference(ref: Reference, fmus: ExperimentFmus) -> tuple[np.ndarray
     return data, gammas
 
 
+def _csv_row(fields: Sequence[str]) -> str:
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="").writerow(fields)
+    return buf.getvalue()
+
+
 def write_reference(ref: Reference, data: np.ndarray, gammas: dict[str, float], directory: str | Path) -> Path:
     """Write ``directory/<name>.csv``: comment lines (what, tolerance, reason,
     gammas, how to regenerate), the column names, then the rows (12 significant digits)."""
@@ -173,7 +181,7 @@ def write_reference(ref: Reference, data: np.ndarray, gammas: dict[str, float], 
         f"# tolerance: {ref.tolerance:g} of max |column|: {ref.reason}",
         *(f"# gamma {name} = {g!r}" for name, g in gammas.items()),
         f"# written by lpvest {__version__}; regenerate with: {UPDATE_COMMAND}",
-        ",".join(("time", *ref.columns)),
+        _csv_row(("time", *ref.columns)),  # matrix elements hold commas: quoted
     ]
     lines += [",".join(f"{v:.12g}" for v in row) for row in data]
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
@@ -196,7 +204,7 @@ def read_reference(path: str | Path) -> tuple[list[str], np.ndarray, dict[str, f
             gammas[name] = float(value)
         elif line and not line.startswith("#"):
             body.append(line)
-    columns = body[0].split(",")
+    columns = next(csv.reader([body[0]]))
     data = np.array([[float(v) for v in row.split(",")] for row in body[1:]])
     return columns, data, gammas
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import LpvestError
-from . import ExperimentResult, registry, write_results
+from . import ExperimentResult, write_results
 from .fmus import ExperimentFmus, as_experiment_fmus
 
 __all__ = ["ExperimentRun", "reproduce", "reproduce_all"]
@@ -56,6 +56,8 @@ def reproduce(
     """Run the experiments ``names`` into ``out/<name>/``; ``reduced`` uses each
     experiment's quicker configuration (:attr:`Experiment.reduced`); ``echo``
     receives the printable output (tables, FMU agreement, files written)."""
+    from . import registry  # looked up at call time
+
     experiments = registry()
     unknown = [n for n in names if n not in experiments]
     if unknown:
@@ -92,6 +94,7 @@ def reproduce_all(
     """Every registered experiment, then ``out/report.md``
     (:func:`lpvest.experiments.report.write_report`). ``fmus`` defaults to the
     cache ``out/fmu-cache``."""
+    from . import registry
     from .report import write_report
 
     out = Path(out)
