@@ -453,7 +453,7 @@ def _plot_fig1(out_dir: Path, sig: Fig1Signals, errors: dict[str, np.ndarray]) -
         ax.grid(alpha=0.3)
     axes[0].legend()
     axes[-1].set_xlabel("k")
-    fig.suptitle("Fig. 1: estimation error, epsilon = 150, xi(0) = 0 (Example 1)")
+    fig.suptitle("Fig. 1: estimation error, epsilon = 150, xi(0) = 0 (Example 1; co-simulated FMUs)")
     fig.tight_layout()
     p1 = out_dir / "fig1.png"
     fig.savefig(p1, dpi=120)
