@@ -222,3 +222,16 @@ __all__ += [
     "HinfFilter",
     "hinf_filter_batch",
 ]
+
+# Co-simulation files and the SSP export (issue 7: lpvest cosim, SSP)
+from .cosimfile import CoSimFile as CoSimFile, CoSimResult as CoSimResult, load_cosim as load_cosim  # noqa: E402
+from .ssp import read_ssp as read_ssp, simulate_ssp as simulate_ssp, write_ssp as write_ssp  # noqa: E402
+
+__all__ += [
+    "CoSimFile",
+    "CoSimResult",
+    "load_cosim",
+    "read_ssp",
+    "simulate_ssp",
+    "write_ssp",
+]

@@ -10,6 +10,13 @@ component. Direct feedthrough is read from each FMU's ``ModelStructure``
 says) and can be overridden per component. A cycle through feedthrough paths is
 an algebraic loop and a clear error.
 
+Per step the master makes one ``fmi2SetReal`` and one ``fmi2GetReal`` per
+component at most (value references looked up once; only outputs that are
+connected or recorded are read), writes every value it reads into one numpy
+array (a set whose sources lie next to each other there passes that memory to
+the FMU as is), and records a row by one copy. Set-up errors carry the field
+of a co-simulation file they are about (:attr:`CoSimulationError.where`).
+
 Examples
 --------
 >>> sim = CoSimulation(
@@ -29,7 +36,6 @@ import re
 import shutil
 import tempfile
 from collections.abc import Iterable, Mapping, Sequence
-from ctypes import byref, c_double, c_int
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -49,7 +55,20 @@ __all__ = [
 
 
 class CoSimulationError(LpvestError, RuntimeError):
-    """A component failed, or the set-up is invalid (names, types, units)."""
+    """A component failed, or the set-up is invalid (names, types, units).
+
+    Attributes
+    ----------
+    where : str
+        What in the set-up the error is about, in the terms of a co-simulation
+        file (:mod:`lpvest.cosimfile`): ``"connections[2]"`` (1-based),
+        ``"components.plant"``, ``"components.plant.parameters.x0"``,
+        ``"record[1]"``, ``"step_size"``; ``""`` when it is about no one field.
+    """
+
+    def __init__(self, message: str, *, where: str = "") -> None:
+        super().__init__(message)
+        self.where = where
 
 
 class AlgebraicLoopError(CoSimulationError):
@@ -128,6 +147,35 @@ class _Unit:
     depends: dict[str, set[str]]  # output -> inputs it depends on
     log: list[str]
     funcs: dict[str, Any] = field(default_factory=dict)
+    start_values: list[tuple[_Var, Any, str]] = field(default_factory=list)  # (variable, value, parameter key)
+
+
+def _log_text(unit: _Unit) -> str:
+    """The component's last messages of status warning or worse (else its last
+    message), for an error."""
+    bad = [m for m in unit.log if not m.startswith("[OK]")]
+    return "; ".join((bad or unit.log)[-3:]) or "no log message"
+
+
+def _convert(value: Any, fmi_type: str, what: str, where: str) -> Any:
+    """A start value as the Python type of its FMI type; a clear error otherwise."""
+    kind = type(value).__name__
+    if fmi_type == "Real":
+        if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+            raise CoSimulationError(f"{what}: expected a number, found {kind} {value!r}", where=where)
+        return float(value)
+    if fmi_type == "Integer":
+        if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating) \
+                or float(value) != int(value):
+            raise CoSimulationError(f"{what}: expected an integer, found {kind} {value!r}", where=where)
+        return int(value)
+    if fmi_type == "Boolean":
+        if not isinstance(value, bool | np.bool_):
+            raise CoSimulationError(f"{what}: expected true or false, found {kind} {value!r}", where=where)
+        return bool(value)
+    if not isinstance(value, str):
+        raise CoSimulationError(f"{what}: expected a string, found {kind} {value!r}", where=where)
+    return value
 
 
 def _expand(names: Iterable[str], base: str) -> list[str]:
@@ -173,14 +221,14 @@ class CoSimulation:
         record: Sequence[str] | None = None,
     ) -> None:
         if not step_size > 0:
-            raise CoSimulationError(f"step_size must be positive; found {step_size}")
+            raise CoSimulationError(f"step_size must be positive; found {step_size}", where="step_size")
         names = [c.name for c in components]
         dup = {n for n in names if names.count(n) > 1}
         if dup:
-            raise CoSimulationError(f"component names are not unique: {sorted(dup)}")
+            raise CoSimulationError(f"component names are not unique: {sorted(dup)}", where="components")
         for n in names:
             if not n.isidentifier():
-                raise CoSimulationError(f"component name {n!r} is not an identifier")
+                raise CoSimulationError(f"component name {n!r} is not an identifier", where=f"components.{n}")
         self.step_size = float(step_size)
         self.start_time = float(start_time)
         self._tmp = Path(tempfile.mkdtemp(prefix="lpvest-cosim-"))
@@ -189,9 +237,11 @@ class CoSimulation:
         try:
             for i, c in enumerate(components):
                 self._units.append(self._load(i, c))
-            self._links = self._connect([Connection.parse(s) for s in connections])
-            self._schedule = self._order()
+            self._links = self._connect(connections)
             self._record = self._record_list(record)
+            self._schedule = self._order()
+            for unit in self._units:
+                self._check_parameters(unit)
             self._instantiate()
         except BaseException:
             self.close()
@@ -203,14 +253,15 @@ class CoSimulation:
         from fmpy.fmi2 import FMU2Slave
 
         path = Path(spec.fmu)
+        where = f"components.{spec.name}.fmu"
         if not path.is_file():
-            raise CoSimulationError(f"component {spec.name}: FMU file {path} does not exist")
+            raise CoSimulationError(f"component {spec.name}: FMU file {path} does not exist", where=where)
         try:
             md = read_model_description(str(path))
         except Exception as exc:  # fmpy raises plain exceptions for bad files
-            raise CoSimulationError(f"component {spec.name}: {path} is not a valid FMU: {exc}") from exc
+            raise CoSimulationError(f"component {spec.name}: {path} is not a valid FMU: {exc}", where=where) from exc
         if md.fmiVersion != "2.0" or md.coSimulation is None:
-            raise CoSimulationError(f"component {spec.name}: {path} is not an FMI 2.0 co-simulation FMU")
+            raise CoSimulationError(f"component {spec.name}: {path} is not an FMI 2.0 co-simulation FMU", where=where)
         unzip = extract(str(path), unzipdir=str(self._tmp / spec.name))
         variables: dict[str, _Var] = {}
         for v in md.modelVariables:
@@ -235,43 +286,55 @@ class CoSimulation:
         )
         return _Unit(spec, md, fmu, variables, inputs, outputs, depends, [])
 
-    def _var(self, qualified: str, what: str) -> list[_Var]:
+    def _var(self, qualified: str, what: str, where: str = "") -> list[_Var]:
         comp, sep, name = qualified.partition(".")
         if not sep:
-            raise CoSimulationError(f"{what} {qualified!r}: expected 'component.variable'")
+            raise CoSimulationError(f"{what} {qualified!r}: expected 'component.variable'", where=where)
         unit = next((u for u in self._units if u.spec.name == comp), None)
         if unit is None:
             known = ", ".join(u.spec.name for u in self._units)
-            raise CoSimulationError(f"{what} {qualified!r}: no component {comp!r} (components: {known})")
+            raise CoSimulationError(f"{what} {qualified!r}: no component {comp!r} (components: {known})",
+                                    where=where)
         elems = _expand(unit.variables, name)
         if not elems:
-            raise CoSimulationError(f"{what} {qualified!r}: {comp} has no variable {name!r}")
+            raise CoSimulationError(f"{what} {qualified!r}: {comp} has no variable {name!r}", where=where)
         return [unit.variables[e] for e in elems]
 
-    def _connect(self, connections: list[Connection]) -> list[tuple[_Var, _Var]]:
+    def _connect(self, connections: Sequence[str | tuple[str, str] | Connection]) -> list[tuple[_Var, _Var]]:
         links: list[tuple[_Var, _Var]] = []
         driven: dict[tuple[int, str], str] = {}
-        for c in connections:
-            src = self._var(c.source, "connection source")
-            dst = self._var(c.target, "connection target")
-            if len(src) != len(dst):
-                raise CoSimulationError(
-                    f"connection {c.source} -> {c.target}: {len(src)} source and {len(dst)} target elements"
-                )
-            for s, d in zip(src, dst, strict=True):
-                sname = f"{self._units[s.comp].spec.name}.{s.name}"
-                dname = f"{self._units[d.comp].spec.name}.{d.name}"
-                if s.causality != "output":
-                    raise CoSimulationError(f"connection source {sname} is not an output ({s.causality})")
-                if d.causality != "input":
-                    raise CoSimulationError(f"connection target {dname} is not an input ({d.causality})")
-                if s.type != d.type or s.type not in _TYPES:
-                    raise CoSimulationError(f"connection {sname} -> {dname}: types {s.type} and {d.type}")
-                key = (d.comp, d.name)
-                if key in driven:
-                    raise CoSimulationError(f"{dname} is driven twice (by {driven[key]} and {sname})")
-                driven[key] = sname
-                links.append((s, d))
+        for i, spec in enumerate(connections):
+            where = f"connections[{i + 1}]"
+            try:
+                links += self._link(Connection.parse(spec), driven)
+            except CoSimulationError as exc:
+                if exc.where:
+                    raise
+                raise CoSimulationError(str(exc), where=where) from None
+        return links
+
+    def _link(self, c: Connection, driven: dict[tuple[int, str], str]) -> list[tuple[_Var, _Var]]:
+        links: list[tuple[_Var, _Var]] = []
+        src = self._var(c.source, "connection source")
+        dst = self._var(c.target, "connection target")
+        if len(src) != len(dst):
+            raise CoSimulationError(
+                f"connection {c.source} -> {c.target}: {len(src)} source and {len(dst)} target elements"
+            )
+        for s, d in zip(src, dst, strict=True):
+            sname = f"{self._units[s.comp].spec.name}.{s.name}"
+            dname = f"{self._units[d.comp].spec.name}.{d.name}"
+            if s.causality != "output":
+                raise CoSimulationError(f"connection source {sname} is not an output ({s.causality})")
+            if d.causality != "input":
+                raise CoSimulationError(f"connection target {dname} is not an input ({d.causality})")
+            if s.type != d.type or s.type not in _TYPES:
+                raise CoSimulationError(f"connection {sname} -> {dname}: types {s.type} and {d.type}")
+            key = (d.comp, d.name)
+            if key in driven:
+                raise CoSimulationError(f"{dname} is driven twice (by {driven[key]} and {sname})")
+            driven[key] = sname
+            links.append((s, d))
         return links
 
     def _order(self) -> list[tuple[str, int, list[tuple[_Var, _Var]]]]:
@@ -314,10 +377,13 @@ class CoSimulation:
             raise AlgebraicLoopError(
                 "algebraic loop: these variables depend on each other through direct feedthrough: "
                 + ", ".join(names)
-                + " (declare feedthrough=False for a component whose outputs do not depend on its inputs)"
+                + " (declare feedthrough=False for a component whose outputs do not depend on its inputs)",
+                where="connections",
             )
         # group into batches: consecutive ops on the same component and kind
+        # (outputs that are neither connected nor recorded are not read)
         link_of = {(d.comp, d.name): (s, d) for s, d in self._links}
+        needed = {(s.comp, s.name) for s, _ in self._links} | {(v.comp, v.name) for v in self._record}
         schedule: list[tuple[str, int, list]] = []
         for kind, comp, name in order:
             if kind == "i":
@@ -326,6 +392,8 @@ class CoSimulation:
                 item = link_of[(comp, name)]
                 op = "set"
             else:
+                if (comp, name) not in needed:
+                    continue
                 item = self._units[comp].variables[name]
                 op = "get"
             if schedule and schedule[-1][0] == op and schedule[-1][1] == comp:
@@ -338,9 +406,36 @@ class CoSimulation:
         if record is None:
             return [u.variables[o] for u in self._units for o in u.outputs if u.variables[o].type in _TYPES]
         out: list[_Var] = []
-        for r in record:
-            out.extend(v for v in self._var(r, "recorded variable") if v.type in _TYPES)
+        seen: set[tuple[int, str]] = set()
+        for i, r in enumerate(record):
+            for v in self._var(r, "recorded variable", f"record[{i + 1}]"):
+                if v.type in _TYPES and (v.comp, v.name) not in seen:
+                    seen.add((v.comp, v.name))
+                    out.append(v)
         return out
+
+    def _check_parameters(self, unit: _Unit) -> None:
+        """Every start value names settable variables and fits their type."""
+        name = unit.spec.name
+        values: list[tuple[_Var, Any, str]] = []
+        for par, value in unit.spec.parameters.items():
+            where = f"components.{name}.parameters.{par}"
+            elems = _expand(unit.variables, par)
+            if not elems:
+                raise CoSimulationError(f"component {name}: no variable {par!r} to set", where=where)
+            items = value if isinstance(value, list | tuple | np.ndarray) else [value]
+            flat = np.asarray(items, dtype=object).ravel().tolist()
+            if len(flat) != len(elems):
+                raise CoSimulationError(
+                    f"component {name}: {par} has {len(elems)} element(s); {len(flat)} value(s) given", where=where
+                )
+            for e, val in zip(elems, flat, strict=True):
+                v = unit.variables[e]
+                if v.causality not in ("parameter", "input"):
+                    raise CoSimulationError(f"component {name}: {e} is an {v.causality}; it cannot be set",
+                                            where=where)
+                values.append((v, _convert(val, v.type, f"component {name}: {e}", where), par))
+        unit.start_values = values
 
     def _instantiate(self) -> None:
         from fmpy import calloc, free
@@ -351,23 +446,23 @@ class CoSimulation:
             fmi2CallbackLoggerTYPE,
         )
 
+        # One logger per instance, called by the FMU directly. (fmpy's
+        # addLoggerProxy, which would format printf-style arguments, keeps a
+        # single global callback: with several instances, or any FMU
+        # instantiated later in the process, messages would reach the wrong log.)
+        # Messages arrive as format strings: lpvest FMUs double every '%'.
         for unit in self._units:
 
             def logger(_env, _inst, status, category, message, _log=unit.log):  # type: ignore[no-untyped-def]
                 label = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"][status] if 0 <= status < 6 else "?"
-                _log.append(f"[{label}] {message.decode('utf-8', 'replace')}")
+                text = (message or b"").decode("utf-8", "replace").replace("%%", "%")
+                _log.append(f"[{label}] {text}")
                 del _log[:-50]
 
             callbacks = fmi2CallbackFunctions()
             callbacks.logger = fmi2CallbackLoggerTYPE(logger)
             callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
             callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-            try:
-                from fmpy.logging import addLoggerProxy
-
-                addLoggerProxy(byref(callbacks))
-            except Exception:  # noqa: BLE001 - optional nicety: printf-style messages stay raw
-                pass
             unit.callbacks = callbacks  # type: ignore[attr-defined] (keep alive)
             self._call(
                 unit, "instantiate", lambda u=unit, cb=callbacks: u.fmu.instantiate(callbacks=cb, loggingOn=True)
@@ -375,7 +470,7 @@ class CoSimulation:
             unit.funcs = {n: unit.fmu._functions[n] for n in ("fmi2GetReal", "fmi2SetReal", "fmi2DoStep")}
 
     # -- running --------------------------------------------------------------
-    def _call(self, unit: _Unit, what: str, fn: Any, t: float | None = None) -> Any:
+    def _call(self, unit: _Unit, what: str, fn: Any, t: float | None = None, *, where: str | None = None) -> Any:
         from fmpy.fmi1 import FMICallException
 
         try:
@@ -384,25 +479,16 @@ class CoSimulation:
             if isinstance(exc, LpvestError):
                 raise
             at = "" if t is None else f" at t = {t:g}"
-            log = "; ".join(unit.log[-5:]) or "no log message"
-            raise CoSimulationError(f"component {unit.spec.name}: {what} failed{at}: {exc} ({log})") from exc
+            log = _log_text(unit)
+            raise CoSimulationError(f"component {unit.spec.name}: {what} failed{at}: {exc} ({log})",
+                                    where=f"components.{unit.spec.name}" if where is None else where) from exc
 
     def _set_start_values(self, unit: _Unit) -> None:
-        for name, value in unit.spec.parameters.items():
-            elems = _expand(unit.variables, name)
-            if not elems:
-                raise CoSimulationError(f"component {unit.spec.name}: no variable {name!r} to set")
-            values = np.atleast_1d(np.asarray(value, dtype=object)).ravel()
-            if values.size != len(elems):
-                raise CoSimulationError(
-                    f"component {unit.spec.name}: {name} has {len(elems)} elements; {values.size} values given"
-                )
-            for e, val in zip(elems, values, strict=True):
-                v = unit.variables[e]
-                setter = {"Real": unit.fmu.setReal, "Integer": unit.fmu.setInteger,
-                          "Boolean": unit.fmu.setBoolean, "String": unit.fmu.setString}[v.type]
-                x = {"Real": float, "Integer": int, "Boolean": bool, "String": str}[v.type](val)
-                self._call(unit, f"setting {e} = {val!r}", lambda s=setter, r=v.vr, x=x: s([r], [x]))
+        setters = {"Real": unit.fmu.setReal, "Integer": unit.fmu.setInteger,
+                   "Boolean": unit.fmu.setBoolean, "String": unit.fmu.setString}
+        for v, x, par in unit.start_values:
+            self._call(unit, f"setting {v.name} = {x!r}", lambda s=setters[v.type], r=v.vr, x=x: s([r], [x]),
+                       where=f"components.{unit.spec.name}.parameters.{par}")
 
     def run(
         self,
@@ -432,32 +518,39 @@ class CoSimulation:
             self._call(unit, "setupExperiment", lambda u=unit: u.fmu.setupExperiment(startTime=t0, stopTime=t_end))
             self._set_start_values(unit)
             self._call(unit, "enterInitializationMode", unit.fmu.enterInitializationMode)
-        dtype = [("time", "f8")] + [(f"{self._units[v.comp].spec.name}.{v.name}", "f8") for v in self._record]
-        out = np.zeros(n_steps + 1, dtype=dtype)
-        # pre-built ctypes buffers: one get and one set per batch, no per-step allocation
         plan = self._plan()
         self._exchange(plan, t0, initial=True)
         for unit in self._units:
             self._call(unit, "exitInitializationMode", unit.fmu.exitInitializationMode, t0)
-        rec = self._recorder()
+        # recorded values: one row per communication point, copied from the
+        # value store in one operation (Real) or element-wise (Integer, Boolean)
+        store = self._store
+        rec_cols = [self._values[(v.comp, v.name)] for v in self._record]
+        data = np.empty((n_steps + 1, store.size))
+        extra = [(i, buf, j) for i, (buf, j) in enumerate(rec_cols) if buf is not self._store_c]
+        extra_data = np.empty((n_steps + 1, len(extra))) if extra else None
+        steppers = [(u.funcs["fmi2DoStep"], u.fmu.component, u) for u in self._units]
         show = progress if progress is not None else n_steps > 20_000
         bar = None
         if show:
             from tqdm import tqdm
 
             bar = tqdm(total=n_steps, unit="step", desc="co-simulation")
+        exchange = self._exchange
         try:
             for k in range(n_steps + 1):
                 t = t0 + k * h
                 if k > 0:
-                    self._exchange(plan, t)
-                row = out[k]
-                row["time"] = t
-                rec(row)
+                    exchange(plan, t)
+                data[k] = store
+                if extra_data is not None:
+                    row = extra_data[k]
+                    for col, (_, buf, j) in enumerate(extra):
+                        row[col] = buf[j]
                 if k == n_steps:
                     break
-                for unit in self._units:
-                    status = unit.funcs["fmi2DoStep"](unit.fmu.component, c_double(t), c_double(h), c_int(1))
+                for do_step, component, unit in steppers:
+                    status = do_step(component, t, h, 1)
                     if status > 1:
                         self._fail(unit, "doStep", status, t)
                 if bar is not None:
@@ -465,85 +558,125 @@ class CoSimulation:
         finally:
             if bar is not None:
                 bar.close()
+        dtype = [("time", "f8")] + [(f"{self._units[v.comp].spec.name}.{v.name}", "f8") for v in self._record]
+        out = np.empty(n_steps + 1, dtype=dtype)
+        out["time"] = t0 + np.arange(n_steps + 1) * h
+        extra_col = {i: col for col, (i, _, _) in enumerate(extra)}
+        for i, (name, _) in enumerate(dtype[1:]):
+            if i in extra_col:
+                out[name] = extra_data[:, extra_col[i]]  # type: ignore[index]
+            else:
+                out[name] = data[:, rec_cols[i][1]]
         return out
 
     def _fail(self, unit: _Unit, what: str, status: int, t: float) -> None:
         label = ["ok", "warning", "discard", "error", "fatal", "pending"][status] if 0 <= status < 6 else "?"
-        log = "; ".join(unit.log[-5:]) or "no log message"
-        raise CoSimulationError(f"component {unit.spec.name}: {what} at t = {t:g} returned {label} ({log})")
+        log = _log_text(unit)
+        raise CoSimulationError(f"component {unit.spec.name}: {what} at t = {t:g} returned {label} ({log})",
+                                where=f"components.{unit.spec.name}")
 
     def _plan(self) -> list[tuple]:
-        """ctypes buffers per scheduled batch (Real variables on the fast path)."""
+        """The per-step FMI calls with their value references and buffers.
+
+        Every Real value read (for a connection or for the record) lands in one
+        numpy array, the value store: each ``fmi2GetReal`` writes straight into
+        its slice of it. A set whose sources are consecutive in the store passes
+        that slice itself to ``fmi2SetReal`` (no copy); other sets copy their
+        sources into a buffer of their own first.
+        """
         from fmpy.fmi2 import fmi2Boolean, fmi2Integer, fmi2Real, fmi2ValueReference
 
         ctype = {"Real": fmi2Real, "Integer": fmi2Integer, "Boolean": fmi2Boolean}
-        self._values: dict[tuple[int, str], tuple] = {}  # (comp, var) -> (buffer, index)
-        plan = []
+        # the gets: for connections in schedule order, then recorded-only ones
+        gets: list[tuple[int, str, list[_Var]]] = []
         for op, comp, items in self._schedule:
-            unit = self._units[comp]
-            for typ in _TYPES:
-                vars_ = [it for it in items if (it.type if op == "get" else it[1].type) == typ]
-                if not vars_:
-                    continue
-                n = len(vars_)
-                vrs = (fmi2ValueReference * n)(*[(v.vr if op == "get" else v[1].vr) for v in vars_])
-                buf = (ctype[typ] * n)()
-                fn = unit.fmu._functions[f"fmi2{'Get' if op == 'get' else 'Set'}{typ}"]
-                if op == "get":
-                    for j, v in enumerate(vars_):
-                        self._values[(comp, v.name)] = (buf, j)
-                    plan.append(("get", unit, fn, vrs, n, buf, None))
-                else:
-                    sources = [v[0] for v in vars_]
-                    plan.append(("set", unit, fn, vrs, n, buf, sources))
-        # recorded variables that are not already read for a connection
-        extra: dict[int, list[_Var]] = {}
+            if op == "get":
+                for typ in _TYPES:
+                    vars_ = [v for v in items if v.type == typ]
+                    if vars_:
+                        gets.append((comp, typ, vars_))
+        seen = {(v.comp, v.name) for _, _, vs in gets for v in vs}
+        extra: dict[tuple[int, str], list[_Var]] = {}
         for v in self._record:
-            if (v.comp, v.name) not in self._values:
-                extra.setdefault(v.comp, []).append(v)
-        for comp, vars_ in extra.items():
+            if (v.comp, v.name) not in seen:
+                seen.add((v.comp, v.name))
+                extra.setdefault((v.comp, v.type), []).append(v)
+        n_real = sum(len(vs) for _, typ, vs in gets if typ == "Real")
+        n_real += sum(len(vs) for (_, typ), vs in extra.items() if typ == "Real")
+        self._store = store = np.zeros(max(n_real, 1))
+        self._store_c = store_c = (fmi2Real * store.size).from_buffer(store)
+        self._values: dict[tuple[int, str], tuple[Any, int]] = {}  # (comp, var) -> (buffer, index)
+        offset = 0
+
+        def get_op(comp: int, typ: str, vars_: list[_Var]) -> tuple:
+            nonlocal offset
+            unit = self._units[comp]
+            n = len(vars_)
+            vrs = (fmi2ValueReference * n)(*[v.vr for v in vars_])
+            if typ == "Real":
+                buf = (fmi2Real * n).from_buffer(store, offset * store.itemsize)
+                for j, v in enumerate(vars_):
+                    self._values[(comp, v.name)] = (store_c, offset + j)
+                offset += n
+            else:
+                buf = (ctype[typ] * n)()
+                for j, v in enumerate(vars_):
+                    self._values[(comp, v.name)] = (buf, j)
+            return ("get", unit, unit.fmu._functions[f"fmi2Get{typ}"], vrs, n, buf, ())
+
+        ops: list[tuple] = []
+        get_iter = iter(gets)
+        for op, comp, items in self._schedule:
+            if op == "get":
+                for typ in _TYPES:
+                    if any(v.type == typ for v in items):
+                        ops.append(get_op(*next(get_iter)))
+            else:
+                ops.append(("set", comp, items))
+        # recorded variables that are not read for a connection: after every
+        # set (they may depend on inputs)
+        for (comp, typ), vars_ in extra.items():
+            ops.append(get_op(comp, typ, vars_))
+        plan = []
+        for op in ops:
+            if op[0] == "get":
+                plan.append(op)
+                continue
+            _, comp, items = op
             unit = self._units[comp]
             for typ in _TYPES:
-                vs = [v for v in vars_ if v.type == typ]
-                if not vs:
+                links = [it for it in items if it[1].type == typ]
+                if not links:
                     continue
-                n = len(vs)
-                vrs = (fmi2ValueReference * n)(*[v.vr for v in vs])
-                buf = (ctype[typ] * n)()
-                for j, v in enumerate(vs):
-                    self._values[(comp, v.name)] = (buf, j)
-                plan.append(("get", unit, unit.fmu._functions[f"fmi2Get{typ}"], vrs, n, buf, None))
-        # resolve set sources to (buffer, index) now that every get exists
-        resolved = []
-        for op, unit, fn, vrs, n, buf, sources in plan:
-            if op == "set":
-                sources = [self._values[(s.comp, s.name)] for s in sources]
-            resolved.append((op, unit, fn, vrs, n, buf, sources))
-        # (the recording-only gets come last: after every set, as they may
-        # depend on inputs)
-        return resolved
+                n = len(links)
+                vrs = (fmi2ValueReference * n)(*[d.vr for _, d in links])
+                sources = [self._values[(s.comp, s.name)] for s, _ in links]
+                fn = unit.fmu._functions[f"fmi2Set{typ}"]
+                first = sources[0][1]
+                if typ == "Real" and all(b is store_c and i == first + j for j, (b, i) in enumerate(sources)):
+                    buf = (fmi2Real * n).from_buffer(store, first * store.itemsize)
+                    copies: tuple = ()
+                else:
+                    buf = (ctype[typ] * n)()
+                    copies = tuple((j, b, i) for j, (b, i) in enumerate(sources))
+                plan.append(("set", unit, fn, vrs, n, buf, copies))
+        return [(op, unit, fn, unit.fmu.component, vrs, n, buf, copies) for op, unit, fn, vrs, n, buf, copies in plan]
 
     def _exchange(self, plan: list[tuple], t: float, *, initial: bool = False) -> None:
-        for op, unit, fn, vrs, n, buf, sources in plan:
-            if op == "set":
-                for j, (sbuf, si) in enumerate(sources):
-                    buf[j] = sbuf[si]
-            status = fn(unit.fmu.component, vrs, n, buf)
+        for op, unit, fn, component, vrs, n, buf, copies in plan:
+            for j, sbuf, si in copies:
+                buf[j] = sbuf[si]
+            status = fn(component, vrs, n, buf)
             if status > 1:
                 what = "reading outputs" if op == "get" else "setting inputs"
                 self._fail(unit, what + (" during initialization" if initial else ""), status, t)
 
-    def _recorder(self) -> Any:
-        refs = [self._values[(v.comp, v.name)] for v in self._record]
-        names = [f"{self._units[v.comp].spec.name}.{v.name}" for v in self._record]
-
-        def rec(row: np.void) -> None:
-            for name, (buf, j) in zip(names, refs, strict=True):
-                row[name] = buf[j]
-
-        return rec
-
     # -- inspection and clean-up ----------------------------------------------
+    @property
+    def recorded(self) -> list[str]:
+        """The recorded variables, ``"comp.var"`` per element (the result's columns after ``"time"``)."""
+        return [f"{self._units[v.comp].spec.name}.{v.name}" for v in self._record]
+
     @property
     def execution_order(self) -> list[str]:
         """The per-step operations, e.g. ``["get sched: p[1]", "set plant: p[1]", ...]``."""

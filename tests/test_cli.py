@@ -79,3 +79,12 @@ def test_simulate_reports_bad_schedule(capsys):
     # (21b) is not defined where p_{t+1} = 0
     assert main(["simulate", "cox-toth-ex1", "--schedule", "0*k", "--out", "/tmp/lpvest-x"]) == 2
     assert "the gain K is not finite" in capsys.readouterr().err
+
+
+def test_output_piped_into_head_ends_quietly():
+    proc = subprocess.run(
+        f"{sys.executable} -m lpvest.cli systems show peixoto-ex1 | head -1",
+        shell=True, capture_output=True, text=True, check=False,
+    )
+    assert proc.stdout.startswith("peixoto-ex1: ")
+    assert "Traceback" not in proc.stderr and "BrokenPipe" not in proc.stderr

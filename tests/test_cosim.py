@@ -99,3 +99,48 @@ def test_component_failure_names_component_time_and_log(fmus):
         match=r"component f: doStep at t = 3 returned discard \(\[ERROR\] deliberate failure for the test\)",
     ):
         simulate(comps, [], step_size=1.0, n_steps=10)
+
+
+def test_each_instance_keeps_its_own_log(fmus):
+    """A component's message reaches its own log even when other FMUs are
+    instantiated after it (fmpy's logger proxy keeps one global callback)."""
+    comps = [Component("f", fmus["failing"], {"fail_at": 2.0}), Component("r", fmus["ramp"]),
+             Component("g", fmus["gain"])]
+    with pytest.raises(CoSimulationError, match=r"component f: doStep at t = 2 returned discard "
+                                                r"\(\[ERROR\] deliberate failure for the test\)"):
+        simulate(comps, ["r.y -> g.u[1]"], step_size=1.0, n_steps=5)
+
+
+def test_only_connected_or_recorded_outputs_are_read(fmus):
+    comps = [Component("g", fmus["gain"], {"k": 3.0}), Component("r", fmus["ramp"])]
+    with CoSimulation(comps, ["r.y -> g.u[2]"], step_size=1.0, record=["g.y[2]", "g.u[2]"]) as sim:
+        assert sim.execution_order == ["get r: y", "set g: u[2]", "get g: y[2]"]
+        assert sim.recorded == ["g.y[2]", "g.u[2]"]
+        res = sim.run(3)
+    np.testing.assert_array_equal(res["g.y[2]"], 3.0 * res["g.u[2]"])
+    np.testing.assert_array_equal(res["g.u[2]"], np.arange(4.0))
+
+
+@pytest.mark.parametrize(
+    ("params", "where", "match"),
+    [
+        ({"k": "fast"}, "components.g.parameters.k", "component g: k: expected a number, found str 'fast'"),
+        ({"k": True}, "components.g.parameters.k", "component g: k: expected a number, found bool True"),
+        ({"y": [1.0, 2.0]}, "components.g.parameters.y", r"component g: y\[1\] is an output; it cannot be set"),
+        ({"u": [1.0]}, "components.g.parameters.u", r"component g: u has 2 element\(s\); 1 value\(s\) given"),
+    ],
+)
+def test_start_values_are_checked_at_set_up_and_name_their_field(fmus, params, where, match):
+    with pytest.raises(CoSimulationError, match=match) as info:
+        CoSimulation([Component("g", fmus["gain"], params)], [], step_size=1.0)
+    assert info.value.where == where
+
+
+def test_setup_errors_name_the_connection(fmus):
+    comps = [Component("g", fmus["gain"]), Component("r", fmus["ramp"])]
+    with pytest.raises(CoSimulationError, match="r has no variable 'z'") as info:
+        CoSimulation(comps, ["r.y -> g.u[1]", "r.z -> g.u[2]"], step_size=1.0)
+    assert info.value.where == "connections[2]"
+    with pytest.raises(CoSimulationError, match="no component 'q'") as info:
+        CoSimulation(comps, [], step_size=1.0, record=["r.y", "q.y"])
+    assert info.value.where == "record[2]"

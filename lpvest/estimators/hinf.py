@@ -40,7 +40,7 @@ from ..design.result import HinfDesign
 from ..errors import DimensionError, NumericalError
 from ..systems.polytopic import SimplexMap
 from ..validation import as_signal, as_vector, check_simplex
-from .base import Port
+from .base import Port, input_key
 
 __all__ = ["HinfFilter", "HinfStep", "HinfRun", "hinf_step", "hinf_filter_batch"]
 
@@ -66,8 +66,15 @@ def hinf_step(design: HinfDesign, xf: np.ndarray, alpha: np.ndarray | None, y: n
     Raises :class:`~lpvest.errors.NumericalError` if ``H(alpha)`` is singular
     (it cannot be for a certified design: ``H + H^T > P_2 > 0``).
     """
-    m = design.matrices_at(alpha)
-    zhat = m.Cf @ xf + m.Df @ y
+    return _step_with(design.matrices_at(alpha), xf, alpha, y)
+
+
+def _step_with(
+    m: Any, xf: np.ndarray, alpha: np.ndarray | None, y: np.ndarray, zhat: np.ndarray | None = None
+) -> HinfStep:
+    """:func:`hinf_step` with the matrices at ``alpha`` (and ``zhat``) already evaluated."""
+    if zhat is None:
+        zhat = m.Cf @ xf + m.Df @ y
     try:
         nxt = np.linalg.solve(m.H, m.Af @ xf + m.Bf @ y)
     except np.linalg.LinAlgError as exc:
@@ -184,6 +191,7 @@ class HinfFilter:
         """Back to the initial filter state."""
         self._xf = self._xf0.copy()
         self._k = 0
+        self._memo: tuple[Any, Any, np.ndarray | None, np.ndarray, np.ndarray] | None = None
 
     def _parse(self, inputs: Mapping[str, Any]) -> tuple[np.ndarray | None, np.ndarray]:
         names = {p.name for p in self._inputs}
@@ -207,18 +215,32 @@ class HinfFilter:
         return alpha, y
 
     def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
-        """``zhat`` and ``xf`` at the current sample; no state change."""
-        alpha, y = self._parse(inputs)
-        m = self.design.matrices_at(alpha)
-        return {"zhat": m.Cf @ self._xf + m.Df @ y, "xf": self._xf.copy()}
+        """``zhat`` and ``xf`` at the current sample; no state change.
+
+        The evaluation (checked inputs, matrices at ``alpha``, ``zhat``) is kept,
+        keyed on the inputs (:func:`~lpvest.estimators.base.input_key`), for a
+        following :meth:`step` with the same inputs."""
+        key = input_key(inputs)
+        memo = self._memo
+        if key is None or memo is None or memo[0] != key:
+            alpha, y = self._parse(inputs)
+            m = self.design.matrices_at(alpha)
+            memo = (key, m, alpha, y, m.Cf @ self._xf + m.Df @ y)
+            self._memo = memo if key is not None else None
+        return {"zhat": memo[4].copy(), "xf": self._xf.copy()}
 
     def step(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
         """Consume sample ``k``: return :meth:`outputs` and advance to ``k + 1``."""
-        alpha, y = self._parse(inputs)
-        res = hinf_step(self.design, self._xf, alpha, y)
+        memo = self._memo
+        if memo is not None and memo[0] == input_key(inputs):
+            res = _step_with(memo[1], self._xf, memo[2], memo[3], memo[4])
+        else:
+            alpha, y = self._parse(inputs)
+            res = hinf_step(self.design, self._xf, alpha, y)
         out = {"zhat": res.zhat, "xf": self._xf.copy()}
         self._xf = res.xf_next
         self._k += 1
+        self._memo = None
         return out
 
     def get_state(self) -> dict[str, Any]:
@@ -234,3 +256,4 @@ class HinfFilter:
         if k < 0:
             raise DimensionError(f"the sample counter k of a HinfFilter state must be >= 0; found {k}")
         self._xf, self._k = xf, k
+        self._memo = None

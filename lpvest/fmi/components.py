@@ -71,6 +71,7 @@ class SchedulerComponent:
         self.space = space
         self.simplex_map = simplex_map
         self._gen = SignalGenerator(signal)
+        self._memo: dict[str, np.ndarray] | None = None
         ports = [Port("p", (space.dim,), "scheduling")]
         if simplex_map is not None:
             ports.append(Port("alpha", (simplex_map.n_vertices,), "vertex weights"))
@@ -86,17 +87,25 @@ class SchedulerComponent:
 
     def reset(self, t0: float = 0.0) -> None:
         self._gen.start(t0)
+        self._memo = None
 
-    def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    def _evaluate(self) -> dict[str, np.ndarray]:
         p = np.clip(self._gen.value, self.space.lower, self.space.upper)
         out = {"p": p}
         if self.simplex_map is not None:
             out["alpha"] = np.asarray(self.simplex_map(p), dtype=float)
         return out
 
+    def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+        """``p`` (and ``alpha``) at the current time; kept for the next :meth:`step`."""
+        if self._memo is None:
+            self._memo = self._evaluate()
+        return {name: value.copy() for name, value in self._memo.items()}
+
     def step(self, inputs: Mapping[str, Any], *, dt: float, t_end: float | None = None) -> dict[str, np.ndarray]:
-        out = self.outputs(inputs)
+        out = self._memo if self._memo is not None else self._evaluate()
         self._gen.advance(self._gen.time + float(dt) if t_end is None else float(t_end))
+        self._memo = None
         return out
 
     def get_state(self) -> dict[str, Any]:
@@ -104,6 +113,7 @@ class SchedulerComponent:
 
     def set_state(self, state: Mapping[str, Any]) -> None:
         self._gen.set_state(dict(state))
+        self._memo = None
 
 
 class SourceComponent:

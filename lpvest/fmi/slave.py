@@ -56,12 +56,18 @@ _TYPES = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String
 class _Element:
     """One FMI scalar variable of a port or parameter."""
 
-    __slots__ = ("name", "kind", "owner", "index", "fmi_type", "minimum", "maximum", "label")
+    __slots__ = ("name", "kind", "owner", "index", "fmi_type", "minimum", "maximum", "label", "tol", "position")
 
     def __init__(self, name: str, kind: str, owner: str, index: int, fmi_type: str, label: str = "",
                  minimum: float | None = None, maximum: float | None = None) -> None:
         self.name, self.kind, self.owner, self.index, self.fmi_type = name, kind, owner, index, fmi_type
         self.minimum, self.maximum, self.label = minimum, maximum, label
+        # inputs: the relative tolerance of lpvest.validation.check_box; parameters: exact
+        self.tol = 1e-12 * max(1.0, abs(minimum or 0.0), abs(maximum or 0.0)) if kind == "input" else 0.0
+        self.position = -1  # outputs: index in the flat list of output values
+
+    def what(self) -> str:
+        return f"{self.kind} {self.name}" + (f" ({self.label})" if self.label else "")
 
 
 class LpvestSlave(Fmi2Slave):
@@ -148,11 +154,16 @@ class LpvestSlave(Fmi2Slave):
         self._input_ports = tuple(component.input_ports)
         self._output_ports = tuple(component.output_ports)
         self._inputs = {p.name: np.zeros(p.shape) for p in self._input_ports}
-        self._outputs = {p.name: np.full(p.shape, np.nan) for p in self._output_ports}
+        self._n_outputs = 0
         for port in self._input_ports:
             self._add_port(port, "input")
         for port in self._output_ports:
             self._add_port(port, "output")
+        self._store_outputs({p.name: np.full(p.shape, np.nan) for p in self._output_ports})
+        # fmi2GetReal of outputs only (what a master does every step): per list of
+        # value references, the positions in the flat output list (bounded cache)
+        self._output_reads: dict[tuple[int, ...], list[int]] = {}
+        self._step_inputs: dict[str, np.ndarray] | None = None
         self._component: Any = None
         self._preview: Any = None
         self._initialized = False
@@ -216,6 +227,9 @@ class LpvestSlave(Fmi2Slave):
         for i, name in enumerate(element_names(port.name, tuple(port.shape))):
             lo, hi, label = (self.input_range if kind == "input" else self.output_range)(port, i)
             element = _Element(name, kind, port.name, i, "Real", label, lo, hi)
+            if kind == "output":
+                element.position = self._n_outputs
+                self._n_outputs += 1
             desc = " ".join(x for x in (port.description, f"({label})" if label else "") if x) or None
             causality = Fmi2Causality.input if kind == "input" else Fmi2Causality.output
             self._register(element, causality=causality, description=desc)
@@ -250,41 +264,41 @@ class LpvestSlave(Fmi2Slave):
             return float(value.reshape(-1)[e.index]) if isinstance(value, np.ndarray) else value
         if e.kind == "input":
             return float(self._inputs[e.owner].reshape(-1)[e.index])
-        return float(self._outputs[e.owner].reshape(-1)[e.index])
+        return self._output_values[e.position]
 
     def _reject(self, e: _Element, message: str) -> None:
         self._invalid[e.name] = message
         self._log(Fmi2Status.error, message)
 
     def _set_element(self, e: _Element, value: Any) -> None:
-        what = f"{e.kind} {e.name}" + (f" ({e.label})" if e.label else "")
         if e.kind == "parameter" and self._initialized:
-            self._log(Fmi2Status.error, f"{what} is fixed: it can be set only before fmi2ExitInitializationMode")
+            self._log(Fmi2Status.error, f"{e.what()} is fixed: it can be set only before fmi2ExitInitializationMode")
             return
         if e.fmi_type == "Real":
             value = float(value)
             if not math.isfinite(value):
-                self._reject(e, f"{what} = {value} is not finite; value rejected")
+                self._reject(e, f"{e.what()} = {value} is not finite; value rejected")
                 return
-            # inputs: the relative tolerance of lpvest.validation.check_box; parameters: exact
-            tol = 1e-12 * max(1.0, abs(e.minimum or 0.0), abs(e.maximum or 0.0)) if e.kind == "input" else 0.0
+            tol = e.tol
             below = e.minimum is not None and value < e.minimum - tol
             if below or (e.maximum is not None and value > e.maximum + tol):
                 lo = "-inf" if e.minimum is None else f"{e.minimum:.6g}"
                 hi = "inf" if e.maximum is None else f"{e.maximum:.6g}"
-                self._reject(e, f"{what} = {value:.6g} is outside its declared range [{lo}, {hi}]; value rejected")
+                self._reject(e, f"{e.what()} = {value:.6g} is outside its declared range [{lo}, {hi}]; "
+                             "value rejected")
                 return
         elif e.fmi_type == "Integer":
             value = int(value)
             if (e.minimum is not None and value < e.minimum) or (e.maximum is not None and value > e.maximum):
                 bounds = f"[{'-inf' if e.minimum is None else e.minimum}, {'inf' if e.maximum is None else e.maximum}]"
-                self._reject(e, f"{what} = {value} is outside its declared range {bounds}; value rejected")
+                self._reject(e, f"{e.what()} = {value} is outside its declared range {bounds}; value rejected")
                 return
         elif e.fmi_type == "Boolean":
             value = bool(value)
         else:
             value = str(value)
-        self._invalid.pop(e.name, None)
+        if self._invalid:
+            self._invalid.pop(e.name, None)
         if e.kind == "parameter":
             current = self._params[e.owner]
             if isinstance(current, np.ndarray):
@@ -293,8 +307,9 @@ class LpvestSlave(Fmi2Slave):
                 self._params[e.owner] = value
             self._preview = None
         else:
-            self._inputs[e.owner].reshape(-1)[e.index] = value
+            self._inputs[e.owner].flat[e.index] = value
         self._dirty = True
+        self._step_inputs = None
 
     def _input_dict(self) -> dict[str, np.ndarray]:
         return {k: v.copy() for k, v in self._inputs.items()}
@@ -316,13 +331,25 @@ class LpvestSlave(Fmi2Slave):
         else:
             component.reset()
 
+    def _store_outputs(self, values: Mapping[str, Any]) -> None:
+        """Keep a copy of the component's outputs, and the flat list of their
+        values in the order of the output variables (what fmi2GetReal reads)."""
+        outputs = {}
+        flat: list[float] = []
+        for p in self._output_ports:
+            a = np.array(values[p.name], dtype=float).reshape(p.shape)  # a copy
+            outputs[p.name] = a
+            flat += a.ravel().tolist()
+        self._outputs, self._output_values = outputs, flat
+
     def _refresh(self) -> None:
         if not self._dirty or self._invalid:
             return
         component = self._preview_component()
-        values = component.outputs(self._input_dict())
-        self._outputs = {p.name: np.asarray(values[p.name], dtype=float).reshape(p.shape).copy()
-                         for p in self._output_ports}
+        # the same copy of the inputs is handed to step() when nothing is set in between
+        inputs = self._input_dict()
+        self._store_outputs(component.outputs(inputs))
+        self._step_inputs = inputs
         self._dirty = False
 
     # -- logging and the error barrier -----------------------------------------------
@@ -394,7 +421,8 @@ class LpvestSlave(Fmi2Slave):
                           "(set valid values, restore a state with fmi2SetFMUstate, or reset)")
                 return False
             component = self._component
-            inputs = self._input_dict()
+            inputs = self._step_inputs if self._step_inputs is not None and self._initialized else self._input_dict()
+            self._step_inputs = None
             if self._timed:
                 component.step(inputs, dt=float(step_size), t_end=float(current_time) + float(step_size))
             else:
@@ -417,7 +445,23 @@ class LpvestSlave(Fmi2Slave):
         return [self._get_element(e) for e in elements]
 
     def get_real(self, vrs: list[int]) -> list[float]:
-        return self._guard("fmi2GetReal", lambda: self._get(vrs, "Real", math.nan), [math.nan] * len(vrs))
+        # fast path: outputs only (checked once per list of value references)
+        key = tuple(vrs)
+        positions = self._output_reads.get(key)
+        if positions is None:
+            elements = [self._elements.get(vr) for vr in vrs]
+            if not elements or not all(e is not None and e.kind == "output" for e in elements):
+                return self._guard("fmi2GetReal", lambda: self._get(vrs, "Real", math.nan), [math.nan] * len(vrs))
+            if len(self._output_reads) >= 256:
+                self._output_reads.clear()
+            positions = self._output_reads[key] = [e.position for e in elements]  # type: ignore[union-attr]
+        if self._dirty:
+            try:
+                self._refresh()
+            except Exception as exc:  # noqa: BLE001 - nothing may reach pythonfmu (fmi2Fatal)
+                self._fail("fmi2GetReal (computing the outputs)", exc)
+        values = self._output_values
+        return [values[i] for i in positions]
 
     def get_integer(self, vrs: list[int]) -> list[int]:
         return self._guard("fmi2GetInteger", lambda: self._get(vrs, "Integer", 0), [0] * len(vrs))
@@ -440,7 +484,10 @@ class LpvestSlave(Fmi2Slave):
             self._set_element(e, value)
 
     def set_real(self, vrs: list[int], values: list[float]) -> None:
-        self._guard("fmi2SetReal", lambda: self._set(vrs, values, "Real"), None)
+        try:
+            self._set(vrs, values, "Real")
+        except Exception as exc:  # noqa: BLE001 - nothing may reach pythonfmu (fmi2Fatal)
+            self._fail("fmi2SetReal", exc)
 
     def set_integer(self, vrs: list[int], values: list[int]) -> None:
         self._guard("fmi2SetInteger", lambda: self._set(vrs, values, "Integer"), None)
@@ -489,7 +536,9 @@ class LpvestSlave(Fmi2Slave):
                 component = self.make_component(params)
                 component.set_state(snap["component"])
             self._params = params
-            self._inputs, self._outputs = inputs, outputs
+            self._inputs = inputs
+            self._store_outputs(outputs)
+            self._step_inputs = None
             self._invalid = dict(snap["invalid"])
             self._initialized = bool(snap["initialized"])
             self._init_error = str(snap["init_error"])

@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DimensionError, ExpressionError
-from ..estimators.base import Port
+from ..estimators.base import Port, input_key
 from ..validation import as_vector, check_simplex
 from .affine import AffineLPV
 from .innovation import InnovationLPV
@@ -155,6 +155,7 @@ class DiscretePlant:
             self._inputs = tuple(ins)
             self._outputs = (Port("y", (model.ny,), "measured output"), Port("x", (nx,), "state"))
             self._chol = np.linalg.cholesky(model.innovation_covariance)
+        self._input_names = tuple(p.name for p in self._inputs)
         self.reset()
 
     # -- protocol -------------------------------------------------------------
@@ -183,6 +184,7 @@ class DiscretePlant:
             x = np.zeros(model.nx)
         self._x = np.asarray(x, dtype=float)
         self._noise = self._draw()
+        self._memo: tuple[Any, dict[str, np.ndarray], dict[str, np.ndarray]] | None = None
 
     def _draw(self) -> np.ndarray:
         """The model noise of the current sample (zeros without noise)."""
@@ -233,15 +235,30 @@ class DiscretePlant:
         return out, {"x": nxt}
 
     def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
-        """The outputs at the current sample for these inputs; no state change."""
-        return self._evaluate(inputs)[0]
+        """The outputs at the current sample for these inputs; no state change.
+
+        The evaluation is kept (keyed on the inputs, :func:`~lpvest.estimators.base.input_key`)
+        for a following :meth:`step` with the same inputs."""
+        key = input_key(inputs, self._input_names)
+        memo = self._memo
+        if key is None or memo is None or memo[0] != key:
+            out, nxt = self._evaluate(inputs)
+            memo = self._memo = (key, out, nxt) if key is not None else None
+            if memo is None:
+                return out
+        return {name: value.copy() for name, value in memo[1].items()}
 
     def step(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
         """The outputs at the current sample; then advance to the next one."""
-        out, nxt = self._evaluate(inputs)
+        memo = self._memo
+        if memo is not None and memo[0] == input_key(inputs, self._input_names):
+            out, nxt = memo[1], memo[2]
+        else:
+            out, nxt = self._evaluate(inputs)
         self._x = nxt["x"]
         self._k += 1
         self._noise = self._draw()
+        self._memo = None
         return out
 
     @property
@@ -265,6 +282,7 @@ class DiscretePlant:
         rng = np.random.default_rng()
         rng.bit_generator.state = state["rng"]
         self._x, self._k, self._noise, self._rng = x.copy(), int(state["k"]), noise.copy(), rng
+        self._memo = None
 
 
 class LTVPlant:

@@ -1,0 +1,420 @@
+"""Co-simulation description files (TOML): what ``lpvest cosim FILE.toml`` runs.
+
+A file names the FMUs, their parameter values, the connections, the
+communication step and how long to run; :func:`load_cosim` checks it and
+:meth:`CoSimFile.run` co-simulates it with :class:`lpvest.cosim.CoSimulation`
+(execution order from the connection graph: no one-step delay). Every error
+names the file and the field, in one line::
+
+    examples/bad.toml: connections[2]: expected 'comp.output -> comp.input', found 'plant.y filter.y'
+
+The format, by example (``examples/peixoto_ex1_hinf.toml`` is a complete file)::
+
+    title = "Peixoto et al. Example 1 with the gain-scheduled H-infinity filter"
+    step_size = 1.0                  # communication step h (time units of the FMUs)
+    steps = 200                      # how long: a number of steps, or
+    # stop_time = 200.0              #   a stop time (start_time + a whole number of steps)
+    start_time = 0.0                 # optional, default 0
+    fmu_dir = "../fmu-build"         # optional: where FMUs given by name are (relative to
+                                     #   this file; `lpvest cosim --fmus DIR` overrides it)
+    connections = [                  # "component.output -> component.input"; a vector
+        "sched.p -> plant.p",        #   name connects every element (p[1], p[2], ...)
+        "plant.y -> filter.y",
+    ]
+    record = ["plant.z", "filter.zhat"]          # optional; default: every output
+    plots = [["plant.z[1]", "filter.zhat[1]"]]   # optional panels; default: one per vector
+
+    [components.sched]               # one table per component; the key is its name
+    fmu = "PeixotoEx1Scheduler"      # a built FMU by name (looked up as NAME.fmu in the
+                                     #   FMU folder) or a path to an .fmu (relative to this file)
+    parameters = { omega = [0.25] }  # optional start values (vectors as lists)
+    # feedthrough = false            # optional: override the FMU's declared dependencies
+
+Examples
+--------
+>>> spec = load_cosim("examples/peixoto_ex1_hinf.toml", fmu_dir="fmu-build")   # doctest: +SKIP
+>>> result = spec.run()                                                        # doctest: +SKIP
+>>> result.write_csv("out.csv"), result.plot("out.png")                       # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import tomllib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .cosim import Component, Connection, CoSimulation, CoSimulationError
+from .errors import ModelFileError
+
+__all__ = ["CoSimFile", "CoSimResult", "load_cosim", "DEFAULT_FMU_DIR"]
+
+#: Where FMUs named without a path are looked up when neither the file nor the
+#: caller says (the default output folder of ``lpvest build``).
+DEFAULT_FMU_DIR = "fmu-build"
+
+_TOP_KEYS = {"title", "description", "step_size", "steps", "stop_time", "start_time", "fmu_dir", "connections",
+             "record", "plots", "components"}
+_COMPONENT_KEYS = {"fmu", "parameters", "feedthrough"}
+
+
+def _kind(value: Any) -> str:
+    if isinstance(value, bool):
+        return f"a boolean ({str(value).lower()})"
+    if isinstance(value, int | float):
+        return f"a number ({value!r})"
+    if isinstance(value, str):
+        return f"a string ({value!r})"
+    return {dict: "a table", list: "a list"}.get(type(value), type(value).__name__)
+
+
+@dataclass(frozen=True)
+class CoSimFile:
+    """A checked co-simulation description (see the module documentation)."""
+
+    path: Path
+    title: str
+    components: tuple[Component, ...]
+    connections: tuple[str, ...]
+    step_size: float
+    n_steps: int
+    start_time: float
+    record: tuple[str, ...] | None
+    plots: tuple[tuple[str, ...], ...]
+    fmu_dir: Path
+
+    @property
+    def stop_time(self) -> float:
+        return self.start_time + self.n_steps * self.step_size
+
+    def error(self, where: str, message: str) -> ModelFileError:
+        return ModelFileError(f"{self.path}: {where}: {message}" if where else f"{self.path}: {message}")
+
+    def _reword(self, exc: CoSimulationError) -> ModelFileError:
+        """A set-up or run error of the master, as an error of this file's field."""
+        msg = str(exc)
+        where = exc.where
+        if where.startswith("components."):
+            name = where.split(".")[1]
+            msg = msg.removeprefix(f"component {name}: ")
+        return self.error(where, msg)
+
+    def simulation(self) -> CoSimulation:
+        """The :class:`~lpvest.cosim.CoSimulation` of this file (instances
+        created; close it, or use it in a ``with`` block)."""
+        try:
+            sim = CoSimulation(self.components, self.connections, step_size=self.step_size,
+                               start_time=self.start_time, record=self.record)
+        except CoSimulationError as exc:
+            raise self._reword(exc) from exc
+        try:
+            recorded = set(sim.recorded)
+            for i, panel in enumerate(self.plots):
+                for name in panel:
+                    if not _expand_recorded(name, recorded):
+                        raise self.error(f"plots[{i + 1}]", f"{name!r} is not recorded (see record)")
+        except BaseException:
+            sim.close()
+            raise
+        return sim
+
+    def run(self, *, progress: bool | None = None) -> CoSimResult:
+        """Co-simulate: ``n_steps`` steps from ``start_time``."""
+        with self.simulation() as sim:
+            order = sim.execution_order
+            t0 = time.perf_counter()
+            try:
+                data = sim.run(self.n_steps, progress=progress)
+            except CoSimulationError as exc:
+                raise self._reword(exc) from exc
+            elapsed = time.perf_counter() - t0
+        return CoSimResult(self, data, elapsed, order)
+
+    def to_ssp(self, path: str | Path) -> Path:
+        """Write this system as an SSP file (:func:`lpvest.ssp.write_ssp`)."""
+        from .ssp import write_ssp
+
+        try:
+            return write_ssp(path, self.components, self.connections, step_size=self.step_size,
+                             start_time=self.start_time, stop_time=self.stop_time,
+                             name=self.path.stem, description=self.title or None)
+        except CoSimulationError as exc:
+            raise self._reword(exc) from exc
+
+
+def _short(op: str, limit: int = 4) -> str:
+    """``"get kalman: a, b, c, d, e"`` -> ``"get kalman: a, b, ... (5)"``."""
+    head, _, names = op.partition(": ")
+    items = names.split(", ")
+    return op if len(items) <= limit else f"{head}: {', '.join(items[:2])}, ... ({len(items)})"
+
+
+def _expand_recorded(name: str, recorded: set[str]) -> list[str]:
+    if name in recorded:
+        return [name]
+    return sorted((r for r in recorded if r.startswith(name + "[")), key=_element_order)
+
+
+def _element_order(name: str) -> tuple:
+    base, _, idx = name.partition("[")
+    return (base, tuple(int(i) for i in idx.rstrip("]").split(",")) if idx else ())
+
+
+@dataclass(frozen=True)
+class CoSimResult:
+    """The recorded values of a run of a :class:`CoSimFile`."""
+
+    spec: CoSimFile
+    data: np.ndarray  #: structured array: ``"time"`` and ``"comp.var"`` columns
+    elapsed: float  #: seconds spent in the run (FMUs instantiated already)
+    execution_order: list[str]
+
+    @property
+    def names(self) -> list[str]:
+        return [n for n in self.data.dtype.names if n != "time"]
+
+    def write_csv(self, path: str | Path) -> Path:
+        """``time`` and every recorded variable, full precision."""
+        path = Path(path)
+        cols = ["time", *self.names]
+        table = np.column_stack([self.data[c] for c in cols])
+        np.savetxt(path, table, delimiter=",", header=",".join(cols), comments="", fmt="%.17g")
+        return path
+
+    def panels(self) -> list[tuple[str, list[str]]]:
+        """(title, columns) of each plot panel: the file's ``plots``, else one per
+        recorded vector (``plant.z`` holds ``plant.z[1]``, ``plant.z[2]``)."""
+        recorded = set(self.names)
+        if self.spec.plots:
+            out = []
+            for panel in self.spec.plots:
+                cols = [c for name in panel for c in _expand_recorded(name, recorded)]
+                out.append((", ".join(panel), cols))
+            return out
+        groups: dict[str, list[str]] = {}
+        for n in self.names:
+            groups.setdefault(n.split("[", 1)[0], []).append(n)
+        return list(groups.items())
+
+    def plot(self, path: str | Path) -> Path:
+        """One panel per group of variables (see :meth:`panels`), against time."""
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        path = Path(path)
+        panels = self.panels()
+        fig, axes = plt.subplots(len(panels), 1, figsize=(8, 1.2 + 2.0 * len(panels)), sharex=True, squeeze=False)
+        t = self.data["time"]
+        for ax, (title, cols) in zip(axes[:, 0], panels, strict=True):
+            for c in cols:
+                ax.plot(t, self.data[c], label=c, linewidth=1.2)
+            label = ", ".join(c.split(".", 1)[1] for c in cols) if cols else title
+            ax.set_ylabel(label if len(label) <= 24 else "", fontsize="small")
+            ax.legend(loc="upper right", fontsize="x-small", ncol=min(4, len(cols)))
+            ax.grid(alpha=0.3)
+        axes[-1, 0].set_xlabel("time")
+        spec = self.spec
+        fig.suptitle(spec.title or spec.path.name, fontsize="medium")
+        fig.tight_layout()
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        return path
+
+    def summary(self) -> str:
+        """A few lines: what ran, how long, the execution order, each variable's range."""
+        spec = self.spec
+        n = len(spec.components)
+        lines = [
+            f"co-simulated {spec.path.name}: {n} component{'s' * (n != 1)}, {spec.n_steps} steps of "
+            f"{spec.step_size:g} (t = {spec.start_time:g} .. {spec.stop_time:g}) in {self.elapsed:.2f} s",
+            "  each step: " + "; ".join(_short(op) for op in self.execution_order) + "; doStep each",
+        ]
+        width = max((len(c) for c in self.names), default=0)
+        for c in self.names:
+            col = self.data[c]
+            lines.append(f"  {c:<{width}}  min {np.min(col):>11.4g}  max {np.max(col):>11.4g}  "
+                         f"rms {np.sqrt(np.mean(col ** 2)):>11.4g}")
+        return "\n".join(lines)
+
+
+# -- reading ------------------------------------------------------------------
+
+
+class _Reader:
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def error(self, where: str, message: str) -> ModelFileError:
+        return ModelFileError(f"{self.path}: {where}: {message}")
+
+    def number(self, data: Mapping, key: str, *, positive: bool = False, default: float | None = None) -> float:
+        if key not in data:
+            if default is None:
+                raise self.error(key, "missing (expected a number)")
+            return default
+        value = data[key]
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            raise self.error(key, f"expected a finite number, found {_kind(value)}")
+        if positive and not value > 0:
+            raise self.error(key, f"expected a positive number, found {value!r}")
+        return float(value)
+
+    def strings(self, data: Mapping, key: str) -> list[str]:
+        value = data[key]
+        if not isinstance(value, list):
+            raise self.error(key, f"expected a list of strings, found {_kind(value)}")
+        for i, v in enumerate(value):
+            if not isinstance(v, str):
+                raise self.error(f"{key}[{i + 1}]", f"expected a string, found {_kind(v)}")
+        return list(value)
+
+    def variable(self, text: str, where: str, components: Sequence[str]) -> None:
+        comp, sep, name = text.partition(".")
+        if not sep or not comp or not name:
+            raise self.error(where, f"expected 'component.variable', found {text!r}")
+        if comp not in components:
+            raise self.error(where, f"no component {comp!r} in {text!r} (components: {', '.join(components)})")
+
+
+def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimFile:
+    """Read and check a co-simulation file (see the module documentation).
+
+    Parameters
+    ----------
+    path : str or Path
+        The TOML file.
+    fmu_dir : str or Path, optional
+        Where FMUs given by name are looked up (overrides the file's
+        ``fmu_dir``; relative to the current directory). Default: the file's
+        ``fmu_dir`` (relative to the file), else ``fmu-build``.
+
+    Raises
+    ------
+    ModelFileError
+        One line naming the file and the field, e.g.
+        ``run.toml: step_size: expected a positive number, found -1.0``.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ModelFileError(f"{path}: cannot be read: {exc.strerror}") from exc
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ModelFileError(f"{path}: not valid TOML: {exc}") from exc
+    r = _Reader(path)
+    unknown = sorted(set(data) - _TOP_KEYS)
+    if unknown:
+        raise r.error(unknown[0], f"unknown key (expected one of: {', '.join(sorted(_TOP_KEYS))})")
+    title = data.get("title", "")
+    if not isinstance(title, str):
+        raise r.error("title", f"expected a string, found {_kind(title)}")
+
+    # timing
+    h = r.number(data, "step_size", positive=True)
+    t0 = r.number(data, "start_time", default=0.0)
+    if ("steps" in data) == ("stop_time" in data):
+        raise r.error("steps", "give either steps or stop_time (exactly one)")
+    if "steps" in data:
+        steps = data["steps"]
+        if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
+            raise r.error("steps", f"expected a positive integer, found {_kind(steps)}")
+        n_steps = int(steps)
+    else:
+        stop = r.number(data, "stop_time")
+        ratio = (stop - t0) / h
+        n_steps = int(round(ratio))
+        if n_steps < 1 or abs(ratio - n_steps) > 1e-9 * max(1.0, abs(ratio)):
+            raise r.error("stop_time", f"expected start_time + a positive whole number of steps of {h:g}, "
+                          f"found {stop!r} ({ratio:.6g} steps)")
+
+    # components
+    comps_raw = data.get("components")
+    if comps_raw is None:
+        raise r.error("components", "missing (expected a table [components.NAME] per component)")
+    if not isinstance(comps_raw, dict) or not comps_raw:
+        raise r.error("components", f"expected a table of components, found {_kind(comps_raw)}")
+    if fmu_dir is not None:
+        folder = Path(fmu_dir)
+    elif "fmu_dir" in data:
+        if not isinstance(data["fmu_dir"], str):
+            raise r.error("fmu_dir", f"expected a string (a folder), found {_kind(data['fmu_dir'])}")
+        folder = path.parent / data["fmu_dir"]
+    else:
+        folder = Path(DEFAULT_FMU_DIR)
+    components = []
+    for name, spec in comps_raw.items():
+        where = f"components.{name}"
+        if not name.isidentifier():
+            raise r.error(where, f"expected a component name that is an identifier, found {name!r}")
+        if not isinstance(spec, dict):
+            raise r.error(where, f"expected a table, found {_kind(spec)}")
+        bad = sorted(set(spec) - _COMPONENT_KEYS)
+        if bad:
+            raise r.error(f"{where}.{bad[0]}", f"unknown key (expected one of: {', '.join(sorted(_COMPONENT_KEYS))})")
+        fmu = spec.get("fmu")
+        if not isinstance(fmu, str) or not fmu:
+            raise r.error(f"{where}.fmu", "missing (expected a built FMU's name or a path to an .fmu file)"
+                          if fmu is None else f"expected a string, found {_kind(fmu)}")
+        if fmu.lower().endswith(".fmu") or "/" in fmu or "\\" in fmu:
+            fmu_path = path.parent / fmu
+            if not fmu_path.is_file():
+                raise r.error(f"{where}.fmu", f"expected an FMU file, found no file {fmu_path}")
+        else:
+            fmu_path = folder / f"{fmu}.fmu"
+            if not fmu_path.is_file():
+                raise r.error(f"{where}.fmu", f"no FMU {fmu}.fmu in {folder} (build the FMUs with "
+                              f"`lpvest build --out {folder}`, or point --fmus or fmu_dir at their folder)")
+        params = spec.get("parameters", {})
+        if not isinstance(params, dict):
+            raise r.error(f"{where}.parameters", f"expected a table of start values, found {_kind(params)}")
+        for pname, value in params.items():
+            if isinstance(value, dict) or (isinstance(value, list) and any(isinstance(v, dict | list)
+                                                                           for v in value)):
+                raise r.error(f"{where}.parameters.{pname}",
+                              f"expected a number, string, boolean or a list of them, found {_kind(value)}")
+        feed = spec.get("feedthrough")
+        if feed is not None and not isinstance(feed, bool):
+            raise r.error(f"{where}.feedthrough", f"expected true or false, found {_kind(feed)}")
+        components.append(Component(name, fmu_path, dict(params), feed))
+    names = [c.name for c in components]
+
+    # connections, record, plots
+    connections: list[str] = []
+    if "connections" in data:
+        for i, text in enumerate(r.strings(data, "connections")):
+            where = f"connections[{i + 1}]"
+            try:
+                c = Connection.parse(text)
+            except CoSimulationError:
+                raise r.error(where, f"expected 'comp.output -> comp.input', found {text!r}") from None
+            r.variable(c.source, where, names)
+            r.variable(c.target, where, names)
+            connections.append(text)
+    record = None
+    if "record" in data:
+        record = r.strings(data, "record")
+        for i, text in enumerate(record):
+            r.variable(text, f"record[{i + 1}]", names)
+    plots: list[tuple[str, ...]] = []
+    if "plots" in data:
+        panels = data["plots"]
+        if not isinstance(panels, list):
+            raise r.error("plots", f"expected a list of panels (lists of variables), found {_kind(panels)}")
+        for i, panel in enumerate(panels):
+            where = f"plots[{i + 1}]"
+            if not isinstance(panel, list) or not panel or not all(isinstance(v, str) for v in panel):
+                raise r.error(where, f"expected a non-empty list of variable names, found {_kind(panel)}")
+            for v in panel:
+                r.variable(v, where, names)
+            plots.append(tuple(panel))
+    return CoSimFile(path, title, tuple(components), tuple(connections), h, n_steps, t0,
+                     None if record is None else tuple(record), tuple(plots), folder)

@@ -1,0 +1,405 @@
+"""A co-simulation as an SSP file (System Structure and Parameterization 1.0),
+and running such a file with fmpy or libcosim.
+
+:func:`write_ssp` writes the system of a :class:`~lpvest.cosim.CoSimulation`
+(components, their parameter values, connections, the communication step) as
+one ``.ssp`` archive::
+
+    SystemStructure.ssd      the system: components, connectors, connections,
+                             parameter values bound inline, default experiment
+    resources/<FMU>.fmu      each FMU once (components may share one)
+
+What the two importers make of it (checked by the tests):
+
+=========================  ===============================  ==================================
+                           ``fmpy.ssp.simulate_ssp``        libcosim (``libcosimpy``)
+=========================  ===============================  ==================================
+components, connections    yes                              yes
+parameter bindings         **no**: it applies only the      yes (the first binding of each
+(inline ``ParameterSet``)  ``parameter_set`` argument;      component; String values too)
+                           :func:`simulate_ssp` passes the
+                           SSD's values; String values
+                           cannot be set (fmpy has no
+                           setter for them: an error)
+communication step         **no**: a ``step_size``          the ``com.opensimulationplatform``
+                           argument (:func:`simulate_ssp`   annotation of the default
+                           reads the SSD's annotation)      experiment (``FixedStepAlgorithm
+                                                            baseStepSize``)
+start / stop time          arguments                        start time; the caller steps
+stepping                   Jacobi, fixed order              Jacobi, in parallel
+initial inputs             0.0 for every connector          the outputs at the start time,
+                                                            propagated through the connections
+                                                            in initialization mode
+recorded values            every connector after each       what an observer asks for, after
+                           step, labelled with the step's   each step, at the step's end time
+                           *start* time
+=========================  ===============================  ==================================
+
+Jacobi stepping (both importers): every component takes its step from ``t_k``
+with the inputs that were read *after the previous step*, and the outputs are
+read after the step. An output that does not depend on the component's inputs
+at the same instant (a source's signal, a plant's state) arrives in time: a
+scheduler's ``p`` read after its step to ``t_k`` is ``p_k``. An output with
+direct feedthrough is read with the inputs still held from the step before:
+the plant's ``y`` that reaches the filter in step ``k`` is
+``y~_k = C_y(alpha_{k-1}) x_k + D_y(alpha_{k-1}) w_{k-1}`` instead of
+``y_k = C_y(alpha_k) x_k + D_y(alpha_k) w_k``, and the filter estimate read
+after step ``k`` is ``C_f(alpha_k) x~_{f,k+1} + D_f(alpha_k) y~_k`` with the
+filter state driven by ``y~``. :class:`~lpvest.cosim.CoSimulation` orders its
+calls by the connection graph instead, so ``y_k`` reaches the filter at
+``t_k`` (no delay); ``tests/test_ssp.py`` measures the difference on
+Peixoto et al.'s Example 1 and checks it against this relation exactly.
+
+Examples
+--------
+>>> from lpvest.cosim import Component
+>>> path = write_ssp("system.ssp",                                        # doctest: +SKIP
+...                  [Component("sched", "PeixotoEx1Scheduler.fmu"),
+...                   Component("plant", "PeixotoEx1Plant.fmu")],
+...                  ["sched.p -> plant.p"], step_size=1.0, stop_time=100.0)
+>>> res = simulate_ssp(path, importer="libcosim")                        # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import tempfile
+import textwrap
+import xml.etree.ElementTree as ET
+import zipfile
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .cosim import Component, Connection, CoSimulation, CoSimulationError
+
+__all__ = ["write_ssp", "read_ssp", "SspSystem", "simulate_ssp", "IMPORTERS"]
+
+#: The importers :func:`simulate_ssp` can run a file with.
+IMPORTERS = ("fmpy", "libcosim")
+
+NS = {
+    "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
+    "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
+    "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
+    "osp": "http://opensimulationplatform.com/SSP/OSPAnnotations",
+}
+_OSP_TYPE = "com.opensimulationplatform"
+
+
+def _q(prefix: str, tag: str) -> str:
+    return f"{{{NS[prefix]}}}{tag}"
+
+
+def _fmt(value: float) -> str:
+    return repr(float(value))
+
+
+def write_ssp(
+    path: str | Path,
+    components: Sequence[Component],
+    connections: Sequence[str | tuple[str, str] | Connection] = (),
+    *,
+    step_size: float,
+    start_time: float = 0.0,
+    stop_time: float | None = None,
+    name: str = "lpvest-system",
+    description: str | None = None,
+) -> Path:
+    """Write the system as an SSP archive at ``path`` and return the path.
+
+    The FMUs are read (and the connections and parameter values checked) by a
+    :class:`~lpvest.cosim.CoSimulation` first, so a file that is written is one
+    the master can run; vector names expand to their elements (``"plant.y"``
+    connects ``y[1], y[2], ...``; ``parameters={"x0": [1, 0]}`` binds
+    ``x0[1]`` and ``x0[2]``). Each component lists every input and output of
+    its FMU as a connector; the communication step is declared as
+    libcosim's ``FixedStepAlgorithm`` annotation of the default experiment.
+    """
+    from . import __version__
+
+    if not step_size > 0 or not math.isfinite(step_size):
+        raise CoSimulationError(f"step_size must be positive and finite; found {step_size}", where="step_size")
+    path = Path(path)
+    with CoSimulation(components, connections, step_size=step_size, start_time=start_time) as sim:
+        units = sim._units
+        links = [(units[s.comp].spec.name, s.name, units[d.comp].spec.name, d.name) for s, d in sim._links]
+        sources: dict[Path, str] = {}
+        for u in units:
+            fmu = Path(u.spec.fmu).resolve()
+            if fmu not in sources:
+                stem, n = fmu.stem, 1
+                while f"resources/{stem}.fmu" in sources.values():
+                    n += 1
+                    stem = f"{fmu.stem}_{n}"
+                sources[fmu] = f"resources/{stem}.fmu"
+        for prefix, uri in NS.items():
+            ET.register_namespace(prefix, uri)
+        root = ET.Element(_q("ssd", "SystemStructureDescription"),
+                          {"name": name, "version": "1.0", "generationTool": f"lpvest {__version__}"})
+        system = ET.SubElement(root, _q("ssd", "System"), {"name": name})
+        if description:
+            system.set("description", description)
+        elements = ET.SubElement(system, _q("ssd", "Elements"))
+        for u in units:
+            comp = ET.SubElement(elements, _q("ssd", "Component"), {
+                "name": u.spec.name, "type": "application/x-fmu-sharedlibrary",
+                "source": sources[Path(u.spec.fmu).resolve()], "implementation": "CoSimulation",
+            })
+            conns = ET.SubElement(comp, _q("ssd", "Connectors"))
+            for v in u.md.modelVariables:
+                if v.causality in ("input", "output") and v.type in ("Real", "Integer", "Boolean", "String"):
+                    c = ET.SubElement(conns, _q("ssd", "Connector"), {"name": v.name, "kind": v.causality})
+                    ET.SubElement(c, _q("ssc", v.type))
+            if u.start_values:
+                bindings = ET.SubElement(comp, _q("ssd", "ParameterBindings"))
+                binding = ET.SubElement(bindings, _q("ssd", "ParameterBinding"))
+                values = ET.SubElement(binding, _q("ssd", "ParameterValues"))
+                pset = ET.SubElement(values, _q("ssv", "ParameterSet"), {"version": "1.0", "name": u.spec.name})
+                params = ET.SubElement(pset, _q("ssv", "Parameters"))
+                for v, value, _ in u.start_values:
+                    p = ET.SubElement(params, _q("ssv", "Parameter"), {"name": v.name})
+                    text = (_fmt(value) if v.type == "Real" else str(value).lower() if v.type == "Boolean"
+                            else str(value))
+                    ET.SubElement(p, _q("ssv", v.type), {"value": text})
+        if links:
+            cs = ET.SubElement(system, _q("ssd", "Connections"))
+            for a, av, b, bv in links:
+                ET.SubElement(cs, _q("ssd", "Connection"),
+                              {"startElement": a, "startConnector": av, "endElement": b, "endConnector": bv})
+        exp = {"startTime": _fmt(start_time)}
+        if stop_time is not None:
+            exp["stopTime"] = _fmt(stop_time)
+        default = ET.SubElement(root, _q("ssd", "DefaultExperiment"), exp)
+        annotations = ET.SubElement(default, _q("ssd", "Annotations"))
+        annotation = ET.SubElement(annotations, _q("ssc", "Annotation"), {"type": _OSP_TYPE})
+        algorithm = ET.SubElement(annotation, _q("osp", "Algorithm"))
+        ET.SubElement(algorithm, _q("osp", "FixedStepAlgorithm"), {"baseStepSize": _fmt(step_size)})
+        ET.indent(root)
+        xml = ET.tostring(root, encoding="unicode", xml_declaration=False)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
+            z.writestr("SystemStructure.ssd", '<?xml version="1.0" encoding="UTF-8"?>\n' + xml + "\n")
+            for fmu, arc in sources.items():
+                z.write(fmu, arc)
+    return path
+
+
+@dataclass(frozen=True)
+class SspSystem:
+    """What :func:`read_ssp` finds in an SSP file written by :func:`write_ssp`
+    (or any flat SSP 1.0 system of FMUs)."""
+
+    name: str
+    components: dict[str, str]  #: component -> FMU inside the archive
+    connections: list[tuple[str, str]]  #: ("comp.var", "comp.var")
+    parameters: dict[str, list[tuple[str, str, str]]]  #: component -> [(variable, type, value text)]
+    outputs: dict[str, list[str]] = field(default_factory=dict)  #: component -> output connectors
+    step_size: float | None = None  #: the OSP FixedStepAlgorithm's baseStepSize
+    start_time: float = 0.0
+    stop_time: float | None = None
+
+
+def read_ssp(path: str | Path) -> SspSystem:
+    """The system, parameter values and default experiment of an SSP file."""
+    path = Path(path)
+    try:
+        with zipfile.ZipFile(path) as z:
+            root = ET.fromstring(z.read("SystemStructure.ssd"))
+    except (OSError, KeyError, zipfile.BadZipFile, ET.ParseError) as exc:
+        raise CoSimulationError(f"{path}: not an SSP file with a SystemStructure.ssd: {exc}") from exc
+    system = root.find("ssd:System", NS)
+    if system is None:
+        raise CoSimulationError(f"{path}: SystemStructure.ssd has no System")
+    components: dict[str, str] = {}
+    parameters: dict[str, list[tuple[str, str, str]]] = {}
+    outputs: dict[str, list[str]] = {}
+    for c in system.findall("ssd:Elements/ssd:Component", NS):
+        cname = c.get("name", "")
+        components[cname] = c.get("source", "")
+        outputs[cname] = [k.get("name", "") for k in c.findall("ssd:Connectors/ssd:Connector", NS)
+                          if k.get("kind") == "output"]
+        values = []
+        binding = c.find("ssd:ParameterBindings/ssd:ParameterBinding", NS)
+        if binding is not None:
+            for p in binding.findall("ssd:ParameterValues/ssv:ParameterSet/ssv:Parameters/ssv:Parameter", NS):
+                for typ in ("Real", "Integer", "Boolean", "String"):
+                    e = p.find(f"ssv:{typ}", NS)
+                    if e is not None:
+                        values.append((p.get("name", ""), typ, e.get("value", "")))
+        parameters[cname] = values
+    connections = [(f"{c.get('startElement')}.{c.get('startConnector')}",
+                    f"{c.get('endElement')}.{c.get('endConnector')}")
+                   for c in system.findall("ssd:Connections/ssd:Connection", NS)]
+    step = None
+    start, stop = 0.0, None
+    exp = root.find("ssd:DefaultExperiment", NS)
+    if exp is not None:
+        start = float(exp.get("startTime", "0"))
+        stop = float(exp.get("stopTime")) if exp.get("stopTime") is not None else None
+        for a in exp.findall("ssd:Annotations/ssc:Annotation", NS):
+            if a.get("type") == _OSP_TYPE:
+                alg = a.find("osp:Algorithm/osp:FixedStepAlgorithm", NS)
+                if alg is not None and alg.get("baseStepSize") is not None:
+                    step = float(alg.get("baseStepSize"))  # type: ignore[arg-type]
+    return SspSystem(root.get("name", ""), components, connections, parameters, outputs, step, start, stop)
+
+
+def _typed(typ: str, text: str) -> Any:
+    if typ == "Real":
+        return float(text)
+    if typ == "Integer":
+        return int(text)
+    if typ == "Boolean":
+        return text.strip().lower() in ("true", "1")
+    return text
+
+
+def simulate_ssp(
+    path: str | Path,
+    *,
+    importer: str = "fmpy",
+    n_steps: int | None = None,
+    stop_time: float | None = None,
+) -> np.ndarray:
+    """Run an SSP file with another co-simulation master.
+
+    Parameters
+    ----------
+    path : str or Path
+        An SSP file (e.g. from :func:`write_ssp`).
+    importer : {"fmpy", "libcosim"}
+        ``"fmpy"``: ``fmpy.ssp.simulate_ssp`` in this process, given the
+        file's step size and parameter values (it reads neither itself).
+        ``"libcosim"``: ``libcosimpy`` (the ``test`` extra) in a subprocess
+        (libcosim keeps the FMUs' libraries loaded), configured by the file
+        alone.
+    n_steps, stop_time : optional
+        How far to run (default: the file's stop time).
+
+    Returns
+    -------
+    numpy structured array
+        ``"time"`` and every output connector as ``"comp.var"``, one row per
+        step, the values read *after* the step: row ``k`` holds the outputs at
+        ``t_{k+1}``, and its ``"time"`` is ``t_{k+1}`` (fmpy labels that row
+        ``t_k``; the label is corrected here so both importers agree).
+
+    The stepping is each importer's own (Jacobi, see the module documentation).
+    """
+    if importer not in IMPORTERS:
+        raise CoSimulationError(f"importer {importer!r}: expected one of {', '.join(IMPORTERS)}")
+    system = read_ssp(path)
+    if system.step_size is None:
+        raise CoSimulationError(f"{path}: the SSD declares no step size (OSP FixedStepAlgorithm baseStepSize)")
+    h, t0 = system.step_size, system.start_time
+    if n_steps is None:
+        end = stop_time if stop_time is not None else system.stop_time
+        if end is None:
+            raise CoSimulationError(f"{path}: no stop time in the file; give n_steps or stop_time")
+        n_steps = int(round((end - t0) / h))
+    if n_steps < 1:
+        raise CoSimulationError(f"n_steps must be at least 1; found {n_steps}")
+    names = [f"{c}.{o}" for c, outs in system.outputs.items() for o in outs]
+    if importer == "fmpy":
+        values = _run_fmpy(Path(path), system, n_steps)
+    else:
+        values = _run_libcosim(Path(path), system, n_steps)
+    out = np.empty(n_steps, dtype=[("time", "f8")] + [(n, "f8") for n in names])
+    out["time"] = t0 + np.arange(1, n_steps + 1) * h
+    for n in names:
+        out[n] = values[n]
+    return out
+
+
+def _run_fmpy(path: Path, system: SspSystem, n_steps: int) -> dict[str, np.ndarray]:
+    from fmpy.ssp.simulation import simulate_ssp as fmpy_simulate
+    from fmpy.ssp.ssd import Parameter, ParameterSet
+
+    params = []
+    starts: dict[str, dict[str, str | None]] = {}
+    for comp, values in system.parameters.items():
+        for name, typ, text in values:
+            if typ == "String":
+                # fmpy has no setter for String variables: a value equal to the
+                # FMU's start value needs none; any other cannot be applied
+                if comp not in starts:
+                    starts[comp] = _start_values(path, system.components[comp])
+                if starts[comp].get(name) == text:
+                    continue
+                raise CoSimulationError(
+                    f"{path}: fmpy's simulate_ssp cannot set the String parameter {comp}.{name} = {text!r} "
+                    "(it has no setter for String variables); run this file with libcosim"
+                )
+            params.append(Parameter(name=f"{comp}.{name}", type=typ, value=_typed(typ, text)))
+    h, t0 = system.step_size, system.start_time
+    assert h is not None
+    # fmpy steps while time < stop_time with time += h: stop half a step early
+    # so that exactly n_steps are taken whatever the round-off
+    res = fmpy_simulate(str(path), start_time=t0, stop_time=t0 + (n_steps - 0.5) * h, step_size=h,
+                        parameter_set=ParameterSet(parameters=params) if params else None)
+    if res.shape[0] != n_steps:
+        raise CoSimulationError(f"fmpy took {res.shape[0]} steps; expected {n_steps}")
+    return {n: np.asarray(res[n], dtype=float) for n in res.dtype.names if n != "time"}
+
+
+def _start_values(path: Path, source: str) -> dict[str, str | None]:
+    """Start values (as written in the model description) of an FMU inside an SSP."""
+    from fmpy import read_model_description
+
+    with tempfile.TemporaryDirectory(prefix="lpvest-ssp-") as tmp, zipfile.ZipFile(path) as z:
+        fmu = z.extract(source, tmp)
+        md = read_model_description(fmu, validate=False)
+    return {v.name: v.start for v in md.modelVariables}
+
+
+_LIBCOSIM_SCRIPT = """
+import json, sys
+from libcosimpy.CosimExecution import CosimExecution
+from libcosimpy.CosimObserver import CosimObserver
+from libcosimpy.CosimLogging import log_output_level, CosimLogLevel
+log_output_level(CosimLogLevel.ERROR)
+path, n_steps, wanted = sys.argv[1], int(sys.argv[2]), json.loads(sys.argv[3])
+ex = CosimExecution.from_ssp_file(path)
+obs = CosimObserver.create_last_value()
+ex.add_observer(obs)
+index = {ex.slave_infos()[i].name.decode(): ex.slave_infos()[i].index for i in range(ex.num_slaves())}
+refs = {}
+for comp, names in wanted.items():
+    byname = {v.name.decode(): v.reference for v in ex.slave_variables(index[comp])}
+    refs[comp] = [byname[n] for n in names]
+rows = []
+for k in range(n_steps):
+    if not ex.step(1):
+        sys.exit(f"libcosim failed at step {k}: {ex.status()}")
+    rows.append({comp: obs.last_real_values(index[comp], refs[comp]) for comp in wanted})
+print("RESULT" + json.dumps(rows))
+"""
+
+
+def _run_libcosim(path: Path, system: SspSystem, n_steps: int) -> dict[str, np.ndarray]:
+    try:
+        import libcosimpy  # noqa: F401 - checked here, used in the subprocess
+    except ImportError as exc:
+        raise CoSimulationError("libcosim is not installed (pip install libcosimpy)") from exc
+    wanted = {c: outs for c, outs in system.outputs.items() if outs}
+    with tempfile.TemporaryDirectory(prefix="lpvest-libcosim-") as tmp:
+        proc = subprocess.run(
+            [sys.executable, "-c", textwrap.dedent(_LIBCOSIM_SCRIPT), str(Path(path).resolve()), str(n_steps),
+             json.dumps(wanted)],
+            capture_output=True, text=True, check=False, cwd=tmp, timeout=3600,
+        )
+    line = next((x for x in proc.stdout.splitlines() if x.startswith("RESULT")), None)
+    if proc.returncode != 0 or line is None:
+        tail = (proc.stderr or proc.stdout).strip().splitlines()[-3:]
+        raise CoSimulationError(f"{path}: libcosim failed (exit status {proc.returncode}): " + " | ".join(tail))
+    rows = json.loads(line[len("RESULT"):])
+    return {f"{c}.{n}": np.array([r[c][i] for r in rows]) for c, names in wanted.items()
+            for i, n in enumerate(names)}
+
