@@ -5,7 +5,8 @@
     lpvest systems                          the example systems, one line each
     lpvest systems show NAME|FILE.toml      dimensions, matrices, scheduling map
     lpvest simulate NAME|FILE.toml          simulate one model: CSV, plot, summary
-    lpvest reproduce NAME|all --out DIR     reproduce a paper example
+    lpvest reproduce NAME|all --out DIR     reproduce paper examples through FMUs (all: + DIR/report.md)
+    lpvest regress [--update]               FMU co-simulations against tests/data/reference
     lpvest build [--out DIR] [--model FILE.toml ...]   build and validate the FMUs
     lpvest cosim FILE.toml [--out DIR] [--fmus DIR]    co-simulate FMUs described in a file: CSV, plot, summary
     lpvest cosim FILE.toml --ssp OUT.ssp               write that system as an SSP file instead
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -202,7 +204,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
-    from .experiments import registry, write_results
+    from .experiments import registry
+    from .experiments.fmus import ExperimentFmus
+    from .experiments.reproduce import reproduce, reproduce_all
 
     experiments = registry()
     if args.name in (None, "list"):
@@ -211,19 +215,42 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         for exp in experiments.values():
             print(f"{exp.name:<28} {exp.title}")
         return 0
-    names = list(experiments) if args.name == "all" else [args.name]
-    unknown = [n for n in names if n not in experiments]
-    if unknown:
-        raise LpvestError(f"no experiment {unknown[0]!r} (known: {', '.join(experiments) or 'none'})")
+    if args.name != "all" and args.name not in experiments:
+        raise LpvestError(f"no experiment {args.name!r} (known: {', '.join(experiments) or 'none'})")
     out = Path(args.out)
-    for name in names:
-        exp = experiments[name]
-        print(f"== {exp.name}: {exp.title}")
-        result = exp.run(out / name)
-        print(result.table)
-        path = write_results(result, out / name)
-        print(f"wrote {path}" + "".join(f"\nwrote {f}" for f in result.figures))
+    fmus = ExperimentFmus(Path(args.fmus) if args.fmus else out / "fmu-cache",
+                          progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+
+    def echo(text: str) -> None:
+        print(text, flush=True)
+
+    t = time.perf_counter()
+    if args.name == "all":
+        runs = reproduce_all(out, fmus=fmus, reduced=args.quick, echo=echo)
+    else:
+        runs = reproduce([args.name], out, fmus=fmus, reduced=args.quick, echo=echo)
+    seconds = time.perf_counter() - t
+    print(fmus.summary())
+    if len(runs) > 1:
+        print("\nexperiment                    time  FMU vs library")
+        for r in runs:
+            verdict = "-" if r.result.fmu is None else r.result.fmu.headline().split(": ", 1)[1]
+            print(f"{r.name:<28} {r.seconds:>5.1f} s  {verdict}")
+    print(f"{len(runs)} experiment(s) in {seconds:.1f} s")
+    bad = [r.name for r in runs if not r.ok]
+    if bad:
+        print(f"FMU results disagree with the library in: {', '.join(bad)}", file=sys.stderr)
+        return 1
     return 0
+
+
+def cmd_regress(args: argparse.Namespace) -> int:
+    from .experiments.fmus import as_experiment_fmus
+    from .experiments.regression import regress
+
+    fmus = as_experiment_fmus(args.fmus)
+    fmus.progress = lambda msg: print(msg, file=sys.stderr, flush=True)
+    return regress(args.names, update=args.update, directory=args.dir, fmus=fmus)
 
 
 def cmd_build(args: argparse.Namespace) -> int:
@@ -298,10 +325,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="out/simulate", help="output folder (default out/simulate)")
     p.set_defaults(func=cmd_simulate)
 
-    p = sub.add_parser("reproduce", help="reproduce a paper example (list them with 'list')")
-    p.add_argument("name", nargs="?", help="experiment name, 'all', or 'list'")
+    p = sub.add_parser("reproduce", help="reproduce a paper example through FMUs (list them with 'list')")
+    p.add_argument("name", nargs="?", help="experiment name, 'all' (also writes OUT/report.md), or 'list'")
     p.add_argument("--out", default="out", help="output folder (default out); each experiment gets a subfolder")
+    p.add_argument("--fmus", metavar="DIR",
+                   help="FMU cache folder (default OUT/fmu-cache): built when missing or out of date, else reused")
+    p.add_argument("--quick", action="store_true",
+                   help="reduced configuration: 200 Monte Carlo runs, 5 noise seeds, Example 2 at rho = 1, 11, 21")
     p.set_defaults(func=cmd_reproduce)
+
+    from .experiments.regression import add_arguments as regress_arguments
+
+    p = sub.add_parser("regress", help="compare the FMU co-simulations with the stored regression references "
+                                       "(--update rewrites them)")
+    regress_arguments(p)
+    p.set_defaults(func=cmd_regress)
 
     p = sub.add_parser("build", help="build the FMUs of every example system (or of --model files) and validate them")
     p.add_argument("--out", default="fmu-build", help="output folder (default fmu-build)")

@@ -12,5 +12,5 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(20261121)
 
 
-# the FMU set, built once per session (tests/conftest_fmu.py)
-from .conftest_fmu import fmus as fmus  # noqa: E402
+# the FMU sets, built once per session (tests/conftest_fmu.py)
+from .conftest_fmu import experiment_fmus as experiment_fmus, fmus as fmus  # noqa: E402

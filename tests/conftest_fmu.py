@@ -72,3 +72,15 @@ def fmus(tmp_path_factory: pytest.TempPathFactory) -> FmuSet:
     est = next(p for p in plans if p.role == "MovingAverage")
     paths[est.identifier] = build_fmu(est, out)
     return FmuSet(out, model, paths)
+
+
+@pytest.fixture(scope="session")
+def experiment_fmus(fmus: FmuSet, tmp_path_factory: pytest.TempPathFactory):
+    """The experiments' FMU cache for the session: the session's FMU set
+    adopted (built from the current code), the rest (the epsilon = 150 and
+    rho-variant H-infinity FMUs) built on first use."""
+    from lpvest.experiments.fmus import ExperimentFmus
+
+    cache = ExperimentFmus(tmp_path_factory.mktemp("experiment-fmus"))
+    cache.adopt(fmus.paths)
+    return cache

@@ -15,8 +15,9 @@ def test_registered():
     assert "cox-toth-example1" in reg and "cox-toth-truncation" in reg
 
 
-def test_example1_three_realizations_agree():
-    r = run_example1(None).results
+def test_example1_three_realizations_agree(experiment_fmus):
+    res = run_example1(None, fmus=experiment_fmus)
+    r = res.results
     # paper: (21a), (21b), (21c) give the same y "to machine precision". max |y| is
     # about 6 here, so 1e-12 allows ~100 ulp of accumulated round-off over 200 steps
     assert 1.0 < r["max_abs_y"] < 100.0
@@ -25,11 +26,19 @@ def test_example1_three_realizations_agree():
     # e is the innovation of (21b) and (21c): inverting them recovers it
     assert r["max_innovation_error_21b"] < 1e-12
     assert r["max_innovation_error_21c"] < 1e-12
+    # through FMUs: the Plant FMU realizes (21c); Scheduler, Source and Plant give
+    # the library's p, u, y, x bit for bit (the same operations), and its y is
+    # (21a)'s and (21b)'s to the same round-off as the library's (21c)
+    fmu = res.fmu
+    assert fmu.ok and fmu.bit_for_bit and len(fmu.agreements) == 4
+    assert fmu.fmus == ("CoxTothEx1Scheduler", "CoxTothEx1Source", "CoxTothEx1Plant")
+    assert r["fmu_max_diff_21a"] < 1e-12 and r["fmu_max_diff_21b"] < 1e-12
+    assert r["fmu_max_innovation_error_21c"] < 1e-12
 
 
 @pytest.fixture(scope="module")
-def truncation():
-    return run_truncation(None)
+def truncation(experiment_fmus):
+    return run_truncation(None, fmus=experiment_fmus)
 
 
 def test_truncation_assumptions_and_bound_8(truncation):
@@ -80,18 +89,49 @@ def test_truncation_prediction_error(truncation):
     assert "tau(K<1e-3)" in truncation.table
 
 
-def test_cli_writes_results_and_figures(tmp_path, capsys):
-    assert main(["reproduce", "cox-toth-example1", "--out", str(tmp_path)]) == 0
+def test_truncation_through_fmus(truncation):
+    fmu = truncation.fmu
+    # the plant, the Kalman FMU and six TruncatedKalman FMUs against the library:
+    # model.simulate and the streaming filters (other operations: round-off), the
+    # gains against the truncation analysis; max |y| ~ 8, so 1e-12 is ~50 ulp
+    assert fmu.ok and len(fmu.agreements) == 4 + 3 + 2 * 6
+    assert fmu.max_abs_difference < 1e-13
+    assert all(a.bit_for_bit for a in fmu.agreements[:2])  # p and u
+    # max_t ||K_t - K^(tau)_t|| from the FMUs' gain outputs is the analysis' number
+    th = truncation.results["decay"]["theorem"]
+    for tau, value in truncation.results["fmu_max_K_error"].items():
+        assert value == pytest.approx(th["max_K_error"][int(tau)], rel=1e-9, abs=1e-15), tau
+
+
+def test_plant_noise_is_the_plant_fmus(experiment_fmus):
+    """plant_noise() draws what the Plant FMU draws (seeded, from the model's x0)."""
+    from lpvest import load_system
+    from lpvest.experiments.cox_toth import plant_noise, truncation_cosim
+    from lpvest.experiments.fmus import column
+
+    model = load_system("cox-toth-truncation").model()
+    res = truncation_cosim(30, seed=3, taus=()).run(experiment_fmus)
+    k = np.arange(30)
+    data = model.simulate(np.sin(0.25 * k)[:, None], np.sin(0.1 * k)[:, None], **plant_noise(model, 30, 3))
+    np.testing.assert_allclose(column(res, "plant.y"), data.y, rtol=0, atol=1e-13)
+    np.testing.assert_array_equal(column(res, "plant.x")[0], model.x0)
+
+
+def test_cli_writes_results_and_figures(tmp_path, capsys, experiment_fmus):
+    assert main(["reproduce", "cox-toth-example1", "--out", str(tmp_path),
+                 "--fmus", str(experiment_fmus.directory)]) == 0
     out = capsys.readouterr().out
     assert "max |y(21b) - y(21a)|" in out
+    assert "FMU co-simulation vs library: max |difference| = 0 (bit for bit) over 4 quantities" in out
     folder = tmp_path / "cox-toth-example1"
     res = json.loads((folder / "results.json").read_text())
     assert res["max_diff_21b_21a"] < 1e-12
+    assert res["fmu_cosimulation"]["ok"] and res["fmu_cosimulation"]["bit_for_bit"]
     assert (folder / "example1.png").stat().st_size > 10000
 
 
-def test_truncation_figures(tmp_path):
-    r = run_truncation(tmp_path, runs=50)
+def test_truncation_figures(tmp_path, experiment_fmus):
+    r = run_truncation(tmp_path, runs=50, fmus=experiment_fmus)
     names = sorted(f.name for f in r.figures)
     assert names == ["truncation_decay.png", "truncation_over_time.png"]
     assert all(f.stat().st_size > 10000 for f in r.figures)

@@ -37,8 +37,16 @@ def test_noise_has_the_stated_snr(rng):
     assert snr == pytest.approx(30.0, abs=0.05)  # 200k samples: sample variance within ~0.3 %
 
 
-def test_noiseless_headless():
-    res = run_noiseless(None)
+def _plant_checks(fmu):
+    # the plant FMU and the streaming LTVPlant do the same operations: bit for bit
+    names = [a.what for a in fmu.agreements]
+    assert names[:3] == [f"{q} (SridharLtvPlant FMU vs streaming LTVPlant)" for q in ("y", "x", "u applied")]
+    assert fmu.ok and fmu.bit_for_bit
+    assert fmu.fmus == ("SridharLtvPlant", "SridharLtvBSplineObserver") and fmu.steps == 20000
+
+
+def test_noiseless_headless(experiment_fmus):
+    res = run_noiseless(None, fmus=experiment_fmus)
     r = res.results
     assert res.figures == ()
     # paper Section V-A prints a1 = 0.9617; exact data determine a1 = 1 (issue 5: within 1e-6)
@@ -49,10 +57,13 @@ def test_noiseless_headless():
     assert r["dy_max_error"] < 1e-9
     assert r["samples"] == 20001 and r["n_basis"] == 86 and r["inner_window"] == [5.0, 15.0]
     assert "0.9617" in res.table
+    _plant_checks(res.fmu)
+    # one batch integration instead of the FMU's per-step restarts: a1 moves by round-off only
+    assert r["a1_difference_fmu_vs_batch"] < 1e-9
 
 
-def test_noisy_headless():
-    res = run_noisy(None)
+def test_noisy_headless(experiment_fmus):
+    res = run_noisy(None, fmus=experiment_fmus)
     r = res.results
     # paper Section V-B prints a1 = 0.8321 (one realization); issue 5: over
     # 20 seeds the mean is within 0.02 of 1 and the mean max relative error of
@@ -66,10 +77,17 @@ def test_noisy_headless():
     assert r["gcv"]["a0_max_rel_error"] <= 0.06 and abs(r["gcv"]["a1"] - 1.0) < 0.02
     assert r["snr_db"] == 30.0 and r["window"] == [0.0, 9.0] and r["n_basis"] == 16
     assert "0.8321" in res.table
+    _plant_checks(res.fmu)
+    assert r["samples"] == 9001  # the plant FMU's first 9 s
+    assert r["a1_difference_fmu_vs_batch"] < 1e-9
 
 
-def test_sliding_headless():
-    r = run_sliding(None).results
+def test_sliding_headless(experiment_fmus):
+    res = run_sliding(None, fmus=experiment_fmus)
+    r = res.results
+    # the observer FMU against BSplineObserver on the streaming plant's samples
+    _plant_checks(res.fmu)
+    assert len(res.fmu.agreements) == 3 + 7
     assert r["delay_s"] == 2.0 and r["first_valid_time"] == 4.0
     assert r["t_est_error"] < 1e-12
     assert r["a1_max_error"] < 1e-6
@@ -77,8 +95,9 @@ def test_sliding_headless():
     assert r["y_max_error"] < 1e-10 and r["dy_max_error"] < 1e-9
 
 
-def test_cli_writes_results_and_figures(tmp_path, capsys):
-    assert main(["reproduce", "sridhar-noiseless", "--out", str(tmp_path)]) == 0
+def test_cli_writes_results_and_figures(tmp_path, capsys, experiment_fmus):
+    assert main(["reproduce", "sridhar-noiseless", "--out", str(tmp_path),
+                 "--fmus", str(experiment_fmus.directory)]) == 0
     out = capsys.readouterr().out
     assert "0.9617" in out
     folder = tmp_path / "sridhar-noiseless"
@@ -92,8 +111,8 @@ def test_cli_writes_results_and_figures(tmp_path, capsys):
     (run_noisy, ("fig4_a0.png", "fig5_y.png", "fig6_dy.png")),
     (run_sliding, ("sliding.png",)),
 ])
-def test_figures(run, files, tmp_path):
-    res = run(tmp_path)
+def test_figures(run, files, tmp_path, experiment_fmus):
+    res = run(tmp_path, fmus=experiment_fmus)
     assert sorted(p.name for p in res.figures) == sorted(files)
     for name in files:
         assert (tmp_path / name).stat().st_size > 10_000

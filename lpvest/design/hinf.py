@@ -486,7 +486,13 @@ class HinfProgram:
             with warnings.catch_warnings():
                 # "Solution may be inaccurate": the status says so, and the check decides
                 warnings.simplefilter("ignore", UserWarning)
-                options = {**_DEFAULT_OPTIONS.get(self.solver, {}), **self.solver_options}
+                # warm_start=False: with cvxpy's default (True) a re-solve updates the
+                # solver cached from this program's first solve (Clarabel's update()),
+                # which keeps state from that solve, so a design depended on the
+                # history of the compiled program (filter matrices up to ~1e-3 apart
+                # on a flat optimum); a fresh solver per solve makes it a function of
+                # the data alone
+                options = {"warm_start": False, **_DEFAULT_OPTIONS.get(self.solver, {}), **self.solver_options}
                 self._problem.solve(solver=self.solver, **options)
             status, message = str(self._problem.status), ""
         except cp.error.SolverError as exc:

@@ -2,9 +2,12 @@
 
 Each module in this package may define ``EXPERIMENTS``, a sequence of
 :class:`Experiment`; :func:`registry` collects them, and ``lpvest reproduce
-NAME|all`` runs them. An experiment's ``run(out_dir)`` returns an
-:class:`ExperimentResult` (a printable table, JSON-able numbers, the figures
-it wrote) and writes nothing when ``out_dir`` is ``None``.
+NAME|all`` runs them. An experiment's ``run(out_dir, *, fmus=None, ...)``
+returns an :class:`ExperimentResult` (a printable table, JSON-able numbers,
+the figures it wrote, the paper-versus-ours rows of the report, and the
+record of what ran through FMUs) and writes nothing when ``out_dir`` is
+``None``. ``fmus`` is an :class:`~lpvest.experiments.fmus.ExperimentFmus`
+(the FMU cache), a cache folder, or ``None`` for the default cache.
 """
 
 from __future__ import annotations
@@ -15,7 +18,10 @@ import pkgutil
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .fmus import FmuRun
 
 __all__ = ["Experiment", "ExperimentResult", "registry", "write_results"]
 
@@ -28,15 +34,24 @@ class ExperimentResult:
     table: str  #: text table, paper next to ours
     results: Mapping[str, Any]  #: JSON-able numbers (written to results.json)
     figures: tuple[Path, ...] = field(default_factory=tuple)
+    #: rows ``(quantity, paper, ours)`` of the report's paper-versus-ours table
+    paper: tuple[tuple[str, str, str], ...] = field(default_factory=tuple)
+    #: what ran through FMUs and how it agrees with the library (None: no FMU part)
+    fmu: FmuRun | None = None
 
 
 @dataclass(frozen=True)
 class Experiment:
-    """A named, runnable experiment."""
+    """A named, runnable experiment.
+
+    ``run(out_dir, *, fmus=None, **options)``; ``reduced`` holds the options of a
+    quicker configuration (``lpvest reproduce all --quick``, the tests).
+    """
 
     name: str
     title: str
-    run: Callable[[Path | None], ExperimentResult]
+    run: Callable[..., ExperimentResult]
+    reduced: Mapping[str, Any] = field(default_factory=dict)
 
 
 def registry() -> dict[str, Experiment]:
@@ -73,5 +88,8 @@ def write_results(result: ExperimentResult, out_dir: Path) -> Path:
     """Write ``results.json`` for ``result`` into ``out_dir``."""
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / "results.json"
-    path.write_text(json.dumps(_jsonable(result.results), indent=2) + "\n", encoding="utf-8")
+    data = dict(result.results)
+    if result.fmu is not None:
+        data["fmu_cosimulation"] = result.fmu.to_json()
+    path.write_text(json.dumps(_jsonable(data), indent=2) + "\n", encoding="utf-8")
     return path

@@ -26,6 +26,17 @@ from typing import Any
 import numpy as np
 
 from . import Experiment, ExperimentResult
+from .fmus import (
+    Agreement,
+    CoSimSpec,
+    ExperimentFmus,
+    FmuRun,
+    Timer,
+    as_experiment_fmus,
+    carried_design,
+    column,
+    design_difference,
+)
 
 __all__ = [
     "EXPERIMENTS",
@@ -36,6 +47,10 @@ __all__ = [
     "stability_limits",
     "StabilityLimits",
     "fig1_signals",
+    "hinf_cosim",
+    "HinfFmuResult",
+    "EXAMPLE2_FMU_RHOS",
+    "example2_cosim",
 ]
 
 #: Table 1 of the paper: (method, filter, gamma).
@@ -77,11 +92,138 @@ def _design_summary(design: Any) -> dict[str, Any]:
 
 
 # ---------------------------------------------------------------------------
+# the paper's scenario through FMUs
+# ---------------------------------------------------------------------------
+def hinf_cosim(
+    filters: Sequence[tuple[str, str]],
+    *,
+    system: str = "PeixotoEx1",
+    steps: int = 100,
+    plant_parameters: dict[str, Any] | None = None,
+) -> CoSimSpec:
+    """The scenario of Figs. 1-2 through FMUs: the Scheduler
+    (``theta_k = sin(0.25 k)``), the Source (``w_k = sin(0.5 k) exp(-0.1 k)``
+    from ``k = 10``), the Plant (zero initial state) and the filter FMUs
+    ``filters`` (``(component name, FMU identifier)``; a parameter-dependent
+    filter gets ``theta``, a robust one only ``y``); ``steps`` samples."""
+    comps: list[tuple[str, str, Any]] = [
+        ("sched", f"{system}Scheduler", {"kind": "sinusoid", "offset": [0.0], "amplitude": [1.0],
+                                         "omega": [0.25]}),
+        ("source", f"{system}Source", {"w.kind": "decaying", "w.amplitude": [1.0], "w.omega": [0.5],
+                                       "w.decay": [0.1], "w.onset": 10.0}),
+        ("plant", f"{system}Plant", dict(plant_parameters or {})),
+    ]
+    conns = ["sched.p -> plant.p", "source.w -> plant.w"]
+    record = ["sched.p", "sched.alpha", "source.w", "plant.y", "plant.z"]
+    for name, ident in filters:
+        comps.append((name, ident, {}))
+        if "Robust" not in ident:
+            conns.append(f"sched.p -> {name}.p")
+        conns.append(f"plant.y -> {name}.y")
+        record += [f"{name}.zhat"]
+    return CoSimSpec(tuple(comps), tuple(conns), 1.0, steps - 1, tuple(record))
+
+
+@dataclass(frozen=True)
+class HinfFmuResult:
+    """One co-simulation of the paper's scenario, with its library cross-check."""
+
+    errors: dict[str, np.ndarray]  #: component -> e_k = z_k - zhat_k (FMUs), (T, n_z)
+    ratios: dict[str, float]  #: component -> ||e||_2 / ||w||_2 (FMUs)
+    agreements: tuple[Agreement, ...]
+    carried: dict[str, Any]  #: component -> the design the FMU carries
+    design_differences: dict[str, float]  #: component -> max |carried - library design| (filter matrices)
+    gamma_differences: dict[str, float]  #: component -> |gamma carried - gamma library| / gamma library
+    signals: Fig1Signals
+
+
+def _hinf_fmus(
+    fmus: ExperimentFmus,
+    res: np.ndarray,
+    spec: CoSimSpec,
+    plant: Any,
+    designs: dict[str, Any],
+    *,
+    plant_name: str = "plant",
+    label: str = "",
+    signals: bool = True,
+) -> HinfFmuResult:
+    """Compare the co-simulation ``res`` of ``spec`` with the library, which
+    runs the same scenario (``plant.simulate``,
+    :class:`~lpvest.estimators.hinf.HinfFilter`) with the design each filter
+    FMU carries; ``designs`` (filter component -> the library's own design) are
+    compared with the carried ones. ``signals=False`` leaves out the checks of
+    the Scheduler and Source outputs (already made for another plant)."""
+    from ..estimators.base import run_streaming
+    from ..estimators.hinf import HinfFilter
+
+    steps = spec.n_steps + 1
+    sig = fig1_signals(steps, plant=plant)
+    traj = plant.simulate(sig.alpha, sig.w)
+    tag = f" ({label})" if label else ""
+    agreements = [
+        Agreement.of(f"theta (Scheduler FMU){tag}", column(res, "sched.p"), sig.theta[:, None]),
+        Agreement.of(f"alpha (Scheduler FMU){tag}", column(res, "sched.alpha"), sig.alpha),
+        Agreement.of(f"w (Source FMU){tag}", column(res, "source.w"), sig.w),
+    ] if signals else []
+    agreements += [
+        Agreement.of(f"y (Plant FMU){tag}", column(res, f"{plant_name}.y"), traj.y),
+        Agreement.of(f"z (Plant FMU){tag}", column(res, f"{plant_name}.z"), traj.z),
+    ]
+    z_fmu = column(res, f"{plant_name}.z")
+    wnorm = float(np.linalg.norm(sig.w))
+    errors, ratios, carried, diffs, gdiffs = {}, {}, {}, {}, {}
+    idents = {name: ident for name, ident, _ in spec.components}
+    for name, design in designs.items():
+        d = carried[name] = carried_design(fmus.path(idents[name]))
+        diffs[name] = design_difference(d, design)
+        gdiffs[name] = abs(d.gamma - design.gamma) / design.gamma
+        if d.scheduled:
+            out = run_streaming(HinfFilter(d, simplex_map=plant.simplex_map), {"p": sig.theta[:, None], "y": traj.y})
+        else:
+            out = run_streaming(HinfFilter(d), {"y": traj.y})
+        zhat = column(res, f"{name}.zhat")
+        agreements.append(Agreement.of(f"zhat ({idents[name]} FMU vs HinfFilter){tag}", zhat, out["zhat"]))
+        errors[name] = z_fmu - zhat
+        ratios[name] = float(np.linalg.norm(errors[name])) / wnorm
+    return HinfFmuResult(errors, ratios, tuple(agreements), carried, diffs, gdiffs, sig)
+
+
+def _fmu_run(description: str, spec: CoSimSpec, timer: Timer, runs: Sequence[HinfFmuResult],
+             labels: dict[str, str]) -> FmuRun:
+    """The :class:`FmuRun` of H-infinity co-simulations, with notes on the designs."""
+    notes = []
+    for run in runs:
+        for name, diff in run.design_differences.items():
+            notes.append(
+                f"{labels.get(name, name)}: design carried by the FMU (made at build time) vs the library's: "
+                f"gamma {run.carried[name].gamma:.6f}, relative difference {run.gamma_differences[name]:.1e}; "
+                f"filter matrices differ by {diff:.1e}"
+            )
+    if any(d > 0 for run in runs for d in run.design_differences.values()):
+        notes.append("a design is an interior-point solution: two solves of the same LMIs agree to the solver's "
+                     "accuracy, not bit for bit (see the report), so the filter FMUs are checked against the "
+                     "library's HinfFilter on the design they carry")
+    agreements = tuple(a for run in runs for a in run.agreements)
+    return FmuRun(description, spec.fmu_names, agreements, timer.steps, timer.seconds, tuple(notes))
+
+
+# ---------------------------------------------------------------------------
 # Table 1
 # ---------------------------------------------------------------------------
-def run_table1(out_dir: Path | None = None) -> ExperimentResult:
+def run_table1(
+    out_dir: Path | None = None, *, fmus: ExperimentFmus | str | Path | None = None
+) -> ExperimentResult:
     """Example 1: Theorem 1 and Corollary 1 at ``epsilon = 150`` and at the best
-    ``epsilon``, next to the paper's Table 1."""
+    ``epsilon``, next to the paper's Table 1.
+
+    Table 1 is a design (LMIs), so the FMU part is the designs in use: the
+    shipped ``PeixotoEx1HinfPD`` and ``PeixotoEx1HinfRobust`` FMUs, which carry
+    the best-epsilon designs made at build time, co-simulated with the
+    Scheduler, Source and Plant FMUs in the paper's scenario (Figs. 1-2); the
+    library runs the designs found here on the same scenario.
+    """
+    fmus = as_experiment_fmus(fmus)
     from ..design import KIND_PD, KIND_ROBUST, design_hinf, search_epsilon
     from ..modelfile import load_system
 
@@ -111,6 +253,22 @@ def run_table1(out_dir: Path | None = None) -> ExperimentResult:
         f"Theorem 1: gamma(epsilon) is flat for |epsilon| >~ 1e3 (gamma(inf) = "
         f"{_gamma_at(pd_best, math.inf):.5f}); the best epsilon there is one point of a plateau."
     )
+    timer = Timer()
+    spec = hinf_cosim([("pd", "PeixotoEx1HinfPD"), ("robust", "PeixotoEx1HinfRobust")])
+    run = _hinf_fmus(fmus, timer.run(spec, fmus), spec, plant, {"pd": pd_best.design, "robust": rob_best.design})
+    lines.append(
+        "through FMUs (best-epsilon FMUs, Figs. 1-2 scenario): ||e||_2/||w||_2 = "
+        f"{run.ratios['pd']:.4f} <= gamma {run.carried['pd'].gamma:.4f} (PD), "
+        f"{run.ratios['robust']:.4f} <= gamma {run.carried['robust'].gamma:.4f} (robust)"
+    )
+    fmu = _fmu_run(
+        "Table 1 is an LMI design (library only: cvxpy + Clarabel). Through FMUs: the shipped PeixotoEx1HinfPD and "
+        "PeixotoEx1HinfRobust FMUs, which carry the best-epsilon designs made when they were built, run with the "
+        "Scheduler, Source and Plant FMUs on the scenario of Figs. 1-2 (100 samples); cross-check: "
+        "plant.simulate and HinfFilter on the carried designs, which are compared with the best-epsilon designs "
+        "found here.",
+        spec, timer, [run], {"pd": "PD", "robust": "robust"},
+    )
     results: dict[str, Any] = {
         "paper": {"theorem1": {"gamma": 1.21, "epsilon": PAPER_EPSILON},
                   "corollary1": {"gamma": 8.18, "epsilon": PAPER_EPSILON},
@@ -119,6 +277,10 @@ def run_table1(out_dir: Path | None = None) -> ExperimentResult:
         "corollary1": _design_summary(rob150),
         "theorem1_best": {**_design_summary(pd_best.design), "n_evaluations": pd_best.n_evaluations},
         "corollary1_best": {**_design_summary(rob_best.design), "n_evaluations": rob_best.n_evaluations},
+        "fmu_ratios": {"theorem1_best": run.ratios["pd"], "corollary1_best": run.ratios["robust"]},
+        "fmu_gammas": {"theorem1_best": run.carried["pd"].gamma, "corollary1_best": run.carried["robust"].gamma},
+        "fmu_gamma_relative_difference": {"theorem1_best": run.gamma_differences["pd"],
+                                          "corollary1_best": run.gamma_differences["robust"]},
         "curves": {
             name: {"epsilon": [_eps(e) for e in s.curve.epsilon], "phi": s.curve.phi,
                    "gamma": [g if math.isfinite(g) else None for g in s.curve.gamma]}
@@ -132,7 +294,18 @@ def run_table1(out_dir: Path | None = None) -> ExperimentResult:
                         ("theorem1_best", pd_best.design), ("corollary1_best", rob_best.design)):
             d.to_json(out_dir / f"{name}.json")
         figures.append(_plot_curves(out_dir / "gamma_vs_epsilon.png", pd_best, rob_best))
-    return ExperimentResult("peixoto-table1", "\n".join(lines), results, tuple(figures))
+    paper = (
+        ("Theorem 1 (PD), epsilon = 150: gamma", "1.21", f"{pd150.gamma:.4f}"),
+        ("Corollary 1 (robust), epsilon = 150: gamma", "8.18", f"{rob150.gamma:.4f}"),
+        ("Theorem 1, best epsilon: gamma", "-",
+         f"{pd_best.design.gamma:.4f} (epsilon {_eps_text(pd_best.design.epsilon)})"),
+        ("Corollary 1, best epsilon: gamma", "-",
+         f"{rob_best.design.gamma:.4f} (epsilon {_eps_text(rob_best.design.epsilon)})"),
+        ("best Robust of the other methods (Palma et al.)", "8.74", "-"),
+        ("best-epsilon FMUs, Figs. 1-2 scenario: ||e||/||w|| (PD, robust)", "-",
+         f"{run.ratios['pd']:.4f}, {run.ratios['robust']:.4f}"),
+    )
+    return ExperimentResult("peixoto-table1", "\n".join(lines), results, tuple(figures), paper, fmu)
 
 
 def _gamma_at(search: Any, epsilon: float) -> float:
@@ -196,40 +369,55 @@ def fig1_signals(steps: int = 100, *, plant: Any | None = None) -> Fig1Signals:
     return Fig1Signals(k, theta, alpha, w)
 
 
-def run_fig1(out_dir: Path | None = None, *, steps: int = 100) -> ExperimentResult:
+def run_fig1(
+    out_dir: Path | None = None, *, steps: int = 100, fmus: ExperimentFmus | str | Path | None = None
+) -> ExperimentResult:
     """Example 1: e_k of the PD and robust filters (epsilon = 150) in the
-    paper's scenario, run through the streaming :class:`~lpvest.estimators.hinf.HinfFilter`."""
+    paper's scenario, co-simulated as FMUs.
+
+    The Scheduler, Source and Plant FMUs drive ``PeixotoEx1HinfPDEps150`` and
+    ``PeixotoEx1HinfRobustEps150``, filter FMUs built with the paper's
+    ``epsilon = 150`` designs (:data:`~lpvest.experiments.fmus.PAPER_KINDS`;
+    the shipped HinfPD/HinfRobust carry the best-epsilon designs instead). The
+    figures show the FMU results. The library designs at ``epsilon = 150``
+    here and runs the streaming :class:`~lpvest.estimators.hinf.HinfFilter`
+    on ``plant.simulate`` as the cross-check.
+    """
     from ..design import KIND_PD, KIND_ROBUST, design_hinf
-    from ..estimators.base import run_streaming
-    from ..estimators.hinf import HinfFilter
     from ..modelfile import load_system
 
+    fmus = as_experiment_fmus(fmus)
     plant = load_system("peixoto-ex1").model()
-    sig = fig1_signals(steps, plant=plant)
-    traj = plant.simulate(sig.alpha, sig.w)
     designs = {
         "theorem1": design_hinf(plant, epsilon=PAPER_EPSILON, kind=KIND_PD),
         "corollary1": design_hinf(plant, epsilon=PAPER_EPSILON, kind=KIND_ROBUST),
     }
+    timer = Timer()
+    spec = hinf_cosim([("theorem1", "PeixotoEx1HinfPDEps150"), ("corollary1", "PeixotoEx1HinfRobustEps150")],
+                      steps=steps)
+    run = _hinf_fmus(fmus, timer.run(spec, fmus), spec, plant, designs)
+    sig, errors = run.signals, run.errors
     wnorm = float(np.linalg.norm(sig.w))
-    errors: dict[str, np.ndarray] = {}
-    results: dict[str, Any] = {"steps": steps, "w_norm": wnorm}
-    lines = [f"{'filter':<26} {'||e||_2/||w||_2':>16} {'gamma':>9}", "-" * 53]
-    for name, d in designs.items():
-        if d.scheduled:
-            filt = HinfFilter(d, simplex_map=plant.simplex_map)
-            out = run_streaming(filt, {"p": sig.theta[:, None], "y": traj.y})
-        else:
-            filt = HinfFilter(d)
-            out = run_streaming(filt, {"y": traj.y})
-        e = traj.z - out["zhat"]
-        errors[name] = e
-        ratio = float(np.linalg.norm(e)) / wnorm
+    results: dict[str, Any] = {"steps": steps, "w_norm": wnorm,
+                               "design_gamma_relative_difference": run.gamma_differences,
+                               "design_matrix_difference": run.design_differences}
+    lines = [f"{'filter (FMU, epsilon = 150)':<30} {'||e||_2/||w||_2':>16} {'gamma':>9}", "-" * 57]
+    for name in designs:
+        d = run.carried[name]
+        e = errors[name]
+        ratio = run.ratios[name]
         results[name] = {"ratio": ratio, "gamma": d.gamma, "epsilon": _eps(d.epsilon),
                          "e_norm": float(np.linalg.norm(e)), "e_peak": float(np.max(np.abs(e)))}
         label = "Theorem 1 (PD)" if d.scheduled else "Corollary 1 (robust)"
-        lines.append(f"{label:<26} {ratio:>16.4f} {d.gamma:>9.4f}")
+        lines.append(f"{label:<30} {ratio:>16.4f} {d.gamma:>9.4f}")
     lines.append("theta_k = sin(0.25 k), w_k = sin(0.5 k) exp(-0.1 k) for k >= 10, zero initial state, epsilon = 150")
+    fmu = _fmu_run(
+        "Scheduler, Source and Plant FMUs drive PeixotoEx1HinfPDEps150 and PeixotoEx1HinfRobustEps150 (FMUs built "
+        "with the paper's epsilon = 150 designs) on the scenario of Figs. 1-2; the figures and ratios are the FMU "
+        "results. Library cross-check: plant.simulate and HinfFilter on the designs the FMUs carry; the designs "
+        "are compared with the epsilon = 150 designs made here.",
+        spec, timer, [run], {"theorem1": "PD", "corollary1": "robust"},
+    )
     figures: list[Path] = []
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -240,7 +428,15 @@ def run_fig1(out_dir: Path | None = None, *, steps: int = 100) -> ExperimentResu
             delimiter=",", comments="", fmt="%.17g",
             header="k,theta,alpha1,alpha2,w,e1_pd,e2_pd,e1_robust,e2_robust",
         )
-    return ExperimentResult("peixoto-fig1", "\n".join(lines), results, tuple(figures))
+    pd, rob = results["theorem1"], results["corollary1"]
+    paper = (
+        ("Fig. 1: the PD filter's error is the smaller", "visual",
+         f"||e|| = {pd['e_norm']:.3f} (PD) < {rob['e_norm']:.3f} (robust); peaks {pd['e_peak']:.3f}, "
+         f"{rob['e_peak']:.3f}"),
+        ("||e||_2/||w||_2 <= gamma (PD)", "gamma 1.21", f"{pd['ratio']:.4f} <= {pd['gamma']:.4f}"),
+        ("||e||_2/||w||_2 <= gamma (robust)", "gamma 8.18", f"{rob['ratio']:.4f} <= {rob['gamma']:.4f}"),
+    )
+    return ExperimentResult("peixoto-fig1", "\n".join(lines), results, tuple(figures), paper, fmu)
 
 
 def _plot_fig1(out_dir: Path, sig: Fig1Signals, errors: dict[str, np.ndarray]) -> list[Path]:
@@ -257,7 +453,7 @@ def _plot_fig1(out_dir: Path, sig: Fig1Signals, errors: dict[str, np.ndarray]) -
         ax.grid(alpha=0.3)
     axes[0].legend()
     axes[-1].set_xlabel("k")
-    fig.suptitle("Fig. 1: estimation error, epsilon = 150, xi(0) = 0 (Example 1)")
+    fig.suptitle("Fig. 1: estimation error, epsilon = 150, xi(0) = 0 (Example 1; co-simulated FMUs)")
     fig.tight_layout()
     p1 = out_dir / "fig1.png"
     fig.savefig(p1, dpi=120)
@@ -358,23 +554,55 @@ def stability_limits(*, tol: float = 1e-6) -> StabilityLimits:
     return StabilityLimits(float(frozen), float(lo), at_limit, jsr, rho_above, res.status)
 
 
+#: The values of rho at which Example 2's designs are co-simulated as FMUs.
+EXAMPLE2_FMU_RHOS = (1.0, 11.0, 21.0)
+
+
+def example2_cosim(rhos: Sequence[float] = EXAMPLE2_FMU_RHOS, *, steps: int = 100) -> CoSimSpec:
+    """Example 2 through FMUs: one Scheduler and Source drive a Plant FMU per
+    ``rho`` (its parameter ``rho``) and the HinfPD FMU designed at that ``rho``
+    (``PeixotoEx2HinfPD`` at the file's ``rho = 1``, ``PeixotoEx2Rho11HinfPD``
+    ...), in the scenario of Figs. 1-2."""
+    base = hinf_cosim([], system="PeixotoEx2", steps=steps)
+    comps = [c for c in base.components if c[0] != "plant"]
+    conns = [c for c in base.connections if "plant" not in c]
+    record = [r for r in (base.record or ()) if not r.startswith("plant.")]
+    for rho in rhos:
+        tag = f"{rho:g}".replace(".", "_")
+        plant, filt = f"plant_rho{tag}", f"pd_rho{tag}"
+        ident = "PeixotoEx2HinfPD" if rho == 1.0 else f"PeixotoEx2Rho{rho:g}HinfPD"
+        comps += [(plant, "PeixotoEx2Plant", {"rho": float(rho)}), (filt, ident, {})]
+        conns += [f"sched.p -> {plant}.p", f"source.w -> {plant}.w", f"sched.p -> {filt}.p", f"{plant}.y -> {filt}.y"]
+        record += [f"{plant}.y", f"{plant}.z", f"{filt}.zhat"]
+    return CoSimSpec(tuple(comps), tuple(conns), base.step_size, base.n_steps, tuple(record))
+
+
 def run_example2(
     out_dir: Path | None = None,
     *,
     rhos: Sequence[float] = tuple(float(r) for r in range(1, 22)),
     progress: bool | None = None,
+    fmus: ExperimentFmus | str | Path | None = None,
 ) -> ExperimentResult:
     """Example 2: ``gamma(rho)`` of Theorem 1 with the best ``epsilon`` per ``rho``.
 
     One compiled LMI program serves every ``rho`` (the vertex matrices are
     parameters). ``progress=None`` shows a tqdm bar when stderr is a terminal.
+
+    Fig. 3 is a design sweep (library only). Through FMUs
+    (:func:`example2_cosim`): at each ``rho`` of :data:`EXAMPLE2_FMU_RHOS` in
+    ``rhos``, the HinfPD FMU designed (best epsilon) at that ``rho`` runs with
+    the Plant FMU at that ``rho`` in the scenario of Figs. 1-2; its ``gamma`` is
+    compared with the sweep's and ``||e||_2 / ||w||_2 <= gamma`` is checked.
     """
+    fmus = as_experiment_fmus(fmus)
     from tqdm import tqdm
 
     from ..design import KIND_PD, HinfProgram, search_epsilon
     from ..modelfile import load_system
 
     rows: list[dict[str, Any]] = []
+    designs: dict[float, Any] = {}
     program = None
     bar = tqdm(list(rhos), desc="Example 2: rho sweep", unit="rho", disable=None if progress is None else not progress)
     for rho in bar:
@@ -382,6 +610,7 @@ def run_example2(
         if program is None:
             program = HinfProgram.for_plant(plant, kind=KIND_PD)
         s = search_epsilon(plant, kind=KIND_PD, program=program)
+        designs[float(rho)] = s.design
         rows.append({"rho": float(rho), "epsilon": _eps(s.design.epsilon), "gamma": s.design.gamma,
                      "status": s.design.status, "n_evaluations": s.n_evaluations})
         bar.set_postfix(gamma=f"{s.design.gamma:.4f}")
@@ -406,7 +635,34 @@ def run_example2(
         f"({lim.theorem1_above_status})."
     )
     lines.append(explanation)
+
+    fmu_rhos = [r for r in EXAMPLE2_FMU_RHOS if r in designs]
+    timer = Timer()
+    spec = example2_cosim(fmu_rhos)
+    res = timer.run(spec, fmus)
+    runs, fmu_rows = [], []
+    for rho in fmu_rhos:
+        tag = f"{rho:g}".replace(".", "_")
+        plant = load_system("peixoto-ex2", parameters={"rho": rho}).model()
+        run = _hinf_fmus(fmus, res, spec, plant, {f"pd_rho{tag}": designs[rho]}, plant_name=f"plant_rho{tag}",
+                         label=f"rho = {rho:g}", signals=not runs)
+        runs.append(run)
+        d = run.carried[f"pd_rho{tag}"]
+        fmu_rows.append({"rho": rho, "gamma_fmu": d.gamma, "gamma_sweep": designs[rho].gamma,
+                         "gamma_relative_difference": run.gamma_differences[f"pd_rho{tag}"],
+                         "ratio": run.ratios[f"pd_rho{tag}"]})
+        lines.append(f"through FMUs, rho = {rho:g}: HinfPD FMU gamma {d.gamma:.4f} (sweep {designs[rho].gamma:.4f}), "
+                     f"||e||_2/||w||_2 = {run.ratios[f'pd_rho{tag}']:.4f} in the Figs. 1-2 scenario")
+    fmu = _fmu_run(
+        "Fig. 3 is an LMI design sweep (library only). Through FMUs: at rho = "
+        + ", ".join(f"{r:g}" for r in fmu_rhos)
+        + " the HinfPD FMU designed (best epsilon, at build time) at that rho runs with the PeixotoEx2Plant FMU "
+        "(parameter rho) on the scenario of Figs. 1-2, one co-simulation with a Scheduler and a Source; "
+        "cross-check: plant.simulate and HinfFilter on the carried designs, compared with the sweep's designs.",
+        spec, timer, runs, {},
+    )
     results: dict[str, Any] = {
+        "fmu": fmu_rows,
         "curve": rows,
         "stability": {
             "frozen_vertex_limit": lim.frozen,
@@ -423,7 +679,16 @@ def run_example2(
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
         figures.append(_plot_example2(out_dir / "fig3.png", rows, lim))
-    return ExperimentResult("peixoto-example2", "\n".join(lines), results, tuple(figures))
+    g = np.array([r["gamma"] for r in rows])
+    paper = (
+        ("Fig. 3: gamma(rho) grows with rho", "visual (rho = 1..21)",
+         f"{rows[0]['gamma']:.4f} at rho = {rows[0]['rho']:g} to {rows[-1]['gamma']:.4f} at rho = {rows[-1]['rho']:g}; "
+         + ("increasing" if np.all(np.diff(g) > 0) else "NOT monotone")),
+        ("plant unstable for rho >", "21.4", f"{lim.frozen:.4f}"),
+        *((f"HinfPD FMU at rho = {r['rho']:g}: ||e||/||w|| <= gamma", "-",
+           f"{r['ratio']:.4f} <= {r['gamma_fmu']:.4f}") for r in fmu_rows),
+    )
+    return ExperimentResult("peixoto-example2", "\n".join(lines), results, tuple(figures), paper, fmu)
 
 
 def _plot_example2(path: Path, rows: list[dict[str, Any]], lim: StabilityLimits) -> Path:
@@ -460,5 +725,6 @@ def _plot_example2(path: Path, rows: list[dict[str, Any]], lim: StabilityLimits)
 EXPERIMENTS = [
     Experiment("peixoto-table1", "Peixoto et al. Table 1: H-infinity bounds, Example 1", run_table1),
     Experiment("peixoto-fig1", "Peixoto et al. Figs. 1-2: estimation errors, Example 1", run_fig1),
-    Experiment("peixoto-example2", "Peixoto et al. Fig. 3: gamma(rho) of Theorem 1, Example 2", run_example2),
+    Experiment("peixoto-example2", "Peixoto et al. Fig. 3: gamma(rho) of Theorem 1, Example 2", run_example2,
+               reduced={"rhos": EXAMPLE2_FMU_RHOS}),
 ]

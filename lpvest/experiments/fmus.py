@@ -1,0 +1,603 @@
+"""The FMUs behind the paper experiments: a build cache, the co-simulation
+set-ups, and the record of how the FMU results agree with the library.
+
+Every experiment of ``lpvest reproduce`` runs its plant and its filters as FMUs
+under :mod:`lpvest.cosim` and repeats the computation with the library alone
+as the cross-check. This module holds what they share:
+
+- :class:`ExperimentFmus`, the FMUs the experiments need, built on demand into
+  a cache folder and reused while they are up to date. An FMU is up to date
+  when its *fingerprint* is the one recorded in ``manifest.json`` at build
+  time and the file's SHA-256 is unchanged. The fingerprint hashes everything
+  the FMU is made from: the ``lpvest`` package it carries (every file the
+  builder copies), the slave script, the model file, the build plan
+  (role, parameters, estimator kind, design function) and the versions of
+  Python, numpy, scipy, cvxpy, clarabel and pythonfmu (the designs made at
+  build time depend on the solver). Any change rebuilds; nothing is guessed
+  from time stamps.
+- :data:`PAPER_KINDS`: the H-infinity filter FMUs with the paper's
+  ``epsilon = 150`` design (Peixoto et al., Table 1 and Fig. 1); the shipped
+  ``HinfPD``/``HinfRobust`` FMUs carry the best-epsilon design.
+- :class:`CoSimSpec`: components, connections, step and length of one
+  co-simulation, so that an experiment and its regression reference
+  (:mod:`lpvest.experiments.regression`) run the same set-up.
+- :class:`Agreement` and :class:`FmuRun`: FMU against library, per quantity:
+  the largest absolute difference, the scale, and whether it is within
+  ``1e-12`` (relative to ``max(1, max |library value|)``).
+
+Examples
+--------
+>>> fmus = ExperimentFmus("out/fmu-cache")                    # doctest: +SKIP
+>>> fmus["PeixotoEx1Plant"]                                    # doctest: +SKIP
+PosixPath('out/fmu-cache/PeixotoEx1Plant.fmu')
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import shutil
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import LpvestError
+from ..fmi.registry import EstimatorKind, estimator_kinds
+
+__all__ = [
+    "PAPER_EPSILON",
+    "PAPER_KINDS",
+    "AGREEMENT_TOLERANCE",
+    "FmuEntry",
+    "CATALOG",
+    "ExperimentFmus",
+    "FmuCacheError",
+    "CoSimSpec",
+    "Agreement",
+    "FmuRun",
+    "Timer",
+    "column",
+    "default_cache_dir",
+    "fingerprint",
+    "as_experiment_fmus",
+    "hinf_pd_eps150",
+    "hinf_robust_eps150",
+    "carried_design",
+    "design_difference",
+]
+
+#: The epsilon of Peixoto et al.'s Table 1 and Figs. 1-2.
+PAPER_EPSILON = 150.0
+
+#: FMU against library: largest difference allowed, relative to ``max(1, scale)``.
+AGREEMENT_TOLERANCE = 1e-12
+
+_CACHE_FORMAT = "lpvest-fmu-cache/1"
+
+
+class FmuCacheError(LpvestError, RuntimeError):
+    """An FMU of the experiments could not be built or is unknown."""
+
+
+# ---------------------------------------------------------------------------
+# the paper's epsilon = 150 designs, as estimator kinds
+# ---------------------------------------------------------------------------
+def hinf_pd_eps150(model: Any) -> str:
+    """Build-time design: Theorem 1 (parameter-dependent) at ``epsilon = 150``, as JSON."""
+    from ..design import KIND_PD, design_hinf
+
+    return design_hinf(model, epsilon=PAPER_EPSILON, kind=KIND_PD).to_json()
+
+
+def hinf_robust_eps150(model: Any) -> str:
+    """Build-time design: Corollary 1 (robust) at ``epsilon = 150``, as JSON."""
+    from ..design import KIND_ROBUST, design_hinf
+
+    return design_hinf(model, epsilon=PAPER_EPSILON, kind=KIND_ROBUST).to_json()
+
+
+#: Filter FMUs with the paper's epsilon (Peixoto et al. Table 1, Fig. 1).
+PAPER_KINDS: tuple[EstimatorKind, ...] = (
+    EstimatorKind("HinfPDEps150", "lpvest.fmi.factories:hinf", models=("polytopic",),
+                  design="lpvest.experiments.fmus:hinf_pd_eps150",
+                  description="gain-scheduled H-infinity filter (Peixoto et al. Theorem 1), epsilon = 150"),
+    EstimatorKind("HinfRobustEps150", "lpvest.fmi.factories:hinf", models=("polytopic",),
+                  design="lpvest.experiments.fmus:hinf_robust_eps150",
+                  description="robust H-infinity filter (Peixoto et al. Corollary 1), epsilon = 150"),
+)
+
+
+# ---------------------------------------------------------------------------
+# the catalog
+# ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class FmuEntry:
+    """One FMU the experiments use: an example system (optionally with its
+    model-file parameters changed, which makes a variant system) and a role."""
+
+    system: str
+    role: str
+    parameters: tuple[tuple[str, float], ...] = ()
+
+    @property
+    def system_name(self) -> str:
+        """``"peixoto-ex2"``, or ``"peixoto-ex2-rho11"`` for a variant."""
+        return self.system + "".join(f"-{k}{v:g}" for k, v in self.parameters)
+
+    @property
+    def identifier(self) -> str:
+        from ..fmi.naming import fmu_name
+
+        return fmu_name(self.system_name) + self.role
+
+
+def _entries() -> dict[str, FmuEntry]:
+    items = [
+        FmuEntry("cox-toth-ex1", r) for r in ("Plant", "Scheduler", "Source")
+    ] + [
+        FmuEntry("cox-toth-truncation", r) for r in ("Plant", "Scheduler", "Source", "Kalman", "TruncatedKalman")
+    ] + [
+        FmuEntry("peixoto-ex1", r)
+        for r in ("Plant", "Scheduler", "Source", "HinfPD", "HinfRobust", "HinfPDEps150", "HinfRobustEps150")
+    ] + [
+        FmuEntry("peixoto-ex2", r) for r in ("Plant", "Scheduler", "Source", "HinfPD")
+    ] + [
+        # Example 2's filter designed at other values of rho (the plant FMU takes rho as a parameter)
+        FmuEntry("peixoto-ex2", "HinfPD", (("rho", 11.0),)),
+        FmuEntry("peixoto-ex2", "HinfPD", (("rho", 21.0),)),
+    ] + [
+        FmuEntry("sridhar-ltv", r) for r in ("Plant", "BSplineObserver")
+    ]
+    return {e.identifier: e for e in items}
+
+
+#: Every FMU the experiments use, by identifier (``"PeixotoEx1HinfPD"``).
+CATALOG: dict[str, FmuEntry] = _entries()
+
+
+def _kinds(role: str) -> list[EstimatorKind]:
+    return [k for k in (*estimator_kinds(), *PAPER_KINDS) if k.role == role]
+
+
+# ---------------------------------------------------------------------------
+# fingerprints
+# ---------------------------------------------------------------------------
+def _hash_tree(h: Any, root: Path, *, skip: Callable[[Path], bool]) -> None:
+    for f in sorted(p for p in root.rglob("*") if p.is_file()):
+        rel = f.relative_to(root)
+        if skip(rel):
+            continue
+        h.update(rel.as_posix().encode() + b"\0")
+        h.update(hashlib.sha256(f.read_bytes()).digest())
+
+
+@cache
+def _package_digest() -> str:
+    """SHA-256 of the lpvest package as the builder copies it into an FMU
+    (plus ``status_bridge.c``, compiled into its binary)."""
+    import lpvest
+
+    root = Path(lpvest.__file__).resolve().parent
+    h = hashlib.sha256()
+
+    def skip(rel: Path) -> bool:
+        parts = rel.parts
+        return "__pycache__" in parts or rel.suffix == ".pyc" or parts[0] in ("_models", "_fmus")
+
+    _hash_tree(h, root, skip=skip)
+    return h.hexdigest()
+
+
+@cache
+def _versions() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = [f"python={sys.version_info.major}.{sys.version_info.minor}"]
+    for name in ("numpy", "scipy", "cvxpy", "clarabel", "pythonfmu"):
+        try:
+            out.append(f"{name}={version(name)}")
+        except PackageNotFoundError:
+            out.append(f"{name}=none")
+    out.append("cc=" + ("yes" if (os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")) else "no"))
+    return ";".join(out)
+
+
+def fingerprint(plan: Any) -> str:
+    """SHA-256 of everything an FMU of ``plan`` (a :class:`~lpvest.fmi.build.FmuPlan`) is made from."""
+    from ..fmi.build import scripts_dir
+
+    h = hashlib.sha256()
+    h.update(_CACHE_FORMAT.encode() + b"\0" + _package_digest().encode() + b"\0" + _versions().encode() + b"\0")
+    h.update(hashlib.sha256((scripts_dir() / plan.script).read_bytes()).digest())
+    h.update(hashlib.sha256(Path(plan.system_path).read_bytes()).digest())
+    desc = {
+        "identifier": plan.identifier, "role": plan.role, "script": plan.script, "system": plan.system_name,
+        "model_key": plan.model_key, "description": plan.description,
+        "model_parameters": list(plan.model_parameters), "requirements": list(plan.requirements),
+        "step_size": plan.step_size, "stop_time": plan.stop_time,
+    }
+    if plan.estimator is not None:
+        desc["estimator"] = plan.estimator.to_json() | {"design": plan.estimator.design,
+                                                          "models": list(plan.estimator.models)}
+        for extra in plan.estimator.files:
+            extra = Path(extra)
+            if extra.is_dir():
+                _hash_tree(h, extra, skip=lambda rel: "__pycache__" in rel.parts or rel.suffix == ".pyc")
+            else:
+                h.update(hashlib.sha256(extra.read_bytes()).digest())
+    h.update(json.dumps(desc, sort_keys=True).encode())
+    return h.hexdigest()
+
+
+def _file_digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def default_cache_dir() -> Path:
+    """``$LPVEST_FMU_CACHE``, else ``$XDG_CACHE_HOME/lpvest/fmus`` (``~/.cache/lpvest/fmus``)."""
+    env = os.environ.get("LPVEST_FMU_CACHE")
+    if env:
+        return Path(env)
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "lpvest" / "fmus"
+
+
+# ---------------------------------------------------------------------------
+# the cache
+# ---------------------------------------------------------------------------
+class ExperimentFmus:
+    """The experiments' FMUs in a cache folder, built when missing or stale.
+
+    Parameters
+    ----------
+    directory : str or Path
+        The cache folder (created when needed): ``<identifier>.fmu`` files,
+        ``manifest.json`` and ``models/`` (the variant model files).
+    progress : callable, optional
+        Called with a message before each build (the CLI prints it).
+
+    ``fmus["PeixotoEx1Plant"]`` (or :meth:`path`) returns the FMU's path,
+    building and validating it first when it is missing or out of date.
+    :attr:`built` and :attr:`reused` list what happened.
+    """
+
+    def __init__(self, directory: str | Path, *, progress: Callable[[str], None] | None = None) -> None:
+        self.directory = Path(directory)
+        self.progress = progress
+        self.built: list[str] = []
+        self.reused: list[str] = []
+        self.build_time = 0.0
+        self._checked: dict[str, Path] = {}
+        self._lock = threading.Lock()
+
+    # -- manifest -------------------------------------------------------------
+    @property
+    def manifest_path(self) -> Path:
+        return self.directory / "manifest.json"
+
+    def _manifest(self) -> dict[str, Any]:
+        try:
+            data = json.loads(self.manifest_path.read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError):
+            return {}
+        if not isinstance(data, dict) or data.get("format") != _CACHE_FORMAT:
+            return {}
+        fmus = data.get("fmus", {})
+        return fmus if isinstance(fmus, dict) else {}
+
+    def _record(self, identifier: str, entry: dict[str, Any]) -> None:
+        fmus = self._manifest()
+        fmus[identifier] = entry
+        self.directory.mkdir(parents=True, exist_ok=True)
+        tmp = self.manifest_path.with_suffix(f".json.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps({"format": _CACHE_FORMAT, "fmus": fmus}, indent=1, sort_keys=True) + "\n",
+                       encoding="utf-8")
+        tmp.replace(self.manifest_path)
+
+    # -- planning -------------------------------------------------------------
+    def _source(self, entry: FmuEntry) -> str | Path:
+        """The model file of ``entry``: the example's, or a generated variant."""
+        if not entry.parameters:
+            return entry.system
+        from ..catalog import find_system
+
+        text = find_system(entry.system).read_text(encoding="utf-8")
+        text, n = re.subn(r'(?m)^name = "[^"]*"$', f'name = "{entry.system_name}"', text, count=1)
+        if n != 1:
+            raise FmuCacheError(f"{entry.system}: no 'name = ...' line to change for the variant")
+        for key, value in entry.parameters:
+            text, n = re.subn(rf"(?m)^{re.escape(key)} = .*$", f"{key} = {value!r}", text, count=1)
+            if n != 1:
+                raise FmuCacheError(f"{entry.system}: no parameter line '{key} = ...' to change for the variant")
+        header = (f"# Generated by lpvest.experiments.fmus from the example {entry.system!r} with "
+                  + ", ".join(f"{k} = {v:g}" for k, v in entry.parameters) + ".\n")
+        path = self.directory / "models" / f"{entry.system_name.replace('-', '_')}.toml"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if not path.is_file() or path.read_text(encoding="utf-8") != header + text:
+            path.write_text(header + text, encoding="utf-8")
+        from ..modelfile import load_system
+
+        loaded = load_system(path)
+        for key, value in entry.parameters:
+            if loaded.parameters.get(key) != value:  # pragma: no cover - guards the text edit above
+                raise FmuCacheError(f"{path}: {key} = {loaded.parameters.get(key)}; expected {value}")
+        return path
+
+    def plan(self, identifier: str) -> Any:
+        """The :class:`~lpvest.fmi.build.FmuPlan` of a catalog FMU."""
+        from ..fmi.build import plan_system
+
+        entry = CATALOG.get(identifier)
+        if entry is None:
+            raise FmuCacheError(f"no experiment FMU {identifier!r} (known: {', '.join(CATALOG)})")
+        plans, _ = plan_system(self._source(entry), kinds=_kinds(entry.role))
+        for plan in plans:
+            if plan.identifier == identifier:
+                return plan
+        raise FmuCacheError(f"{identifier}: the builder plans no such FMU for {entry.system_name}")  # pragma: no cover
+
+    # -- access ---------------------------------------------------------------
+    def path(self, identifier: str) -> Path:
+        """The FMU's path; built (and validated) first when missing or stale."""
+        with self._lock:
+            if identifier in self._checked:
+                return self._checked[identifier]
+            plan = self.plan(identifier)
+            want = fingerprint(plan)
+            target = self.directory / f"{identifier}.fmu"
+            known = self._manifest().get(identifier, {})
+            if (target.is_file() and known.get("fingerprint") == want
+                    and known.get("sha256") == _file_digest(target)):
+                self.reused.append(identifier)
+            else:
+                self._build(plan, want, target)
+            self._checked[identifier] = target
+            return target
+
+    __getitem__ = path
+
+    def paths(self, identifiers: Iterable[str]) -> dict[str, Path]:
+        return {i: self.path(i) for i in identifiers}
+
+    def _build(self, plan: Any, want: str, target: Path) -> None:
+        from ..fmi.build import build_fmu, validate_fmus
+
+        if self.progress is not None:
+            self.progress(f"building {plan.identifier} into {self.directory}")
+        t = time.perf_counter()
+        path = build_fmu(plan, self.directory)
+        (check,) = validate_fmus([path])
+        if not check.ok:
+            raise FmuCacheError(f"{plan.identifier}: the built FMU fails validation: " + "; ".join(check.problems))
+        self.build_time += time.perf_counter() - t
+        self._record(plan.identifier, {"fingerprint": want, "sha256": _file_digest(path),
+                                       "built": time.strftime("%Y-%m-%dT%H:%M:%S")})
+        assert path == target
+        self.built.append(plan.identifier)
+
+    def adopt(self, paths: Mapping[str, str | Path]) -> None:
+        """Take FMUs built from the current code elsewhere (e.g. a test
+        session's FMU set) into the cache: copied and recorded as up to date.
+        Identifiers not in the catalog are ignored."""
+        with self._lock:
+            for identifier, src in paths.items():
+                if identifier not in CATALOG or identifier in self._checked:
+                    continue
+                plan = self.plan(identifier)
+                target = self.directory / f"{identifier}.fmu"
+                target.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(src, target)
+                self._record(identifier, {"fingerprint": fingerprint(plan), "sha256": _file_digest(target),
+                                          "built": "adopted from " + str(src)})
+
+    def summary(self) -> str:
+        """One line: how many FMUs were built and reused, and where."""
+        parts = []
+        if self.built:
+            parts.append(f"built {len(self.built)} ({self.build_time:.1f} s)")
+        if self.reused:
+            parts.append(f"reused {len(self.reused)} up-to-date")
+        return f"FMU cache {self.directory}: " + (", ".join(parts) if parts else "nothing used yet")
+
+
+def as_experiment_fmus(fmus: ExperimentFmus | str | Path | None) -> ExperimentFmus:
+    """``fmus`` itself, a cache in the given folder, or the default cache."""
+    if isinstance(fmus, ExperimentFmus):
+        return fmus
+    return ExperimentFmus(default_cache_dir() if fmus is None else fmus)
+
+
+# ---------------------------------------------------------------------------
+# one co-simulation set-up
+# ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class CoSimSpec:
+    """A co-simulation: components (``(name, FMU identifier, parameters)``),
+    connections, step size and number of steps. :meth:`run` resolves the FMUs
+    in an :class:`ExperimentFmus` and runs :func:`lpvest.cosim.simulate`."""
+
+    components: tuple[tuple[str, str, Mapping[str, Any]], ...]
+    connections: tuple[str, ...]
+    step_size: float
+    n_steps: int
+    record: tuple[str, ...] | None = None
+
+    @property
+    def fmu_names(self) -> tuple[str, ...]:
+        return tuple(dict.fromkeys(ident for _, ident, _ in self.components))
+
+    def run(self, fmus: ExperimentFmus, *, progress: bool | None = None) -> np.ndarray:
+        from ..cosim import Component, simulate
+
+        comps = [Component(name, fmus.path(ident), dict(params)) for name, ident, params in self.components]
+        return simulate(comps, list(self.connections), step_size=self.step_size, n_steps=self.n_steps,
+                        record=None if self.record is None else list(self.record), progress=progress)
+
+    def describe(self) -> str:
+        """``"sched (PeixotoEx1Scheduler) -> plant (PeixotoEx1Plant) ..."`` in component order."""
+        comps = ", ".join(f"{name} = {ident}" for name, ident, _ in self.components)
+        return f"{comps}; {self.n_steps} steps of {self.step_size:g}"
+
+
+def column(result: np.ndarray, base: str) -> np.ndarray:
+    """The recorded elements ``base[1], base[2], ...`` (or ``base``) as an array ``(T, n)``;
+    matrix elements ``base[i,j]`` in row-major order."""
+    names = result.dtype.names or ()
+    if base in names:
+        return np.asarray(result[base], dtype=float)[:, None]
+    pat = re.compile(re.escape(base) + r"\[(\d+(?:,\d+)*)\]$")
+    found = sorted((tuple(int(i) for i in m.group(1).split(",")), n) for n in names if (m := pat.match(n)))
+    if not found:
+        raise KeyError(f"no recorded variable {base!r}")
+    return np.column_stack([np.asarray(result[n], dtype=float) for _, n in found])
+
+
+# ---------------------------------------------------------------------------
+# FMU against library
+# ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Agreement:
+    """FMU co-simulation against the library-only computation for one quantity.
+
+    ``max_abs_difference`` is ``max |fmu - library|`` over every sample and
+    element, ``scale`` is ``max |library|``; they agree when the difference is
+    at most ``tolerance * max(1, scale)``.
+    """
+
+    what: str
+    max_abs_difference: float
+    scale: float
+    tolerance: float = AGREEMENT_TOLERANCE
+
+    @classmethod
+    def of(cls, what: str, fmu: Any, library: Any, *, tolerance: float = AGREEMENT_TOLERANCE) -> Agreement:
+        a = np.asarray(fmu, dtype=float)
+        b = np.asarray(library, dtype=float)
+        if a.shape != b.shape:
+            raise LpvestError(f"{what}: FMU result has shape {a.shape}, library result {b.shape}")
+        if a.size == 0:
+            return cls(what, 0.0, 0.0, tolerance)
+        diff = np.abs(a - b)
+        worst = float(np.max(diff)) if np.all(np.isfinite(diff)) else float("inf")
+        return cls(what, worst, float(np.max(np.abs(b))), tolerance)
+
+    @property
+    def bit_for_bit(self) -> bool:
+        return self.max_abs_difference == 0.0
+
+    @property
+    def ok(self) -> bool:
+        return self.max_abs_difference <= self.tolerance * max(1.0, self.scale)
+
+    def line(self) -> str:
+        if self.bit_for_bit:
+            verdict = "0 (bit for bit)"
+        else:
+            verdict = (f"{self.max_abs_difference:.2e} (max |value| {self.scale:.3g}; "
+                       + ("within" if self.ok else "EXCEEDS") + f" {self.tolerance:g})")
+        return f"{self.what}: max |FMU - library| = {verdict}"
+
+    def to_json(self) -> dict[str, Any]:
+        return {"what": self.what, "max_abs_difference": self.max_abs_difference, "scale": self.scale,
+                "tolerance": self.tolerance, "bit_for_bit": self.bit_for_bit, "ok": self.ok}
+
+
+@dataclass(frozen=True)
+class FmuRun:
+    """What an experiment ran through FMUs, and how it agrees with the library."""
+
+    description: str  #: what ran through FMUs, what is library-only
+    fmus: tuple[str, ...]  #: FMU identifiers used
+    agreements: tuple[Agreement, ...]
+    steps: int = 0  #: communication steps, summed over the co-simulations
+    wall_time: float = 0.0  #: seconds spent in co-simulations
+    notes: tuple[str, ...] = field(default_factory=tuple)  #: other comparisons (not agreement checks)
+
+    @property
+    def ok(self) -> bool:
+        return all(a.ok for a in self.agreements)
+
+    @property
+    def max_abs_difference(self) -> float:
+        return max((a.max_abs_difference for a in self.agreements), default=0.0)
+
+    @property
+    def bit_for_bit(self) -> bool:
+        return all(a.bit_for_bit for a in self.agreements)
+
+    def headline(self) -> str:
+        """One line: the largest difference over every compared quantity."""
+        n = len(self.agreements)
+        if self.bit_for_bit:
+            verdict = "0 (bit for bit)"
+        else:
+            worst = max(self.agreements, key=lambda a: a.max_abs_difference / max(1.0, a.scale))
+            verdict = (f"{self.max_abs_difference:.2e} ("
+                       + ("within" if self.ok else "EXCEEDS") + f" {worst.tolerance:g} of scale)")
+        return f"FMU co-simulation vs library: max |difference| = {verdict} over {n} quantities"
+
+    def lines(self) -> list[str]:
+        out = [self.headline(), f"  FMUs: {', '.join(self.fmus)} ({self.steps} steps, {self.wall_time:.1f} s)"]
+        out += [f"  {a.line()}" for a in self.agreements]
+        out += [f"  note: {n}" for n in self.notes]
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "description": self.description,
+            "fmus": list(self.fmus),
+            "steps": self.steps,
+            "wall_time": self.wall_time,
+            "ok": self.ok,
+            "bit_for_bit": self.bit_for_bit,
+            "max_abs_difference": self.max_abs_difference,
+            "agreements": [a.to_json() for a in self.agreements],
+            "notes": list(self.notes),
+        }
+
+
+class Timer:
+    """Accumulates co-simulation steps and wall time for an :class:`FmuRun`."""
+
+    def __init__(self) -> None:
+        self.steps = 0
+        self.seconds = 0.0
+
+    def run(self, spec: CoSimSpec, fmus: ExperimentFmus, *, progress: bool | None = None) -> np.ndarray:
+        for ident in spec.fmu_names:  # build outside the timed part
+            fmus.path(ident)
+        t = time.perf_counter()
+        out = spec.run(fmus, progress=progress)
+        self.seconds += time.perf_counter() - t
+        self.steps += spec.n_steps
+        return out
+
+
+# ---------------------------------------------------------------------------
+# designs carried by FMUs
+# ---------------------------------------------------------------------------
+def carried_design(path: str | Path) -> Any:
+    """The :class:`~lpvest.design.HinfDesign` an H-infinity filter FMU carries (``resources/design.json``)."""
+    import zipfile
+
+    from ..design import HinfDesign
+
+    with zipfile.ZipFile(path) as z:
+        return HinfDesign.from_json(z.read("resources/design.json").decode("utf-8"))
+
+
+def design_difference(a: Any, b: Any) -> float:
+    """Largest absolute difference between the filter matrices of two designs."""
+    names = ("H", "Af", "Bf", "Cf", "Df")
+    if any(np.shape(getattr(a, n)) != np.shape(getattr(b, n)) for n in names):
+        return float("inf")
+    return max(float(np.max(np.abs(np.asarray(getattr(a, n)) - np.asarray(getattr(b, n))))) for n in names)

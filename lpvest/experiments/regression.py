@@ -1,0 +1,312 @@
+"""Regression references: small stored trajectories of each example's co-simulation.
+
+Each :class:`Reference` is a short version of an experiment's co-simulation
+(the same :class:`~lpvest.experiments.fmus.CoSimSpec` builder, fewer steps or
+filters) and a few of its recorded outputs, stored as CSV in
+``tests/data/reference/<name>.csv`` (a few hundred rows). The regression test
+(``tests/test_regression.py``) builds the FMUs, co-simulates and compares every
+column with the reference within ``tolerance * max |reference column|``; the
+reason for each tolerance is stored in the file's header and in
+:data:`REFERENCES`. H-infinity references also store the ``gamma`` their filter
+FMUs carry.
+
+Regenerate the references (after a deliberate change) with::
+
+    lpvest regress --update                     # or: python -m lpvest.experiments.regression --update
+
+and compare without writing with ``lpvest regress``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import LpvestError
+from .fmus import CoSimSpec, ExperimentFmus, as_experiment_fmus, carried_design
+
+__all__ = [
+    "Reference",
+    "REFERENCES",
+    "ColumnCheck",
+    "reference_dir",
+    "simulate_reference",
+    "write_reference",
+    "read_reference",
+    "check_reference",
+    "regress",
+    "add_arguments",
+    "main",
+]
+
+#: The command that regenerates the references (written into every file).
+UPDATE_COMMAND = "lpvest regress --update"
+
+_NUMERIC = ("numpy-only, stable discrete-time recursions with seeded noise: across platforms only the last bits "
+            "of sin/exp and of BLAS sums change (~1e-15 relative), and the file keeps 12 significant digits "
+            "(5e-13); 1e-10 leaves a wide margin and still catches any change of model, signal, noise convention "
+            "or filter")
+_DESIGN = ("the filter FMUs carry LMI designs solved at build time by an interior-point solver (Clarabel): with "
+           "one solver version a design is deterministic (bit for bit), but another version or BLAS moves it "
+           "within the solver's accuracy, and the optimum is flat (gamma changes far less than the filter "
+           "matrices); 1e-6 of scale covers solver round-off, while a design that moved along the flat optimum "
+           "fails and the references must be regenerated (the stored gamma tells which case it is)")
+_LTV = ("the plant integrates with scipy's DOP853 (rtol 1e-12) per 1 ms step and the observer solves least-squares "
+        "problems with condition numbers ~1e4: another scipy or LAPACK changes the plant at ~1e-12 of scale and the "
+        "estimates at ~1e-9; 1e-7 of scale covers that and catches any change of the model, the kernel identity or "
+        "the window logic")
+
+
+@dataclass(frozen=True)
+class Reference:
+    """One stored reference: which co-simulation, which columns, how close."""
+
+    name: str
+    title: str
+    spec: Callable[[], CoSimSpec]
+    columns: tuple[str, ...]  #: recorded variables (``"plant.y[1]"``)
+    tolerance: float  #: allowed ``max |got - ref|`` as a fraction of ``max |ref|`` (per column)
+    reason: str
+    every: int = 1  #: keep every ``every``-th row
+    designs: tuple[str, ...] = ()  #: filter components whose carried gamma is stored
+
+    @property
+    def filename(self) -> str:
+        return f"{self.name}.csv"
+
+
+def _example1() -> CoSimSpec:
+    from .cox_toth import example1_cosim
+
+    return example1_cosim(200)
+
+
+def _truncation() -> CoSimSpec:
+    from .cox_toth import truncation_cosim
+
+    return truncation_cosim(200, taus=(2,))
+
+
+def _table1() -> CoSimSpec:
+    from .peixoto import hinf_cosim
+
+    return hinf_cosim([("pd", "PeixotoEx1HinfPD"), ("robust", "PeixotoEx1HinfRobust")])
+
+
+def _fig1() -> CoSimSpec:
+    from .peixoto import hinf_cosim
+
+    return hinf_cosim([("theorem1", "PeixotoEx1HinfPDEps150"), ("corollary1", "PeixotoEx1HinfRobustEps150")])
+
+
+def _example2() -> CoSimSpec:
+    from .peixoto import example2_cosim
+
+    return example2_cosim((1.0, 21.0))
+
+
+def _sridhar() -> CoSimSpec:
+    from .sridhar import sridhar_cosim
+
+    return sridhar_cosim(2.0, window=0.4, hop=0.1, n_basis=18)
+
+
+#: The references, one per example's co-simulation.
+REFERENCES: tuple[Reference, ...] = (
+    Reference("cox-toth-example1", "Example 1: Scheduler, Source, Plant (21c), 200 samples", _example1,
+              ("source.u[1]", "plant.y[1]"), 1e-10, _NUMERIC),
+    Reference("cox-toth-truncation", "truncation model: Plant, Kalman, TruncatedKalman (tau = 2), 200 samples",
+              _truncation, ("plant.y[1]", "kalman.xhat[1]", "trunc2.K[1,1]"), 1e-10, _NUMERIC),
+    Reference("peixoto-table1", "Example 1, best-epsilon HinfPD and HinfRobust FMUs, Figs. 1-2 scenario", _table1,
+              ("plant.z[1]", "pd.zhat[1]", "robust.zhat[1]"), 1e-6, _DESIGN, designs=("pd", "robust")),
+    Reference("peixoto-fig1", "Example 1, epsilon = 150 filter FMUs (Fig. 1)", _fig1,
+              ("theorem1.zhat[1]", "theorem1.zhat[2]", "corollary1.zhat[1]"), 1e-6, _DESIGN,
+              designs=("theorem1", "corollary1")),
+    Reference("peixoto-example2", "Example 2 at rho = 1 and 21: Plant and HinfPD FMUs", _example2,
+              ("plant_rho1.z[1]", "pd_rho1.zhat[1]", "pd_rho21.zhat[1]"), 1e-6, _DESIGN,
+              designs=("pd_rho1", "pd_rho21")),
+    Reference("sridhar-ltv", "LTV plant and B-spline observer FMUs (window 0.4 s, hop 0.1 s), 2 s, every 10 ms",
+              _sridhar, ("plant.y[1]", "observer.a0[1]", "observer.a1[1]"), 1e-7, _LTV, every=10),
+)
+
+
+def reference_dir() -> Path:
+    """``tests/data/reference`` of the source checkout lpvest runs from."""
+    import lpvest
+
+    path = Path(lpvest.__file__).resolve().parent.parent / "tests" / "data" / "reference"
+    if not path.parent.is_dir():
+        raise LpvestError(f"no source checkout around lpvest ({path.parent} does not exist): give --dir")
+    return path
+
+
+def simulate_reference(ref: Reference, fmus: ExperimentFmus) -> tuple[np.ndarray, dict[str, float]]:
+    """Run the reference's co-simulation: the kept rows ``(time, columns...)``
+    and the ``gamma`` of each design-carrying filter component."""
+    spec = ref.spec()
+    res = spec.run(fmus, progress=False)
+    missing = [c for c in ref.columns if c not in (res.dtype.names or ())]
+    if missing:
+        raise LpvestError(f"reference {ref.name}: the co-simulation records no {', '.join(missing)}")
+    data = np.column_stack([res["time"], *(res[c] for c in ref.columns)])[:: ref.every]
+    idents = {name: ident for name, ident, _ in spec.components}
+    gammas = {name: carried_design(fmus.path(idents[name])).gamma for name in ref.designs}
+    return data, gammas
+
+
+def _csv_row(fields: Sequence[str]) -> str:
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="").writerow(fields)
+    return buf.getvalue()
+
+
+def write_reference(ref: Reference, data: np.ndarray, gammas: dict[str, float], directory: str | Path) -> Path:
+    """Write ``directory/<name>.csv``: comment lines (what, tolerance, reason,
+    gammas, how to regenerate), the column names, then the rows (12 significant digits)."""
+    from .. import __version__
+
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    path = directory / ref.filename
+    lines = [
+        f"# lpvest regression reference {ref.name}: {ref.title}",
+        f"# co-simulation: {ref.spec().describe()}; every {ref.every} row(s) kept",
+        f"# tolerance: {ref.tolerance:g} of max |column|: {ref.reason}",
+        *(f"# gamma {name} = {g!r}" for name, g in gammas.items()),
+        f"# written by lpvest {__version__}; regenerate with: {UPDATE_COMMAND}",
+        _csv_row(("time", *ref.columns)),  # matrix elements hold commas: quoted
+    ]
+    lines += [",".join(f"{v:.12g}" for v in row) for row in data]
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+def read_reference(path: str | Path) -> tuple[list[str], np.ndarray, dict[str, float]]:
+    """Column names, rows and stored gammas of a reference file."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8").splitlines()
+    except OSError as exc:
+        raise LpvestError(f"{path}: cannot read the reference ({exc.strerror}); create it with "
+                          f"{UPDATE_COMMAND}") from exc
+    gammas = {}
+    body = []
+    for line in text:
+        if line.startswith("# gamma "):
+            name, _, value = line[len("# gamma "):].partition(" = ")
+            gammas[name] = float(value)
+        elif line and not line.startswith("#"):
+            body.append(line)
+    columns = next(csv.reader([body[0]]))
+    data = np.array([[float(v) for v in row.split(",")] for row in body[1:]])
+    return columns, data, gammas
+
+
+@dataclass(frozen=True)
+class ColumnCheck:
+    """One column (or one stored gamma) against its reference."""
+
+    name: str
+    max_abs_difference: float
+    scale: float
+    tolerance: float
+
+    @property
+    def ok(self) -> bool:
+        return self.max_abs_difference <= self.tolerance * (self.scale if self.scale > 0 else 1.0)
+
+    def line(self) -> str:
+        return (f"{self.name}: max |difference| {self.max_abs_difference:.2e}, max |reference| {self.scale:.3g}, "
+                f"tolerance {self.tolerance:g} -> " + ("ok" if self.ok else "FAIL"))
+
+
+def check_reference(ref: Reference, data: np.ndarray, gammas: dict[str, float],
+                    directory: str | Path) -> list[ColumnCheck]:
+    """Compare a fresh co-simulation with the stored reference."""
+    columns, stored, stored_gammas = read_reference(Path(directory) / ref.filename)
+    want = ["time", *ref.columns]
+    if columns != want or stored.shape != data.shape:
+        raise LpvestError(f"reference {ref.name}: stored columns {columns} and shape {stored.shape}; the "
+                          f"co-simulation gives {want} and {data.shape} (regenerate with {UPDATE_COMMAND})")
+    checks = []
+    for j, name in enumerate(want):
+        ref_col = stored[:, j]
+        diff = np.abs(data[:, j] - ref_col)
+        worst = float(np.max(diff)) if np.all(np.isfinite(diff)) else float("inf")
+        tol = 1e-12 if name == "time" else ref.tolerance
+        checks.append(ColumnCheck(name, worst, float(np.max(np.abs(ref_col))), tol))
+    for name, g in gammas.items():
+        if name not in stored_gammas:
+            raise LpvestError(f"reference {ref.name}: no stored gamma for {name} (regenerate with {UPDATE_COMMAND})")
+        checks.append(ColumnCheck(f"gamma {name}", abs(g - stored_gammas[name]), abs(stored_gammas[name]), 1e-6))
+    return checks
+
+
+def regress(
+    names: Sequence[str] = (),
+    *,
+    update: bool = False,
+    directory: str | Path | None = None,
+    fmus: ExperimentFmus | str | Path | None = None,
+    echo: Callable[[str], None] = print,
+) -> int:
+    """Compare the references ``names`` (default: all) with fresh co-simulations,
+    or rewrite them (``update``); returns the exit status (1: a comparison failed)."""
+    folder = Path(directory) if directory else reference_dir()
+    cache = as_experiment_fmus(fmus)
+    unknown = set(names) - {r.name for r in REFERENCES}
+    if unknown:
+        raise LpvestError(f"no reference {sorted(unknown)[0]!r} (known: {', '.join(r.name for r in REFERENCES)})")
+    failed = []
+    for ref in (r for r in REFERENCES if not names or r.name in names):
+        data, gammas = simulate_reference(ref, cache)
+        if update:
+            path = write_reference(ref, data, gammas, folder)
+            echo(f"wrote {path} ({data.shape[0]} rows, {path.stat().st_size / 1024:.1f} KiB)")
+            continue
+        checks = check_reference(ref, data, gammas, folder)
+        ok = all(c.ok for c in checks)
+        echo(f"{ref.name}: " + ("ok" if ok else "FAIL"))
+        for c in checks:
+            echo(f"  {c.line()}")
+        if not ok:
+            failed.append(ref.name)
+    if failed:
+        echo(f"regression failures: {', '.join(failed)} (after a deliberate change: {UPDATE_COMMAND})")
+        return 1
+    return 0
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``lpvest regress`` (and of this module's ``main``)."""
+    parser.add_argument("names", nargs="*", help="references to run (default: all)")
+    parser.add_argument("--update", action="store_true", help="rewrite the reference files from a fresh run")
+    parser.add_argument("--dir", help="reference folder (default: tests/data/reference of the source checkout)")
+    parser.add_argument("--fmus", metavar="DIR",
+                        help="FMU cache folder (default: $LPVEST_FMU_CACHE or ~/.cache/lpvest/fmus)")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m lpvest.experiments.regression [--update] [--dir DIR] [--fmus DIR] [NAME...]``."""
+    parser = argparse.ArgumentParser(prog="python -m lpvest.experiments.regression",
+                                     description="Compare (or --update) the stored regression references.")
+    add_arguments(parser)
+    args = parser.parse_args(argv)
+    cache = as_experiment_fmus(args.fmus)
+    cache.progress = lambda msg: print(msg, file=sys.stderr, flush=True)
+    return regress(args.names, update=args.update, directory=args.dir, fmus=cache)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    try:
+        sys.exit(main())
+    except LpvestError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        sys.exit(2)

@@ -1,0 +1,159 @@
+"""`lpvest reproduce all`: the FMU cache, the agreement records, the report."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+
+import numpy as np
+import pytest
+
+from lpvest.cli import main
+from lpvest.errors import LpvestError
+from lpvest.experiments import Experiment, ExperimentResult
+from lpvest.experiments.fmus import (
+    CATALOG,
+    Agreement,
+    ExperimentFmus,
+    FmuRun,
+    fingerprint,
+)
+from lpvest.experiments.reproduce import reproduce_all
+
+# -- agreement records ------------------------------------------------------------------------------
+
+
+def test_agreement_is_relative_to_the_scale():
+    a = Agreement.of("y", [1.0, 2.0 + 1e-12], [1.0, 2.0])
+    assert not a.bit_for_bit and a.ok and a.scale == 2.0
+    assert Agreement.of("y", [0.0, 1e-6], [0.0, 0.0]).ok is False  # scale below 1 counts as 1
+    assert Agreement.of("y", [100.0 + 5e-11], [100.0]).ok is True  # 5e-11 <= 1e-12 * 100
+    assert Agreement.of("y", [100.0 + 2e-10], [100.0]).ok is False
+    assert Agreement.of("y", [3.0], [3.0]).line() == "y: max |FMU - library| = 0 (bit for bit)"
+    nan = Agreement.of("y", [np.nan], [1.0])
+    assert nan.max_abs_difference == float("inf") and not nan.ok
+    with pytest.raises(LpvestError, match=r"y: FMU result has shape \(2,\), library result \(3,\)"):
+        Agreement.of("y", [1.0, 2.0], [1.0, 2.0, 3.0])
+
+
+def test_fmu_run_headline():
+    good = FmuRun("d", ("A",), (Agreement.of("p", [1.0], [1.0]), Agreement.of("y", [2.0 + 4e-16], [2.0])))
+    assert good.ok and not good.bit_for_bit
+    assert good.headline() == ("FMU co-simulation vs library: max |difference| = 4.44e-16 "
+                               "(within 1e-12 of scale) over 2 quantities")
+    bad = FmuRun("d", ("A",), (Agreement.of("y", [2.1], [2.0]),))
+    assert not bad.ok and "EXCEEDS" in bad.headline()
+
+
+# -- the FMU cache ----------------------------------------------------------------------------------
+
+
+def test_cache_builds_once_then_reuses_and_detects_staleness(tmp_path):
+    messages: list[str] = []
+    cache = ExperimentFmus(tmp_path, progress=messages.append)
+    path = cache["CoxTothEx1Scheduler"]
+    assert path == tmp_path / "CoxTothEx1Scheduler.fmu" and cache.built == ["CoxTothEx1Scheduler"]
+    assert messages == [f"building CoxTothEx1Scheduler into {tmp_path}"]
+    assert cache["CoxTothEx1Scheduler"] == path and cache.built == ["CoxTothEx1Scheduler"]  # once per instance
+    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    assert manifest["fmus"]["CoxTothEx1Scheduler"]["fingerprint"] == fingerprint(cache.plan("CoxTothEx1Scheduler"))
+
+    again = ExperimentFmus(tmp_path)  # another process, same folder: reused
+    again["CoxTothEx1Scheduler"]
+    assert again.reused == ["CoxTothEx1Scheduler"] and again.built == []
+    assert "reused 1 up-to-date" in again.summary()
+
+    path.write_bytes(path.read_bytes()[:-10])  # a damaged file is rebuilt
+    damaged = ExperimentFmus(tmp_path)
+    damaged["CoxTothEx1Scheduler"]
+    assert damaged.built == ["CoxTothEx1Scheduler"]
+
+    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    manifest["fmus"]["CoxTothEx1Scheduler"]["fingerprint"] = "0" * 64  # built from other code
+    (tmp_path / "manifest.json").write_text(json.dumps(manifest))
+    stale = ExperimentFmus(tmp_path)
+    stale["CoxTothEx1Scheduler"]
+    assert stale.built == ["CoxTothEx1Scheduler"]
+
+
+def test_fingerprint_follows_what_the_fmu_is_made_of(tmp_path):
+    from dataclasses import replace
+
+    cache = ExperimentFmus(tmp_path)
+    plan = cache.plan("PeixotoEx1HinfPDEps150")
+    assert plan.estimator.design == "lpvest.experiments.fmus:hinf_pd_eps150"
+    base = fingerprint(plan)
+    assert fingerprint(cache.plan("PeixotoEx1HinfPDEps150")) == base
+    assert fingerprint(cache.plan("PeixotoEx1HinfPD")) != base  # another design function
+    edited = tmp_path / "peixoto_ex1.toml"
+    shutil.copy(plan.system_path, edited)
+    edited.write_text(edited.read_text().replace("Bw = [[2.0], [0.1]]", "Bw = [[2.0], [0.2]]"))
+    assert fingerprint(replace(plan, system_path=edited)) != base  # another model
+
+
+def test_variant_model_file_for_example2(tmp_path):
+    from lpvest import load_system
+
+    plan = ExperimentFmus(tmp_path).plan("PeixotoEx2Rho11HinfPD")
+    assert plan.system_path == tmp_path / "models" / "peixoto_ex2_rho11.toml"
+    system = load_system(plan.system_path)
+    assert system.name == "peixoto-ex2-rho11" and system.parameters == {"rho": 11.0}
+    assert plan.model_parameters == ()  # the design is for rho = 11: not an FMU parameter
+    assert {"PeixotoEx2Rho11HinfPD", "PeixotoEx2Rho21HinfPD", "PeixotoEx1HinfRobustEps150"} <= set(CATALOG)
+
+
+def test_unknown_fmu(tmp_path):
+    with pytest.raises(LpvestError, match="no experiment FMU 'PeixotoEx3Plant'"):
+        ExperimentFmus(tmp_path)["PeixotoEx3Plant"]
+
+
+# -- the command line -------------------------------------------------------------------------------
+
+
+def test_disagreement_gives_exit_status_1(monkeypatch, tmp_path, capsys):
+    import lpvest.experiments as experiments
+
+    def run(out_dir, *, fmus):
+        fmu = FmuRun("fake", ("X",), (Agreement.of("y", [1.0], [1.5]),))
+        return ExperimentResult("fake", "table", {"n": 1}, (), (), fmu)
+
+    monkeypatch.setattr(experiments, "registry", lambda: {"fake": Experiment("fake", "a fake", run)})
+    assert main(["reproduce", "fake", "--out", str(tmp_path), "--fmus", str(tmp_path / "c")]) == 1
+    captured = capsys.readouterr()
+    assert "EXCEEDS 1e-12" in captured.out
+    assert "FMU results disagree with the library in: fake" in captured.err
+    assert main(["reproduce", "nothing", "--out", str(tmp_path)]) == 2
+    assert "no experiment 'nothing'" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_reproduce_all_reduced_writes_everything(tmp_path, experiment_fmus):
+    """`lpvest reproduce all --quick`: every experiment, through FMUs, and the report.
+    (The full configuration is measured, not tested: see the README.)"""
+    lines: list[str] = []
+    runs = reproduce_all(tmp_path, fmus=experiment_fmus, reduced=True, echo=lines.append)
+    names = [r.name for r in runs]
+    assert names == ["cox-toth-example1", "cox-toth-truncation", "peixoto-table1", "peixoto-fig1",
+                     "peixoto-example2", "sridhar-noiseless", "sridhar-noisy", "sridhar-sliding"]
+    for r in runs:
+        assert r.ok and r.result.fmu is not None and r.result.paper, r.name
+        data = json.loads(r.results_path.read_text())
+        assert data["fmu_cosimulation"]["ok"] and data["fmu_cosimulation"]["max_abs_difference"] < 1e-13
+        assert all(f.is_file() for f in r.result.figures) and r.result.figures, r.name
+    assert runs[4].options == {"rhos": (1.0, 11.0, 21.0)}
+    report = (tmp_path / "report.md").read_text()
+    assert lines[-1] == f"wrote {tmp_path / 'report.md'}"
+    # the summary table: one row per experiment with its FMU agreement
+    rows = [line for line in report.splitlines() if re.match(r"\| \[[a-z0-9-]+\]\(#", line)]
+    assert [re.match(r"\| \[([a-z0-9-]+)\]", row).group(1) for row in rows] == names
+    assert all("bit for bit" in row or "e-1" in row for row in rows)
+    # the paper-versus-ours tables carry the papers' numbers
+    for text in ("| Theorem 1 (PD), epsilon = 150: gamma | 1.21 | 1.2138 |", "| 8.18 |", "| 0.9617 |", "| 21.4 |",
+                 "0.8321 (one realization)", "machine precision"):
+        assert text in report, text
+    # every figure is linked with a path relative to the report, and exists
+    links = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", report)
+    assert len(links) == sum(len(r.result.figures) for r in runs) >= 14
+    assert all((tmp_path / link).is_file() for link in links)
+    assert report.count("**Through FMUs.**") == 8 and "reduced configuration" in report
