@@ -298,6 +298,12 @@ class CoSimulation:
         elems = _expand(unit.variables, name)
         if not elems:
             raise CoSimulationError(f"{what} {qualified!r}: {comp} has no variable {name!r}", where=where)
+        if len(elems) == 1 and elems[0] == name and unit.variables[name].type not in _TYPES:
+            # a String variable and a vector of the same base name (the observer's
+            # parameter a0 and its output a0[1]): the numeric vector is meant
+            vector = _expand([n for n in unit.variables if n != name], name)
+            if vector:
+                elems = vector
         return [unit.variables[e] for e in elems]
 
     def _connect(self, connections: Sequence[str | tuple[str, str] | Connection]) -> list[tuple[_Var, _Var]]:
@@ -408,8 +414,14 @@ class CoSimulation:
         out: list[_Var] = []
         seen: set[tuple[int, str]] = set()
         for i, r in enumerate(record):
-            for v in self._var(r, "recorded variable", f"record[{i + 1}]"):
-                if v.type in _TYPES and (v.comp, v.name) not in seen:
+            found = self._var(r, "recorded variable", f"record[{i + 1}]")
+            numeric = [v for v in found if v.type in _TYPES]
+            if not numeric:
+                raise CoSimulationError(
+                    f"recorded variable {r!r} is a {found[0].type}; only Real, Integer and Boolean "
+                    "variables can be recorded", where=f"record[{i + 1}]")
+            for v in numeric:
+                if (v.comp, v.name) not in seen:
                     seen.add((v.comp, v.name))
                     out.append(v)
         return out

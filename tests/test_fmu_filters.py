@@ -237,3 +237,17 @@ def test_hinf_fmu_design_is_certified_and_model_is_fixed(fmus):
     plant_vars = {v.name for v in Driver(fmus["PeixotoEx2Plant"]).md.modelVariables}
     filt_vars = {v.name for v in Driver(fmus["PeixotoEx2HinfPD"]).md.modelVariables}
     assert "rho" in plant_vars and "rho" not in filt_vars
+
+
+def test_recording_a_vector_that_shares_its_name_with_a_string_parameter(fmus):
+    """The observer FMU has a String parameter ``a0`` (its declaration) and an
+    output ``a0[1]`` (the estimate): recording ``obs.a0`` means the estimate;
+    a name that selects only a String is an error, not a silently empty record."""
+    from lpvest.cosim import Component, CoSimulation, CoSimulationError
+
+    comps = [Component("obs", fmus["SridharLtvBSplineObserver"])]
+    with CoSimulation(comps, [], step_size=1e-3, record=["obs.a0", "obs.valid"]) as sim:
+        assert sim.recorded == ["obs.a0[1]", "obs.valid[1]"]
+    sched = [Component("sched", fmus["PeixotoEx1Scheduler"])]
+    with pytest.raises(CoSimulationError, match="recorded variable 'sched.kind' is a String"):
+        CoSimulation(sched, [], step_size=1.0, record=["sched.kind"])
