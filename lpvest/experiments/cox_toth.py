@@ -348,8 +348,10 @@ def plant_noise(model: Any, steps: int, seed: int) -> dict[str, np.ndarray]:
     ``[w_t; v_t] = L z_t`` per sample from ``default_rng(seed)``,
     ``L L^T = [[Q, S], [S^T, R]]``, one row at a time as
     :class:`~lpvest.systems.streaming.DiscretePlant` does.
-    (``AffineLPV.simulate(rng=seed)`` draws all the noise at once and then
-    ``x0 ~ N(x0, P0)``: another realization.)"""
+    (``AffineLPV.simulate(rng=seed)`` and the streaming plant without an
+    ``x0`` draw ``x0 ~ N(x0, P0)`` first and then the same noise: with
+    ``P0 != 0`` that is another realization than the FMU's, whose ``x0``
+    parameter is the initial state itself.)"""
     gen = np.random.default_rng(seed)
     L = np.linalg.cholesky(model.noise.joint)
     z = np.array([(gen.standard_normal((1, L.shape[0])) @ L.T)[0] for _ in range(steps)])

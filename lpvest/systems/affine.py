@@ -449,10 +449,12 @@ class AffineLPV:
         if (w is None) != (v is None):
             raise DimensionError("give both noise sequences w and v, or neither")
         if w is None:
+            # the initial state first, then the noise in time order: the same
+            # draws as the streaming plant (lpvest.systems.streaming.DiscretePlant)
             gen = as_rng(rng)
-            w, v = self.noise.sample(gen, T)
             if x0 is None:
                 x0 = gen.multivariate_normal(self.x0, self.P0) if np.any(self.P0) else self.x0
+            w, v = self.noise.sample(gen, T)
         else:
             w = as_signal(w, "w", self.nw, T)
             v = as_signal(v, "v", self.nv, T)
