@@ -422,13 +422,19 @@ def _spline_block(name: str, col: int, spec: UnknownSpline, quad: ProductQuadrat
     values = _basis_rows(x, knots, k, mu).reshape(k, -1)
     dvalues = _basis_rows(x, knots, k, mu, derivative=True).reshape(k, -1) if name[1] == "1" else None
     piece_first = mu - (k - 1)
-    # the band of B_i: the intervals of the pieces whose span has B_i among its k non-zero B-splines
+    # the band of B_i: the intervals of the pieces whose span has B_i among its
+    # k non-zero B-splines; on the whole intervals (pieces 0 .. m - 2, in order)
+    # a run found by bisection, extended by the pieces that split intervals
     basis = np.arange(n)
-    p_lo = np.searchsorted(piece_first + (k - 1), basis, side="left")
-    p_hi = np.searchsorted(piece_first, basis, side="right") - 1
-    empty = p_hi < p_lo  # support outside the window: a zero column, reported by the rank check
-    jlo = quad.piece_interval[np.where(empty, 0, p_lo)]
-    jhi = quad.piece_interval[np.where(empty, 0, p_hi)]
+    whole = piece_first[: m - 1]
+    jlo = np.searchsorted(whole + (k - 1), basis, side="left")
+    jhi = np.searchsorted(whole, basis, side="right") - 1
+    none = jlo > jhi
+    jlo[none], jhi[none] = m - 1, -1
+    owner = piece_first[m - 1 :] + np.arange(k)[:, None]  # (k, split pieces)
+    np.minimum.at(jlo, owner, np.broadcast_to(quad.piece_interval[m - 1 :], owner.shape))
+    np.maximum.at(jhi, owner, np.broadcast_to(quad.piece_interval[m - 1 :], owner.shape))
+    empty = jhi < jlo  # support outside the window: a zero column, reported by the rank check
     jlo[empty] = np.clip(np.floor(knots[:n][empty] / quad.h), 0, m - 2).astype(np.int64)
     jhi[empty] = jlo[empty]
     width = int(max(1, np.max(jhi - jlo + 1)))

@@ -109,10 +109,12 @@ class ProductQuadrature:
     """Cumulative product quadrature on ``m`` uniform samples ``a + j h``.
 
     Build it with :func:`product_quadrature`. The window is cut into ``P``
-    *pieces* at the samples and the breakpoints; each piece holds
-    ``q = points / 2`` Gauss nodes. Node arrays have length ``N = q P`` and
-    hold the first node of every piece, then the second, ...: node
-    ``g = i P + p`` is node ``i`` of piece ``p`` (they reshape to ``(q, P)``).
+    *pieces* at the samples and the breakpoints: pieces ``0 .. m - 2`` are the
+    sample intervals (cut short at their first breakpoint, if any), the others
+    the rest of the split intervals. Each piece holds ``q = points / 2`` Gauss
+    nodes. Node arrays have length ``N = q P`` and hold the first node of every
+    piece, then the second, ...: node ``g = i P + p`` is node ``i`` of piece
+    ``p`` (they reshape to ``(q, P)``).
 
     Attributes
     ----------
@@ -131,12 +133,8 @@ class ProductQuadrature:
         ``weights * (x - a)^k`` (forward, ``[0, k]``) and ``weights * (b - x)^k``
         (backward, ``[1, k]``), ``k = 0..3``; also as ``s_weights``, ``r_weights``.
     piece_interval : ndarray of int, shape (P,)
-        Sample interval ``j`` (``a + j h <= x <= a + (j + 1) h``) of each piece,
-        non-decreasing (a breakpoint inside an interval splits it in two pieces).
-    sample_piece : ndarray of int, shape (m,)
-        Number of pieces before each sample (the first piece at or after it):
-        the forward moments at sample ``j`` sum the pieces before
-        ``sample_piece[j]``, the backward moments the others.
+        Sample interval ``j`` (``a + j h <= x <= a + (j + 1) h``) of each piece:
+        ``j`` for piece ``j < m - 1``.
     stencil : ndarray of int, shape (P,)
         First sample of each piece's interpolation stencil (``points`` samples).
     lagrange : ndarray, shape (points, N)
@@ -152,7 +150,6 @@ class ProductQuadrature:
     weights: np.ndarray
     moment_weights: np.ndarray
     piece_interval: np.ndarray
-    sample_piece: np.ndarray
     stencil: np.ndarray
     lagrange: np.ndarray
 
@@ -204,15 +201,19 @@ class ProductQuadrature:
         ``(b - x)^k`` over each piece, ``k`` in ``moments`` (a range):
         shape (2, len(moments), ..., P) for ``f`` of shape (..., N)."""
         q = self.nodes_per_piece
-        lead = f.shape[:-1]
-        w = self.moment_weights[:, moments.start : moments.stop]
-        w = w.reshape(2, len(moments), *(1,) * len(lead), q, -1)
-        fq = f.reshape(*lead, q, -1)
-        out = w[..., 0, :] * fq[..., 0, :]
-        term = np.empty_like(out)
-        for i in range(1, q):
-            out += np.multiply(w[..., i, :], fq[..., i, :], out=term)
-        return out
+        fq = f.reshape(-1, q, f.shape[-1] // q)  # (rows, q, P)
+        P = fq.shape[-1]
+        out = np.empty((2, len(moments), fq.shape[0], P))
+        term = np.empty(P)
+        # row by row into one output: large temporaries cost more than the arithmetic
+        for d in range(2):
+            for kk, k in enumerate(moments):
+                w = self.moment_weights[d, k].reshape(q, P)
+                for row, fr in enumerate(fq):
+                    o = np.multiply(w[0], fr[0], out=out[d, kk, row])
+                    for i in range(1, q):
+                        o += np.multiply(w[i], fr[i], out=term)
+        return out.reshape(2, len(moments), *f.shape[:-1], P)
 
     def cumulative(self, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Forward and backward moments of ``f`` (given at the nodes).
@@ -221,17 +222,25 @@ class ProductQuadrature:
         ``F[k, j] = int_a^{t_j} (x - a)^k f dx``,
         ``B[k, j] = int_{t_j}^b (b - x)^k f dx``.
         """
-        pieces = self.piece_moments(f)
-        Fp, Bp = cumulate(pieces[0], pieces[1])
-        return Fp[:, self.sample_piece], Bp[:, self.sample_piece]
+        per_interval = self.interval_sums(self.piece_moments(f))
+        return cumulate(per_interval[0], per_interval[1])
 
     def cumulative_rows(self, f: np.ndarray, moments: range) -> tuple[list[Any], list[Any]]:
         """:meth:`cumulative` for the moments ``k`` in ``moments`` only (a range):
         ``F, B`` are lists indexed by ``k = 0..3`` holding the rows, shape (m,),
         and ``None`` for the moments not computed."""
-        pieces = self.piece_moments(f, moments)
-        Fp, Bp = cumulate(pieces[0], pieces[1])
-        return moment_rows(moments, Fp[:, self.sample_piece]), moment_rows(moments, Bp[:, self.sample_piece])
+        per_interval = self.interval_sums(self.piece_moments(f, moments))
+        F, B = cumulate(per_interval[0], per_interval[1])
+        return moment_rows(moments, F), moment_rows(moments, B)
+
+    def interval_sums(self, pieces: np.ndarray) -> np.ndarray:
+        """Per-piece values (..., P) summed per sample interval, (..., m - 1);
+        ``pieces`` is overwritten."""
+        J = self.m - 1
+        out = pieces[..., :J]
+        if pieces.shape[-1] > J:
+            np.add.at(out, (..., self.piece_interval[J:]), pieces[..., J:])
+        return out
 
 
 def moment_rows(moments: range, values: np.ndarray) -> list[Any]:
@@ -301,15 +310,20 @@ def product_quadrature(
     bp = np.asarray(breakpoints, dtype=float).ravel()
     rel = (bp - a) / h
     inside = np.unique(bp[(bp > a) & (bp < b) & (np.abs(rel - np.round(rel)) > 1e-9)])
-    # the pieces: the sample intervals, split at the breakpoints inside them
-    at = np.searchsorted(samples, inside, side="right")  # a breakpoint lies in interval at - 1
-    edges = np.insert(samples, at, inside)
-    piece_interval = np.insert(np.arange(m - 1), at, at - 1)
-    # pieces before sample j: one per interval before it, plus the breakpoints there
-    sample_piece = np.arange(m) + np.cumsum(np.bincount(at, minlength=m))
+    # the pieces: the sample intervals, cut short at their first breakpoint,
+    # then from each breakpoint to the next one in its interval or to its end
+    split = np.searchsorted(samples, inside, side="right") - 1  # the interval of each breakpoint
+    first = np.ones(inside.size, dtype=bool)
+    first[1:] = split[1:] != split[:-1]
+    last = np.ones(inside.size, dtype=bool)
+    last[:-1] = first[1:]
+    right = samples[1:].copy()
+    right[split[first]] = inside[first]
+    left = np.concatenate([samples[:-1], inside])
+    right = np.concatenate([right, np.where(last, samples[split + 1], np.append(inside[1:], b))])
+    piece_interval = np.concatenate([np.arange(m - 1), split])
     q = points // 2
     gx, gw = _gauss_legendre(q)
-    left, right = edges[:-1], edges[1:]
     half = 0.5 * (right - left)
     mid = 0.5 * (right + left)
     x = (mid + half * gx[:, None]).ravel()  # node i of every piece, then node i + 1
@@ -332,8 +346,7 @@ def product_quadrature(
         denominator = float(np.prod([ell - j for j in range(points) if j != ell]))
         np.divide(total, (pos - ell) * denominator, out=lagrange[ell])
     return ProductQuadrature(
-        float(a), float(h), int(m), int(points), x, w, moment_weights, piece_interval, sample_piece, stencil,
-        lagrange,
+        float(a), float(h), int(m), int(points), x, w, moment_weights, piece_interval, stencil, lagrange,
     )
 
 
