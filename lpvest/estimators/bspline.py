@@ -74,7 +74,6 @@ from .kernels import (
     ProductQuadrature,
     check_uniform_samples as _check_samples,
     coefficient_terms,
-    cumulate,
     finish_identity,
     free_derivative,
     free_identity,
@@ -523,13 +522,28 @@ def _band_moments(block: _Block, quad: ProductQuadrature, values: np.ndarray, v_
     samples, (n, width + 1) rows, and over the whole band, (n,) rows (:func:`moment_rows`)."""
     assert block.band_slot is not None
     n, L, K = block.size, block.width, len(moments)
-    pieces = quad.piece_moments(values * v_nodes, moments).reshape(2, K, -1)  # (r, piece) pairs
-    # summed per basis function and interval (the pieces of a split interval add up), then cumulated
-    bands = np.empty((2, K, n, L))
-    for d in range(2):
-        for k in range(K):
-            bands[d, k] = np.bincount(block.band_slot, weights=pieces[d, k], minlength=n * L).reshape(n, L)
-    F, B = cumulate(bands[0], bands[1])  # (K, n, L + 1)
+    k_order, q = values.shape[0], quad.nodes_per_piece
+    basis = values.reshape(k_order, q, -1)
+    F, B = np.empty((K, n, L + 1)), np.empty((K, n, L + 1))
+    weighted = np.empty_like(v_nodes)
+    pieces = np.empty(basis.shape[::2])  # (order, P): B_{first + r} v times the moment weight, per piece
+    term = np.empty(pieces.shape[1])
+    # one moment at a time (large temporaries cost more than the arithmetic here)
+    for d, out in ((0, F), (1, B)):
+        for kk, k in enumerate(moments):
+            wv = np.multiply(quad.moment_weights[d, k], v_nodes, out=weighted).reshape(q, -1)
+            for r in range(k_order):
+                row = np.multiply(wv[0], basis[r, 0], out=pieces[r])
+                for i in range(1, q):
+                    row += np.multiply(wv[i], basis[r, i], out=term)
+            # per basis function and interval of its band (the pieces of a split interval add up)
+            per_interval = np.bincount(block.band_slot, weights=pieces.ravel(), minlength=n * L).reshape(n, L)
+            if d == 0:  # forward: the intervals before each band sample
+                out[kk, :, 0] = 0.0
+                np.cumsum(per_interval, axis=1, out=out[kk, :, 1:])
+            else:  # backward: those after it
+                out[kk, :, -1] = 0.0
+                np.cumsum(per_interval[:, ::-1], axis=1, out=out[kk, :, -2::-1])
     return (
         moment_rows(moments, F), moment_rows(moments, B),
         moment_rows(moments, F[:, :, -1]), moment_rows(moments, B[:, :, 0]),

@@ -136,10 +136,18 @@ class ProductQuadrature:
         Sample interval ``j`` (``a + j h <= x <= a + (j + 1) h``) of each piece:
         ``j`` for piece ``j < m - 1``.
     stencil : ndarray of int, shape (P,)
-        First sample of each piece's interpolation stencil (``points`` samples).
-    lagrange : ndarray, shape (points, N)
-        Lagrange weights: ``v(x_g) ~ sum_l lagrange[l, g] v[stencil[p] + l]``
-        for node ``g`` of piece ``p``.
+        First sample of each piece's interpolation stencil (``points`` samples,
+        centred on the piece's interval, shifted inwards at the ends).
+    lagrange : ndarray, shape (points, q)
+        Lagrange weights of the nodes of a *regular* piece (a whole interval,
+        not split, with a centred stencil; they all have the same nodes relative
+        to their stencil): ``v(x) ~ sum_l lagrange[l, i] v[stencil[p] + l]``
+        for node ``i`` of piece ``p``.
+    irregular : ndarray of int, shape (P_irr,)
+        The other pieces (split intervals and the ``points / 2 - 1`` intervals
+        at each end).
+    irregular_lagrange : ndarray, shape (points, q, P_irr)
+        Their Lagrange weights.
     """
 
     a: float
@@ -152,6 +160,8 @@ class ProductQuadrature:
     piece_interval: np.ndarray
     stencil: np.ndarray
     lagrange: np.ndarray
+    irregular: np.ndarray
+    irregular_lagrange: np.ndarray
 
     @property
     def b(self) -> float:
@@ -189,11 +199,22 @@ class ProductQuadrature:
 
     def interpolate(self, v: np.ndarray) -> np.ndarray:
         """Samples ``v`` (shape (m,)) interpolated at the nodes, shape (N,)."""
-        lagrange = self.lagrange.reshape(self.points, self.nodes_per_piece, -1)
-        out = lagrange[0] * v[self.stencil]
-        term = np.empty_like(out)
-        for ell in range(1, self.points):
-            out += np.multiply(lagrange[ell], v[ell:][self.stencil], out=term)
+        q, points = self.nodes_per_piece, self.points
+        out = np.empty((q, self.piece_interval.size))
+        # the regular pieces among the whole intervals c .. m - points + c
+        # (stencil j - c): slices of v, then the irregular ones overwritten
+        c = points // 2 - 1
+        n = self.m - points + 1
+        term = np.empty(n)
+        for i in range(q):
+            row = np.multiply(self.lagrange[0, i], v[:n], out=out[i, c : c + n])
+            for ell in range(1, points):
+                row += np.multiply(self.lagrange[ell, i], v[ell : ell + n], out=term)
+        first = self.stencil[self.irregular]
+        irregular = self.irregular_lagrange[0] * v[first]
+        for ell in range(1, points):
+            irregular += self.irregular_lagrange[ell] * v[first + ell]
+        out[:, self.irregular] = irregular
         return out.ravel()
 
     def piece_moments(self, f: np.ndarray, moments: range = range(MOMENTS)) -> np.ndarray:
@@ -333,21 +354,34 @@ def product_quadrature(
         moment_weights[direction, 0] = w
         for k in range(1, MOMENTS):
             np.multiply(w, dist**k, out=moment_weights[direction, k])
-    # Lagrange weights L_l(pos) = prod_{j != l} (pos - j) / (l - j) on a stencil
-    # centred on the piece's interval (shifted inwards at the ends); a node lies
-    # strictly between two samples, so pos is never an integer
-    stencil = np.clip(piece_interval - points // 2 + 1, 0, m - points)
-    pos = ((x.reshape(q, -1) - samples[stencil]) / h).ravel()
+    # interpolation stencils: centred on the piece's interval, shifted inwards at the ends
+    c = points // 2 - 1
+    stencil = np.clip(piece_interval - c, 0, m - points)
+    # a whole interval with a centred stencil has its nodes at c + (1 + gx) / 2
+    # samples from the stencil's start: one set of weights serves them all
+    regular = np.zeros(piece_interval.size, dtype=bool)
+    regular[c : m - points + c + 1] = True
+    regular[split] = False
+    irregular = np.flatnonzero(~regular)
+    pos = (x.reshape(q, -1)[:, irregular] - samples[stencil[irregular]]) / h
+    return ProductQuadrature(
+        float(a), float(h), int(m), int(points), x, w, moment_weights, piece_interval, stencil,
+        _lagrange_weights(c + 0.5 * (1.0 + gx), points), irregular, _lagrange_weights(pos, points),
+    )
+
+
+def _lagrange_weights(pos: np.ndarray, points: int) -> np.ndarray:
+    """``L_l(pos) = prod_{j != l} (pos - j) / (l - j)``, ``l = 0 .. points - 1``:
+    shape (points, *pos.shape); ``pos`` (in samples from the stencil's start)
+    lies strictly between two samples, so it is never an integer."""
     total = pos.copy()  # prod_j (pos - j)
     for j in range(1, points):
         total *= pos - j
-    lagrange = np.empty((points, x.size))
+    out = np.empty((points, *pos.shape))
     for ell in range(points):
         denominator = float(np.prod([ell - j for j in range(points) if j != ell]))
-        np.divide(total, (pos - ell) * denominator, out=lagrange[ell])
-    return ProductQuadrature(
-        float(a), float(h), int(m), int(points), x, w, moment_weights, piece_interval, stencil, lagrange,
-    )
+        np.divide(total, (pos - ell) * denominator, out=out[ell])
+    return out
 
 
 #: Relative tolerance of the uniform-sampling check: ``|t[j+1] - t[j] - h| <= tol * h``.
