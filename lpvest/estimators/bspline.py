@@ -23,7 +23,7 @@ instants). The least-squares problem is solved by Householder QR of the
 column-scaled ``[P, q]`` (no normal equations), optionally with a P-spline
 difference penalty whose weight is given or chosen by generalized
 cross-validation (GCV). ``P`` (``m x s``, dense) is never formed: between
-consecutive edges of the B-splines' supports its rows lie in a space of
+consecutive starts of the B-splines' supports its rows lie in a space of
 dimension about 10, so each such segment is first reduced by a small QR and
 only the stacked triangular factors enter the final QR (a TSQR; see
 :func:`_compressed_system`). :func:`kernel_regression` returns the dense ``P``.
@@ -368,8 +368,8 @@ class _Block:
     """Columns of ``P`` belonging to one unknown coefficient.
 
     For a spline block, the *band* of ``B_i`` is the sample intervals where it
-    is non-zero, ``jlo[i] .. jlo[i] + width - 1`` (at most); band arrays are
-    (n, width).
+    is non-zero, ``jlo[i] .. jhi[i]``; band arrays are (n, width) (intervals
+    ``jlo[i] .. jlo[i] + width - 1``, zero beyond ``jhi[i]``).
     """
 
     name: str
@@ -516,8 +516,9 @@ class _Band:
     c1a: np.ndarray
 
 
-def _band_moments(block: _Block, quad: ProductQuadrature, values: np.ndarray, v_nodes: np.ndarray,
-                  moments: range) -> tuple[list[Any], ...]:
+def _band_moments(
+    block: _Block, quad: ProductQuadrature, values: np.ndarray, v_nodes: np.ndarray, moments: range
+) -> tuple[list[Any], ...]:
     """Moments of ``B_i v`` (``values``: ``B_i`` or ``B_i'`` at the nodes) at the band
     samples, (n, width + 1) rows, and over the whole band, (n,) rows (:func:`moment_rows`)."""
     assert block.band_slot is not None
@@ -628,9 +629,9 @@ def _parts(plan: _Plan, a: float, u: np.ndarray, y: np.ndarray) -> _Parts:
     u_nodes = quad.interpolate(u)
     # the moments of y (and u) that the free part and the unknown constants read
     const = [b for b in plan.blocks if b.spline is None]
-    moments = {"y": quad.cumulative_rows(y_nodes, _hull(FREE_MOMENTS, *(SLOT_MOMENTS[int(b.name[1])] for b in const
-                                                                  if b.name[0] == "a")))}
+    y_const = [SLOT_MOMENTS[int(b.name[1])] for b in const if b.name[0] == "a"]
     u_const = [SLOT_MOMENTS[int(b.name[1])] for b in const if b.name[0] == "b"]
+    moments = {"y": quad.cumulative_rows(y_nodes, _hull(FREE_MOMENTS, *y_const))}
     if u_const:
         moments["u"] = quad.cumulative_rows(u_nodes, _hull(*u_const))
     Fy, By = moments["y"]
