@@ -640,7 +640,7 @@ def _parts(plan: _Plan, a: float, u: np.ndarray, y: np.ndarray) -> _Parts:
     funcs = _known_functions(plan.model)
     for name, f in funcs.items():
         phi = f(quad.x)
-        dphi = f.derivative()(quad.x) if name[1] == "1" else None
+        dphi = f.derivative()(quad.x) if name[1] == "1" and not f.is_constant else None
         if not np.any(phi) and (dphi is None or not np.any(dphi)):
             continue
         ident, deriv = coefficient_terms(quad, int(name[1]), phi, dphi, y_nodes if name[0] == "a" else u_nodes)
