@@ -32,6 +32,11 @@ For comparison it also times forming the dense ``P`` and a LAPACK QR of it
 (what a plain implementation would do). Timings on a shared machine are
 noisy: compare numbers of one run with each other, not across runs; the load
 average is printed.
+
+The cold figure includes the operating system's price for fresh memory pages
+(the geometry is a few MB; where freed memory goes back to the system, as on
+small VMs, this is a visible share, and the cold time exceeds geometry + warm).
+A first call in a fresh process also pays the imports and first-touch costs.
 """
 
 from __future__ import annotations
