@@ -13,20 +13,30 @@ Run::
 is imported); the default leaves BLAS alone. On a loaded machine several BLAS
 threads spinning against other processes can be much slower than one.
 
-It reports the median over ``--repeat`` runs of
+It reports the median over ``--repeat`` runs (wall clock, and the process's
+CPU time, which a shared machine disturbs less) of
 
 - ``cold``: :func:`lpvest.estimators.bspline.fit_kernel_model` (prepares the
-  window geometry: quadrature nodes and the B-spline basis at the nodes, then fits);
+  window geometry, then fits): what a single call on a window costs;
 - ``warm``: the fit with the geometry prepared once, which is what
   :class:`~lpvest.estimators.bspline.BSplineObserver` does for every window;
 
-and where the time of a warm fit goes: interpolation and cumulative quadrature
-(the known part, the constant column, the B-spline band moments), the
-segment-wise QR of ``[P, q]``, the final QR + rank check + solve, and the
-state reconstruction (y_E, y_E'). For comparison it also times forming the
-dense ``P`` and a LAPACK QR of it (what a plain implementation would do).
-Timings on a shared machine are noisy: compare numbers of one run with each
-other, not across runs.
+and where the time goes. The geometry: the quadrature (pieces between the
+samples and the knots, Gauss nodes, moment weights, Lagrange weights) and the
+B-spline block (the basis at the nodes and the samples, the bands). A warm
+fit: interpolation of u, y at the nodes and the cumulative moments (the known
+part, the constant columns, the B-spline band moments), the segment-wise QR of
+``[P, q]``, the final QR + rank check + solve, and the state reconstruction
+(y_E, y_E'). Then a warm fit with a GCV-chosen penalty and its lambda search.
+For comparison it also times forming the dense ``P`` and a LAPACK QR of it
+(what a plain implementation would do). Timings on a shared machine are
+noisy: compare numbers of one run with each other, not across runs; the load
+average is printed.
+
+The cold figure includes the operating system's price for fresh memory pages
+(the geometry is a few MB; where freed memory goes back to the system, as on
+small VMs, this is a visible share, and the cold time exceeds geometry + warm).
+A first call in a fresh process also pays the imports and first-touch costs.
 """
 
 from __future__ import annotations
@@ -56,16 +66,19 @@ from scipy.linalg import qr  # noqa: E402
 
 from lpvest import load_system  # noqa: E402
 from lpvest.estimators import bspline as bs  # noqa: E402
+from lpvest.estimators.kernels import product_quadrature  # noqa: E402
 
 
-def _median_ms(fn, repeat: int) -> float:
+def _median_ms(fn, repeat: int) -> tuple[float, float]:
+    """Median wall-clock and CPU milliseconds of ``fn()`` over ``repeat`` runs (after one warm-up)."""
     fn()
-    times = []
+    wall, cpu = [], []
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         fn()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * float(np.median(times))
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    return 1e3 * float(np.median(wall)), 1e3 * float(np.median(cpu))
 
 
 def main() -> None:
@@ -79,50 +92,57 @@ def main() -> None:
     idx = np.arange(m)
     plan = bs._build_plan(model, m, h, points=6, difference_order=2)
     s = plan.n_unknowns
+    spline = plan.blocks[0]
+    knots = spline.knots
 
-    def warm_fit():
-        return bs._fit(plan, 0.0, u, y, penalty=None, instants=idx, rank_rtol=1e-9)
+    def warm_fit(penalty=None):
+        return bs._fit(plan, 0.0, u, y, penalty=penalty, instants=idx, rank_rtol=1e-9)
 
-    cold = _median_ms(lambda: bs.fit_kernel_model(model, t, u, y), repeat)
-    warm = _median_ms(warm_fit, repeat)
-    geometry = _median_ms(lambda: bs._build_plan(model, m, h, points=6, difference_order=2), repeat)
-    parts_ms = _median_ms(lambda: bs._parts(plan, 0.0, u, y), repeat)
     parts = bs._parts(plan, 0.0, u, y)
-    band_ms = _median_ms(lambda: bs._band(plan.blocks[0], parts.quad, parts.y_nodes), repeat)
-    compress = _median_ms(lambda: bs._compressed_system(plan, parts, None), repeat)
     K = bs._compressed_system(plan, parts, None)
 
-    def final_solve() -> None:
+    def final_solve() -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
         A = K.copy()
         scale = np.sqrt(np.einsum("ij,ij->j", A[:, :s], A[:, :s]))
         A[:, :s] /= scale
         (_, _), Raug = qr(A, mode="raw", overwrite_a=True, check_finite=False)
         bs._rank_check(plan, Raug[:s, :s], 1e-9)
         bs._penalized_solve(Raug[:s, :s], Raug[:s, s], plan.penalty_matrix / scale, 0.0)
+        return Raug[:s, :s], Raug[:s, s], float(Raug[s, s] ** 2), plan.penalty_matrix / scale
 
-    solve = _median_ms(final_solve, repeat)
+    R, z, rho2, D = final_solve()
     beta = warm_fit().beta
-    state = _median_ms(lambda: bs._fitted(plan, parts, beta, u), repeat)
-    gcv = _median_ms(lambda: bs._fit(plan, 0.0, u, y, penalty="gcv", instants=idx, rank_rtol=1e-9),
-                     max(3, repeat // 5))
-    dense_form = _median_ms(lambda: bs._dense_system(plan, parts), max(3, repeat // 3))
     dense = bs._dense_system(plan, parts)
-    dense_qr = _median_ms(lambda: qr(dense.copy(order="F"), mode="raw", overwrite_a=True, check_finite=False),
-                          max(3, repeat // 3))
-
+    few = max(3, repeat // 3)
+    rows = [
+        ("cold fit (fit_kernel_model)", _median_ms(lambda: bs.fit_kernel_model(model, t, u, y), repeat),
+         "target <= 50 ms"),
+        ("  window geometry (_build_plan)", _median_ms(
+            lambda: bs._build_plan(model, m, h, points=6, difference_order=2), repeat), ""),
+        ("    quadrature: pieces, nodes, weights", _median_ms(
+            lambda: product_quadrature(0.0, h, m, breakpoints=knots, points=6), repeat), ""),
+        ("    B-spline basis at nodes/samples, bands", _median_ms(
+            lambda: bs._spline_block("a0", 0, spline.spline, plan.quad, t[-1] - t[0]), repeat), ""),
+        ("warm fit (geometry prepared once)", _median_ms(warm_fit, repeat), ""),
+        ("  quadrature: interpolation, moments", _median_ms(lambda: bs._parts(plan, 0.0, u, y), repeat), ""),
+        ("    of which the a_0 band moments", _median_ms(
+            lambda: bs._band(spline, parts.quad, parts.y_nodes), repeat), ""),
+        (f"  segment-wise QR of [P, q] -> {K.shape[0]} rows", _median_ms(
+            lambda: bs._compressed_system(plan, parts, None), repeat), ""),
+        ("  final QR + rank check (SVD) + solve", _median_ms(final_solve, repeat), ""),
+        ("  state: coefficients, y_E, y_E'", _median_ms(lambda: bs._fitted(plan, parts, beta, u), repeat), ""),
+        ("warm fit with GCV-chosen penalty", _median_ms(lambda: warm_fit("gcv"), repeat), ""),
+        ("  of which the lambda search", _median_ms(lambda: bs._choose_penalty(R, z, rho2, D, m), repeat), ""),
+        ("for comparison: dense P formed", _median_ms(lambda: bs._dense_system(plan, parts), few), ""),
+        ("  LAPACK QR of the dense [P, q]", _median_ms(
+            lambda: qr(dense.copy(order="F"), mode="raw", overwrite_a=True, check_finite=False), few), ""),
+    ]
     threads = os.environ.get("OPENBLAS_NUM_THREADS", "default")
     print(f"one window: {m} samples, {s} unknowns (86 quadratic B-splines + a_1), every sample an instant;"
-          f" median of {repeat}; BLAS threads: {threads}")
-    print(f"  cold fit (fit_kernel_model)                 {cold:7.1f} ms")
-    print(f"  warm fit (geometry prepared once)           {warm:7.1f} ms   target <= 50 ms")
-    print(f"    quadrature: interpolation, moments        {parts_ms:7.1f} ms")
-    print(f"      of which the a_0 band moments           {band_ms:7.1f} ms")
-    print(f"    segment-wise QR of [P, q] -> {K.shape[0]:4d} rows  {compress:7.1f} ms")
-    print(f"    final QR + rank check (SVD) + solve       {solve:7.1f} ms")
-    print(f"    state: coefficients, y_E, y_E'            {state:7.1f} ms")
-    print(f"  window geometry (nodes, basis, bands)       {geometry:7.1f} ms")
-    print(f"  warm fit with GCV-chosen penalty            {gcv:7.1f} ms")
-    print(f"  for comparison: dense P formed              {dense_form:7.1f} ms, LAPACK QR of it {dense_qr:7.1f} ms")
+          f" median of {repeat}; BLAS threads: {threads}; load average {os.getloadavg()[0]:.2f}")
+    print(f"  {'':44s} {'wall':>8s} {'cpu':>8s}")
+    for label, (wall, cpu), note in rows:
+        print(f"  {label:44s} {wall:6.1f} ms {cpu:6.1f} ms   {note}".rstrip())
 
 
 if __name__ == "__main__":

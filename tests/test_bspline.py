@@ -197,6 +197,26 @@ def test_quadrature_is_exact_for_polynomial_data():
     np.testing.assert_allclose(F[0], exact, atol=1e-13)
 
 
+def test_quadrature_moments_with_several_breakpoints_in_one_interval():
+    # three breakpoints in one sample interval (four pieces), one on a sample
+    # and one within 1e-9 h of a sample (both ignored), one outside; the data
+    # are quadratic, so every moment's integrand has degree <= 5 and the
+    # 3-point Gauss rule is exact. Oracle: the polynomials integrated exactly.
+    from numpy.polynomial import polynomial as pn
+
+    a, b = -1.0, 1.5
+    t = np.linspace(a, b, 26)  # h = 0.1
+    q = kernels.product_quadrature(a, t[1] - t[0], t.size, breakpoints=[0.123, 0.1234, 0.17, 0.7, 0.9 + 1e-12, 2.0])
+    assert q.x.size == 3 * (t.size - 1 + 3)
+    f = [2.0, -1.0, 0.5]
+    F, B = q.cumulative(q.interpolate(pn.polyval(t, f)))
+    for k in range(4):
+        forward = pn.polyint(pn.polymul(pn.polypow([-a, 1.0], k), f))  # of (x - a)^k f
+        backward = pn.polyint(pn.polymul(pn.polypow([b, -1.0], k), f))  # of (b - x)^k f
+        np.testing.assert_allclose(F[k], pn.polyval(t, forward) - pn.polyval(a, forward), rtol=0, atol=1e-13)
+        np.testing.assert_allclose(B[k], pn.polyval(b, backward) - pn.polyval(t, backward), rtol=0, atol=1e-13)
+
+
 # -- the kernel identities (9), (10) --------------------------------------------------------------
 
 
@@ -376,6 +396,41 @@ def test_solve_with_clustered_knots_and_two_spline_blocks(sridhar, traj9):
     reg = kernel_regression(model, traj9.t, traj9.u, y)
     beta_ref = np.linalg.lstsq(reg.P, reg.q, rcond=None)[0]
     fit = fit_kernel_model(model, traj9.t, traj9.u, y)
+    np.testing.assert_allclose(fit.beta, beta_ref, rtol=1e-8, atol=1e-8 * np.max(np.abs(beta_ref)))
+
+
+def test_regression_columns_against_the_printed_kernels_with_split_intervals():
+    # Oracle independent of the moment machinery: a column of P is the a0 part
+    # of the printed kernel (18) with a0 = B_i, integrated by scipy's adaptive
+    # quad against the analytic y. The knots put two breakpoints into one
+    # sample interval, a double knot on a sample and a knot just off one.
+    from scipy.integrate import quad
+    from scipy.interpolate import BSpline
+
+    a, b = 0.5, 6.5
+    t = np.linspace(a, b, 601)  # h = 0.01
+    knots = np.array([-0.4, -0.2, 0.0, 1.2034, 1.2071, 3.0, 3.0, 4.5137, 6.0, 6.2, 6.4])  # relative to a
+    n = knots.size - 3
+    model = KernelModel(a0=UnknownSpline(n, 3, knots=knots), a1=_a1, b0=1.0, b1=lpvest_tf(_b1, _db1))
+    reg = kernel_regression(model, t, _u(t), _y(t))
+    inside = knots[(knots > 0) & (knots < b - a)] + a
+    for i in (1, 3, 4, 6):
+        basis = BSpline(knots + a, np.eye(n)[i], 2, extrapolate=False)
+
+        def a0_part(s, t0, basis=basis):
+            with_bi = kernels.kernel_functions(t0, s, a, b, {"a0": lambda x: np.nan_to_num(basis(x))}).Ky
+            return (with_bi - kernels.kernel_functions(t0, s, a, b, {}).Ky) * _y(s)
+
+        for j in (0, 120, 121, 300, 451, 600):
+            pts = sorted({*inside, *([t[j]] if a < t[j] < b else [])})
+            ref = quad(a0_part, a, b, args=(t[j],), points=pts, epsabs=1e-15, epsrel=1e-13, limit=400)[0]
+            assert reg.P[j, i] == pytest.approx(ref, abs=1e-13), (i, j)
+    # and the segment-wise solve agrees with lstsq on this P
+    rng = np.random.default_rng(2)
+    y = _y(t) + 1e-4 * rng.standard_normal(t.size)
+    reg = kernel_regression(model, t, _u(t), y)
+    beta_ref = np.linalg.lstsq(reg.P, reg.q, rcond=None)[0]
+    fit = fit_kernel_model(model, t, _u(t), y)
     np.testing.assert_allclose(fit.beta, beta_ref, rtol=1e-8, atol=1e-8 * np.max(np.abs(beta_ref)))
 
 

@@ -23,7 +23,7 @@ instants). The least-squares problem is solved by Householder QR of the
 column-scaled ``[P, q]`` (no normal equations), optionally with a P-spline
 difference penalty whose weight is given or chosen by generalized
 cross-validation (GCV). ``P`` (``m x s``, dense) is never formed: between
-consecutive edges of the B-splines' supports its rows lie in a space of
+consecutive starts of the B-splines' supports its rows lie in a space of
 dimension about 10, so each such segment is first reduced by a small QR and
 only the stacked triangular factors enter the final QR (a TSQR; see
 :func:`_compressed_system`). :func:`kernel_regression` returns the dense ``P``.
@@ -68,14 +68,16 @@ from ..systems.ltv import LTVInputOutput, LTVStateSpace, TimeFunction
 from ..validation import as_vector, check_finite
 from .base import Port
 from .kernels import (
+    FREE_MOMENTS,
     MOMENTS,
+    SLOT_MOMENTS,
     ProductQuadrature,
     check_uniform_samples as _check_samples,
     coefficient_terms,
-    cumulate,
     finish_identity,
     free_derivative,
     free_identity,
+    moment_rows,
     product_quadrature,
     slot_derivative,
     slot_identity,
@@ -276,22 +278,52 @@ def spline_knots(spec: UnknownSpline, length: float) -> np.ndarray:
     return knots
 
 
+def _span(x: np.ndarray, knots: np.ndarray, order: int) -> np.ndarray:
+    """Knot span ``mu`` of each ``x`` (``knots[mu] <= x < knots[mu + 1]``, clipped
+    to the spans of the basis): the non-zero B-splines there are ``mu - order + 1 .. mu``."""
+    return np.clip(np.searchsorted(knots, x, side="right") - 1, order - 1, knots.size - order - 1)
+
+
 def _nonzero_basis(x: np.ndarray, knots: np.ndarray, mu: np.ndarray, degree: int) -> np.ndarray:
-    """Cox-de Boor: values of ``B_{mu-degree+r, degree}(x)``, ``r = 0..degree``, shape (N, degree+1)."""
-    N = np.zeros((x.size, degree + 1))
-    N[:, 0] = 1.0
-    left = np.zeros((x.size, degree + 1))
-    right = np.zeros((x.size, degree + 1))
+    """Cox-de Boor: values of ``B_{mu-degree+r, degree}(x)``, ``r = 0..degree``, shape
+    (degree + 1, *x.shape) (``mu`` broadcasts against ``x``)."""
+    N = np.empty((degree + 1, *x.shape))
+    N[0] = 1.0
+    left = [x - knots[mu + 1 - j] for j in range(1, degree + 1)]  # left[j - 1]
+    right = [knots[mu + j] - x for j in range(1, degree + 1)]  # right[j - 1]
     for j in range(1, degree + 1):
-        left[:, j] = x - knots[mu + 1 - j]
-        right[:, j] = knots[mu + j] - x
-        saved = np.zeros(x.size)
+        saved = np.zeros(x.shape)
         for r in range(j):
-            temp = N[:, r] / (right[:, r + 1] + left[:, j - r])
-            N[:, r] = saved + right[:, r + 1] * temp
-            saved = left[:, j - r] * temp
-        N[:, j] = saved
+            temp = N[r] / (right[r] + left[j - r - 1])
+            N[r] = saved + right[r] * temp
+            saved = left[j - r - 1] * temp
+        N[j] = saved
     return N
+
+
+def _basis_rows(
+    x: np.ndarray, knots: np.ndarray, order: int, mu: np.ndarray, *, derivative: bool = False
+) -> np.ndarray:
+    """The ``order`` B-splines non-zero in the spans ``mu`` (or their derivatives
+    (22)) at ``x``: row ``r`` holds ``B_{mu - order + 1 + r}``, shape (order, *x.shape)
+    (``mu`` broadcasts against ``x``)."""
+    degree = order - 1
+    if not derivative:
+        return _nonzero_basis(x, knots, mu, degree)
+    out = np.zeros((order, *x.shape))
+    if degree == 0:
+        return out
+    lower = _nonzero_basis(x, knots, mu, degree - 1)  # B_{mu-degree+1+r, degree-1}
+    first = mu - degree
+    for r in range(order):
+        i = first + r
+        if r >= 1:
+            den = knots[i + degree] - knots[i]
+            out[r] += np.where(den > 0, degree / np.where(den > 0, den, 1.0), 0.0) * lower[r - 1]
+        if r <= degree - 1:
+            den = knots[i + degree + 1] - knots[i + 1]
+            out[r] -= np.where(den > 0, degree / np.where(den > 0, den, 1.0), 0.0) * lower[r]
+    return out
 
 
 def bspline_basis(
@@ -323,25 +355,9 @@ def bspline_basis(
     (array([0]), array([[0.125, 0.75 , 0.125]]))
     """
     x = np.asarray(x, dtype=float)
-    degree = order - 1
-    n_basis = knots.size - order
-    mu = np.clip(np.searchsorted(knots, x, side="right") - 1, degree, n_basis - 1)
-    first = mu - degree
-    if not derivative:
-        return first, _nonzero_basis(x, knots, mu, degree)
-    out = np.zeros((x.size, order))
-    if degree == 0:
-        return first, out
-    lower = _nonzero_basis(x, knots, mu, degree - 1)  # B_{mu-degree+1+r, degree-1}
-    for r in range(order):
-        i = first + r
-        if r >= 1:
-            den = knots[i + degree] - knots[i]
-            out[:, r] += np.where(den > 0, degree / np.where(den > 0, den, 1.0), 0.0) * lower[:, r - 1]
-        if r <= degree - 1:
-            den = knots[i + degree + 1] - knots[i + 1]
-            out[:, r] -= np.where(den > 0, degree / np.where(den > 0, den, 1.0), 0.0) * lower[:, r]
-    return first, out
+    mu = _span(x, knots, order)
+    rows = _basis_rows(x, knots, order, mu, derivative=derivative)
+    return mu - (order - 1), np.ascontiguousarray(rows.T)
 
 
 # -- the regression plan (everything that depends on the window geometry, not on the data) -----
@@ -349,23 +365,27 @@ def bspline_basis(
 
 @dataclass(frozen=True, eq=False)
 class _Block:
-    """Columns of ``P`` belonging to one unknown coefficient."""
+    """Columns of ``P`` belonging to one unknown coefficient.
+
+    For a spline block, the *band* of ``B_i`` is the sample intervals where it
+    is non-zero, ``jlo[i] .. jhi[i]``; band arrays are (n, width) (intervals
+    ``jlo[i] .. jlo[i] + width - 1``, zero beyond ``jhi[i]``).
+    """
 
     name: str
     col: int  #: first column
     size: int
     spline: UnknownSpline | None = None
     knots: np.ndarray | None = None  #: window coordinates
-    first: np.ndarray | None = None  #: (N,) first non-zero basis at each node
-    values: np.ndarray | None = None  #: (N, order)
-    dvalues: np.ndarray | None = None  #: (N, order), slot-1 coefficients only
-    band_index: np.ndarray | None = None  #: (N * order,) flat (basis, interval) index
-    jlo: np.ndarray | None = None  #: (n_basis,) first interval of each basis function
-    width: int = 0  #: band width (intervals)
-    band_matrix: Any = None  #: sparse (8 n width, N): node values -> band moments of B_i
-    dband_matrix: Any = None  #: the same for B_i' (a_1, b_1 blocks)
+    piece_first: np.ndarray | None = None  #: (P,) first non-zero basis function on each piece
+    values: np.ndarray | None = None  #: (order, N) row r: B_{first + r} at the nodes
+    dvalues: np.ndarray | None = None  #: (order, N) their derivatives, slot-1 coefficients only
+    jlo: np.ndarray | None = None  #: (n_basis,) first interval of each band
+    jhi: np.ndarray | None = None  #: (n_basis,) last interval of each band
+    width: int = 0  #: band width (intervals): max(jhi - jlo) + 1
+    band_slot: np.ndarray | None = None  #: (order * P,) flat (basis, interval - jlo) slot of (r, piece)
     sample_first: np.ndarray | None = None  #: (m,) first non-zero basis at each sample
-    sample_values: np.ndarray | None = None  #: (m, order) basis values at the samples
+    sample_values: np.ndarray | None = None  #: (order, m) basis values at the samples
 
 
 @dataclass(frozen=True, eq=False)
@@ -385,27 +405,48 @@ class _Plan:
         return len(self.labels)
 
 
-def _band_matrix(quad: ProductQuadrature, band_index: np.ndarray, vals: np.ndarray, size: int) -> Any:
-    """The sparse map from a signal at the nodes to the per-interval moments of
-    ``B_i`` times the signal over each basis function's band: rows
-    ``(direction, k, i, l)`` (forward ``s^k`` then backward ``r^k``), one
-    column per node. A product with it replaces a scatter-add per moment."""
-    from scipy.sparse import csc_matrix
-
-    N, order = vals.shape
-    index = np.int32 if 2 * MOMENTS * size < 2**31 else np.int64
-    offsets = (np.arange(2 * MOMENTS, dtype=index) * size)[None, :, None]
-    rows = offsets + band_index.astype(index).reshape(N, 1, order)  # (N, 8, order)
-    weights = np.empty((N, 2 * MOMENTS))
-    weights[:, :MOMENTS] = quad.s_weights.T
-    weights[:, MOMENTS:] = quad.r_weights.T
-    data = weights[:, :, None] * vals[:, None, :]
-    indptr = np.arange(N + 1, dtype=index) * (2 * MOMENTS * order)
-    return csc_matrix((data.ravel(), rows.ravel(), indptr), shape=(2 * MOMENTS * size, N))
-
-
 def _difference_matrix(n: int, order: int) -> np.ndarray:
     return np.diff(np.eye(n), n=order, axis=0) if order < n else np.zeros((0, n))
+
+
+def _spline_block(name: str, col: int, spec: UnknownSpline, quad: ProductQuadrature, length: float) -> _Block:
+    """The geometry of one spline block: the basis at the nodes and the samples, and its bands."""
+    knots = spline_knots(spec, length)
+    n, k = spec.n_basis, spec.order
+    m, q = quad.m, quad.nodes_per_piece
+    P = quad.piece_interval.size
+    # the knots inside the window are piece edges, so each piece lies in one knot span
+    x = quad.x.reshape(q, P)
+    mu = _span(0.5 * (x[0] + x[-1]), knots, k)  # (P,)
+    values = _basis_rows(x, knots, k, mu).reshape(k, -1)
+    dvalues = _basis_rows(x, knots, k, mu, derivative=True).reshape(k, -1) if name[1] == "1" else None
+    piece_first = mu - (k - 1)
+    # the band of B_i: the intervals of the pieces whose span has B_i among its
+    # k non-zero B-splines; on the whole intervals (pieces 0 .. m - 2, in order)
+    # a run found by bisection, extended by the pieces that split intervals
+    basis = np.arange(n)
+    whole = piece_first[: m - 1]
+    jlo = np.searchsorted(whole + (k - 1), basis, side="left")
+    jhi = np.searchsorted(whole, basis, side="right") - 1
+    none = jlo > jhi
+    jlo[none], jhi[none] = m - 1, -1
+    owner = piece_first[m - 1 :] + np.arange(k)[:, None]  # (k, split pieces)
+    np.minimum.at(jlo, owner, np.broadcast_to(quad.piece_interval[m - 1 :], owner.shape))
+    np.maximum.at(jhi, owner, np.broadcast_to(quad.piece_interval[m - 1 :], owner.shape))
+    empty = jhi < jlo  # support outside the window: a zero column, reported by the rank check
+    jlo[empty] = np.clip(np.floor(knots[:n][empty] / quad.h), 0, m - 2).astype(np.int64)
+    jhi[empty] = jlo[empty]
+    width = int(max(1, np.max(jhi - jlo + 1)))
+    # piece p adds to B_{first_p + r} on interval j_p: slot (first_p + r, j_p - jlo) of the band array
+    owner = piece_first + np.arange(k)[:, None]  # (k, P)
+    band_slot = (owner * width + (quad.piece_interval - jlo[owner])).ravel()
+    samples = quad.samples
+    sample_mu = _span(samples, knots, k)
+    sample_values = _basis_rows(samples, knots, k, sample_mu)
+    return _Block(
+        name, col, n, spec, knots, piece_first, values, dvalues, jlo, jhi, width, band_slot, sample_mu - (k - 1),
+        sample_values,
+    )
 
 
 def _build_plan(model: KernelModel, m: int, h: float, *, points: int, difference_order: int) -> _Plan:
@@ -429,31 +470,8 @@ def _build_plan(model: KernelModel, m: int, h: float, *, points: int, difference
             col += 1
             continue
         assert isinstance(c, UnknownSpline)
-        knots = spline_knots(c, length)
-        first, vals = bspline_basis(quad.x, knots, c.order)
-        dvals = bspline_basis(quad.x, knots, c.order, derivative=True)[1] if name[1] == "1" else None
+        blocks.append(_spline_block(name, col, c, quad, length))
         n = c.n_basis
-        basis = (first[:, None] + np.arange(c.order)).ravel()
-        intervals = np.repeat(quad.interval, c.order)
-        nonzero = (vals.ravel() != 0.0) | (
-            dvals.ravel() != 0.0 if dvals is not None else np.zeros(basis.size, dtype=bool)
-        )
-        jlo = np.full(n, m - 1, dtype=np.int64)
-        jhi = np.full(n, -1, dtype=np.int64)
-        np.minimum.at(jlo, basis[nonzero], intervals[nonzero])
-        np.maximum.at(jhi, basis[nonzero], intervals[nonzero])
-        empty = jhi < 0  # support outside the window: a zero column, reported by the rank check
-        jlo[empty] = np.clip(np.floor(knots[:n][empty] / h), 0, m - 2).astype(np.int64)
-        jhi[empty] = jlo[empty]
-        width = int(max(1, np.max(jhi - jlo + 1)))
-        band_index = np.where(nonzero, basis * width + (intervals - jlo[basis]), 0)
-        band_matrix = _band_matrix(quad, band_index, vals, n * width)
-        dband_matrix = None if dvals is None else _band_matrix(quad, band_index, dvals, n * width)
-        sample_first, sample_values = bspline_basis(quad.samples, knots, c.order)
-        blocks.append(
-            _Block(name, col, n, c, knots, first, vals, dvals, band_index, jlo, width, band_matrix, dband_matrix,
-                   sample_first, sample_values)
-        )
         labels.extend(f"{name}[{i}]" for i in range(n))
         pen_rows.append((col, _difference_matrix(n, difference_order)))
         col += n
@@ -475,13 +493,15 @@ def _build_plan(model: KernelModel, m: int, h: float, *, points: int, difference
 # the column is c0 + c1 R(t) before the band, c0' + c1' T(t) after it
 # (T = t - a, R = b - t = (b - a) - T), and cumulative band sums in between.
 #
-# Two consequences: the columns are cheap to form (one pass over each band),
-# and between consecutive band edges (a "segment") every row of P lies in the
-# span of [1/C, R/C, the few band columns, the dense columns]. The solve uses
-# this: each segment's rows are reduced by a small QR (TSQR), and only the
-# stacked R factors, a few rows per segment, enter the final QR. That is
-# O(m r^2) with r ~ 10 instead of O(m s^2) for s = 87 unknowns, with the same
-# orthogonal-transformation stability as a QR of the full P.
+# Two consequences: the columns are cheap to form (one pass over each band:
+# the pieces' moments, rearranged into one row per basis function and
+# cumulated), and on a run of samples (a "segment") every row of P lies in the
+# span of [1/C, R/C, the columns of the few basis functions whose band meets
+# the segment, the dense columns]. The solve uses this: each segment's rows
+# are reduced by a small QR (TSQR), and only the stacked R factors, a few rows
+# per segment, enter the final QR. That is O(m r^2) with r ~ 10 instead of
+# O(m s^2) for s = 87 unknowns, with the same orthogonal-transformation
+# stability as a QR of the full P.
 
 
 @dataclass(frozen=True, eq=False)
@@ -496,26 +516,53 @@ class _Band:
     c1a: np.ndarray
 
 
+def _band_moments(
+    block: _Block, quad: ProductQuadrature, values: np.ndarray, v_nodes: np.ndarray, moments: range
+) -> tuple[list[Any], ...]:
+    """Moments of ``B_i v`` (``values``: ``B_i`` or ``B_i'`` at the nodes) at the band
+    samples, (n, width + 1) rows, and over the whole band, (n,) rows (:func:`moment_rows`)."""
+    assert block.band_slot is not None
+    n, L, K = block.size, block.width, len(moments)
+    k_order, q = values.shape[0], quad.nodes_per_piece
+    basis = values.reshape(k_order, q, -1)
+    F, B = np.empty((K, n, L + 1)), np.empty((K, n, L + 1))
+    weighted = np.empty_like(v_nodes)
+    pieces = np.empty(basis.shape[::2])  # (order, P): B_{first + r} v times the moment weight, per piece
+    term = np.empty(pieces.shape[1])
+    # one moment at a time (large temporaries cost more than the arithmetic here)
+    for d, out in ((0, F), (1, B)):
+        for kk, k in enumerate(moments):
+            wv = np.multiply(quad.moment_weights[d, k], v_nodes, out=weighted).reshape(q, -1)
+            for r in range(k_order):
+                row = np.multiply(wv[0], basis[r, 0], out=pieces[r])
+                for i in range(1, q):
+                    row += np.multiply(wv[i], basis[r, i], out=term)
+            # per basis function and interval of its band (the pieces of a split interval add up)
+            per_interval = np.bincount(block.band_slot, weights=pieces.ravel(), minlength=n * L).reshape(n, L)
+            if d == 0:  # forward: the intervals before each band sample
+                out[kk, :, 0] = 0.0
+                np.cumsum(per_interval, axis=1, out=out[kk, :, 1:])
+            else:  # backward: those after it
+                out[kk, :, -1] = 0.0
+                np.cumsum(per_interval[:, ::-1], axis=1, out=out[kk, :, -2::-1])
+    return (
+        moment_rows(moments, F), moment_rows(moments, B),
+        moment_rows(moments, F[:, :, -1]), moment_rows(moments, B[:, :, 0]),
+    )
+
+
 def _band(block: _Block, quad: ProductQuadrature, v_nodes: np.ndarray) -> _Band:
     """Band moments of every basis function of ``block`` and its column formulas."""
-    assert block.values is not None and block.jlo is not None and block.band_index is not None
+    assert block.values is not None and block.jlo is not None
     n, L, m, h = block.size, block.width, quad.m, quad.h
     order = int(block.name[1])
-
-    def band_moments(matrix: Any) -> tuple[np.ndarray, np.ndarray]:
-        per_interval = (matrix @ v_nodes).reshape(2, MOMENTS, n, L)
-        return cumulate(per_interval[0], per_interval[1])  # (4, n, L + 1) each
-
-    F, B = band_moments(block.band_matrix)
-    Fd = Bd = None
-    if order == 1 and block.dband_matrix is not None:
-        Fd, Bd = band_moments(block.dband_matrix)
+    F, B, Ft, Bt = _band_moments(block, quad, block.values, v_nodes, SLOT_MOMENTS[order])
+    Fd = Bd = Fdt = Bdt = None
+    if order == 1 and block.dvalues is not None:
+        Fd, Bd, Fdt, Bdt = _band_moments(block, quad, block.dvalues, v_nodes, SLOT_MOMENTS[0])
     zero = np.zeros((MOMENTS, n))
     j = block.jlo[:, None] + np.arange(L + 1)
     mid = slot_identity(order, F, B, j * h, (m - 1 - j) * h, Fd, Bd)
-    Bt, Ft = B[:, :, 0], F[:, :, L]
-    Bdt = None if Bd is None else Bd[:, :, 0]
-    Fdt = None if Fd is None else Fd[:, :, L]
     zd = None if Fd is None else zero
     c0b = slot_identity(order, zero, Bt, 0.0, 0.0, zd, Bdt)
     c1b = slot_identity(order, zero, Bt, 0.0, 1.0, zd, Bdt) - c0b
@@ -558,13 +605,18 @@ class _Parts:
     C: np.ndarray  #: (m,) C_[a,b](t)
     y_nodes: np.ndarray
     u_nodes: np.ndarray
-    moments: dict[str, tuple[np.ndarray, np.ndarray]]  #: "y", "u": (F, B) of the signal
+    moments: dict[str, tuple[list[Any], list[Any]]]  #: "y", "u": (F, B) rows of the signal (moment_rows)
     known_ident: np.ndarray  #: free part + known coefficients, identity (9), times C
     known_deriv: np.ndarray  #: the same for the derivative identity (10)
     functions: dict[str, TimeFunction]  #: the known coefficients
     dense: np.ndarray  #: (m, nd) columns of the unknown constants, then q; divided by C
     dense_cols: np.ndarray  #: (nd,) their column index in [P, q]
     bands: tuple[_Band, ...]
+
+
+def _hull(*moments: range) -> range:
+    """The smallest range of moments holding all of ``moments``."""
+    return range(min(r.start for r in moments), max(r.stop for r in moments))
 
 
 def _parts(plan: _Plan, a: float, u: np.ndarray, y: np.ndarray) -> _Parts:
@@ -575,21 +627,24 @@ def _parts(plan: _Plan, a: float, u: np.ndarray, y: np.ndarray) -> _Parts:
     C = window_weight(t, a, quad.b)
     y_nodes = quad.interpolate(y)
     u_nodes = quad.interpolate(u)
-    moments = {"y": quad.cumulative(y_nodes)}
-    if any(b.name[0] == "b" and b.spline is None for b in plan.blocks):
-        moments["u"] = quad.cumulative(u_nodes)
+    # the moments of y (and u) that the free part and the unknown constants read
+    const = [b for b in plan.blocks if b.spline is None]
+    y_const = [SLOT_MOMENTS[int(b.name[1])] for b in const if b.name[0] == "a"]
+    u_const = [SLOT_MOMENTS[int(b.name[1])] for b in const if b.name[0] == "b"]
+    moments = {"y": quad.cumulative_rows(y_nodes, _hull(FREE_MOMENTS, *y_const))}
+    if u_const:
+        moments["u"] = quad.cumulative_rows(u_nodes, _hull(*u_const))
     Fy, By = moments["y"]
     known = free_identity(Fy, By, T, R)
     known_d = free_derivative(Fy, By)
     funcs = _known_functions(plan.model)
     for name, f in funcs.items():
         phi = f(quad.x)
-        dphi = f.derivative()(quad.x) if name[1] == "1" else None
+        dphi = f.derivative()(quad.x) if name[1] == "1" and not f.is_constant else None
         if not np.any(phi) and (dphi is None or not np.any(dphi)):
             continue
         ident, deriv = coefficient_terms(quad, int(name[1]), phi, dphi, y_nodes if name[0] == "a" else u_nodes)
         known, known_d = known + ident, known_d + deriv
-    const = [b for b in plan.blocks if b.spline is None]
     dense = np.empty((quad.m, len(const) + 1), order="F")
     for k, block in enumerate(const):
         F, B = moments[_SIGNAL[block.name[0]]]
@@ -621,13 +676,15 @@ def _compressed_system(plan: _Plan, parts: _Parts, rows: np.ndarray | None) -> n
     m = quad.m
     s = plan.n_unknowns
     length = quad.b - quad.a
+    t = quad.samples
+    T, R = t - quad.a, quad.b - t
     inv_c = 1.0 / parts.C
-    r_over_c = (quad.b - quad.samples) * inv_c
+    # segments run from one band start to the next (of any spline block): a
+    # segment meets the bands of about `order` + 1 basis functions per block
     edges = [np.array([0, m])]
     for band in parts.bands:
-        jlo = band.block.jlo
-        assert jlo is not None
-        edges += [jlo, jlo + band.block.width + 1]
+        assert band.block.jlo is not None
+        edges.append(band.block.jlo)
     e = np.unique(np.clip(np.concatenate(edges), 0, m))
     # split long segments (the row partition is free within a segment) so that
     # padding every segment to the longest one costs at most about 5 m rows
@@ -639,52 +696,58 @@ def _compressed_system(plan: _Plan, parts: _Parts, rows: np.ndarray | None) -> n
     K = starts.size
     lens = ends - starts
     Lseg = int(np.max(lens))
-    idx = starts[:, None] + np.arange(Lseg)
+    # the rows of each segment, padded with copies of its last row (weight 0)
+    idx = np.minimum(starts[:, None] + np.arange(Lseg), (ends - 1)[:, None])
     valid = np.arange(Lseg) < lens[:, None]
     if rows is not None:
         mask = np.zeros(m, dtype=bool)
         mask[rows] = True
-        valid &= mask[np.minimum(idx, m - 1)]
-    idx = np.where(valid, idx, 0)
+        valid &= mask[idx]
     w = valid.astype(float)
-    # band membership of each segment: basis functions i with jlo_i <= start <= jlo_i + width
+    weight = inv_c[idx] * w  # rows of P are divided by C
+    # the basis functions whose band (samples jlo_i .. jhi_i + 1) meets each segment: a run of i
     slots = []
     for band in parts.bands:
         block = band.block
-        assert block.jlo is not None
-        jlo, L = block.jlo, block.width
-        i_first = np.searchsorted(jlo + L, starts, side="left")
-        i_last = np.searchsorted(jlo, starts, side="right") - 1
+        assert block.jlo is not None and block.jhi is not None
+        i_first = np.searchsorted(block.jhi + 1, starts, side="left")
+        i_last = np.searchsorted(block.jlo, ends - 1, side="right") - 1
         count = np.maximum(i_last - i_first + 1, 0)
         slots.append((band, i_first, count, int(np.max(count)) if count.size else 0))
     n_band = sum(c for *_, c in slots)
     nd = parts.dense.shape[1]
     r = 2 + n_band + nd
     W = np.zeros((K, Lseg, r))
-    W[:, :, 0] = inv_c[idx] * w
-    W[:, :, 1] = r_over_c[idx] * w
+    W[:, :, 0] = weight
+    W[:, :, 1] = R[idx] * weight
     M = np.zeros((K, r, s + 1))
     col = 2
     ks = np.arange(K)
     for band, i_first, count, nmax in slots:
         block = band.block
-        assert block.jlo is not None
+        assert block.jlo is not None and block.jhi is not None
         jlo, L, n = block.jlo, block.width, block.size
-        # the linear parts: before (start < jlo_i) and after (start > jlo_i + L)
-        before = starts[:, None] < jlo[None, :]
-        after = starts[:, None] > (jlo + L)[None, :]
+        # the other columns are linear in 1/C, R/C on the segment: the segment
+        # lies before their band or after it
+        before = (ends - 1)[:, None] < jlo[None, :]
+        after = starts[:, None] > (block.jhi + 1)[None, :]
         cols = slice(block.col, block.col + n)
         M[:, 0, cols] = np.where(before, band.c0b, 0.0) + np.where(after, band.c0a + length * band.c1a, 0.0)
         M[:, 1, cols] = np.where(before, band.c1b, 0.0) - np.where(after, band.c1a, 0.0)
         for slot in range(nmax):
-            i = i_first + slot
             ok = slot < count
-            ii = np.where(ok, i, 0)
-            off = np.clip(idx - jlo[ii][:, None], 0, L)
-            W[:, :, col] = band.mid[ii[:, None], off] * inv_c[idx] * (w * ok[:, None])
-            M[ks[ok], col, block.col + ii[ok]] = 1.0
+            i = np.where(ok, i_first + slot, 0)[:, None]
+            off = idx - jlo[i]  # the column: band values (mid) on its band, linear before and after
+            column = np.take(band.mid, i * (L + 1) + np.clip(off, 0, L))
+            if np.any(off < 0):
+                column = np.where(off < 0, band.c1b[i] * R[idx] + band.c0b[i], column)
+            if np.any(off > L):
+                column = np.where(off > L, band.c1a[i] * T[idx] + band.c0a[i], column)
+            np.multiply(column, weight * ok[:, None], out=W[:, :, col])
+            M[ks[ok], col, block.col + i[ok, 0]] = 1.0
             col += 1
-    W[:, :, col:] = parts.dense[idx] * w[:, :, None]
+    for k in range(nd):
+        W[:, :, col + k] = parts.dense[:, k][idx] * w
     M[:, np.arange(col, r), parts.dense_cols] = 1.0
     Rk = np.linalg.qr(W, mode="r")
     return (Rk @ M).reshape(-1, s + 1)
@@ -794,8 +857,9 @@ def _unidentifiable_message(plan: _Plan, participation: np.ndarray, reason: str)
 def _rank_check(plan: _Plan, R: np.ndarray, rtol: float) -> np.ndarray:
     """Singular values of the scaled ``P`` (from its R factor); raise when the rank is deficient."""
     s = R.shape[1]
-    _, sv, vt = np.linalg.svd(R)
+    sv = np.linalg.svd(R, compute_uv=False)
     if sv[-1] <= rtol * sv[0]:
+        _, sv, vt = np.linalg.svd(R)  # the null space names the coefficients
         null = vt[sv <= rtol * sv[0]]
         part = np.max(null**2, axis=0) > 0.05 / s
         raise IdentifiabilityError(
@@ -821,13 +885,30 @@ def _penalized_solve(R: np.ndarray, z: np.ndarray, D: np.ndarray, lam: float) ->
 
 
 def _choose_penalty(R: np.ndarray, z: np.ndarray, rho2: float, D: np.ndarray, m: int) -> float:
-    """The GCV choice of lambda: a log grid, then golden-section refinement."""
+    """The GCV choice of lambda: a log grid, then golden-section refinement.
+
+    The score comes from one SVD (Demmler-Reinsch form): with ``h = R g`` the
+    problem is ``min |z - h|^2 + lam |S h|^2``, ``S = D R^-1 = U diag(sigma) V^T``,
+    so in the coordinates ``V^T`` each component of ``V^T z`` is shrunk by
+    ``1 / (1 + lam sigma_i^2)``: the residual and the trace of the hat matrix
+    are sums over ``i``, O(s) per lambda. (The fit at the chosen lambda is then
+    solved by :func:`_penalized_solve`, a QR.)
+    """
+    from scipy.linalg import solve_triangular
+
+    s = R.shape[1]
     scale = float(np.sum(R**2) / max(np.sum(D**2), 1e-300))
+    sigma2 = np.zeros(s)
+    zhat2 = z**2
+    if D.shape[0]:
+        V, sigma, _ = np.linalg.svd(solve_triangular(R, D.T, trans="T"))  # S^T = V diag(sigma) U^T
+        sigma2[: sigma.size] = sigma**2
+        zhat2 = (V.T @ z) ** 2
 
     def gcv(log_lam: float) -> float:
-        lam = scale * 10.0**log_lam
-        g, edf = _penalized_solve(R, z, D, lam)
-        rss = float(np.sum((z - R @ g) ** 2)) + rho2
+        keep = 1.0 / (1.0 + scale * 10.0**log_lam * sigma2)
+        rss = float(np.sum((1.0 - keep) ** 2 * zhat2)) + rho2
+        edf = float(np.sum(keep))
         return m * rss / max(m - edf, 1e-12) ** 2
 
     grid = np.linspace(-14.0, 4.0, 37)
@@ -848,6 +929,14 @@ def _choose_penalty(R: np.ndarray, z: np.ndarray, rho2: float, D: np.ndarray, m:
             fd = gcv(d)
     best = min([(fc, c), (fd, d), (scores[k], grid[k])])
     return scale * 10.0 ** best[1]
+
+
+def _combine(values: np.ndarray, coef: np.ndarray) -> np.ndarray:
+    """``sum_r values[r] * coef[r]`` over the rows of (order, N) arrays."""
+    out = values[0] * coef[0]
+    for r in range(1, values.shape[0]):
+        out += values[r] * coef[r]
+    return out
 
 
 def _fitted(
@@ -878,18 +967,21 @@ def _fitted(
             ident += value * slot_identity(order, F, B, T, R)
             deriv += value * slot_derivative(order, F, B)
             continue
-        assert block.first is not None and block.values is not None and block.knots is not None
+        assert block.piece_first is not None and block.values is not None and block.knots is not None
         k = block.spline.order
-        idx = block.first[:, None] + np.arange(k)
-        phi = np.einsum("gr,gr->g", block.values, coef[idx])
-        dphi = np.einsum("gr,gr->g", block.dvalues, coef[idx]) if block.dvalues is not None else None
+        # the coefficients of the non-zero B-splines at each node
+        q = quad.nodes_per_piece
+        at_pieces = coef[block.piece_first + np.arange(k)[:, None]]  # (k, P)
+        phi = _combine(block.values.reshape(k, q, -1), at_pieces[:, None]).ravel()
+        dphi = None
+        if block.dvalues is not None:
+            dphi = _combine(block.dvalues.reshape(k, q, -1), at_pieces[:, None]).ravel()
         v_nodes = terms.y_nodes if block.name[0] == "a" else terms.u_nodes
         di, dd = coefficient_terms(quad, order, phi, dphi, v_nodes)
         ident += di
         deriv += dd
         assert block.sample_first is not None and block.sample_values is not None
-        sidx = block.sample_first[:, None] + np.arange(k)
-        sample_values[block.name] = np.einsum("gr,gr->g", block.sample_values, coef[sidx])
+        sample_values[block.name] = _combine(block.sample_values, coef[block.sample_first + np.arange(k)[:, None]])
         spline = BSpline(block.knots + quad.a, coef.copy(), k - 1, extrapolate=True)
         splines[block.name] = spline
         functions[block.name] = TimeFunction.from_callable(

@@ -62,8 +62,9 @@ True
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -75,6 +76,7 @@ __all__ = [
     "ProductQuadrature",
     "product_quadrature",
     "cumulate",
+    "moment_rows",
     "KernelIdentity",
     "kernel_identity",
     "kernel_functions",
@@ -89,19 +91,30 @@ __all__ = [
     "check_uniform_samples",
     "SAMPLING_RTOL",
     "MOMENTS",
+    "SLOT_MOMENTS",
+    "FREE_MOMENTS",
 ]
 
 #: Number of moments ``s^0 .. s^3`` the kernels (13)-(17) need.
 MOMENTS = 4
+#: The moments ``k`` (of ``phi v``) that :func:`slot_identity` and
+#: :func:`slot_derivative` read, by order (those of ``phi' v`` are ``SLOT_MOMENTS[0]``).
+SLOT_MOMENTS = {0: range(2, 4), 1: range(1, 3)}
+#: The moments of ``y`` that :func:`free_identity` and :func:`free_derivative` read.
+FREE_MOMENTS = range(0, 2)
 
 
 @dataclass(frozen=True, eq=False)
 class ProductQuadrature:
     """Cumulative product quadrature on ``m`` uniform samples ``a + j h``.
 
-    Build it with :func:`product_quadrature`. Node arrays have length ``N``
-    (``points / 2`` Gauss nodes per piece between breakpoints); interval
-    arrays have length ``J = m - 1``.
+    Build it with :func:`product_quadrature`. The window is cut into ``P``
+    *pieces* at the samples and the breakpoints: pieces ``0 .. m - 2`` are the
+    sample intervals (cut short at their first breakpoint, if any), the others
+    the rest of the split intervals. Each piece holds ``q = points / 2`` Gauss
+    nodes. Node arrays have length ``N = q P`` and hold the first node of every
+    piece, then the second, ...: node ``g = i P + p`` is node ``i`` of piece
+    ``p`` (they reshape to ``(q, P)``).
 
     Attributes
     ----------
@@ -116,19 +129,25 @@ class ProductQuadrature:
         Quadrature nodes (absolute time).
     weights : ndarray, shape (N,)
         Gauss weights (they sum to ``b - a``).
-    interval : ndarray of int, shape (N,)
-        Sample interval ``j`` (``a + j h <= x <= a + (j + 1) h``) of each node.
-    s_weights, r_weights : ndarray, shape (4, N)
-        ``weights * (x - a)^k`` and ``weights * (b - x)^k``, ``k = 0..3``.
-    starts : ndarray of int, shape (J,)
-        First node of each interval (nodes are sorted).
-    gather : ndarray of int, shape (points, N)
-        Interpolation stencils: ``v(x_g) ~ sum_l lagrange[l, g] v[gather[l, g]]``.
-    lagrange : ndarray, shape (points, N)
-        Lagrange weights.
-    moment_matrix : scipy.sparse.csc_matrix, shape (8 J, N)
-        ``s_weights`` and ``r_weights`` summed per interval: one sparse product
-        gives the per-interval moments of a function at the nodes.
+    moment_weights : ndarray, shape (2, 4, N)
+        ``weights * (x - a)^k`` (forward, ``[0, k]``) and ``weights * (b - x)^k``
+        (backward, ``[1, k]``), ``k = 0..3``; also as ``s_weights``, ``r_weights``.
+    piece_interval : ndarray of int, shape (P,)
+        Sample interval ``j`` (``a + j h <= x <= a + (j + 1) h``) of each piece:
+        ``j`` for piece ``j < m - 1``.
+    stencil : ndarray of int, shape (P,)
+        First sample of each piece's interpolation stencil (``points`` samples,
+        centred on the piece's interval, shifted inwards at the ends).
+    lagrange : ndarray, shape (points, q)
+        Lagrange weights of the nodes of a *regular* piece (a whole interval,
+        not split, with a centred stencil; they all have the same nodes relative
+        to their stencil): ``v(x) ~ sum_l lagrange[l, i] v[stencil[p] + l]``
+        for node ``i`` of piece ``p``.
+    irregular : ndarray of int, shape (P_irr,)
+        The other pieces (split intervals and the ``points / 2 - 1`` intervals
+        at each end).
+    irregular_lagrange : ndarray, shape (points, q, P_irr)
+        Their Lagrange weights.
     """
 
     a: float
@@ -137,13 +156,12 @@ class ProductQuadrature:
     points: int
     x: np.ndarray
     weights: np.ndarray
-    interval: np.ndarray
-    s_weights: np.ndarray
-    r_weights: np.ndarray
-    starts: np.ndarray
-    gather: np.ndarray
+    moment_weights: np.ndarray
+    piece_interval: np.ndarray
+    stencil: np.ndarray
     lagrange: np.ndarray
-    moment_matrix: Any
+    irregular: np.ndarray
+    irregular_lagrange: np.ndarray
 
     @property
     def b(self) -> float:
@@ -154,18 +172,69 @@ class ProductQuadrature:
         """Sample times ``a + j h``, shape (m,)."""
         return self.a + self.h * np.arange(self.m)
 
+    @property
+    def nodes_per_piece(self) -> int:
+        """``q``, the Gauss nodes on each piece."""
+        return self.points // 2
+
+    @property
+    def interval(self) -> np.ndarray:
+        """Sample interval of each node, shape (N,)."""
+        return np.tile(self.piece_interval, self.nodes_per_piece)
+
+    @property
+    def s_weights(self) -> np.ndarray:
+        """``weights * (x - a)^k``, shape (4, N)."""
+        return self.moment_weights[0]
+
+    @property
+    def r_weights(self) -> np.ndarray:
+        """``weights * (b - x)^k``, shape (4, N)."""
+        return self.moment_weights[1]
+
     def shifted(self, a: float) -> ProductQuadrature:
         """The same rule on the window starting at ``a`` (same ``h`` and ``m``;
         every weight is invariant under the shift)."""
-        return ProductQuadrature(
-            float(a), self.h, self.m, self.points, self.x + (float(a) - self.a), self.weights,
-            self.interval, self.s_weights, self.r_weights, self.starts, self.gather, self.lagrange,
-            self.moment_matrix,
-        )
+        return replace(self, a=float(a), x=self.x + (float(a) - self.a))
 
     def interpolate(self, v: np.ndarray) -> np.ndarray:
         """Samples ``v`` (shape (m,)) interpolated at the nodes, shape (N,)."""
-        return np.einsum("lg,lg->g", self.lagrange, v[self.gather])
+        q, points = self.nodes_per_piece, self.points
+        out = np.empty((q, self.piece_interval.size))
+        # the regular pieces among the whole intervals c .. m - points + c
+        # (stencil j - c): slices of v, then the irregular ones overwritten
+        c = points // 2 - 1
+        n = self.m - points + 1
+        term = np.empty(n)
+        for i in range(q):
+            row = np.multiply(self.lagrange[0, i], v[:n], out=out[i, c : c + n])
+            for ell in range(1, points):
+                row += np.multiply(self.lagrange[ell, i], v[ell : ell + n], out=term)
+        first = self.stencil[self.irregular]
+        irregular = self.irregular_lagrange[0] * v[first]
+        for ell in range(1, points):
+            irregular += self.irregular_lagrange[ell] * v[first + ell]
+        out[:, self.irregular] = irregular
+        return out.ravel()
+
+    def piece_moments(self, f: np.ndarray, moments: range = range(MOMENTS)) -> np.ndarray:
+        """Integrals of ``f`` (given at the nodes) times ``(x - a)^k`` and
+        ``(b - x)^k`` over each piece, ``k`` in ``moments`` (a range):
+        shape (2, len(moments), ..., P) for ``f`` of shape (..., N)."""
+        q = self.nodes_per_piece
+        fq = f.reshape(-1, q, f.shape[-1] // q)  # (rows, q, P)
+        P = fq.shape[-1]
+        out = np.empty((2, len(moments), fq.shape[0], P))
+        term = np.empty(P)
+        # row by row into one output: large temporaries cost more than the arithmetic
+        for d in range(2):
+            for kk, k in enumerate(moments):
+                w = self.moment_weights[d, k].reshape(q, P)
+                for row, fr in enumerate(fq):
+                    o = np.multiply(w[0], fr[0], out=out[d, kk, row])
+                    for i in range(1, q):
+                        o += np.multiply(w[i], fr[i], out=term)
+        return out.reshape(2, len(moments), *f.shape[:-1], P)
 
     def cumulative(self, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Forward and backward moments of ``f`` (given at the nodes).
@@ -174,18 +243,55 @@ class ProductQuadrature:
         ``F[k, j] = int_a^{t_j} (x - a)^k f dx``,
         ``B[k, j] = int_{t_j}^b (b - x)^k f dx``.
         """
-        per_interval = (self.moment_matrix @ f).reshape(2, MOMENTS, self.m - 1)
+        per_interval = self.interval_sums(self.piece_moments(f))
         return cumulate(per_interval[0], per_interval[1])
+
+    def cumulative_rows(self, f: np.ndarray, moments: range) -> tuple[list[Any], list[Any]]:
+        """:meth:`cumulative` for the moments ``k`` in ``moments`` only (a range):
+        ``F, B`` are lists indexed by ``k = 0..3`` holding the rows, shape (m,),
+        and ``None`` for the moments not computed."""
+        per_interval = self.interval_sums(self.piece_moments(f, moments))
+        F, B = cumulate(per_interval[0], per_interval[1])
+        return moment_rows(moments, F), moment_rows(moments, B)
+
+    def interval_sums(self, pieces: np.ndarray) -> np.ndarray:
+        """Per-piece values (..., P) summed per sample interval, (..., m - 1);
+        ``pieces`` is overwritten."""
+        J = self.m - 1
+        out = pieces[..., :J]
+        if pieces.shape[-1] > J:
+            np.add.at(out, (..., self.piece_interval[J:]), pieces[..., J:])
+        return out
+
+
+def moment_rows(moments: range, values: np.ndarray) -> list[Any]:
+    """The moments ``k`` in ``moments`` (``values``, shape (len(moments), ...)) as a
+    list indexed by ``k = 0..3``, ``None`` for the others (what :func:`slot_identity`
+    and the other kernel combinations read)."""
+    return [values[k - moments.start] if k in moments else None for k in range(MOMENTS)]
 
 
 def cumulate(IF: np.ndarray, IB: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-interval integrals (..., L) to moments at the ``L + 1`` bounding
-    samples: ``F`` sums the intervals to the left of a sample, ``B`` those to
+    points: ``F`` sums the intervals to the left of a point, ``B`` those to
     its right. Returns arrays of shape (..., L + 1)."""
-    zeros = np.zeros((*IF.shape[:-1], 1))
-    F = np.concatenate([zeros, np.cumsum(IF, axis=-1)], axis=-1)
-    B = np.concatenate([np.cumsum(IB[..., ::-1], axis=-1)[..., ::-1], zeros], axis=-1)
+    shape = (*IF.shape[:-1], IF.shape[-1] + 1)
+    F = np.empty(shape)
+    B = np.empty(shape)
+    F[..., 0] = 0.0
+    B[..., -1] = 0.0
+    np.cumsum(IF, axis=-1, out=F[..., 1:])
+    np.cumsum(IB[..., ::-1], axis=-1, out=B[..., -2::-1])
     return F, B
+
+
+@functools.lru_cache(maxsize=8)
+def _gauss_legendre(q: int) -> tuple[np.ndarray, np.ndarray]:
+    """``q``-point Gauss-Legendre nodes and weights on [-1, 1] (read-only)."""
+    gx, gw = np.polynomial.legendre.leggauss(q)
+    gx.flags.writeable = False
+    gw.flags.writeable = False
+    return gx, gw
 
 
 def product_quadrature(
@@ -224,46 +330,58 @@ def product_quadrature(
     b = samples[-1]
     bp = np.asarray(breakpoints, dtype=float).ravel()
     rel = (bp - a) / h
-    inside = (bp > a) & (bp < b) & (np.abs(rel - np.round(rel)) > 1e-9)
-    edges = np.union1d(samples, bp[inside])
-    left, right = edges[:-1], edges[1:]
-    piece_interval = np.clip(np.searchsorted(samples, left, side="right") - 1, 0, m - 2)
+    inside = np.unique(bp[(bp > a) & (bp < b) & (np.abs(rel - np.round(rel)) > 1e-9)])
+    # the pieces: the sample intervals, cut short at their first breakpoint,
+    # then from each breakpoint to the next one in its interval or to its end
+    split = np.searchsorted(samples, inside, side="right") - 1  # the interval of each breakpoint
+    first = np.ones(inside.size, dtype=bool)
+    first[1:] = split[1:] != split[:-1]
+    last = np.ones(inside.size, dtype=bool)
+    last[:-1] = first[1:]
+    right = samples[1:].copy()
+    right[split[first]] = inside[first]
+    left = np.concatenate([samples[:-1], inside])
+    right = np.concatenate([right, np.where(last, samples[split + 1], np.append(inside[1:], b))])
+    piece_interval = np.concatenate([np.arange(m - 1), split])
     q = points // 2
-    gx, gw = np.polynomial.legendre.leggauss(q)
+    gx, gw = _gauss_legendre(q)
     half = 0.5 * (right - left)
     mid = 0.5 * (right + left)
-    x = (mid[:, None] + half[:, None] * gx).ravel()
-    w = (half[:, None] * gw).ravel()
-    interval = np.repeat(piece_interval, q)
-    k = np.arange(MOMENTS)[:, None]
-    s_weights = w * (x - a) ** k
-    r_weights = w * (b - x) ** k
-    starts = np.searchsorted(interval, np.arange(m - 1))
-    stencil = np.clip(interval - points // 2 + 1, 0, m - points)
-    # Lagrange weights L_l(pos) = prod_{j != l} (pos - j) / (l - j); a node lies
-    # strictly between two samples, so pos is never an integer
-    pos = (x - samples[stencil]) / h
-    diff = pos - np.arange(points)[:, None]  # (points, N)
-    total = np.prod(diff, axis=0)
-    ell = np.arange(points)
-    denominators = np.array([np.prod([l_ - j for j in ell if j != l_]) for l_ in ell], dtype=float)
-    lagrange = total / (diff * denominators[:, None])
-    gather = stencil + np.arange(points)[:, None]
-    from scipy.sparse import csc_matrix
-
-    J = m - 1
-    rows = (np.arange(2 * MOMENTS, dtype=np.int32) * J)[None, :] + interval.astype(np.int32)[:, None]  # (N, 8)
-    data = np.empty((x.size, 2 * MOMENTS))
-    data[:, :MOMENTS] = s_weights.T
-    data[:, MOMENTS:] = r_weights.T
-    moment_matrix = csc_matrix(
-        (data.ravel(), rows.ravel(), np.arange(x.size + 1, dtype=np.int32) * (2 * MOMENTS)),
-        shape=(2 * MOMENTS * J, x.size),
-    )
+    x = (mid + half * gx[:, None]).ravel()  # node i of every piece, then node i + 1
+    w = (half * gw[:, None]).ravel()
+    moment_weights = np.empty((2, MOMENTS, x.size))
+    for direction, dist in enumerate((x - a, b - x)):
+        moment_weights[direction, 0] = w
+        for k in range(1, MOMENTS):
+            np.multiply(w, dist**k, out=moment_weights[direction, k])
+    # interpolation stencils: centred on the piece's interval, shifted inwards at the ends
+    c = points // 2 - 1
+    stencil = np.clip(piece_interval - c, 0, m - points)
+    # a whole interval with a centred stencil has its nodes at c + (1 + gx) / 2
+    # samples from the stencil's start: one set of weights serves them all
+    regular = np.zeros(piece_interval.size, dtype=bool)
+    regular[c : m - points + c + 1] = True
+    regular[split] = False
+    irregular = np.flatnonzero(~regular)
+    pos = (x.reshape(q, -1)[:, irregular] - samples[stencil[irregular]]) / h
     return ProductQuadrature(
-        float(a), float(h), int(m), int(points), x, w, interval, s_weights, r_weights, starts, gather, lagrange,
-        moment_matrix,
+        float(a), float(h), int(m), int(points), x, w, moment_weights, piece_interval, stencil,
+        _lagrange_weights(c + 0.5 * (1.0 + gx), points), irregular, _lagrange_weights(pos, points),
     )
+
+
+def _lagrange_weights(pos: np.ndarray, points: int) -> np.ndarray:
+    """``L_l(pos) = prod_{j != l} (pos - j) / (l - j)``, ``l = 0 .. points - 1``:
+    shape (points, *pos.shape); ``pos`` (in samples from the stencil's start)
+    lies strictly between two samples, so it is never an integer."""
+    total = pos.copy()  # prod_j (pos - j)
+    for j in range(1, points):
+        total *= pos - j
+    out = np.empty((points, *pos.shape))
+    for ell in range(points):
+        denominator = float(np.prod([ell - j for j in range(points) if j != ell]))
+        np.divide(total, (pos - ell) * denominator, out=out[ell])
+    return out
 
 
 #: Relative tolerance of the uniform-sampling check: ``|t[j+1] - t[j] - h| <= tol * h``.
@@ -368,10 +486,10 @@ def coefficient_terms(
     each of shape (m,), not yet divided by ``C``."""
     t = quad.samples
     T, R = t - quad.a, quad.b - t
-    F, B = quad.cumulative(phi * v_nodes)
+    F, B = quad.cumulative_rows(phi * v_nodes, SLOT_MOMENTS[order])
     Fd = Bd = None
     if order == 1 and dphi is not None and np.any(dphi != 0.0):
-        Fd, Bd = quad.cumulative(dphi * v_nodes)
+        Fd, Bd = quad.cumulative_rows(dphi * v_nodes, SLOT_MOMENTS[0])
     return slot_identity(order, F, B, T, R, Fd, Bd), slot_derivative(order, F, B, Fd, Bd)
 
 
