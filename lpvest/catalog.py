@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,12 +31,11 @@ class ExampleEntry:
 
 def example_systems() -> list[ExampleEntry]:
     """Every example system, sorted by name."""
+    from .modelfile import read_toml
+
     out = []
     for path in sorted(models_dir().glob("*.toml")):
-        try:
-            meta = tomllib.loads(path.read_text(encoding="utf-8")).get("system", {})
-        except tomllib.TOMLDecodeError as exc:
-            raise ModelFileError(f"{path}: not valid TOML: {exc}") from exc
+        meta = read_toml(path).get("system", {})
         out.append(ExampleEntry(str(meta.get("name", path.stem)), str(meta.get("title", "")), path))
     return sorted(out, key=lambda e: e.name)
 

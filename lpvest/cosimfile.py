@@ -41,7 +41,6 @@ from __future__ import annotations
 
 import math
 import time
-import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,6 +50,7 @@ import numpy as np
 
 from .cosim import Component, Connection, CoSimulation, CoSimulationError
 from .errors import ModelFileError
+from .modelfile import read_toml
 
 __all__ = ["CoSimFile", "CoSimResult", "load_cosim", "DEFAULT_FMU_DIR"]
 
@@ -302,14 +302,7 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
         ``run.toml: step_size: expected a positive number, found -1.0``.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ModelFileError(f"{path}: cannot be read: {exc.strerror}") from exc
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ModelFileError(f"{path}: not valid TOML: {exc}") from exc
+    data = read_toml(path)
     r = _Reader(path)
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:

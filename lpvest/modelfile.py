@@ -71,6 +71,7 @@ __all__ = [
     "loads_system",
     "dump_system",
     "save_system",
+    "read_toml",
     "MODEL_TYPES",
 ]
 
@@ -500,15 +501,21 @@ def load_system(
     from .catalog import find_system
 
     path = find_system(source)
+    return _build(read_toml(path), str(path), parameters, path)
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """The parsed TOML file ``path``; an unreadable or malformed file is a
+    one-line :class:`ModelFileError` naming it (shared by every file lpvest reads)."""
+    path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ModelFileError(f"{path}: cannot be read: {exc.strerror}") from exc
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ModelFileError(f"{path}: not valid TOML: {exc}") from exc
-    return _build(data, str(path), parameters, path)
 
 
 def _build(
