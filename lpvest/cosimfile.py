@@ -51,6 +51,7 @@ import numpy as np
 from .cosim import Component, Connection, CoSimulation, CoSimulationError
 from .errors import ModelFileError
 from .modelfile import read_toml
+from .plotting import save_figure
 
 __all__ = ["CoSimFile", "CoSimResult", "load_cosim", "DEFAULT_FMU_DIR"]
 
@@ -221,11 +222,7 @@ class CoSimResult:
             ax.grid(alpha=0.3)
         axes[-1, 0].set_xlabel("time")
         spec = self.spec
-        fig.suptitle(spec.title or spec.path.name, fontsize="medium")
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        return path
+        return save_figure(fig, path, title=spec.title or spec.path.name, title_size="medium")
 
     def summary(self) -> str:
         """A few lines: what ran, how long, the execution order, each variable's range."""

@@ -33,6 +33,7 @@ from ..analysis.fading_memory import (
 from ..estimators.kalman import KalmanModel, kalman_filter
 from ..estimators.truncated import assumption_bounds
 from ..modelfile import load_system
+from ..plotting import save_figure
 from ..systems.innovation import _window_values
 from . import Experiment, ExperimentResult
 from .fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
@@ -199,12 +200,7 @@ def _plot_example1(
     ax[2].legend(fontsize="small", loc="upper right")
     for a in ax:
         a.grid(alpha=0.3)
-    fig.suptitle("Cox & Toth Example 1: three realizations, one output")
-    fig.tight_layout()
-    path = out_dir / "example1.png"
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, out_dir / "example1.png", title="Cox & Toth Example 1: three realizations, one output")
 
 
 # ---------------------------------------------------------------------------
@@ -505,11 +501,10 @@ def _plot_truncation(
         a.set_xlabel(r"memory $\tau$")
         a.grid(alpha=0.3, which="both")
         a.legend(fontsize="small")
-    fig.suptitle("Fading memory: truncation error against tau (cox-toth-truncation, p_t = sin(0.25 t))")
-    fig.tight_layout()
-    decay_path = out_dir / "truncation_decay.png"
-    fig.savefig(decay_path, dpi=120)
-    plt.close(fig)
+    decay_path = save_figure(
+        fig, out_dir / "truncation_decay.png",
+        title="Fading memory: truncation error against tau (cox-toth-truncation, p_t = sin(0.25 t))",
+    )
 
     theorem = errs["theorem"]
     t = np.arange(theorem.K_error.shape[1])
@@ -533,11 +528,10 @@ def _plot_truncation(
     ax[2].legend(fontsize="small", ncol=2)
     for a in ax:
         a.grid(alpha=0.3)
-    fig.suptitle("Truncated (theorem start) and frozen gains along the trajectory")
-    fig.tight_layout()
-    time_path = out_dir / "truncation_over_time.png"
-    fig.savefig(time_path, dpi=120)
-    plt.close(fig)
+    time_path = save_figure(
+        fig, out_dir / "truncation_over_time.png",
+        title="Truncated (theorem start) and frozen gains along the trajectory",
+    )
     return decay_path, time_path
 
 

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from ..plotting import save_figure
 from . import Experiment, ExperimentResult
 from .fmus import (
     Agreement,
@@ -337,10 +338,7 @@ def _plot_curves(path: Path, pd: Any, rob: Any) -> Path:
     ax.grid(alpha=0.3)
     ax.legend()
     ax.set_title("Example 1: certified gamma as a function of epsilon (points evaluated by the search)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 # ---------------------------------------------------------------------------
@@ -453,11 +451,10 @@ def _plot_fig1(out_dir: Path, sig: Fig1Signals, errors: dict[str, np.ndarray]) -
         ax.grid(alpha=0.3)
     axes[0].legend()
     axes[-1].set_xlabel("k")
-    fig.suptitle("Fig. 1: estimation error, epsilon = 150, xi(0) = 0 (Example 1; co-simulated FMUs)")
-    fig.tight_layout()
-    p1 = out_dir / "fig1.png"
-    fig.savefig(p1, dpi=120)
-    plt.close(fig)
+    p1 = save_figure(
+        fig, out_dir / "fig1.png",
+        title="Fig. 1: estimation error, epsilon = 150, xi(0) = 0 (Example 1; co-simulated FMUs)",
+    )
 
     fig, axes = plt.subplots(2, 1, figsize=(8, 5), sharex=True)
     axes[0].plot(sig.k, sig.w[:, 0], "k-")
@@ -469,11 +466,7 @@ def _plot_fig1(out_dir: Path, sig: Fig1Signals, errors: dict[str, np.ndarray]) -
     axes[-1].set_xlabel("k")
     for ax in axes:
         ax.grid(alpha=0.3)
-    fig.suptitle("Fig. 2: disturbance and scheduling (Example 1)")
-    fig.tight_layout()
-    p2 = out_dir / "fig2.png"
-    fig.savefig(p2, dpi=120)
-    plt.close(fig)
+    p2 = save_figure(fig, out_dir / "fig2.png", title="Fig. 2: disturbance and scheduling (Example 1)")
     return [p1, p2]
 
 
@@ -716,10 +709,7 @@ def _plot_example2(path: Path, rows: list[dict[str, Any]], lim: StabilityLimits)
     ax2.set_xlabel("rho")
     ax2.axvline(lim.frozen, color="r", ls="--")
     ax2.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 EXPERIMENTS = [

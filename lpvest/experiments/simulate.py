@@ -15,6 +15,7 @@ import numpy as np
 
 from ..expressions import Expression
 from ..modelfile import SystemFile
+from ..plotting import save_figure
 from ..scheduling import SchedulingSpace
 from ..systems import (
     AffineLPV,
@@ -61,11 +62,7 @@ class Simulation:
             ax.legend(loc="upper right", fontsize="small", ncol=min(4, len(cols)))
             ax.grid(alpha=0.3)
         axes[-1].set_xlabel(self.time_name)
-        fig.suptitle(f"{self.system}: model {self.model}")
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        return path
+        return save_figure(fig, path, title=f"{self.system}: model {self.model}")
 
 
 def default_schedule(space: SchedulingSpace) -> list[str]:

@@ -54,6 +54,7 @@ import numpy as np
 from ..estimators.base import run_streaming
 from ..estimators.bspline import BSplineObserver, KernelModel, UnknownConstant, UnknownSpline, fit_kernel_model
 from ..modelfile import load_system
+from ..plotting import save_figure
 from . import Experiment, ExperimentResult
 from .fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
 
@@ -134,11 +135,7 @@ def _figure(path: Path, t: np.ndarray, panels: list[dict[str, Any]], title: str)
             ax.legend(loc="best", fontsize=8)
     axes[0].set_title(title)
     axes[-1].set_xlabel("t [s]")
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 # -- the data, through FMUs ----------------------------------------------------------------------

@@ -1,0 +1,27 @@
+"""Shared plotting glue (matplotlib is imported inside, never at import time)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+__all__ = ["save_figure"]
+
+
+def save_figure(fig: Any, path: str | Path, *, title: str | None = None, title_size: str | None = None) -> Path:
+    """Finish a matplotlib figure the way every lpvest figure is finished:
+    optional ``suptitle``, ``tight_layout``, PNG at 120 dpi into ``path``
+    (its folder created), then close it. Returns ``path``."""
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    if title is not None:
+        if title_size is None:
+            fig.suptitle(title)
+        else:
+            fig.suptitle(title, fontsize=title_size)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
