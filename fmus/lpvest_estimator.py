@@ -24,7 +24,8 @@ class LpvestEstimator(LpvestSlave):
 
     def declare(self):
         kind = self.spec["estimator"]
-        return self.model_parameters() + [Parameter.from_json(p) for p in kind["parameters"]]
+        model = self.model()
+        return self.model_parameters() + [Parameter.from_json(p).for_model(model) for p in kind["parameters"]]
 
     def make_component(self, params):
         kind = self.spec["estimator"]

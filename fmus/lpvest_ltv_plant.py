@@ -41,6 +41,5 @@ class LpvestLtvPlant(LpvestSlave):
         )
 
     def output_dependencies(self, port):
-        if port.name == "x":
-            return []
-        return None
+        # u_applied is the input u when use_model_input = false: declared so for every configuration
+        return ["u"] if port.name == "u_applied" else super().output_dependencies(port)

@@ -12,12 +12,16 @@ of sample k are set, they read ``C(p_k) x_k + D u_k + ...`` before fmi2DoStep;
 ``x_k`` does not depend on the inputs of sample k.
 
 Parameters: ``noise`` and ``seed`` (models with a noise description),
-``x0[i]``, and the model file's own parameters (e.g. ``rho``).
+``x0[i]`` (the initial state; for an affine model the mean of ``x_0``, drawn
+from ``N(x0, P0)`` with the parameter ``P0[i,j]`` when the noise is on, as
+``AffineLPV.simulate`` does: the same seed gives the same realization), and
+the model file's own parameters (e.g. ``rho``).
 """
 
 from lpvest.fmi.slave import LpvestSlave
 from lpvest.fmi.spec import Parameter
-from lpvest.systems import AffineLPV, InnovationLPV
+from lpvest.systems.affine import AffineLPV
+from lpvest.systems.innovation import InnovationLPV
 from lpvest.systems.streaming import DiscretePlant
 
 
@@ -33,7 +37,11 @@ class LpvestPlant(LpvestSlave):
             x0 = model.x0
         else:
             x0 = [0.0] * model.nx
-        pars.append(Parameter("x0", [float(v) for v in x0], "initial state"))
+        if isinstance(model, AffineLPV):
+            pars.append(Parameter("x0", [float(v) for v in x0], "mean of the initial state x_0"))
+            pars.append(Parameter("P0", model.P0.tolist(), "covariance of the initial state x_0 (drawn when noise)"))
+        else:
+            pars.append(Parameter("x0", [float(v) for v in x0], "initial state"))
         return pars
 
     def make_component(self, params):
@@ -42,12 +50,8 @@ class LpvestPlant(LpvestSlave):
             noise=bool(params.get("noise", False)),
             seed=int(params.get("seed", 0)),
             x0=params["x0"],
+            P0=params.get("P0"),
         )
 
     def input_range(self, port, index):
         return self.scheduling_range(port, index)
-
-    def output_dependencies(self, port):
-        if port.name == "x":
-            return []  # x_k is the state: no direct feedthrough
-        return None  # y_k, z_k depend on every input of sample k

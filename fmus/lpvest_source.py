@@ -19,7 +19,7 @@ from lpvest.fmi.components import SourceComponent
 from lpvest.fmi.slave import LpvestSlave
 from lpvest.fmi.spec import Parameter
 from lpvest.signals import SignalSpec
-from lpvest.systems import PolytopicLPV
+from lpvest.systems.polytopic import PolytopicLPV
 
 KINDS = ("zero", "sinusoid", "decaying", "gaussian", "constant", "random", "table")
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from .errors import ModelFileError
 
-__all__ = ["models_dir", "example_systems", "find_system", "ExampleEntry"]
+__all__ = ["models_dir", "example_systems", "find_system", "stored_design", "ExampleEntry"]
 
 
 def models_dir() -> Path:
@@ -53,3 +53,13 @@ def find_system(source: str | Path) -> Path:
             return e.path
     names = ", ".join(e.name for e in entries)
     raise ModelFileError(f"no example system {str(source)!r} (examples: {names}; or give a .toml file)")
+
+
+def stored_design(system_name: str, role: str) -> Path | None:
+    """The design stored with the example systems for ``role`` of ``system_name``
+    (``models/designs/<system>.<Role>.json``, written by ``lpvest design``), or
+    ``None``. The FMU builder carries it instead of solving the LMIs again, so
+    every machine builds the same filter; it checks that the design fits the
+    plant (:meth:`lpvest.design.result.HinfDesign.check_model`)."""
+    path = models_dir() / "designs" / f"{system_name}.{role}.json"
+    return path if path.is_file() else None

@@ -7,7 +7,10 @@
     lpvest simulate NAME|FILE.toml          simulate one model: CSV, plot, summary
     lpvest reproduce NAME|all --out DIR     reproduce paper examples through FMUs (all: + DIR/report.md)
     lpvest regress [--update]               FMU co-simulations against tests/data/reference
-    lpvest build [--out DIR] [--model FILE.toml ...]   build and validate the FMUs
+    lpvest build [--out DIR] [--model FILE.toml ...] [--kinds ROLES] [--design [ROLE=]FILE.json]
+                                            build and validate the FMUs
+    lpvest design NAME|FILE.toml [--kind pd|robust] [--epsilon E|--search] [--solver S] --out FILE.json
+                                            design an H-infinity filter, write it as JSON
     lpvest cosim FILE.toml [--out DIR] [--fmus DIR]    co-simulate FMUs described in a file: CSV, plot, summary
     lpvest cosim FILE.toml --ssp OUT.ssp               write that system as an SSP file instead
     lpvest validate FMU...                  validate FMUs (fmpy.validation)
@@ -253,12 +256,38 @@ def cmd_regress(args: argparse.Namespace) -> int:
     return regress(args.names, update=args.update, directory=args.dir, fmus=fmus)
 
 
+def _design_args(items: Sequence[str] | None) -> dict[str, Path]:
+    """``--design [ROLE=]FILE`` -> {role: file}; the role defaults to the design's kind
+    (parameter-dependent -> HinfPD, robust -> HinfRobust)."""
+    from .design.result import KIND_PD, HinfDesign
+
+    out: dict[str, Path] = {}
+    for item in items or ():
+        role, sep, file = item.partition("=")
+        if not sep:
+            file, role = item, ""
+        path = Path(file)
+        if not role:
+            role = "HinfPD" if HinfDesign.from_json(path).kind == KIND_PD else "HinfRobust"
+        if role in out:
+            raise LpvestError(f"--design: two designs for {role}")
+        out[role] = path
+    return out
+
+
 def cmd_build(args: argparse.Namespace) -> int:
     from .fmi.build import build_fmus, format_table, status_bridge
 
     out = Path(args.out)
     sources = args.model or None
-    results, notes = build_fmus(sources, out, progress=lambda name: print(f"building {name}", file=sys.stderr))
+    designs = _design_args(args.design)
+    if designs and (not sources or len(sources) != 1):
+        raise LpvestError("--design needs exactly one --model: the model file (or example) the design is for")
+    roles = None
+    if args.kinds:
+        roles = [r.strip() for item in args.kinds for r in item.split(",") if r.strip()]
+    results, notes = build_fmus(sources, out, roles=roles, designs=designs,
+                                progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     print(format_table([r.validation for r in results]))
     for note in notes:
         print(f"note: {note}")
@@ -268,8 +297,37 @@ def cmd_build(args: argparse.Namespace) -> int:
     bad = [r for r in results if not r.validation.ok]
     print(f"{len(results)} FMU(s) in {out}" + (f"; {len(bad)} failed validation" if bad else ", all valid"))
     if not results:
-        raise LpvestError("nothing to build")
+        raise LpvestError("nothing to build" + (f" (no FMU has a role in --kinds {', '.join(roles)})" if roles else ""))
     return 1 if bad else 0
+
+
+def cmd_design(args: argparse.Namespace) -> int:
+    from .design.hinf import design_hinf, search_epsilon
+    from .design.result import KIND_PD, KIND_ROBUST
+    from .modelfile import load_system
+    from .systems.polytopic import PolytopicLPV
+
+    system = load_system(args.target, parameters=_parse_params(args.param))
+    model = system.model(args.model)
+    if not isinstance(model, PolytopicLPV):
+        raise LpvestError(f"{system.name}: model {args.model or system.default!r} is not polytopic; "
+                          "an H-infinity design needs a polytopic plant")
+    kind = {"pd": KIND_PD, "robust": KIND_ROBUST}[args.kind]
+    t = time.perf_counter()
+    if args.epsilon is not None:
+        design = design_hinf(model, epsilon=args.epsilon, kind=kind, solver=args.solver)
+    else:
+        design = search_epsilon(model, kind=kind, solver=args.solver).design
+    seconds = time.perf_counter() - t
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    design.to_json(out)
+    eps = "inf" if design.epsilon == float("inf") else f"{design.epsilon:.6g}"
+    print(f"{system.name}: {kind} H-infinity filter, gamma = {design.gamma:.6g} at epsilon = {eps} "
+          f"({design.solver}, {seconds:.1f} s; LMI margin {design.lmi_margin:.3g}, "
+          f"Lyapunov margin {design.lyapunov_margin:.3g})")
+    print(f"wrote {out}")
+    return 0
 
 
 def cmd_cosim(args: argparse.Namespace) -> int:
@@ -345,7 +403,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="fmu-build", help="output folder (default fmu-build)")
     p.add_argument("--model", action="append", metavar="FILE.toml",
                    help="build the FMUs of this model file (or example name) instead; repeatable")
+    p.add_argument("--kinds", action="append", metavar="ROLE[,ROLE...]",
+                   help="build only these roles (Plant, Scheduler, Source, Kalman, TruncatedKalman, HinfPD, "
+                        "HinfRobust, BSplineObserver)")
+    p.add_argument("--design", action="append", metavar="[ROLE=]FILE.json",
+                   help="carry this design (from `lpvest design`) in the H-infinity filter FMU instead of "
+                        "solving one; the role follows the design's kind unless given; needs one --model")
     p.set_defaults(func=cmd_build)
+
+    p = sub.add_parser("design", help="design an H-infinity filter (LMIs) and write it as JSON for `lpvest build "
+                                      "--design`")
+    p.add_argument("target", help="example name or model file (.toml) with a polytopic model")
+    p.add_argument("--model", help="model of the system (default: the file's default)")
+    p.add_argument("--param", action="append", metavar="NAME=VALUE", help="override a model parameter")
+    p.add_argument("--kind", choices=["pd", "robust"], default="pd",
+                   help="pd: gain-scheduled (Theorem 1, default); robust: constant (Corollary 1)")
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("--epsilon", type=float, help="design at this epsilon")
+    group.add_argument("--search", action="store_true", help="search the best epsilon over the real line (default)")
+    p.add_argument("--solver", default="CLARABEL", help="cvxpy solver (default CLARABEL)")
+    p.add_argument("--out", required=True, metavar="DESIGN.json", help="the design file to write")
+    p.set_defaults(func=cmd_design)
 
     p = sub.add_parser("cosim", help="co-simulate FMUs described in a TOML file; CSV, plot, summary (or --ssp)")
     p.add_argument("file", metavar="FILE.toml", help="co-simulation description (see examples/*.toml)")

@@ -82,7 +82,14 @@ class Driver:
         from lpvest.fmi.naming import parse_element
 
         names = sorted((n for n in self.vr if n.startswith(base + "[")), key=lambda n: parse_element(n)[1])
+        if not names and base in self.vr:  # a scalar port: the variable is its name
+            names = [base]
         return np.array(self.fmu.getReal([self.vr[n] for n in names]))
+
+    @property
+    def step_size(self) -> float:
+        """The default experiment's step: the sample time of a discrete-time FMU."""
+        return float(self.md.defaultExperiment.stepSize)
 
     def step(self, t: float, h: float) -> int:
         return self.status(self.fmu.doStep, t, h)

@@ -96,6 +96,7 @@ connections = ["sched.p -> plant.p"]
 fmu = "{fmus['PeixotoEx1Scheduler'].as_posix()}"
 [components.plant]
 fmu = "PeixotoEx1Plant"
+parameters = {{ sample_time = 0.5 }}
 """)
     res = load_cosim(f, fmu_dir=fmus.out).run()
     assert res.data.shape == (3,)

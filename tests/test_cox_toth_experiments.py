@@ -103,18 +103,21 @@ def test_truncation_through_fmus(truncation):
         assert value == pytest.approx(th["max_K_error"][int(tau)], rel=1e-9, abs=1e-15), tau
 
 
-def test_plant_noise_is_the_plant_fmus(experiment_fmus):
-    """plant_noise() draws what the Plant FMU draws (seeded, from the model's x0)."""
+def test_the_plant_fmu_draws_what_simulate_draws(experiment_fmus):
+    """The Plant FMU (noise on, seed 3) draws x_0 ~ N(x0, P0) and then the noise,
+    as AffineLPV.simulate(rng=3) does: the same seed, the same realization."""
     from lpvest import load_system
-    from lpvest.experiments.cox_toth import plant_noise, truncation_cosim
+    from lpvest.experiments.cox_toth import truncation_cosim
     from lpvest.experiments.fmus import column
 
     model = load_system("cox-toth-truncation").model()
+    assert np.any(model.P0)  # else x_0 would not be drawn
     res = truncation_cosim(30, seed=3, taus=()).run(experiment_fmus)
     k = np.arange(30)
-    data = model.simulate(np.sin(0.25 * k)[:, None], np.sin(0.1 * k)[:, None], **plant_noise(model, 30, 3))
+    data = model.simulate(np.sin(0.25 * k)[:, None], np.sin(0.1 * k)[:, None], rng=3)
     np.testing.assert_allclose(column(res, "plant.y"), data.y, rtol=0, atol=1e-13)
-    np.testing.assert_array_equal(column(res, "plant.x")[0], model.x0)
+    np.testing.assert_array_equal(column(res, "plant.x")[0], data.x[0])
+    assert not np.array_equal(data.x[0], model.x0)
 
 
 def test_cli_writes_results_and_figures(tmp_path, capsys, experiment_fmus):

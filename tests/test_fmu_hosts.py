@@ -56,13 +56,40 @@ def _cosim_run(fmu_paths: dict[str, Path], steps: int, step_size: float, script:
 
 
 def test_every_fmu_loads_and_steps_in_libcosim(fmus):
+    """Every FMU, one libcosim execution after another in one process, twice
+    over (the same FMU instantiated again after its execution ended), each
+    with its own sample time (the default experiment's step)."""
+    from fmpy import read_model_description
+
     names = sorted(EXPECTED)
-    # 1 ms: the B-spline observer's default sample time (one step is one sample)
-    result = _cosim_run({n: fmus[n] for n in names}, steps=5, step_size=0.001, script="")
-    assert result["ok"]
-    for name in names:
-        values = result["values"][name]
-        assert values and all(np.isfinite(v) for v in values.values()), name
+    steps = {n: float(read_model_description(str(fmus[n])).defaultExperiment.stepSize) for n in names}
+    code = textwrap.dedent(f"""
+        import json, math
+        from libcosimpy.CosimExecution import CosimExecution
+        from libcosimpy.CosimSlave import CosimLocalSlave
+        from libcosimpy.CosimObserver import CosimObserver
+        from libcosimpy.CosimLogging import log_output_level, CosimLogLevel
+        log_output_level(CosimLogLevel.ERROR)
+        paths = {json.dumps({n: str(fmus[n]) for n in names})}
+        steps = {json.dumps(steps)}
+        out = {{}}
+        for round_ in range(2):
+            for name, path in paths.items():
+                ex = CosimExecution.from_step_size(step_size=int(round(steps[name] * 1e9)))
+                i = ex.add_local_slave(CosimLocalSlave(fmu_path=path, instance_name=name))
+                refs = [v.reference for v in ex.slave_variables(i) if v.causality == 2]  # outputs
+                obs = CosimObserver.create_last_value()
+                ex.add_observer(obs)
+                ok = ex.step(5)
+                values = obs.last_real_values(i, refs) if refs else []
+                out[f"{{round_}}:{{name}}"] = bool(ok) and all(math.isfinite(v) for v in values)
+                del ex
+        print("RESULT" + json.dumps(out))
+    """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, check=False)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    result = json.loads(next(x for x in proc.stdout.splitlines() if x.startswith("RESULT"))[len("RESULT"):])
+    assert result == {f"{r}:{n}": True for r in range(2) for n in names}
 
 
 def test_libcosim_connects_scheduler_source_and_plant_like_the_library(fmus):
@@ -84,10 +111,9 @@ def test_libcosim_connects_scheduler_source_and_plant_like_the_library(fmus):
     # the plant got p_k and w_k in step k (x_steps right, no one-step delay)
     np.testing.assert_allclose([values["plant"]["x[1]"], values["plant"]["x[2]"]], ref.x[steps], rtol=1e-13)
     # libcosim observes the outputs after the last step, before it passes the
-    # new inputs on: y = Cy x_steps + Dy w_(steps-1) with the inputs still held
-    m = plant.at(plant.alpha(theta(steps - 1)[None]))
-    expected_y = m.Cy @ ref.x[steps] + m.Dy @ paper_w(steps - 1)[None]
-    assert values["plant"]["y[1]"] == pytest.approx(expected_y[0], rel=1e-13)
+    # new inputs on: y feeds through, so it holds the value of the sample just
+    # consumed, y_(steps-1) (lpvest.fmi.slave, step semantics)
+    assert values["plant"]["y[1]"] == ref.y[steps - 1, 0]
 
 
 # -- a long run: no growth in memory -------------------------------------------------------
@@ -139,91 +165,138 @@ def test_100000_steps_do_not_grow_memory(fmus, name):
 # -- a fresh Python without lpvest ------------------------------------------------------------
 
 
+_FRESH_HOST = """
+import json, sys
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave
+
+for absent in ("lpvest", *sys.argv[2:]):
+    try:
+        __import__(absent)
+        sys.exit(f"{absent} is importable in the fresh environment")
+    except ImportError:
+        pass
+job = json.loads(open(sys.argv[1]).read())
+out = {}
+for name, path in job["fmus"].items():
+    md = read_model_description(path)
+    h = float(md.defaultExperiment.stepSize)
+    ins = [v for v in md.modelVariables if v.causality == "input"]
+    outs = [v for v in md.modelVariables if v.causality == "output"]
+    given = job["inputs"].get(name, {})
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.coSimulation.modelIdentifier,
+                    instanceName=name)
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    rows = []
+    for k in range(job["steps"]):
+        values = []
+        for v in ins:  # the given series, else the middle of the declared range, else the start value
+            if v.name in given:
+                values.append(given[v.name][k])
+            elif v.min is not None and v.max is not None:
+                values.append(0.5 * (float(v.min) + float(v.max)))
+            else:
+                values.append(float(v.start or 0.0))
+        if ins:
+            fmu.setReal([v.valueReference for v in ins], values)
+        rows.append(fmu.getReal([v.valueReference for v in outs]))  # sample k, before the step
+        fmu.doStep(k * h, h)
+    fmu.terminate()
+    fmu.freeInstance()
+    out[name] = {v.name: [r[i] for r in rows] for i, v in enumerate(outs)}
+print("RESULT" + json.dumps(out))
+"""
+
+
+def _requirements(path: Path) -> list[str]:
+    with zipfile.ZipFile(path) as z:
+        return z.read("resources/requirements.txt").decode().split()
+
+
 @pytest.mark.slow
-def test_fmus_run_in_a_fresh_virtual_environment_without_lpvest(fmus, tmp_path):
+def test_fmus_run_in_a_fresh_virtual_environment_with_exactly_their_requirements(fmus, tmp_path):
+    """Every FMU role in a fresh Python with fmpy (the host) and exactly the
+    packages its requirements.txt lists: first every FMU that lists numpy
+    only, with scipy absent; then scipy added, the FMUs that list it. lpvest
+    is never importable there: each FMU runs the copy it carries."""
     env_dir = tmp_path / "fresh"
     venv.create(env_dir, with_pip=True)
     py = env_dir / "bin" / "python"
-    pip = subprocess.run([str(py), "-m", "pip", "install", "--quiet", "numpy", "scipy", "fmpy"],
-                         capture_output=True, text=True, timeout=600, check=False)
-    assert pip.returncode == 0, pip.stderr[-3000:]
-    k = np.arange(40)
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+
+    def pip(*packages: str) -> None:
+        proc = subprocess.run([str(py), "-m", "pip", "install", "--quiet", *packages],
+                              capture_output=True, text=True, timeout=600, check=False, env=env)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+
+    one_per_role = {}
+    for name in sorted(EXPECTED):
+        if name != "PeixotoEx1MovingAverage":  # a test-only estimator (tests/fmu_movavg.py)
+            one_per_role.setdefault(name.removeprefix("PeixotoEx1").removeprefix("CoxTothTruncation"), name)
+    chosen = set(one_per_role.values()) | {"PeixotoEx1Plant", "PeixotoEx1HinfPD", "CoxTothTruncationKalman",
+                                           "SridharLtvPlant", "SridharLtvBSplineObserver", "AffineDemoPlant"}
+    groups: dict[tuple[str, ...], list[str]] = {}
+    for name in sorted(chosen):
+        groups.setdefault(tuple(_requirements(fmus[name])), []).append(name)
+    assert set(groups) == {("numpy>=1.26",), ("numpy>=1.26", "scipy>=1.11")}, groups
+    roles = {n.removeprefix("PeixotoEx1").removeprefix("CoxTothTruncation").removeprefix("SridharLtv")
+             .removeprefix("AffineDemo") for n in chosen}
+    assert roles >= {"Plant", "Scheduler", "Source", "Kalman", "TruncatedKalman", "HinfPD", "HinfRobust",
+                     "BSplineObserver"}
+
+    T = 40
+    k = np.arange(T)
+    plant = load_system("peixoto-ex1").model()
+    ref = plant.simulate(plant.alpha_batch(theta(k)[:, None]), paper_w(k)[:, None])
     kf_model = load_system("cox-toth-truncation").model()
     kf_u = np.sin(0.1 * k)[:, None]
     kf_y = kf_model.simulate(theta(k)[:, None], kf_u, rng=1).y
-    inputs = {"p": theta(k).tolist(), "w": paper_w(k).tolist(), "u": kf_u[:, 0].tolist(), "y": kf_y.tolist()}
-    code = textwrap.dedent(f"""
-        import json, sys
-        try:
-            import lpvest
-            sys.exit("lpvest is importable in the fresh environment")
-        except ImportError:
-            pass
-        from fmpy import read_model_description, extract
-        from fmpy.fmi2 import FMU2Slave
-        out = {{}}
-        for name, path in {json.dumps({n: str(fmus[n]) for n in ("PeixotoEx1Plant", "SridharLtvPlant",
-                                                                   "CoxTothTruncationKalman",
-                                                                   "PeixotoEx1HinfPD")})}.items():
-            md = read_model_description(path)
-            vr = {{v.name: v.valueReference for v in md.modelVariables}}
-            fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path),
-                            modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
-            fmu.instantiate()
-            fmu.setupExperiment(startTime=0.0)
-            fmu.enterInitializationMode()
-            fmu.exitInitializationMode()
-            ys = []
-            inputs = json.loads({json.dumps(json.dumps(inputs))})
-            for k in range(40):
-                if name == "PeixotoEx1Plant":
-                    fmu.setReal([vr["p[1]"], vr["w[1]"]], [inputs["p"][k], inputs["w"][k]])
-                    ys.append(fmu.getReal([vr["y[1]"]])[0])
-                    fmu.doStep(float(k), 1.0)
-                elif name == "PeixotoEx1HinfPD":  # fed the plant's y recorded above
-                    fmu.setReal([vr["p[1]"], vr["y[1]"]], [inputs["p"][k], out["PeixotoEx1Plant"][k]])
-                    ys.append(fmu.getReal([vr["zhat[1]"], vr["zhat[2]"]]))
-                    fmu.doStep(float(k), 1.0)
-                elif name == "CoxTothTruncationKalman":
-                    fmu.setReal([vr["p[1]"], vr["u[1]"], vr["y[1]"], vr["y[2]"]],
-                                [inputs["p"][k], inputs["u"][k], *inputs["y"][k]])
-                    ys.append(fmu.getReal([vr["xhat[1]"], vr["xhat[2]"]]))
-                    fmu.doStep(float(k), 1.0)
-                else:
-                    ys.append(fmu.getReal([vr["y[1]"]])[0])
-                    fmu.doStep(0.25 * k, 0.25)
-            fmu.terminate()
-            fmu.freeInstance()
-            out[name] = ys
-        import lpvest
-        out["lpvest"] = lpvest.__file__
-        print("RESULT" + json.dumps(out))
-    """)
-    proc = subprocess.run([str(py), "-c", code], capture_output=True, text=True, timeout=300, check=False,
-                          cwd=tmp_path, env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
-    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
-    result = json.loads(next(x for x in proc.stdout.splitlines() if x.startswith("RESULT"))[len("RESULT"):])
-    assert "resources" in result["lpvest"]  # the copy bundled in the FMU served it
-    plant = load_system("peixoto-ex1").model()
-    ref = plant.simulate(plant.alpha_batch(theta(k)[:, None]), paper_w(k)[:, None])
-    assert np.array_equal(result["PeixotoEx1Plant"], ref.y[:, 0])
-    ltv = load_system("sridhar-ltv").model().to_state_space().simulate(0.25 * np.arange(40))
-    np.testing.assert_allclose(result["SridharLtvPlant"], ltv.y, rtol=0, atol=1e-9 * np.max(np.abs(ltv.y)))
+    inputs = {
+        "PeixotoEx1Plant": {"p[1]": theta(k).tolist(), "w[1]": paper_w(k).tolist()},
+        "PeixotoEx1HinfPD": {"p[1]": theta(k).tolist(), "y[1]": ref.y[:, 0].tolist()},
+        "CoxTothTruncationKalman": {"p[1]": theta(k).tolist(), "u[1]": kf_u[:, 0].tolist(),
+                                    "y[1]": kf_y[:, 0].tolist(), "y[2]": kf_y[:, 1].tolist()},
+    }
+    host = tmp_path / "host.py"
+    host.write_text(_FRESH_HOST)
+    result: dict[str, dict[str, list[float]]] = {}
+    pip("fmpy", "numpy>=1.26")
+    for reqs in sorted(groups, key=len):
+        extra = [r for r in reqs if not r.startswith("numpy")]
+        if extra:
+            pip(*extra)
+        absent = [] if extra else ["scipy"]
+        job = tmp_path / f"job{len(reqs)}.json"
+        job.write_text(json.dumps({"fmus": {n: str(fmus[n]) for n in groups[reqs]}, "inputs": inputs, "steps": T}))
+        proc = subprocess.run([str(py), str(host), str(job), *absent], capture_output=True, text=True,
+                              timeout=600, check=False, cwd=tmp_path, env=env)
+        assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+        result |= json.loads(next(x for x in proc.stdout.splitlines() if x.startswith("RESULT"))[len("RESULT"):])
+    assert set(result) == chosen
+    for name, columns in result.items():
+        assert all(np.all(np.isfinite(c)) for c in columns.values()), name
+    # the numbers are the library's
+    assert np.array_equal(result["PeixotoEx1Plant"]["y[1]"], ref.y[:, 0])
+    ltv = load_system("sridhar-ltv").model().to_state_space().simulate(0.1 * np.arange(T))
+    np.testing.assert_allclose(result["SridharLtvPlant"]["y[1]"], ltv.y, rtol=0, atol=1e-9 * np.max(np.abs(ltv.y)))
     from lpvest.estimators.kalman import kalman_filter
 
     kf = kalman_filter(kf_model, theta(k)[:, None], kf_u, kf_y)
-    np.testing.assert_allclose(result["CoxTothTruncationKalman"], kf.filtered_means, rtol=0, atol=1e-12)
+    got = np.column_stack([result["CoxTothTruncationKalman"][f"xhat[{i}]"] for i in (1, 2)])
+    np.testing.assert_allclose(got, kf.filtered_means, rtol=0, atol=1e-12)
     # the H-infinity filter ran without cvxpy (not installed there): its design came from the FMU
-    import zipfile
-
     from lpvest.design import HinfDesign
     from lpvest.estimators.hinf import HinfFilter
 
     with zipfile.ZipFile(fmus["PeixotoEx1HinfPD"]) as z:
         design = HinfDesign.from_json(z.read("resources/design.json").decode())
     hf = HinfFilter(design, simplex_map=plant.simplex_map)
-    zhat = [hf.step({"p": theta(k)[i:i + 1], "y": ref.y[i]})["zhat"] for i in range(40)]
-    np.testing.assert_array_equal(result["PeixotoEx1HinfPD"], zhat)
+    zhat = np.array([hf.step({"p": theta(k)[i:i + 1], "y": ref.y[i]})["zhat"] for i in range(T)])
+    got = np.column_stack([result["PeixotoEx1HinfPD"][f"zhat[{i}]"] for i in (1, 2)])
+    np.testing.assert_array_equal(got, zhat)
 
 
 # -- command line ----------------------------------------------------------------------------

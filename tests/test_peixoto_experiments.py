@@ -39,8 +39,11 @@ def test_table1_from_the_cli(tmp_path, capsys, experiment_fmus):
     fmu = res["fmu_cosimulation"]
     assert fmu["ok"] and fmu["bit_for_bit"] and fmu["fmus"][-2:] == ["PeixotoEx1HinfPD", "PeixotoEx1HinfRobust"]
     for name in ("theorem1_best", "corollary1_best"):
-        # the design made at build time is the one found here (a deterministic solve)
-        assert res["fmu_gamma_relative_difference"][name] < 1e-9
+        # the FMUs carry the stored designs (models/designs); the search here solves again. Both
+        # stop within xatol = 1e-3 of the best angle phi (epsilon = tan phi), and gamma varies by
+        # at most 6e-6 (relative) over +-1e-3 around it (measured for both kinds), solver accuracy
+        # (1e-8 on gamma^2) aside: 1e-5 holds on any machine, a different design fails it
+        assert res["fmu_gamma_relative_difference"][name] < 1e-5
         assert 0 < res["fmu_ratios"][name] <= res["fmu_gammas"][name]
     assert "FMU co-simulation vs library: max |difference| = 0 (bit for bit) over 7 quantities" in out
 

@@ -32,8 +32,8 @@ def runs(experiment_fmus):
 
 @pytest.mark.parametrize("ref", REFERENCES, ids=lambda r: r.name)
 def test_cosimulation_matches_the_stored_reference(ref, runs):
-    data, gammas = runs[ref.name]
-    checks = check_reference(ref, data, gammas, REFERENCE_DIR)
+    data, designs = runs[ref.name]
+    checks = check_reference(ref, data, designs, REFERENCE_DIR)
     assert all(c.ok for c in checks), "\n".join(c.line() for c in checks)
     assert [c.name for c in checks[: 1 + len(ref.columns)]] == ["time", *ref.columns]
     assert len(checks) == 1 + len(ref.columns) + len(ref.designs)
@@ -42,11 +42,11 @@ def test_cosimulation_matches_the_stored_reference(ref, runs):
 @pytest.mark.parametrize("ref", REFERENCES, ids=lambda r: r.name)
 def test_reference_files_are_small_and_self_describing(ref):
     path = REFERENCE_DIR / ref.filename
-    columns, data, gammas = read_reference(path)
+    columns, data, designs = read_reference(path)
     assert columns == ["time", *ref.columns]
     assert 100 <= data.shape[0] <= 300 and path.stat().st_size < 12_000  # a few hundred rows, a few KB
     assert np.all(np.isfinite(data))
-    assert set(gammas) == set(ref.designs)
+    assert set(designs) == set(ref.designs) and all(len(d) == 64 for d in designs.values())
     head = path.read_text().splitlines()[:3]
     assert f"tolerance: {ref.tolerance:g}" in head[2] and "lpvest regress --update" in path.read_text()
     # the stored signals are not trivial: a reference of zeros would catch nothing
@@ -55,19 +55,19 @@ def test_reference_files_are_small_and_self_describing(ref):
 
 def test_a_changed_trajectory_fails(runs, tmp_path):
     """The comparison can fail: a reference perturbed by 10x its tolerance is caught,
-    and a changed gamma is caught even when the trajectory is unchanged."""
+    and another carried design is caught even when the trajectory is unchanged."""
     ref = next(r for r in REFERENCES if r.name == "peixoto-fig1")
-    data, gammas = runs[ref.name]
-    write_reference(ref, data, gammas, tmp_path)
-    assert all(c.ok for c in check_reference(ref, data, gammas, tmp_path))
+    data, designs = runs[ref.name]
+    write_reference(ref, data, designs, tmp_path)
+    assert all(c.ok for c in check_reference(ref, data, designs, tmp_path))
     bad = data.copy()
     bad[50, 2] += 10 * ref.tolerance * np.max(np.abs(data[:, 2]))
-    write_reference(ref, bad, gammas, tmp_path)
-    failed = [c.name for c in check_reference(ref, data, gammas, tmp_path) if not c.ok]
+    write_reference(ref, bad, designs, tmp_path)
+    failed = [c.name for c in check_reference(ref, data, designs, tmp_path) if not c.ok]
     assert failed == [ref.columns[1]]
-    write_reference(ref, data, {k: v * (1 + 1e-5) for k, v in gammas.items()}, tmp_path)
-    failed = [c.name for c in check_reference(ref, data, gammas, tmp_path) if not c.ok]
-    assert failed == [f"gamma {name}" for name in ref.designs]
+    write_reference(ref, data, {k: "0" * 64 for k in designs}, tmp_path)
+    failed = [c.name for c in check_reference(ref, data, designs, tmp_path) if not c.ok]
+    assert [f.split(" (")[0] for f in failed] == [f"design {name}" for name in ref.designs]
 
 
 def test_regress_command_updates_then_passes(experiment_fmus, tmp_path):

@@ -26,12 +26,13 @@ X0 = [0.5, -0.25]
 CONNECTIONS = ["sched.p -> plant.p", "src.w -> plant.w", "sched.p -> filter.p", "plant.y -> filter.y"]
 
 
-def _components(fmus, **sched):
+def _components(fmus, h=H, **sched):
+    """The system; the discrete-time plant and filter sample every ``h`` (their parameter sample_time)."""
     return [
         Component("sched", fmus["PeixotoEx1Scheduler"], {"omega": [OMEGA], "phase": [PHASE], **sched}),
         Component("src", fmus["PeixotoEx1Source"], {"w.onset": 4.0}),
-        Component("plant", fmus["PeixotoEx1Plant"], {"x0": X0}),
-        Component("filter", fmus["PeixotoEx1HinfPD"]),
+        Component("plant", fmus["PeixotoEx1Plant"], {"x0": X0, "sample_time": h}),
+        Component("filter", fmus["PeixotoEx1HinfPD"], {"sample_time": h}),
     ]
 
 
@@ -70,7 +71,9 @@ def library(fmus):
 def _jacobi(library, first: dict[str, float]) -> dict[str, np.ndarray]:
     """Jacobi stepping of the library components: every component steps from t_k
     with the inputs read after the previous step (``first`` at k = 0), and its
-    outputs are read after the step with those inputs held."""
+    outputs are read after the step: those with direct feedthrough (the plant's
+    y, the filter's zhat) hold their value at the sample just consumed, the
+    others (p, w, the states x and xf) are at t_(k+1) (lpvest.fmi.slave)."""
     sched, src, plant, filt = library()
     pin = {"p": np.array([first["p"]]), "w": np.array([first["w"]])}
     fin = {"p": np.array([first["p"]]), "y": np.array([first["y"]])}
@@ -78,10 +81,11 @@ def _jacobi(library, first: dict[str, float]) -> dict[str, np.ndarray]:
     for k in range(N):
         sched.step({}, dt=H, t_end=(k + 1) * H)
         src.step({}, dt=H, t_end=(k + 1) * H)
-        plant.step(pin)
-        filt.step(fin)
-        so, wo, po, fo = sched.outputs({}), src.outputs({}), plant.outputs(pin), filt.outputs(fin)
-        rows.append(np.concatenate([so["p"], wo["w"], po["y"], po["x"], fo["zhat"], fo["xf"]]))
+        po = plant.step(pin)
+        fo = filt.step(fin)
+        so, wo = sched.outputs({}), src.outputs({})
+        x, xf = plant.get_state()["x"], filt.get_state()["xf"]
+        rows.append(np.concatenate([so["p"], wo["w"], po["y"], x, fo["zhat"], xf]))
         pin = {"p": so["p"], "w": wo["w"]}
         fin = {"p": so["p"], "y": po["y"]}
     a = np.array(rows)
@@ -106,7 +110,9 @@ def test_the_file_holds_the_system_the_step_and_the_bound_parameters(fmus, ssp):
                                 ("sched.p[1]", "filter.p[1]"), ("plant.y[1]", "filter.y[1]")]
     assert sys_.parameters["sched"] == [("omega[1]", "Real", "0.3"), ("phase[1]", "Real", "0.5")]
     assert sys_.parameters["src"] == [("w.onset", "Real", "4.0")]
-    assert sys_.parameters["plant"] == [("x0[1]", "Real", "0.5"), ("x0[2]", "Real", "-0.25")]
+    assert sys_.parameters["plant"] == [("x0[1]", "Real", "0.5"), ("x0[2]", "Real", "-0.25"),
+                                        ("sample_time", "Real", "0.5")]
+    assert sys_.parameters["filter"] == [("sample_time", "Real", "0.5")]
     assert sys_.outputs["filter"] == ["zhat[1]", "zhat[2]", "xf[1]", "xf[2]"]
 
 
@@ -123,15 +129,19 @@ def test_components_sharing_an_fmu_carry_it_once_and_bad_systems_are_not_written
 
 def test_fmpy_ignores_the_bindings_and_the_step_unless_told(fmus, ssp):
     """fmpy.ssp.simulate_ssp as is: the SSD's parameter values are not applied
-    (the scheduler runs with its default omega = 0.25, phase = 0), and the step
-    is whatever the caller passes."""
+    (the scheduler runs with its default omega = 0.25, phase = 0; the plant and
+    filter keep their sample time 1), and the step is whatever the caller passes."""
+    from fmpy.fmi1 import FMICallException
     from fmpy.ssp.simulation import simulate_ssp as fmpy_simulate_ssp
 
-    res = fmpy_simulate_ssp(str(ssp), stop_time=4 * H - 0.25 * H, step_size=H)
-    t_after = (np.arange(4) + 1) * H  # fmpy reads the outputs after each step
+    res = fmpy_simulate_ssp(str(ssp), stop_time=4.0 - 0.25, step_size=1.0)
+    t_after = np.arange(4) + 1.0  # fmpy reads the outputs after each step
     assert res.shape == (4,)
     np.testing.assert_allclose(res["sched.p[1]"], np.sin(0.25 * t_after), rtol=0, atol=1e-15)
-    np.testing.assert_allclose(res["time"], t_after - H, rtol=0, atol=1e-15)  # labelled with the step's start
+    np.testing.assert_allclose(res["time"], t_after - 1.0, rtol=0, atol=1e-15)  # labelled with the step's start
+    # the file's step with the FMUs' own sample time: the discrete-time plant refuses it (fmi2Error)
+    with pytest.raises(FMICallException, match="fmi2DoStep failed with status 3"):
+        fmpy_simulate_ssp(str(ssp), stop_time=4 * H - 0.25 * H, step_size=H)
 
 
 @pytest.mark.parametrize("importer", ["fmpy", "libcosim"])
@@ -154,36 +164,29 @@ def test_each_importer_runs_the_file_as_jacobi_stepping_predicts(ssp, master, li
 
 def test_jacobi_delay_against_our_master_exactly(ssp, master, library, capsys):
     """libcosim (initialized like our master) against our master, with the exact
-    relation: the plant runs identically; the filter gets
-    y~_k = C_y x_k + D_y w_(k-1) = y_k - (w_k - w_(k-1)) (Peixoto's C_y = [1, 0],
-    D_y = 1 do not depend on theta) instead of y_k, and its estimate is read
-    after its step with theta_k and y~_k still held."""
+    relation: the plant runs identically and its y is read after each step
+    holding the value of the sample it consumed (y_k); so the filter gets
+    (theta_(k+1), y_k) in step k + 1 instead of (theta_(k+1), y_(k+1)): every
+    measurement one sample late."""
     res = simulate_ssp(ssp, importer="libcosim")
     x = np.column_stack([master["plant.x[1]"], master["plant.x[2]"]])
     w, p, y = master["src.w[1]"], master["sched.p[1]"], master["plant.y[1]"]
-    # the plant gets p_k and w_k in step k: its state is our master's
+    # the plant gets p_k and w_k in step k: its state is our master's, and its y is y_k
     np.testing.assert_array_equal(np.column_stack([res["plant.x[1]"], res["plant.x[2]"]]), x[1:])
-    # the y it passes on in step k + 1 (read after step k, inputs held)
-    y_tilde = np.concatenate([[y[0]], x[1:, 0] + w[:-1]])
-    np.testing.assert_allclose(res["plant.y[1]"], y_tilde[1:], rtol=0, atol=1e-15)
-    np.testing.assert_allclose(y_tilde, y - np.concatenate([[0.0], np.diff(w)]), rtol=0, atol=1e-15)
-    # the filter of the library on (theta_k, y~_k), read with the inputs held
+    np.testing.assert_array_equal(res["plant.y[1]"], y[:-1])
+    # the library filter on (theta_k, y_(k-1)) (y_(-1): the output at t_0, as libcosim initializes)
+    y_late = np.concatenate([[y[0]], y[:-2]])
     _, _, _, filt = library()
-    zhat = []
-    for k in range(N):
-        inp = {"p": p[k:k + 1], "y": y_tilde[k:k + 1]}
-        filt.step(inp)
-        zhat.append(filt.outputs(inp)["zhat"])
-    zhat = np.array(zhat)
+    zhat = np.array([filt.step({"p": p[k:k + 1], "y": y_late[k:k + 1]})["zhat"] for k in range(N)])
     np.testing.assert_allclose(np.column_stack([res["filter.zhat[1]"], res["filter.zhat[2]"]]), zhat,
                                rtol=1e-14, atol=1e-15)
-    # how much it changes the estimate at the same instant t_(k+1), and the
-    # achieved l2 gain from w to the estimation error (certified bound gamma)
+    # how much it changes the estimate of the same sample, and the achieved l2
+    # gain from w to the estimation error (certified bound gamma, for y_k in time)
     z = np.column_stack([master["plant.z[1]"], master["plant.z[2]"]])
     zhat_master = np.column_stack([master["filter.zhat[1]"], master["filter.zhat[2]"]])
-    diff = np.max(np.abs(zhat - zhat_master[1:]), axis=0)
-    gain_master = np.linalg.norm(z[1:] - zhat_master[1:]) / np.linalg.norm(w)
-    gain_jacobi = np.linalg.norm(z[1:] - zhat) / np.linalg.norm(w)
+    diff = np.max(np.abs(zhat - zhat_master[:-1]), axis=0)
+    gain_master = np.linalg.norm(z[:-1] - zhat_master[:-1]) / np.linalg.norm(w)
+    gain_jacobi = np.linalg.norm(z[:-1] - zhat) / np.linalg.norm(w)
     with capsys.disabled():
         print(f"\nJacobi (libcosim) vs our master, zhat: max difference {diff[0]:.3g}, {diff[1]:.3g}; "
               f"||z - zhat|| / ||w||: master {gain_master:.3f}, Jacobi {gain_jacobi:.3f}")
@@ -192,7 +195,7 @@ def test_jacobi_delay_against_our_master_exactly(ssp, master, library, capsys):
 
 
 def test_string_parameters_libcosim_applies_them_fmpy_cannot(fmus, tmp_path):
-    comps = _components(fmus, kind="constant", offset=[0.25])
+    comps = _components(fmus, h=1.0, kind="constant", offset=[0.25])
     path = write_ssp(tmp_path / "const.ssp", comps, CONNECTIONS, step_size=1.0, stop_time=3.0)
     res = simulate_ssp(path, importer="libcosim")
     np.testing.assert_array_equal(res["sched.p[1]"], [0.25, 0.25, 0.25])
@@ -200,7 +203,7 @@ def test_string_parameters_libcosim_applies_them_fmpy_cannot(fmus, tmp_path):
                                                 r"sched\.kind = 'constant'"):
         simulate_ssp(path, importer="fmpy")
     # a String value equal to the FMU's start value needs no setting: fmpy runs
-    same = write_ssp(tmp_path / "same.ssp", _components(fmus, kind="sinusoid"), CONNECTIONS, step_size=1.0,
+    same = write_ssp(tmp_path / "same.ssp", _components(fmus, h=1.0, kind="sinusoid"), CONNECTIONS, step_size=1.0,
                      stop_time=3.0)
     assert simulate_ssp(same, importer="fmpy").shape == (3,)
 
@@ -235,7 +238,8 @@ def test_the_readme_numbers_for_the_example_file(fmus, tmp_path):
         np.testing.assert_array_equal(f[name], lc[name], err_msg=name)
     w = np.linalg.norm(m["src.w[1]"])
     e_master = np.column_stack([m[f"plant.z[{i}]"] - m[f"filter.zhat[{i}]"] for i in (1, 2)])
-    e_jacobi = np.column_stack([m[f"plant.z[{i}]"][1:] - lc[f"filter.zhat[{i}]"] for i in (1, 2)])
+    # the estimate of sample k is read after step k (the FMUs hold it): against z_k
+    e_jacobi = np.column_stack([m[f"plant.z[{i}]"][:-1] - lc[f"filter.zhat[{i}]"] for i in (1, 2)])
     assert np.linalg.norm(e_master) / w == pytest.approx(1.07, abs=0.005)
     assert np.linalg.norm(e_jacobi) / w == pytest.approx(1.60, abs=0.005)
     with zipfile.ZipFile(fmus["PeixotoEx1HinfPD"]) as z:

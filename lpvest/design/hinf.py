@@ -84,7 +84,7 @@ import numpy as np
 
 from ..errors import DimensionError, LMIInfeasibleError, NonFiniteError
 from ..systems.polytopic import PolytopicLPV
-from .result import KIND_PD, KIND_ROBUST, HinfDesign
+from .result import KIND_PD, KIND_ROBUST, HinfDesign, model_digest
 
 __all__ = [
     "design_hinf",
@@ -629,6 +629,7 @@ class HinfProgram:
             n_lmis=self.n_lmis,
             nw=self.nw,
             plant=plant.name,
+            model_digest=model_digest(plant),
         )
 
 

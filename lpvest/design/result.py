@@ -18,6 +18,7 @@ JSON format (``"format": "lpvest.hinf-design"``, ``"version": 1``)::
       "format": "lpvest.hinf-design", "version": 1,
       "kind": "parameter-dependent" | "robust",
       "plant": "peixoto-ex1",                  # name of the plant (informative)
+      "model_digest": "3f2a...",               # SHA-256 of the plant's vertex matrices (optional)
       "n_vertices": N, "nx": nx, "ny": ny, "nz": nz, "nw": nw,
       "gamma": 1.2087,                         # certified l2-gain bound
       "epsilon": 150.0,                        # null when epsilon = infinity
@@ -36,6 +37,7 @@ written with ``repr`` precision, so a round trip is exact.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from collections.abc import Mapping
@@ -55,6 +57,7 @@ __all__ = [
     "KIND_ROBUST",
     "DESIGN_FORMAT",
     "DESIGN_FORMAT_VERSION",
+    "model_digest",
 ]
 
 #: ``kind`` of a parameter-dependent (gain-scheduled) filter, Theorem 1.
@@ -67,6 +70,19 @@ DESIGN_FORMAT = "lpvest.hinf-design"
 DESIGN_FORMAT_VERSION = 1
 
 _FILTER_NAMES = ("H", "Af", "Bf", "Cf", "Df")
+_PLANT_NAMES = ("A", "Bw", "Cz", "Dz", "Cy", "Dy")
+
+
+def model_digest(plant: Any) -> str:
+    """SHA-256 of a polytopic plant's vertex matrices (their float64 values,
+    shapes and names): a design made for the plant records it, and a filter is
+    built from the design only for a plant with the same digest. Model files
+    are parsed exactly, so the same file gives the same digest on every machine."""
+    h = hashlib.sha256(b"lpvest.polytopic-vertices/1\0")
+    for name in _PLANT_NAMES:
+        arr = np.ascontiguousarray(getattr(plant.vertices, name), dtype="<f8")
+        h.update(f"{name}{arr.shape}".encode() + arr.tobytes())
+    return h.hexdigest()
 
 
 class FilterMatrices(NamedTuple):
@@ -117,6 +133,8 @@ class HinfDesign:
         Disturbance dimension of the plant it was designed for.
     plant : str
         Name of the plant (informative).
+    model_digest : str
+        :func:`model_digest` of the plant it was designed for (``""``: not recorded).
     """
 
     kind: str
@@ -138,6 +156,7 @@ class HinfDesign:
     n_lmis: int
     nw: int
     plant: str = ""
+    model_digest: str = ""
 
     def __post_init__(self) -> None:
         if self.kind not in (KIND_PD, KIND_ROBUST):
@@ -195,6 +214,23 @@ class HinfDesign:
     def nz(self) -> int:
         return int(self.Cf.shape[1])
 
+    def check_model(self, plant: Any, *, source: str = "design") -> None:
+        """Raise :class:`~lpvest.errors.ModelFileError` unless this design fits
+        ``plant``: same dimensions, and the same vertex matrices when the
+        design recorded them (:func:`model_digest`)."""
+        got = {"n_vertices": plant.n_vertices, "nx": plant.nx, "ny": plant.ny, "nz": plant.nz, "nw": plant.nw}
+        want = {"n_vertices": self.n_vertices, "nx": self.nx, "ny": self.ny, "nz": self.nz, "nw": self.nw}
+        for key, value in want.items():
+            if got[key] != value:
+                raise ModelFileError(f"{source}: designed for a plant with {key} = {value}; this plant has {got[key]}")
+        if self.model_digest and self.model_digest != model_digest(plant):
+            name = getattr(plant, "name", "") or "this plant"
+            raise ModelFileError(
+                f"{source}: designed for another plant ({self.plant or 'unnamed'}, vertex digest "
+                f"{self.model_digest[:12]}...) than {name} ({model_digest(plant)[:12]}...); design it again "
+                "with `lpvest design`"
+            )
+
     @property
     def scheduled(self) -> bool:
         """True for a parameter-dependent filter (it needs ``alpha``)."""
@@ -227,6 +263,7 @@ class HinfDesign:
             "ny": self.ny,
             "nz": self.nz,
             "nw": self.nw,
+            "model_digest": self.model_digest,
             "gamma": self.gamma,
             "epsilon": None if math.isinf(self.epsilon) else self.epsilon,
             "multiplier": list(self.multiplier),
@@ -294,6 +331,7 @@ class HinfDesign:
                 n_lmis=int(field(check, "n_lmis", "check.")),
                 nw=int(field(data, "nw")),
                 plant=str(data.get("plant", "")),
+                model_digest=str(data.get("model_digest", "")),
             )
         except ModelFileError:
             raise

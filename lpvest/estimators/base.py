@@ -51,12 +51,17 @@ class Port:
     """A named input or output of an estimator.
 
     ``shape`` is ``(n,)`` for a vector (FMI variables ``name[1]..name[n]``) or
-    ``(r, c)`` for a matrix (``name[1,1]..name[r,c]``).
+    ``(r, c)`` for a matrix (``name[1,1]..name[r,c]``). ``direct`` (outputs):
+    the value at a sample depends on that sample's inputs (direct
+    feedthrough, e.g. a filtered estimate); ``False`` for a value fixed by
+    the past alone (a state ``x_k``), which an FMU can report at ``t_k + h``
+    right after the step.
     """
 
     name: str
     shape: tuple[int, ...]
     description: str = ""
+    direct: bool = True
 
     @property
     def size(self) -> int:

@@ -175,7 +175,7 @@ class HinfFilter:
         self._inputs = tuple(ports)
         self._outputs = (
             Port("zhat", (design.nz,), "estimate z_f,k of z_k"),
-            Port("xf", (design.nx,), "filter state x_f,k"),
+            Port("xf", (design.nx,), "filter state x_f,k", direct=False),
         )
         self.reset()
 

@@ -1109,7 +1109,8 @@ class LPVKalmanFilter:
     covariance ``P_{t|t}``; ``xpred`` (n_x,) ``x^_{t+1|t}``; ``Ppred``
     (n_x, n_x) ``P_{t+1|t}``; ``yhat`` (n_y,) ``C x^_{t|t-1} + D u_t``;
     ``innovation`` (n_y,) ``xi_t``; ``K`` (n_x, n_y) ``K_t``; ``Omega``
-    (n_y, n_y) ``Omega_t``.
+    (n_y, n_y) ``Omega_t``; ``loglik`` (scalar) ``log p(y_0, ..., y_t)``, the
+    log-likelihood of the samples up to and including this one.
 
     Parameters
     ----------
@@ -1153,6 +1154,7 @@ class LPVKalmanFilter:
             Port("innovation", (m,), "innovation xi_t = y_t - yhat"),
             Port("K", (n, m), "predictor gain K_t (4c)"),
             Port("Omega", (m, m), "innovation covariance Omega_t (4e)"),
+            Port("loglik", (), "log-likelihood log p(y_0..y_t) of the samples up to this one"),
         )
         self.reset()
 
@@ -1221,7 +1223,7 @@ class LPVKalmanFilter:
         return res
 
     @staticmethod
-    def _as_dict(r: KalmanStep) -> dict[str, np.ndarray]:
+    def _as_dict(r: KalmanStep, loglik: float) -> dict[str, np.ndarray]:
         return {
             "xhat": r.x_filt,
             "P": r.P_filt,
@@ -1231,17 +1233,19 @@ class LPVKalmanFilter:
             "innovation": r.innovation,
             "K": r.K,
             "Omega": r.Omega,
+            "loglik": np.array(loglik + r.log_likelihood),
         }
 
     def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
         """Estimates at the current sample; no state change."""
         key, res = self._compute(inputs, keep=True)
         self._pending = (key, res)
-        return self._as_dict(res)
+        return self._as_dict(res, self._loglik)
 
     def step(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
         """Consume the current sample, return :meth:`outputs`, advance."""
-        return self._as_dict(self._advance(self._compute(inputs)[1]))
+        loglik = self._loglik
+        return self._as_dict(self._advance(self._compute(inputs)[1]), loglik)
 
     def get_state(self) -> dict[str, Any]:
         st = self._state

@@ -38,7 +38,7 @@ from ..systems.innovation import _window_values
 from . import Experiment, ExperimentResult
 from .fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
 
-__all__ = ["EXPERIMENTS", "run_example1", "run_truncation", "example1_cosim", "truncation_cosim", "plant_noise"]
+__all__ = ["EXPERIMENTS", "run_example1", "run_truncation", "example1_cosim", "truncation_cosim"]
 
 
 # ---------------------------------------------------------------------------
@@ -243,8 +243,8 @@ def run_truncation(
 
     bounds_grid = assumption_bounds(km)
     bounds_traj = assumption_bounds(km, p)
-    # the data the Plant FMU generates (its noise, seed `seed`, from the model's x0)
-    data = model.simulate(p, u, **plant_noise(model, steps, seed))
+    # the data the Plant FMU generates: x_0 ~ N(x0, P0) first, then its noise (seed `seed`), as simulate draws
+    data = model.simulate(p, u, rng=seed)
     # bound (8) on the exact filter along the trajectory (t >= 1)
     exact = kalman_filter(km, p, u, data.y)
     min_post = float(np.min(np.linalg.eigvalsh(exact.filtered_covariances[1:])))
@@ -335,23 +335,6 @@ def run_truncation(
          f"{fmu_k_error[5]:.3e} | {th['max_K_error'][5]:.3e}"),
     )
     return ExperimentResult("cox-toth-truncation", table, results, figures, paper, fmu)
-
-
-def plant_noise(model: Any, steps: int, seed: int) -> dict[str, np.ndarray]:
-    """``x0``, ``w``, ``v`` as the Plant FMU draws them (``noise = true``,
-    ``seed``): it starts at its parameter ``x0`` (default: the model's mean
-    ``x0``; the FMU does not draw the initial state), and draws one
-    ``[w_t; v_t] = L z_t`` per sample from ``default_rng(seed)``,
-    ``L L^T = [[Q, S], [S^T, R]]``, one row at a time as
-    :class:`~lpvest.systems.streaming.DiscretePlant` does.
-    (``AffineLPV.simulate(rng=seed)`` and the streaming plant without an
-    ``x0`` draw ``x0 ~ N(x0, P0)`` first and then the same noise: with
-    ``P0 != 0`` that is another realization than the FMU's, whose ``x0``
-    parameter is the initial state itself.)"""
-    gen = np.random.default_rng(seed)
-    L = np.linalg.cholesky(model.noise.joint)
-    z = np.array([(gen.standard_normal((1, L.shape[0])) @ L.T)[0] for _ in range(steps)])
-    return {"x0": model.x0, "w": z[:, : model.nw], "v": z[:, model.nw :]}
 
 
 def truncation_cosim(steps: int = 300, *, seed: int = 7, taus: Sequence[int] = PREDICTION_TAUS) -> CoSimSpec:

@@ -9,12 +9,11 @@ as the cross-check. This module holds what they share:
   a cache folder and reused while they are up to date. An FMU is up to date
   when its *fingerprint* is the one recorded in ``manifest.json`` at build
   time and the file's SHA-256 is unchanged. The fingerprint hashes everything
-  the FMU is made from: the ``lpvest`` package it carries (every file the
-  builder copies), the slave script, the model file, the build plan
-  (role, parameters, estimator kind, design function) and the versions of
-  Python, numpy, scipy, cvxpy, clarabel and pythonfmu (the designs made at
-  build time depend on the solver). Any change rebuilds; nothing is guessed
-  from time stamps.
+  the FMU is made from, as its manifest records it (the code it carries, the
+  model file, the build plan, the design file, pythonfmu and the compiler),
+  plus the solver versions when a design is solved at build time (the
+  example systems' designs are stored files: ``models/designs/``). Any
+  change rebuilds; nothing is guessed from time stamps.
 - :data:`PAPER_KINDS`: the H-infinity filter FMUs with the paper's
   ``epsilon = 150`` design (Peixoto et al., Table 1 and Fig. 1); the shipped
   ``HinfPD``/``HinfRobust`` FMUs carry the best-epsilon design.
@@ -39,7 +38,6 @@ import json
 import os
 import re
 import shutil
-import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Mapping
@@ -81,7 +79,7 @@ PAPER_EPSILON = 150.0
 #: FMU against library: largest difference allowed, relative to ``max(1, scale)``.
 AGREEMENT_TOLERANCE = 1e-12
 
-_CACHE_FORMAT = "lpvest-fmu-cache/1"
+_CACHE_FORMAT = "lpvest-fmu-cache/2"
 
 
 class FmuCacheError(LpvestError, RuntimeError):
@@ -107,10 +105,10 @@ def hinf_robust_eps150(model: Any) -> str:
 
 #: Filter FMUs with the paper's epsilon (Peixoto et al. Table 1, Fig. 1).
 PAPER_KINDS: tuple[EstimatorKind, ...] = (
-    EstimatorKind("HinfPDEps150", "lpvest.fmi.factories:hinf", models=("polytopic",),
+    EstimatorKind("HinfPDEps150", "lpvest.fmi.factories.hinf:build", models=("polytopic",),
                   design="lpvest.experiments.fmus:hinf_pd_eps150",
                   description="gain-scheduled H-infinity filter (Peixoto et al. Theorem 1), epsilon = 150"),
-    EstimatorKind("HinfRobustEps150", "lpvest.fmi.factories:hinf", models=("polytopic",),
+    EstimatorKind("HinfRobustEps150", "lpvest.fmi.factories.hinf:build", models=("polytopic",),
                   design="lpvest.experiments.fmus:hinf_robust_eps150",
                   description="robust H-infinity filter (Peixoto et al. Corollary 1), epsilon = 150"),
 )
@@ -171,71 +169,30 @@ def _kinds(role: str) -> list[EstimatorKind]:
 # ---------------------------------------------------------------------------
 # fingerprints
 # ---------------------------------------------------------------------------
-def _hash_tree(h: Any, root: Path, *, skip: Callable[[Path], bool]) -> None:
-    for f in sorted(p for p in root.rglob("*") if p.is_file()):
-        rel = f.relative_to(root)
-        if skip(rel):
-            continue
-        h.update(rel.as_posix().encode() + b"\0")
-        h.update(hashlib.sha256(f.read_bytes()).digest())
-
-
 @cache
-def _package_digest() -> str:
-    """SHA-256 of the lpvest package as the builder copies it into an FMU
-    (plus ``status_bridge.c``, compiled into its binary)."""
-    import lpvest
-
-    root = Path(lpvest.__file__).resolve().parent
-    h = hashlib.sha256()
-
-    def skip(rel: Path) -> bool:
-        parts = rel.parts
-        return "__pycache__" in parts or rel.suffix == ".pyc" or parts[0] in ("_models", "_fmus")
-
-    _hash_tree(h, root, skip=skip)
-    return h.hexdigest()
-
-
-@cache
-def _versions() -> str:
+def _solver_versions() -> str:
     from importlib.metadata import PackageNotFoundError, version
 
-    out = [f"python={sys.version_info.major}.{sys.version_info.minor}"]
-    for name in ("numpy", "scipy", "cvxpy", "clarabel", "pythonfmu"):
+    out = []
+    for name in ("numpy", "scipy", "cvxpy", "clarabel"):
         try:
             out.append(f"{name}={version(name)}")
         except PackageNotFoundError:
             out.append(f"{name}=none")
-    out.append("cc=" + ("yes" if (os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")) else "no"))
     return ";".join(out)
 
 
 def fingerprint(plan: Any) -> str:
-    """SHA-256 of everything an FMU of ``plan`` (a :class:`~lpvest.fmi.build.FmuPlan`) is made from."""
-    from ..fmi.build import scripts_dir
+    """SHA-256 of everything an FMU of ``plan`` (a :class:`~lpvest.fmi.build.FmuPlan`)
+    is made from: the inputs its manifest records (:func:`lpvest.fmi.build.manifest_inputs`:
+    plan, model file, carried code, design file, pythonfmu, compiler), and for a
+    design solved at build time the versions of the solver stack."""
+    from ..fmi.build import manifest_inputs
 
-    h = hashlib.sha256()
-    h.update(_CACHE_FORMAT.encode() + b"\0" + _package_digest().encode() + b"\0" + _versions().encode() + b"\0")
-    h.update(hashlib.sha256((scripts_dir() / plan.script).read_bytes()).digest())
-    h.update(hashlib.sha256(Path(plan.system_path).read_bytes()).digest())
-    desc = {
-        "identifier": plan.identifier, "role": plan.role, "script": plan.script, "system": plan.system_name,
-        "model_key": plan.model_key, "description": plan.description,
-        "model_parameters": list(plan.model_parameters), "requirements": list(plan.requirements),
-        "step_size": plan.step_size, "stop_time": plan.stop_time,
-    }
-    if plan.estimator is not None:
-        desc["estimator"] = plan.estimator.to_json() | {"design": plan.estimator.design,
-                                                          "models": list(plan.estimator.models)}
-        for extra in plan.estimator.files:
-            extra = Path(extra)
-            if extra.is_dir():
-                _hash_tree(h, extra, skip=lambda rel: "__pycache__" in rel.parts or rel.suffix == ".pyc")
-            else:
-                h.update(hashlib.sha256(extra.read_bytes()).digest())
-    h.update(json.dumps(desc, sort_keys=True).encode())
-    return h.hexdigest()
+    inputs = manifest_inputs(plan)
+    if plan.estimator is not None and plan.estimator.design and plan.design is None:
+        inputs["solvers"] = _solver_versions()
+    return hashlib.sha256((_CACHE_FORMAT + json.dumps(inputs, sort_keys=True)).encode()).hexdigest()
 
 
 def _file_digest(path: Path) -> str:

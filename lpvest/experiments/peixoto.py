@@ -197,14 +197,14 @@ def _fmu_run(description: str, spec: CoSimSpec, timer: Timer, runs: Sequence[Hin
     for run in runs:
         for name, diff in run.design_differences.items():
             notes.append(
-                f"{labels.get(name, name)}: design carried by the FMU (made at build time) vs the library's: "
+                f"{labels.get(name, name)}: design carried by the FMU (stored in models/designs) vs the library's: "
                 f"gamma {run.carried[name].gamma:.6f}, relative difference {run.gamma_differences[name]:.1e}; "
                 f"filter matrices differ by {diff:.1e}"
             )
     if any(d > 0 for run in runs for d in run.design_differences.values()):
         notes.append("a design is an interior-point solution: two solves of the same LMIs agree to the solver's "
-                     "accuracy, not bit for bit (see the report), so the filter FMUs are checked against the "
-                     "library's HinfFilter on the design they carry")
+                     "accuracy and the epsilon search's resolution, not bit for bit (see the report); the FMUs "
+                     "carry the stored designs and are checked against the library's HinfFilter on them")
     agreements = tuple(a for run in runs for a in run.agreements)
     return FmuRun(description, spec.fmu_names, agreements, timer.steps, timer.seconds, tuple(notes))
 
@@ -220,7 +220,7 @@ def run_table1(
 
     Table 1 is a design (LMIs), so the FMU part is the designs in use: the
     shipped ``PeixotoEx1HinfPD`` and ``PeixotoEx1HinfRobust`` FMUs, which carry
-    the best-epsilon designs made at build time, co-simulated with the
+    the stored best-epsilon designs (models/designs), co-simulated with the
     Scheduler, Source and Plant FMUs in the paper's scenario (Figs. 1-2); the
     library runs the designs found here on the same scenario.
     """
@@ -649,8 +649,8 @@ def run_example2(
     fmu = _fmu_run(
         "Fig. 3 is an LMI design sweep (library only). Through FMUs: at rho = "
         + ", ".join(f"{r:g}" for r in fmu_rhos)
-        + " the HinfPD FMU designed (best epsilon, at build time) at that rho runs with the PeixotoEx2Plant FMU "
-        "(parameter rho) on the scenario of Figs. 1-2, one co-simulation with a Scheduler and a Source; "
+        + " the HinfPD FMU carrying the best-epsilon design for that rho (models/designs) runs with the "
+        "PeixotoEx2Plant FMU (parameter rho) on the scenario of Figs. 1-2, one co-simulation with a Scheduler and a Source; "
         "cross-check: plant.simulate and HinfFilter on the carried designs, compared with the sweep's designs.",
         spec, timer, runs, {},
     )

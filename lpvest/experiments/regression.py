@@ -7,8 +7,10 @@ filters) and a few of its recorded outputs, stored as CSV in
 (``tests/test_regression.py``) builds the FMUs, co-simulates and compares every
 column with the reference within ``tolerance * max |reference column|``; the
 reason for each tolerance is stored in the file's header and in
-:data:`REFERENCES`. H-infinity references also store the ``gamma`` their filter
-FMUs carry.
+:data:`REFERENCES`. The H-infinity filter FMUs carry the designs stored with
+the example systems (``models/designs/``: data, not solved again), so their
+references are as tight as the other numpy-only filters; each such reference
+also stores the SHA-256 of the design its filter FMU carries.
 
 Regenerate the references (after a deliberate change) with::
 
@@ -30,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import LpvestError
-from .fmus import CoSimSpec, ExperimentFmus, as_experiment_fmus, carried_design
+from .fmus import CoSimSpec, ExperimentFmus, as_experiment_fmus
 
 __all__ = [
     "Reference",
@@ -53,11 +55,10 @@ _NUMERIC = ("numpy-only, stable discrete-time recursions with seeded noise: acro
             "of sin/exp and of BLAS sums change (~1e-15 relative), and the file keeps 12 significant digits "
             "(5e-13); 1e-10 leaves a wide margin and still catches any change of model, signal, noise convention "
             "or filter")
-_DESIGN = ("the filter FMUs carry LMI designs solved at build time by an interior-point solver (Clarabel): with "
-           "one solver version a design is deterministic (bit for bit), but another version or BLAS moves it "
-           "within the solver's accuracy, and the optimum is flat (gamma changes far less than the filter "
-           "matrices); 1e-6 of scale covers solver round-off, while a design that moved along the flat optimum "
-           "fails and the references must be regenerated (the stored gamma tells which case it is)")
+_DESIGN = ("the filter FMUs carry the LMI designs stored in models/designs (data: the same matrices on every "
+           "machine, never solved again), so the filter is a stable numpy recursion like the others: "
+           + _NUMERIC[_NUMERIC.index("across platforms"):]
+           + "; the SHA-256 of each carried design is stored too")
 _LTV = ("the plant integrates with scipy's DOP853 (rtol 1e-12) per 1 ms step and the observer solves least-squares "
         "problems whose estimates move by ~1e-7 relative for a 1e-13 relative change of y (measured): another scipy, "
         "LAPACK or summation order changes the plant at ~1e-12 of scale and the estimates at ~1e-10; 1e-7 of scale "
@@ -75,7 +76,7 @@ class Reference:
     tolerance: float  #: allowed ``max |got - ref|`` as a fraction of ``max |ref|`` (per column)
     reason: str
     every: int = 1  #: keep every ``every``-th row
-    designs: tuple[str, ...] = ()  #: filter components whose carried gamma is stored
+    designs: tuple[str, ...] = ()  #: filter components whose carried design (its SHA-256) is stored
 
     @property
     def filename(self) -> str:
@@ -129,12 +130,12 @@ REFERENCES: tuple[Reference, ...] = (
     Reference("cox-toth-truncation", "truncation model: Plant, Kalman, TruncatedKalman (tau = 2), 200 samples",
               _truncation, ("plant.y[1]", "kalman.xhat[1]", "trunc2.K[1,1]"), 1e-10, _NUMERIC),
     Reference("peixoto-table1", "Example 1, best-epsilon HinfPD and HinfRobust FMUs, Figs. 1-2 scenario", _table1,
-              ("plant.z[1]", "pd.zhat[1]", "robust.zhat[1]"), 1e-6, _DESIGN, designs=("pd", "robust")),
+              ("plant.z[1]", "pd.zhat[1]", "robust.zhat[1]"), 1e-10, _DESIGN, designs=("pd", "robust")),
     Reference("peixoto-fig1", "Example 1, epsilon = 150 filter FMUs (Fig. 1)", _fig1,
-              ("theorem1.zhat[1]", "theorem1.zhat[2]", "corollary1.zhat[1]"), 1e-6, _DESIGN,
+              ("theorem1.zhat[1]", "theorem1.zhat[2]", "corollary1.zhat[1]"), 1e-10, _DESIGN,
               designs=("theorem1", "corollary1")),
     Reference("peixoto-example2", "Example 2 at rho = 1 and 21: Plant and HinfPD FMUs", _example2,
-              ("plant_rho1.z[1]", "pd_rho1.zhat[1]", "pd_rho21.zhat[1]"), 1e-6, _DESIGN,
+              ("plant_rho1.z[1]", "pd_rho1.zhat[1]", "pd_rho21.zhat[1]"), 1e-10, _DESIGN,
               designs=("pd_rho1", "pd_rho21")),
     Reference("sridhar-ltv",
               "LTV plant and B-spline observer FMUs (window 0.4 s, 6 splines, hop 0.1 s), 2 s, every 10 ms",
@@ -152,9 +153,17 @@ def reference_dir() -> Path:
     return path
 
 
-def simulate_reference(ref: Reference, fmus: ExperimentFmus) -> tuple[np.ndarray, dict[str, float]]:
+def _design_digest(path: Path) -> str:
+    import hashlib
+    import zipfile
+
+    with zipfile.ZipFile(path) as z:
+        return hashlib.sha256(z.read("resources/design.json")).hexdigest()
+
+
+def simulate_reference(ref: Reference, fmus: ExperimentFmus) -> tuple[np.ndarray, dict[str, str]]:
     """Run the reference's co-simulation: the kept rows ``(time, columns...)``
-    and the ``gamma`` of each design-carrying filter component."""
+    and the SHA-256 of the design each design-carrying filter component carries."""
     spec = ref.spec()
     res = spec.run(fmus, progress=False)
     missing = [c for c in ref.columns if c not in (res.dtype.names or ())]
@@ -162,8 +171,8 @@ def simulate_reference(ref: Reference, fmus: ExperimentFmus) -> tuple[np.ndarray
         raise LpvestError(f"reference {ref.name}: the co-simulation records no {', '.join(missing)}")
     data = np.column_stack([res["time"], *(res[c] for c in ref.columns)])[:: ref.every]
     idents = {name: ident for name, ident, _ in spec.components}
-    gammas = {name: carried_design(fmus.path(idents[name])).gamma for name in ref.designs}
-    return data, gammas
+    designs = {name: _design_digest(fmus.path(idents[name])) for name in ref.designs}
+    return data, designs
 
 
 def _csv_row(fields: Sequence[str]) -> str:
@@ -172,9 +181,9 @@ def _csv_row(fields: Sequence[str]) -> str:
     return buf.getvalue()
 
 
-def write_reference(ref: Reference, data: np.ndarray, gammas: dict[str, float], directory: str | Path) -> Path:
+def write_reference(ref: Reference, data: np.ndarray, designs: dict[str, str], directory: str | Path) -> Path:
     """Write ``directory/<name>.csv``: comment lines (what, tolerance, reason,
-    gammas, how to regenerate), the column names, then the rows (12 significant digits)."""
+    carried designs, how to regenerate), the column names, then the rows (12 significant digits)."""
     from .. import __version__
 
     directory = Path(directory)
@@ -184,7 +193,7 @@ def write_reference(ref: Reference, data: np.ndarray, gammas: dict[str, float], 
         f"# lpvest regression reference {ref.name}: {ref.title}",
         f"# co-simulation: {ref.spec().describe()}; every {ref.every} row(s) kept",
         f"# tolerance: {ref.tolerance:g} of max |column|: {ref.reason}",
-        *(f"# gamma {name} = {g!r}" for name, g in gammas.items()),
+        *(f"# design {name} = sha256:{d}" for name, d in designs.items()),
         f"# written by lpvest {__version__}; regenerate with: {UPDATE_COMMAND}",
         _csv_row(("time", *ref.columns)),  # matrix elements hold commas: quoted
     ]
@@ -193,30 +202,30 @@ def write_reference(ref: Reference, data: np.ndarray, gammas: dict[str, float], 
     return path
 
 
-def read_reference(path: str | Path) -> tuple[list[str], np.ndarray, dict[str, float]]:
-    """Column names, rows and stored gammas of a reference file."""
+def read_reference(path: str | Path) -> tuple[list[str], np.ndarray, dict[str, str]]:
+    """Column names, rows and stored design digests of a reference file."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8").splitlines()
     except OSError as exc:
         raise LpvestError(f"{path}: cannot read the reference ({exc.strerror}); create it with "
                           f"{UPDATE_COMMAND}") from exc
-    gammas = {}
+    designs = {}
     body = []
     for line in text:
-        if line.startswith("# gamma "):
-            name, _, value = line[len("# gamma "):].partition(" = ")
-            gammas[name] = float(value)
+        if line.startswith("# design "):
+            name, _, value = line[len("# design "):].partition(" = ")
+            designs[name] = value.removeprefix("sha256:")
         elif line and not line.startswith("#"):
             body.append(line)
     columns = next(csv.reader([body[0]]))
     data = np.array([[float(v) for v in row.split(",")] for row in body[1:]])
-    return columns, data, gammas
+    return columns, data, designs
 
 
 @dataclass(frozen=True)
 class ColumnCheck:
-    """One column (or one stored gamma) against its reference."""
+    """One column (or one carried design: difference 0 when it is the stored one) against its reference."""
 
     name: str
     max_abs_difference: float
@@ -232,10 +241,10 @@ class ColumnCheck:
                 f"tolerance {self.tolerance:g} -> " + ("ok" if self.ok else "FAIL"))
 
 
-def check_reference(ref: Reference, data: np.ndarray, gammas: dict[str, float],
+def check_reference(ref: Reference, data: np.ndarray, designs: dict[str, str],
                     directory: str | Path) -> list[ColumnCheck]:
     """Compare a fresh co-simulation with the stored reference."""
-    columns, stored, stored_gammas = read_reference(Path(directory) / ref.filename)
+    columns, stored, stored_designs = read_reference(Path(directory) / ref.filename)
     want = ["time", *ref.columns]
     if columns != want or stored.shape != data.shape:
         raise LpvestError(f"reference {ref.name}: stored columns {columns} and shape {stored.shape}; the "
@@ -247,10 +256,12 @@ def check_reference(ref: Reference, data: np.ndarray, gammas: dict[str, float],
         worst = float(np.max(diff)) if np.all(np.isfinite(diff)) else float("inf")
         tol = 1e-12 if name == "time" else ref.tolerance
         checks.append(ColumnCheck(name, worst, float(np.max(np.abs(ref_col))), tol))
-    for name, g in gammas.items():
-        if name not in stored_gammas:
-            raise LpvestError(f"reference {ref.name}: no stored gamma for {name} (regenerate with {UPDATE_COMMAND})")
-        checks.append(ColumnCheck(f"gamma {name}", abs(g - stored_gammas[name]), abs(stored_gammas[name]), 1e-6))
+    for name, digest in designs.items():
+        if name not in stored_designs:
+            raise LpvestError(f"reference {ref.name}: no stored design for {name} (regenerate with {UPDATE_COMMAND})")
+        same = digest == stored_designs[name]
+        checks.append(ColumnCheck(f"design {name} (sha256 {digest[:12]}...)", 0.0 if same else float("inf"), 1.0,
+                                  0.0))
     return checks
 
 
@@ -271,12 +282,12 @@ def regress(
         raise LpvestError(f"no reference {sorted(unknown)[0]!r} (known: {', '.join(r.name for r in REFERENCES)})")
     failed = []
     for ref in (r for r in REFERENCES if not names or r.name in names):
-        data, gammas = simulate_reference(ref, cache)
+        data, designs = simulate_reference(ref, cache)
         if update:
-            path = write_reference(ref, data, gammas, folder)
+            path = write_reference(ref, data, designs, folder)
             echo(f"wrote {path} ({data.shape[0]} rows, {path.stat().st_size / 1024:.1f} KiB)")
             continue
-        checks = check_reference(ref, data, gammas, folder)
+        checks = check_reference(ref, data, designs, folder)
         ok = all(c.ok for c in checks)
         echo(f"{ref.name}: " + ("ok" if ok else "FAIL"))
         for c in checks:

@@ -16,25 +16,34 @@ For a system file the builder plans:
 
 How an FMU is made (pythonfmu 0.7 conventions, done here so that the model
 description can be completed): a staging folder becomes ``resources/``: the
-role's slave script from ``fmus/``, a copy of the ``lpvest`` package (the FMU
-runs where lpvest is not installed), pythonfmu's Python files, the model file,
-the spec ``lpvest_fmu.json``, an optional design, ``requirements.txt`` and
-``slavemodule.txt`` (the script's module name, read by pythonfmu's binary).
-The slave is instantiated once with that folder as its resources to write the
-model description (pythonfmu's ``to_xml``), which is then completed: declared
-``min``/``max``, the inputs each output depends on, and ``InitialUnknowns``
-(pythonfmu writes none). ``binaries/linux64/<id>.so`` is the lpvest status
-bridge (``status_bridge.c``, compiled here with the C compiler) in front of
+FMU's private package (:mod:`lpvest.fmi.bundle`: the modules of lpvest its
+role script and factory import, under a build-unique name, with pythonfmu's
+Python files, and the entry module named in ``slavemodule.txt``), the model
+file, the spec ``lpvest_fmu.json``, an optional design (a given design file
+is carried byte for byte; none is solved then), ``requirements.txt`` (from
+the bundle) and ``manifest.json`` (every input and its SHA-256). The slave is
+instantiated once from that folder to write the model description
+(pythonfmu's ``to_xml``), which is then completed: declared ``min``/``max``,
+the inputs each output depends on, ``InitialUnknowns`` (pythonfmu writes
+none), ``variability="discrete"`` for the outputs of a discrete-time
+component, a GUID derived from the manifest and no time stamp.
+``binaries/linux64/<id>.so`` is the lpvest status bridge
+(``status_bridge.c``, compiled here with the C compiler) in front of
 pythonfmu's export library; without a C compiler pythonfmu's library is used
 as is (bad input then shows as fmi2Discard at the next fmi2DoStep, and a
 Python exception as fmi2Fatal). ``binaries/win64`` carries pythonfmu's DLL.
+
+Reproducible: the same inputs (model file, design, lpvest code, options,
+pythonfmu, compiler) give a byte-identical ``.fmu``: zip entries in sorted
+order with a fixed time stamp and permissions, no absolute path, no host name,
+no time.
 """
 
 from __future__ import annotations
 
 import atexit
 import functools
-import importlib.util
+import hashlib
 import json
 import os
 import shutil
@@ -43,7 +52,7 @@ import sys
 import tempfile
 import uuid
 import zipfile
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -51,6 +60,7 @@ from xml.dom.minidom import parseString
 from xml.etree.ElementTree import Element, SubElement, tostring
 
 from ..errors import LpvestError
+from .bundle import Bundle, SourceRoot, make_bundle
 from .naming import fmu_name
 from .registry import EstimatorKind, estimator_kinds, resolve
 from .spec import SPEC_FILE, SPEC_FORMAT
@@ -58,6 +68,7 @@ from .spec import SPEC_FILE, SPEC_FORMAT
 __all__ = [
     "FmuPlan",
     "BuildResult",
+    "BuildError",
     "ValidationResult",
     "plan_system",
     "build_fmu",
@@ -66,13 +77,21 @@ __all__ = [
     "format_table",
     "scripts_dir",
     "status_bridge",
+    "manifest_inputs",
     "DEFAULT_OUT",
+    "MANIFEST_FILE",
 ]
 
 #: Default output folder of ``build_fmus.py`` / ``lpvest build`` (ignored by git).
 DEFAULT_OUT = "fmu-build"
 
+#: The manifest in an FMU's resources folder: every input of the build and its SHA-256.
+MANIFEST_FILE = "manifest.json"
+
 _INNER_LIBRARY = "lpvest-pythonfmu-export.so"
+_MANIFEST_FORMAT = "lpvest-fmu-manifest-1"
+#: Time stamp of every zip entry (the zip format's earliest date): builds do not depend on the clock.
+_ZIP_TIME = (1980, 1, 1, 0, 0, 0)
 
 
 class BuildError(LpvestError, RuntimeError):
@@ -91,7 +110,14 @@ def scripts_dir() -> Path:
 
 @dataclass(frozen=True)
 class FmuPlan:
-    """One FMU to build."""
+    """One FMU to build.
+
+    ``requirements`` names third-party packages the role imports inside
+    functions (module-level imports are found by the bundler); ``step_size``
+    is the default experiment's step, which is the sample time of a
+    discrete-time component; ``design`` a design file to carry instead of
+    solving one at build time.
+    """
 
     identifier: str
     role: str
@@ -101,10 +127,11 @@ class FmuPlan:
     model_key: str
     description: str
     model_parameters: tuple[str, ...] = ()
-    requirements: tuple[str, ...] = ("numpy>=1.26",)
+    requirements: tuple[str, ...] = ()
     estimator: EstimatorKind | None = None
     step_size: float = 1.0
     stop_time: float = 100.0
+    design: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -138,11 +165,29 @@ class BuildResult:
 # -- planning -----------------------------------------------------------------
 
 
+def _estimator_step(kind: EstimatorKind, default: float) -> float:
+    if kind.sample_time is None:
+        return default
+    for par in kind.parameters:
+        if par.name == kind.sample_time:
+            return float(par.start)
+    raise BuildError(f"estimator {kind.role}: sample_time names {kind.sample_time!r}, which is not a parameter")
+
+
 def plan_system(
-    source: str | Path, *, kinds: Sequence[EstimatorKind] | None = None
+    source: str | Path,
+    *,
+    kinds: Sequence[EstimatorKind] | None = None,
+    designs: Mapping[str, str | Path] | None = None,
 ) -> tuple[list[FmuPlan], list[str]]:
     """The FMUs to build for a system file (or an example's name), and notes on
-    roles left out and why."""
+    roles left out and why.
+
+    ``designs`` maps a role (``HinfPD``) to a design file the FMU carries
+    instead of solving at build time; without one, an example system's stored
+    design (:func:`lpvest.catalog.stored_design`) is used when there is one.
+    """
+    from ..catalog import stored_design
     from ..modelfile import load_system
     from ..systems import AffineLPV, InnovationLPV, LTVInputOutput, LTVStateSpace, PolytopicLPV
     from ..systems.streaming import plant_supports
@@ -170,7 +215,7 @@ def plan_system(
     if isinstance(model, LTVStateSpace | LTVInputOutput):
         plans.append(FmuPlan(f"{stem}Plant", "Plant", "lpvest_ltv_plant.py",
                              description=f"Plant: {title} (model {key!r}, continuous-time LTV)",
-                             model_parameters=params, requirements=("numpy>=1.26", "scipy>=1.11"),
+                             model_parameters=params, requirements=("scipy",),
                              step_size=0.1, stop_time=20.0, **common))
         notes.append(f"{system.name}: no Scheduler/Source (an LTV model depends on time; its input is a function of t)")
     else:
@@ -186,15 +231,41 @@ def plan_system(
         if getattr(model, "nu", 0) or hasattr(model, "nw"):
             plans.append(FmuPlan(f"{stem}Source", "Source", "lpvest_source.py",
                                  description=f"Input u and disturbance w of {title}", **common))
+    given = {role: Path(path) for role, path in (designs or {}).items()}
     for ek in estimator_kinds() if kinds is None else kinds:
         if ek.applies_to(model):
+            design = None
+            if ek.design:
+                design = given.pop(ek.role, None)
+                if design is None:
+                    design = stored_design(system.name, ek.role)
+                    if design is not None and not _design_fits(design, model):
+                        notes.append(f"{system.name}: the stored design {design.name} is for another plant; "
+                                     f"{ek.role} is designed at build time")
+                        design = None
             # a filter designed at build time is designed for the model at the
             # file's parameter values: those are then not FMU parameters
             plans.append(FmuPlan(f"{stem}{ek.role}", ek.role, "lpvest_estimator.py",
                                  description=ek.description or f"{ek.role} estimator for {title} (model {key!r})",
                                  model_parameters=() if ek.design else params, estimator=ek,
-                                 step_size=plans[0].step_size, stop_time=plans[0].stop_time, **common))
+                                 requirements=tuple(ek.requirements),
+                                 step_size=_estimator_step(ek, plans[0].step_size),
+                                 stop_time=plans[0].stop_time, design=design, **common))
+    if given:
+        raise BuildError(f"{system.name}: a design was given for {', '.join(sorted(given))}, which this system "
+                         "does not get (no such H-infinity filter role)")
     return plans, notes
+
+
+def _design_fits(path: Path, model: Any) -> bool:
+    from ..design.result import HinfDesign
+    from ..errors import ModelFileError
+
+    try:
+        HinfDesign.from_json(path).check_model(model, source=str(path))
+    except ModelFileError:
+        return False
+    return True
 
 
 # -- the status bridge ------------------------------------------------------------
@@ -213,7 +284,8 @@ def status_bridge() -> Path | None:
     out_dir = Path(tempfile.mkdtemp(prefix="lpvest-bridge-"))
     atexit.register(shutil.rmtree, out_dir, True)
     out = out_dir / "status_bridge.so"
-    cmd = [*cc.split(), "-shared", "-fPIC", "-O2", "-fvisibility=hidden",
+    # -ffile-prefix-map and no -g: nothing of the build folder ends up in the binary
+    cmd = [*cc.split(), "-shared", "-fPIC", "-O2", "-fvisibility=hidden", f"-ffile-prefix-map={src.parent}=.",
            f'-DINNER_LIBRARY="{_INNER_LIBRARY}"', "-o", str(out), str(src), "-ldl"]
     proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if proc.returncode != 0:
@@ -221,110 +293,230 @@ def status_bridge() -> Path | None:
     return out
 
 
+@functools.cache
+def _compiler_version() -> str:
+    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+    if not cc:
+        return "none"
+    proc = subprocess.run([*cc.split(), "--version"], capture_output=True, text=True, check=False)
+    return proc.stdout.splitlines()[0] if proc.returncode == 0 and proc.stdout else cc
+
+
 # -- building -----------------------------------------------------------------------
 
 
-def _copy_lpvest(dest: Path) -> str:
+def _roots(plan: FmuPlan) -> list[SourceRoot]:
+    import pythonfmu
+
     import lpvest
 
-    src = Path(lpvest.__file__).resolve().parent
-    shutil.copytree(
-        src, dest / "lpvest",
-        ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.c", "_models", "_fmus"),
-    )
+    roots = [
+        SourceRoot("lpvest", Path(lpvest.__file__).resolve().parent, "", skip=("_models",)),
+        SourceRoot("lpvest._fmus", scripts_dir(), "_fmus"),
+        SourceRoot("pythonfmu", Path(pythonfmu.__file__).resolve().parent, "_pythonfmu"),
+    ]
+    if plan.estimator is not None:
+        for extra in plan.estimator.files:
+            extra = Path(extra)
+            name = extra.stem if extra.is_file() else extra.name
+            if not name.isidentifier():
+                raise BuildError(f"{extra}: an estimator module needs a name that is a Python identifier")
+            roots.append(SourceRoot(name, extra.resolve(), f"_ext.{name}"))
+    return roots
+
+
+def _slave_class_name(script: Path) -> str:
+    import ast
+
+    tree = ast.parse(script.read_text(encoding="utf-8"), str(script))
+    classes = [n.name for n in tree.body if isinstance(n, ast.ClassDef)]
+    if len(classes) != 1:
+        raise BuildError(f"{script.name} must define exactly one slave class; found {len(classes)}")
+    return classes[0]
+
+
+def _bundle(plan: FmuPlan) -> Bundle:
+    import lpvest
+
+    script = scripts_dir() / plan.script
+    start = [f"lpvest._fmus.{Path(plan.script).stem}"]
+    if plan.estimator is not None:
+        start.append(plan.estimator.factory.partition(":")[0])
+    return make_bundle(identifier=plan.identifier, script=Path(plan.script).stem,
+                       slave_class=_slave_class_name(script), start=start, roots=_roots(plan),
+                       version=lpvest.__version__, declared=plan.requirements)
+
+
+def _design_text(plan: FmuPlan, progress: Callable[[str], None] | None) -> tuple[str | bytes, str]:
+    """The design the FMU carries (text or bytes) and where it came from."""
+    from ..modelfile import load_system
+    from .state import encode_state
+
+    assert plan.estimator is not None and plan.estimator.design is not None
+    model = load_system(plan.system_path).model(plan.model_key)
+    if plan.design is not None:
+        from ..design.result import HinfDesign
+
+        try:
+            text = plan.design.read_text(encoding="utf-8")
+        except OSError as exc:
+            raise BuildError(f"{plan.design}: cannot be read: {exc.strerror}") from exc
+        HinfDesign.from_json(text).check_model(model, source=str(plan.design))
+        return text, f"file {plan.design.name}"
+    if progress is not None:
+        progress(f"{plan.identifier}: designing ({plan.estimator.design})")
+    design = resolve(plan.estimator.design)(model)
+    if isinstance(design, str):
+        return design, f"designed at build time by {plan.estimator.design}"
+    return encode_state(design), f"designed at build time by {plan.estimator.design}"
+
+
+def manifest_inputs_version() -> str:
+    """The version of the lpvest an FMU carries (this one)."""
+    import lpvest
+
     return lpvest.__version__
 
 
-def _stage(plan: FmuPlan, staging: Path) -> None:
+def _sha(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def manifest_inputs(plan: FmuPlan, bundle: Bundle | None = None, design: str | bytes | None = None) -> dict[str, Any]:
+    """Every input of an FMU's build and its SHA-256 (what ``manifest.json``
+    records and what an FMU cache compares): the plan, the model file, the
+    carried code (the bundle digest), the design when one is carried, and the
+    versions of pythonfmu and the C compiler. No path, no time."""
     import pythonfmu
 
-    shutil.copy2(scripts_dir() / plan.script, staging / plan.script)
-    version = _copy_lpvest(staging)
-    fmu_pkg = staging / "pythonfmu"
-    fmu_pkg.mkdir()
-    for f in Path(pythonfmu.__file__).parent.glob("*.py"):
-        shutil.copy2(f, fmu_pkg / f.name)
-    shutil.copy2(plan.system_path, staging / "model.toml")
-    (staging / "slavemodule.txt").write_text(Path(plan.script).stem)
-    (staging / "requirements.txt").write_text("\n".join(plan.requirements) + "\n")
+    import lpvest
+
+    bundle = bundle or _bundle(plan)
+    est = None
+    if plan.estimator is not None:
+        est = plan.estimator.to_json() | {"design": plan.estimator.design, "models": list(plan.estimator.models),
+                                           "requirements": list(plan.estimator.requirements)}
+    bridge = status_bridge()
+    return {
+        "identifier": plan.identifier,
+        "role": plan.role,
+        "system": plan.system_name,
+        "model_key": plan.model_key,
+        "description": plan.description,
+        "model_parameters": list(plan.model_parameters),
+        "step_size": plan.step_size,
+        "stop_time": plan.stop_time,
+        "estimator": est,
+        "lpvest_version": lpvest.__version__,
+        "model_file_sha256": _sha(Path(plan.system_path).read_bytes()),
+        "design_sha256": None if design is None else _sha(design.encode() if isinstance(design, str) else design),
+        "design_file_sha256": None if plan.design is None else _sha(plan.design.read_bytes()),
+        "bundle": {"package": bundle.package, "digest": bundle.digest, "requirements": list(bundle.requirements)},
+        "pythonfmu": pythonfmu.__version__,
+        "status_bridge_sha256": None if bridge is None else _sha(bridge.read_bytes()),
+        "compiler": _compiler_version() if bridge is not None else None,
+        "python": f"{sys.version_info.major}.{sys.version_info.minor}",
+    }
+
+
+def _stage(plan: FmuPlan, staging: Path, progress: Callable[[str], None] | None) -> tuple[Bundle, dict[str, Any]]:
+    """Write ``resources/`` into ``staging``; returns the bundle and the manifest."""
+    bundle = _bundle(plan)
+    for rel, data in bundle.files.items():
+        target = staging / rel
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_bytes(data)
+    shutil.copyfile(plan.system_path, staging / "model.toml")
+    (staging / "slavemodule.txt").write_text(bundle.entry)
+    (staging / "requirements.txt").write_text("".join(r + "\n" for r in bundle.requirements))
     spec: dict[str, Any] = {
         "format": SPEC_FORMAT,
         "identifier": plan.identifier,
         "role": plan.role,
         "description": plan.description,
-        "lpvest_version": version,
+        "lpvest_version": manifest_inputs_version(),
+        "package": bundle.package,
         "system": plan.system_name,
         "model_file": "model.toml",
         "model_key": plan.model_key,
         "model_parameters": list(plan.model_parameters),
+        "sample_time": plan.step_size,
     }
+    design: str | bytes | None = None
     if plan.estimator is not None:
-        spec["estimator"] = plan.estimator.to_json()
-        for extra in plan.estimator.files:
-            extra = Path(extra)
-            if extra.is_dir():
-                shutil.copytree(extra, staging / extra.name, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
-            else:
-                shutil.copy2(extra, staging / extra.name)
+        spec["estimator"] = plan.estimator.to_json() | {"factory": bundle.reference(plan.estimator.factory)}
         if plan.estimator.design:
-            from ..modelfile import load_system
-            from .state import encode_state
-
-            model = load_system(plan.system_path).model(plan.model_key)
-            design = resolve(plan.estimator.design)(model)
+            design, origin = _design_text(plan, progress)
             if isinstance(design, str):  # a JSON document (e.g. an HinfDesign): kept readable
                 (staging / "design.json").write_text(design, encoding="utf-8")
                 spec["design_format"] = "text"
             else:
-                (staging / "design.json").write_bytes(encode_state(design))
+                (staging / "design.json").write_bytes(design)
             spec["design_file"] = "design.json"
-    (staging / SPEC_FILE).write_text(json.dumps(spec, indent=2))
+            spec["design_origin"] = origin
+    (staging / SPEC_FILE).write_text(json.dumps(spec, indent=2) + "\n")
+    manifest = {
+        "format": _MANIFEST_FORMAT,
+        "inputs": manifest_inputs(plan, bundle, design),
+        "modules": list(bundle.modules),
+        "imported_only_inside_functions": {k: list(v) for k, v in bundle.lazy_imports.items()},
+    }
+    return bundle, manifest
 
 
-def _slave_class(script: Path) -> type:
-    from pythonfmu import Fmi2Slave
+def _instantiate(bundle: Bundle, staging: Path) -> Any:
+    """The slave, instantiated from ``staging`` as pythonfmu would (then unloaded)."""
+    import importlib.util
 
-    name = f"_lpvest_fmu_{script.stem}_{uuid.uuid4().hex}"
-    spec = importlib.util.spec_from_file_location(name, script)
+    entry = staging / f"{bundle.entry}.py"
+    spec = importlib.util.spec_from_file_location(bundle.entry, entry)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    classes = [c for c in vars(module).values()
-               if isinstance(c, type) and issubclass(c, Fmi2Slave) and c.__module__ == name]
-    if len(classes) != 1:
-        raise BuildError(f"{script.name} must define exactly one Fmi2Slave class; found {len(classes)}")
-    return classes[0]
-
-
-def _model_description(plan: FmuPlan, staging: Path) -> tuple[bytes, int, int, int]:
-    from pythonfmu.default_experiment import DefaultExperiment
-
-    # as at run time, resources/ is on sys.path while the slave is instantiated
+    path_before = list(sys.path)
     sys.path.insert(0, str(staging))
     try:
-        cls = _slave_class(staging / plan.script)
-        slave = cls(instance_name="lpvest-build", resources=str(staging))
+        spec.loader.exec_module(module)
+        classes = [c for c in vars(module).values() if isinstance(c, type) and c.__module__.startswith(bundle.package)]
+        if len(classes) != 1:
+            raise BuildError(f"{entry.name} must expose exactly one slave class; found {len(classes)}")
+        return classes[0](instance_name="lpvest-build", resources=str(staging))
     finally:
-        sys.path.remove(str(staging))
-        for name, module in list(sys.modules.items()):
-            if str(getattr(module, "__file__", "") or "").startswith(str(staging)):
+        sys.path[:] = path_before
+        sys.meta_path[:] = [f for f in sys.meta_path if getattr(f, "package", None) != bundle.package]
+        for name in list(sys.modules):
+            if name in (bundle.package, bundle.entry) or name.startswith(bundle.package + "."):
                 del sys.modules[name]
+
+
+def _model_description(plan: FmuPlan, bundle: Bundle, staging: Path, guid: str) -> tuple[bytes, int, int, int]:
+    slave = _instantiate(bundle, staging)
+    meta = slave.fmi_metadata()
+    from pythonfmu.default_experiment import DefaultExperiment
+
     slave.default_experiment = DefaultExperiment(start_time=0.0, stop_time=plan.stop_time, step_size=plan.step_size)
     options = {
         "needsExecutionTool": True,  # a Python interpreter
-        "canHandleVariableCommunicationStepSize": True,
+        # a discrete-time component steps by its sample time only
+        "canHandleVariableCommunicationStepSize": meta["timed"] and (
+            plan.estimator is None or plan.estimator.sample_time is None),
         "canBeInstantiatedOnlyOncePerProcess": False,
         "canGetAndSetFMUstate": True,
         "canSerializeFMUstate": True,
     }
     root: Element = slave.to_xml(options)
-    meta = slave.fmi_metadata()
+    root.set("guid", guid)
+    root.attrib.pop("generationDateAndTime", None)
+    root.set("version", str(slave.version or ""))
     variables = root.find("ModelVariables")
     assert variables is not None
     counts = {"input": 0, "output": 0, "parameter": 0}
+    sampled = not meta["timed"] or (plan.estimator is not None and plan.estimator.sample_time is not None)
     for sv in variables.findall("ScalarVariable"):
         vr = int(sv.get("valueReference", "-1"))
-        counts[sv.get("causality", "local")] = counts.get(sv.get("causality", "local"), 0) + 1
+        causality = sv.get("causality", "local")
+        counts[causality] = counts.get(causality, 0) + 1
+        if causality == "output" and sampled:
+            sv.set("variability", "discrete")  # piecewise constant between samples
         lo, hi = meta["ranges"].get(vr, (None, None))
         typ = next(iter(sv))
         if lo is not None:
@@ -346,8 +538,18 @@ def _model_description(plan: FmuPlan, staging: Path) -> tuple[bytes, int, int, i
     return xml, counts["input"], counts["output"], counts["parameter"]
 
 
-def build_fmu(plan: FmuPlan, out_dir: str | Path) -> Path:
-    """Build one FMU into ``out_dir`` (``<identifier>.fmu``); returns its path."""
+def _zip_write(z: zipfile.ZipFile, name: str, data: bytes, executable: bool = False) -> None:
+    info = zipfile.ZipInfo(name, date_time=_ZIP_TIME)
+    info.compress_type = zipfile.ZIP_DEFLATED
+    info.create_system = 3  # Unix: the permissions below are honoured
+    info.external_attr = (0o755 if executable else 0o644) << 16
+    z.writestr(info, data, compresslevel=9)
+
+
+def build_fmu(plan: FmuPlan, out_dir: str | Path, *, progress: Callable[[str], None] | None = None) -> Path:
+    """Build one FMU into ``out_dir`` (``<identifier>.fmu``); returns its path.
+
+    The same inputs give a byte-identical file (see the module documentation)."""
     import pythonfmu
 
     out = Path(out_dir)
@@ -358,24 +560,30 @@ def build_fmu(plan: FmuPlan, out_dir: str | Path) -> Path:
     with tempfile.TemporaryDirectory(prefix="lpvest-fmu-") as tmp:
         staging = Path(tmp) / "resources"
         staging.mkdir()
-        _stage(plan, staging)
-        xml, *_ = _model_description(plan, staging)
+        bundle, manifest = _stage(plan, staging, progress)
+        manifest_text = json.dumps(manifest, indent=1, sort_keys=True) + "\n"
+        guid = "{" + str(uuid.UUID(hex=_sha(manifest_text.encode())[:32])) + "}"
+        xml, *_ = _model_description(plan, bundle, staging, guid)
+        (staging / MANIFEST_FILE).write_text(manifest_text, encoding="utf-8")
+        entries: dict[str, tuple[bytes, bool]] = {"modelDescription.xml": (xml, False)}
+        for f in staging.rglob("*"):
+            if f.is_file() and "__pycache__" not in f.parts:
+                entries["resources/" + f.relative_to(staging).as_posix()] = (f.read_bytes(), False)
+        for lib in binaries.rglob("*"):
+            if not lib.is_file() or lib.suffix not in (".so", ".dll", ".dylib"):
+                continue
+            platform = lib.parent.name
+            name = f"binaries/{platform}/{plan.identifier}{lib.suffix}"
+            if platform == "linux64" and bridge is not None:
+                entries[name] = (bridge.read_bytes(), True)
+                entries[f"binaries/{platform}/{_INNER_LIBRARY}"] = (lib.read_bytes(), True)
+            else:
+                entries[name] = (lib.read_bytes(), True)
         partial = out / f".{plan.identifier}.fmu.part"
-        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
-            z.writestr("modelDescription.xml", xml)
-            for f in sorted(staging.rglob("*")):
-                if f.is_file() and "__pycache__" not in f.parts:
-                    z.write(f, "resources/" + f.relative_to(staging).as_posix())
-            for lib in sorted(binaries.rglob("*")):
-                if not lib.is_file() or lib.suffix not in (".so", ".dll", ".dylib"):
-                    continue
-                platform = lib.parent.name
-                name = f"binaries/{platform}/{plan.identifier}{lib.suffix}"
-                if platform == "linux64" and bridge is not None:
-                    z.write(bridge, name)
-                    z.write(lib, f"binaries/{platform}/{_INNER_LIBRARY}")
-                else:
-                    z.write(lib, name)
+        with zipfile.ZipFile(partial, "w") as z:
+            for name in sorted(entries):
+                data, executable = entries[name]
+                _zip_write(z, name, data, executable)
         partial.replace(target)
     return target
 
@@ -393,19 +601,27 @@ def build_fmus(
     out_dir: str | Path = DEFAULT_OUT,
     *,
     kinds: Sequence[EstimatorKind] | None = None,
+    roles: Iterable[str] | None = None,
+    designs: Mapping[str, str | Path] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> tuple[list[BuildResult], list[str]]:
     """Build and validate the FMUs of the given system files (default: every
-    example system). Returns the results and the planning notes."""
+    example system). Returns the results and the planning notes.
+
+    ``roles`` keeps only the FMUs of these roles (``Plant``, ``HinfPD``, ...);
+    ``designs`` maps a role to a design file to carry (see :func:`plan_system`)."""
     results: list[BuildResult] = []
     notes: list[str] = []
+    wanted = None if roles is None else set(roles)
     for source in _systems(sources):
-        plans, more = plan_system(source, kinds=kinds)
+        plans, more = plan_system(source, kinds=kinds, designs=designs)
         notes += more
+        if wanted is not None:
+            plans = [p for p in plans if p.role in wanted]
         for plan in plans:
             if progress is not None:
-                progress(plan.identifier)
-            path = build_fmu(plan, out_dir)
+                progress(f"building {plan.identifier}")
+            path = build_fmu(plan, out_dir, progress=progress)
             results.append(BuildResult(plan, validate_fmus([path])[0]))
     return results, notes
 

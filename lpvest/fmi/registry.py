@@ -12,7 +12,8 @@ Factories and design functions are named as ``"module:function"`` strings so
 that this module imports nothing heavy and the FMU imports only what it runs:
 
 - ``factory(model, *, design=None, **parameters) -> StreamingEstimator``
-  (``design`` is the dict the design function returned, or ``None``);
+  (``design`` is the carried design, or ``None``), in its own module so
+  that an FMU carries only the estimator it runs (:mod:`lpvest.fmi.bundle`);
 - ``design(model) -> dict | str`` (numpy arrays allowed; a ``str`` is a JSON
   document stored as readable ``resources/design.json``), at build time. The
   model of such an FMU is fixed at the file's parameter values (they are not
@@ -20,8 +21,8 @@ that this module imports nothing heavy and the FMU imports only what it runs:
 
 Adding a filter FMU is one line in :data:`ESTIMATOR_KINDS` below, e.g.::
 
-    EstimatorKind("Kalman", "lpvest.estimators.kalman:fmu_estimator", models=("affine",),
-                  parameters=(Parameter("tau", 0, "memory (0: exact)", minimum=0),)),
+    EstimatorKind("Kalman", "lpvest.fmi.factories.kalman:build", models=("affine",),
+                  parameters=(Parameter("x0", MODEL_X0, "mean of the initial state x_0"),)),
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .spec import Parameter
+from .spec import MODEL_P0, MODEL_X0, SCHEDULING_CENTRE, Parameter
 
 __all__ = ["EstimatorKind", "ESTIMATOR_KINDS", "estimator_kinds", "resolve"]
 
@@ -53,12 +54,23 @@ class EstimatorKind:
     parameters : tuple of Parameter
         FMU parameters, passed to the factory as keywords.
     design : str, optional
-        ``"module:function"`` run at build time; its result is carried in the FMU.
+        ``"module:function"`` run at build time when no design file is given;
+        its result is carried in the FMU.
     description : str
         One line for the model description.
     files : tuple of Path
-        Extra Python files or packages copied into ``resources/`` (for
-        estimators that live outside lpvest, e.g. in a user's own module).
+        Extra Python modules (files or packages) the factory lives in, for
+        estimators outside lpvest (e.g. a user's own module): carried in the
+        FMU's private package (:mod:`lpvest.fmi.bundle`), their ``lpvest``
+        imports bound to the FMU's own copy.
+    requirements : tuple of str
+        Third-party packages the estimator imports inside functions (its
+        module-level imports are found by the builder), e.g. ``("scipy",)``.
+    sample_time : str, optional
+        The parameter that is the estimator's sample time, for a component
+        that keeps time itself (``timed``); default: a discrete-time filter,
+        which gets the FMU parameter ``sample_time`` (one fmi2DoStep is one
+        sample).
     """
 
     role: str
@@ -68,6 +80,8 @@ class EstimatorKind:
     design: str | None = None
     description: str = ""
     files: tuple[Path, ...] = field(default=())
+    requirements: tuple[str, ...] = ()
+    sample_time: str | None = None
 
     def applies_to(self, model: object) -> bool:
         from ..modelfile import MODEL_TYPES
@@ -80,6 +94,7 @@ class EstimatorKind:
             "factory": self.factory,
             "parameters": [p.to_json() for p in self.parameters],
             "description": self.description,
+            "sample_time": self.sample_time,
         }
 
 
@@ -98,15 +113,21 @@ def resolve(target: str) -> Callable[..., Any]:
 
 #: The estimator FMUs built for every applicable model: one line per filter.
 ESTIMATOR_KINDS: list[EstimatorKind] = [
-    EstimatorKind("Kalman", "lpvest.fmi.factories:kalman", models=("affine",),
+    EstimatorKind("Kalman", "lpvest.fmi.factories.kalman:build", models=("affine",),
+                  parameters=(Parameter("x0", MODEL_X0, "mean of the initial state x_0"),
+                              Parameter("P0", MODEL_P0, "covariance of the initial state x_0")),
                   description="exact LPV Kalman filter in innovation form (Cox & Toth (4a)-(4e))"),
-    EstimatorKind("TruncatedKalman", "lpvest.fmi.factories:truncated_kalman", models=("affine",),
-                  parameters=(Parameter("tau", 10, "memory: the gain uses p_(t-tau)..p_t", minimum=0),
+    EstimatorKind("TruncatedKalman", "lpvest.fmi.factories.truncated:build", models=("affine",),
+                  parameters=(Parameter("tau", 10, "memory: the gain uses p_(t-tau)..p_t", minimum=0,
+                                        maximum=100_000),
                               Parameter("start", "theorem", "start covariance of the restarted recursion: "
-                                        "theorem | steady-state")),
+                                        "theorem | steady-state (at start_p)"),
+                              Parameter("start_p", SCHEDULING_CENTRE,
+                                        "scheduling value the steady-state start is computed at")),
+                  requirements=("scipy",),  # the steady-state start solves a DARE with scipy
                   description="truncated-memory LPV Kalman filter (Cox & Toth Theorem 1)"),
-    EstimatorKind("BSplineObserver", "lpvest.fmi.factories:bspline_observer", models=("ltv-io",),
-                  parameters=(Parameter("dt", 0.001, "sample time = communication step (s)", minimum=0.0),
+    EstimatorKind("BSplineObserver", "lpvest.fmi.factories.bspline:build", models=("ltv-io",),
+                  parameters=(Parameter("dt", 0.001, "sample time = communication step (s)", minimum=1e-12),
                               Parameter("window", 4.0, "window length (s)", minimum=0.0),
                               Parameter("hop", 0.5, "time between refits (s)", minimum=0.0),
                               Parameter("a0", "spline:18", "a0: known | constant | spline:N[:order]"),
@@ -114,12 +135,13 @@ ESTIMATOR_KINDS: list[EstimatorKind] = [
                               Parameter("b0", "known", "b0: known | constant | spline:N[:order]"),
                               Parameter("b1", "known", "b1: known | constant | spline:N[:order]"),
                               Parameter("penalty", 0.0, "P-spline penalty (0: none, < 0: by GCV)")),
+                  requirements=("scipy",), sample_time="dt",
                   description="sliding-window B-spline joint parameter and state observer (Sridhar et al.)"),
-    EstimatorKind("HinfPD", "lpvest.fmi.factories:hinf", models=("polytopic",),
-                  design="lpvest.fmi.factories:hinf_pd_design",
+    EstimatorKind("HinfPD", "lpvest.fmi.factories.hinf:build", models=("polytopic",),
+                  design="lpvest.fmi.designs:hinf_pd",
                   description="gain-scheduled H-infinity filter (Peixoto et al. Theorem 1), best epsilon"),
-    EstimatorKind("HinfRobust", "lpvest.fmi.factories:hinf", models=("polytopic",),
-                  design="lpvest.fmi.factories:hinf_robust_design",
+    EstimatorKind("HinfRobust", "lpvest.fmi.factories.hinf:build", models=("polytopic",),
+                  design="lpvest.fmi.designs:hinf_robust",
                   description="robust H-infinity filter (Peixoto et al. Corollary 1), best epsilon"),
 ]
 

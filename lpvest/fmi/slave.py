@@ -9,28 +9,42 @@ on. The component follows the step protocol of
 change, ``step(inputs)``, ``reset``, ``get_state``/``set_state``); components
 with ``timed = True`` take ``reset(t0)`` and ``step(inputs, dt=h, t_end=t + h)``.
 
-What the base does for every FMU:
+What the base does for every FMU (docs/fmus.md states the conventions):
 
 - ports become FMI variables with structured names (``y[1]``, ``P[1,1]``),
   inputs with start values, outputs listed (with their dependencies) by the
   builder, parameters with start values (variability ``fixed``);
-- direct feedthrough: after ``fmi2SetReal`` of the inputs at ``t_k``, reading
-  an output gives ``outputs(inputs)`` at ``t_k`` (computed on demand), before
-  ``fmi2DoStep``; ``fmi2DoStep`` calls ``step`` (one sample for a discrete-time
-  component; the step size for a timed one);
+- **step semantics.** A discrete-time component (not ``timed``) gets the
+  parameter ``sample_time``: every ``fmi2DoStep`` must be one sample, with
+  ``h = sample_time``. After ``fmi2SetReal`` of the inputs at ``t_k``, an
+  output reads its value at sample ``k`` (computed on demand, before
+  ``fmi2DoStep``: zero-delay masters use this). ``fmi2DoStep(t_k, h)``
+  consumes sample ``k``; until an input is set again, an output that depends
+  on the inputs at the same instant (direct feedthrough: a filter's
+  estimates, a plant's ``y``) holds its sample-``k`` value, and an output that
+  depends on none (a plant's state, a scheduler) reads its value at
+  ``t_k + h``. So a host that reads after each step (``fmpy.simulate_fmu``,
+  libcosim, SSP importers) records the estimate of sample ``k`` at
+  ``t_k + h``. A step that is not a valid next sample (``h <= 0`` or not
+  finite, ``h`` not the sample time, a communication point other than the
+  FMU's time, after ``fmi2Terminate``, with an invalid input) is refused with
+  fmi2Error and a log line, and consumes nothing;
 - bad input never raises into pythonfmu (that would be fmi2Fatal and leaves the
   instance unusable): a NaN/inf value, a value outside the declared range or an
   invalid parameter is rejected, logged at status fmi2Error with a message
   naming the variable, and the instance keeps its state; the lpvest status
   bridge (the FMU's binary) returns that status, so the host sees fmi2Error
-  and can still free, reset or restore the instance. ``fmi2DoStep`` refuses to
-  step while an input is invalid or the initialization failed;
+  and can still free, reset or restore the instance. An output that would be
+  NaN or inf is an fmi2Error naming it (and the step that would consume it is
+  refused); numpy's floating-point warnings go to the FMI logger as
+  fmi2Warning; every message is at most :data:`MAX_MESSAGE` characters;
 - ``fmi2GetFMUstate``/``fmi2SetFMUstate`` and (de)serialization of the whole
   state: parameters, inputs, cached outputs, the component's state (with its
-  random generator), time;
-- at instantiation, a check of which ``lpvest`` serves the FMU: the bundled
-  copy in ``resources/`` or one installed in the host (they share
-  ``sys.modules``); a different version is logged as a warning.
+  random generator), time.
+
+The FMU runs the copy of lpvest it carries under a build-unique name
+(:mod:`lpvest.fmi.bundle`); this module imports pythonfmu's Python files from
+their submodules so that the FMU can carry them too.
 """
 
 from __future__ import annotations
@@ -41,16 +55,33 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
-from pythonfmu.enums import Fmi2Status
+from pythonfmu.enums import Fmi2Causality, Fmi2Status, Fmi2Variability
+from pythonfmu.fmi2slave import Fmi2Slave
+from pythonfmu.variables import Boolean, Integer, Real, String
 
+from .. import __version__
 from .naming import element_names
 from .spec import Parameter, read_spec
 from .state import copy_state, decode_state, encode_state
 
-__all__ = ["LpvestSlave"]
+__all__ = ["LpvestSlave", "MAX_MESSAGE", "INT32"]
 
 _TYPES = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}
+
+#: Longest log message (characters); a longer one is cut, saying how much was cut.
+MAX_MESSAGE = 1000
+
+#: The range of an FMI Integer (32-bit).
+INT32 = (-(2**31), 2**31 - 1)
+
+#: A communication point matches the FMU's time when within this fraction of
+#: ``max(|t|, h)`` (hosts accumulate time in floating point or in integer ticks).
+_TIME_RTOL = 1e-9
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 15] + f"... ({len(text)} chars)"
 
 
 class _Element:
@@ -95,8 +126,9 @@ class LpvestSlave(Fmi2Slave):
 
     def output_dependencies(self, port: Any) -> list[str] | None:
         """Names of the input ports an output depends on at the same instant
-        (``None``: all of them)."""
-        return None
+        (``None``: all of them; default: all, or none for a port with
+        ``direct = False``)."""
+        return None if getattr(port, "direct", True) else []
 
     # -- helpers for role scripts ------------------------------------------------------
     def system(self, params: Mapping[str, Any] | None = None) -> Any:
@@ -141,8 +173,9 @@ class LpvestSlave(Fmi2Slave):
         self.spec = read_spec(self.resources)
         self.modelName = self.spec["identifier"]
         self.description = self.spec.get("description", "")
-        self.version = self.spec.get("lpvest_version")
-        self._check_lpvest()
+        self.version = __version__
+        # which code runs this FMU: its own copy of lpvest (lpvest.fmi.bundle), named here
+        self._log(Fmi2Status.ok, f"lpvest {__version__} ({__name__.rpartition('.fmi.')[0]})")
         self._elements: dict[int, _Element] = {}
         self._invalid: dict[str, str] = {}
         self._params: dict[str, Any] = {}
@@ -151,6 +184,10 @@ class LpvestSlave(Fmi2Slave):
             self._add_parameter(par)
         component = self.make_component(self.parameters())
         self._timed = bool(getattr(component, "timed", False))
+        if not self._timed:
+            h = float(self.spec.get("sample_time", 1.0))
+            self._add_parameter(Parameter("sample_time", h, "time between samples (s): every fmi2DoStep is one "
+                                          "sample, with communication step = sample_time", minimum=0.0))
         self._input_ports = tuple(component.input_ports)
         self._output_ports = tuple(component.output_ports)
         self._inputs = {p.name: np.zeros(p.shape) for p in self._input_ports}
@@ -159,40 +196,34 @@ class LpvestSlave(Fmi2Slave):
             self._add_port(port, "input")
         for port in self._output_ports:
             self._add_port(port, "output")
-        self._store_outputs({p.name: np.full(p.shape, np.nan) for p in self._output_ports})
+        self._feedthrough = self._direct_outputs(component)
+        self._nonfinite: str | None = None
+        self._store_outputs({p.name: np.full(p.shape, np.nan) for p in self._output_ports}, check=False)
         # fmi2GetReal of outputs only (what a master does every step): per list of
         # value references, the positions in the flat output list (bounded cache)
         self._output_reads: dict[tuple[int, ...], list[int]] = {}
         self._step_inputs: dict[str, np.ndarray] | None = None
+        self._held: dict[str, np.ndarray] | None = None  # feedthrough outputs of the sample just consumed
         self._component: Any = None
         self._preview: Any = None
         self._initialized = False
+        self._terminated = False
         self._init_error = "the FMU is not initialized yet (fmi2ExitInitializationMode)"
         self._dirty = True
         self._time = 0.0
         self._start_time = 0.0
 
+    def _direct_outputs(self, component: Any) -> tuple[str, ...]:
+        """The outputs that depend on an input at the same instant: they hold their
+        value after a step until inputs are set (the model description declares
+        the dependencies of the default configuration, which includes these)."""
+        if not tuple(component.input_ports):
+            return ()
+        return tuple(p.name for p in component.output_ports if getattr(p, "direct", True))
+
     @property
     def resources_path(self) -> Path:
         return Path(self.resources)
-
-    def _check_lpvest(self) -> None:
-        import lpvest
-
-        served = Path(lpvest.__file__).resolve().parent
-        bundled = (Path(self.resources) / "lpvest").resolve()
-        built = self.spec.get("lpvest_version")
-        if served == bundled:
-            return
-        if lpvest.__version__ != built:
-            self._log(
-                Fmi2Status.warning,
-                f"lpvest {lpvest.__version__} from {served} serves this FMU, which was built with lpvest "
-                f"{built} (bundled in its resources): both share sys.modules and the one imported first "
-                "serves every FMU in this process",
-            )
-        else:
-            self._log(Fmi2Status.ok, f"lpvest {lpvest.__version__} from {served} serves this FMU (the bundled version)")
 
     # -- variables --------------------------------------------------------------------
     def _register(self, element: _Element, **kwargs: Any) -> None:
@@ -207,6 +238,13 @@ class LpvestSlave(Fmi2Slave):
     def _add_parameter(self, par: Parameter) -> None:
         if par.name in self._param_defs:
             raise ValueError(f"parameter {par.name!r} is declared twice")
+        minimum, maximum = par.minimum, par.maximum
+        if par.fmi_type == "Integer":
+            # an FMI Integer is 32-bit: declare it, so that no value wraps silently
+            minimum = INT32[0] if minimum is None else max(int(minimum), INT32[0])
+            maximum = INT32[1] if maximum is None else min(int(maximum), INT32[1])
+            if not minimum <= int(par.start) <= maximum:
+                raise ValueError(f"parameter {par.name}: start {par.start} is outside [{minimum}, {maximum}]")
         self._param_defs[par.name] = par
         if par.shape:
             self._params[par.name] = np.array(par.start, dtype=float).reshape(par.shape)
@@ -215,7 +253,7 @@ class LpvestSlave(Fmi2Slave):
             self._params[par.name] = par.start
             names = [par.name]
         for i, name in enumerate(names):
-            element = _Element(name, "parameter", par.name, i, par.fmi_type, minimum=par.minimum, maximum=par.maximum)
+            element = _Element(name, "parameter", par.name, i, par.fmi_type, minimum=minimum, maximum=maximum)
             self._register(
                 element,
                 causality=Fmi2Causality.parameter,
@@ -236,7 +274,9 @@ class LpvestSlave(Fmi2Slave):
 
     def fmi_metadata(self) -> dict[str, Any]:
         """For the builder: per variable its declared range, per output the
-        inputs it depends on (value references)."""
+        inputs it depends on (value references), whether the component keeps
+        time itself (``timed``) or samples at every step (then its outputs
+        are piecewise constant: variability ``discrete``)."""
         by_port: dict[str, list[int]] = {}
         for vr, e in self._elements.items():
             if e.kind == "input":
@@ -271,6 +311,9 @@ class LpvestSlave(Fmi2Slave):
         self._log(Fmi2Status.error, message)
 
     def _set_element(self, e: _Element, value: Any) -> None:
+        if self._terminated:
+            self._log(Fmi2Status.error, f"{e.what()} cannot be set after fmi2Terminate (reset the instance)")
+            return
         if e.kind == "parameter" and self._initialized:
             self._log(Fmi2Status.error, f"{e.what()} is fixed: it can be set only before fmi2ExitInitializationMode")
             return
@@ -282,9 +325,9 @@ class LpvestSlave(Fmi2Slave):
             tol = e.tol
             below = e.minimum is not None and value < e.minimum - tol
             if below or (e.maximum is not None and value > e.maximum + tol):
-                lo = "-inf" if e.minimum is None else f"{e.minimum:.6g}"
-                hi = "inf" if e.maximum is None else f"{e.maximum:.6g}"
-                self._reject(e, f"{e.what()} = {value:.6g} is outside its declared range [{lo}, {hi}]; "
+                lo = "-inf" if e.minimum is None else f"{e.minimum:.17g}"
+                hi = "inf" if e.maximum is None else f"{e.maximum:.17g}"
+                self._reject(e, f"{e.what()} = {value:.17g} is outside its declared range [{lo}, {hi}]; "
                              "value rejected")
                 return
         elif e.fmi_type == "Integer":
@@ -308,6 +351,7 @@ class LpvestSlave(Fmi2Slave):
             self._preview = None
         else:
             self._inputs[e.owner].flat[e.index] = value
+            self._held = None  # the inputs of the next sample are arriving
         self._dirty = True
         self._step_inputs = None
 
@@ -331,29 +375,57 @@ class LpvestSlave(Fmi2Slave):
         else:
             component.reset()
 
-    def _store_outputs(self, values: Mapping[str, Any]) -> None:
+    def _store_outputs(self, values: Mapping[str, Any], *, check: bool = True) -> None:
         """Keep a copy of the component's outputs, and the flat list of their
-        values in the order of the output variables (what fmi2GetReal reads)."""
+        values in the order of the output variables (what fmi2GetReal reads).
+        With ``check``, a value that is not finite is remembered (named in
+        :attr:`_nonfinite`): reading it is an error, and so is consuming the sample."""
         outputs = {}
         flat: list[float] = []
+        bad = []
         for p in self._output_ports:
             a = np.array(values[p.name], dtype=float).reshape(p.shape)  # a copy
+            if check and not np.all(np.isfinite(a)):
+                names = element_names(p.name, tuple(p.shape))
+                bad += [names[i] for i in np.flatnonzero(~np.isfinite(a.ravel()))]
             outputs[p.name] = a
             flat += a.ravel().tolist()
         self._outputs, self._output_values = outputs, flat
+        self._nonfinite = (f"output {', '.join(bad[:5])}{' ...' if len(bad) > 5 else ''} is not finite "
+                           f"(NaN or inf) at t = {self._time:.17g}") if bad else None
+
+    def _fp_warning(self, kind: str, flag: int) -> None:
+        self._log(Fmi2Status.warning, f"numpy: floating-point {kind} at t = {self._time:.17g}")
+
+    def _compute(self, fn: Callable[[], Any]) -> Any:
+        """Run component code with numpy's floating-point warnings sent to the FMI logger."""
+        with np.errstate(over="call", invalid="call", divide="call", under="ignore", call=self._fp_warning):
+            return fn()
 
     def _refresh(self) -> None:
         if not self._dirty or self._invalid:
             return
         component = self._preview_component()
-        # the same copy of the inputs is handed to step() when nothing is set in between
-        inputs = self._input_dict()
-        self._store_outputs(component.outputs(inputs))
-        self._step_inputs = inputs
+        held = self._held
+        if held is None:
+            # the same copy of the inputs is handed to step() when nothing is set in between
+            inputs = self._input_dict()
+            values: Mapping[str, Any] = self._compute(lambda: component.outputs(inputs))
+            self._step_inputs = inputs
+        elif len(held) == len(self._output_ports):
+            values = held  # every output holds its value until inputs are set: nothing to compute
+        else:
+            # outputs with no feedthrough at the new time; the others hold
+            stale = self._input_dict()
+            values = {**self._compute(lambda: component.outputs(stale)), **held}
         self._dirty = False
+        self._store_outputs(values)
 
     # -- logging and the error barrier -----------------------------------------------
     def _log(self, status: Fmi2Status, message: str) -> None:
+        if len(message) > MAX_MESSAGE:
+            cut = len(message) - (MAX_MESSAGE - 40)
+            message = message[: MAX_MESSAGE - 40] + f" ... ({cut} characters cut)"
         # pythonfmu hands the text to the host logger as a format string: escape '%'
         self.log(f"[{self.modelName}] {message}".replace("%", "%%"), status)
 
@@ -372,8 +444,11 @@ class LpvestSlave(Fmi2Slave):
         self, start_time: float, stop_time: float | None = None, tolerance: float | None = None
     ) -> None:
         def run() -> None:
-            self._start_time = float(start_time)
-            self._time = float(start_time)
+            t0 = float(start_time)
+            if not math.isfinite(t0):
+                raise ValueError(f"start time {t0} is not finite")
+            self._start_time = t0
+            self._time = t0
             self._preview = None
             self._dirty = True
 
@@ -386,6 +461,8 @@ class LpvestSlave(Fmi2Slave):
         def run() -> None:
             if self._invalid:
                 raise ValueError("invalid values were set: " + "; ".join(self._invalid.values()))
+            if not self._timed and not self._params["sample_time"] > 0:
+                raise ValueError(f"parameter sample_time = {self._params['sample_time']:.17g} must be > 0")
             component = self.make_component(self.parameters())
             ports_in = tuple((p.name, tuple(p.shape)) for p in component.input_ports)
             ports_out = tuple((p.name, tuple(p.shape)) for p in component.output_ports)
@@ -395,9 +472,11 @@ class LpvestSlave(Fmi2Slave):
                 raise ValueError("these parameters change the FMU's inputs or outputs; rebuild the FMU instead")
             self._reset_component(component, self._start_time)
             self._component = component
+            self._feedthrough = self._direct_outputs(component)
             self._time = self._start_time
             self._initialized = True
             self._preview = None
+            self._held = None
             self._dirty = True
 
         try:
@@ -408,30 +487,60 @@ class LpvestSlave(Fmi2Slave):
             self._log(Fmi2Status.error, f"fmi2ExitInitializationMode: {exc}")
 
     def terminate(self) -> None:
-        pass
+        self._terminated = True
+
+    def _step_problem(self, t: float, h: float) -> str | None:
+        """Why ``fmi2DoStep(t, h)`` is not a valid next step, or ``None``."""
+        if self._terminated:
+            return "the FMU is terminated (fmi2Terminate was called; reset or free the instance)"
+        if not self._initialized:
+            return self._init_error
+        if not (math.isfinite(t) and math.isfinite(h)):
+            return f"the communication point t = {t} and step h = {h} must be finite"
+        if h <= 0:
+            return f"the communication step h = {h:.17g} must be > 0"
+        if abs(t - self._time) > _TIME_RTOL * max(abs(t), abs(self._time), h):
+            return (f"the communication point t = {t:.17g} is not the FMU's current time {self._time:.17g} "
+                    "(a skipped or repeated point; restore a state with fmi2SetFMUstate to go back)")
+        if not self._timed:
+            ts = float(self._params["sample_time"])
+            if abs(h - ts) > _TIME_RTOL * ts:
+                return (f"the communication step h = {h:.17g} is not the sample time {ts:.17g} "
+                        "(one fmi2DoStep is one sample; set the parameter sample_time)")
+        if self._invalid:
+            return (f"invalid input(s) {', '.join(self._invalid)} (set valid values, restore a state with "
+                    "fmi2SetFMUstate, or reset)")
+        return None
 
     def do_step(self, current_time: float, step_size: float) -> bool:
         try:
-            if not self._initialized:
-                self._log(Fmi2Status.error, f"fmi2DoStep refused: {self._init_error}")
-                return False
-            if self._invalid:
-                names = ", ".join(self._invalid)
-                self._log(Fmi2Status.error, f"fmi2DoStep refused at t = {current_time:g}: invalid input(s) {names} "
-                          "(set valid values, restore a state with fmi2SetFMUstate, or reset)")
+            t, h = float(current_time), float(step_size)
+            problem = self._step_problem(t, h)
+            if problem is None:
+                if self._held is not None:
+                    # no input was set since the last step: this sample has the same inputs
+                    self._held = None
+                    self._dirty = True
+                # the outputs of this sample (and the inputs step() reuses): refused when not finite
+                self._refresh()
+                problem = self._nonfinite
+            if problem is not None:
+                self._log(Fmi2Status.error, f"fmi2DoStep refused at t = {t:.17g} (h = {h:.17g}): {problem}")
                 return False
             component = self._component
-            inputs = self._step_inputs if self._step_inputs is not None and self._initialized else self._input_dict()
+            inputs = self._step_inputs if self._step_inputs is not None else self._input_dict()
+            current = self._outputs
             self._step_inputs = None
             if self._timed:
-                component.step(inputs, dt=float(step_size), t_end=float(current_time) + float(step_size))
+                self._compute(lambda: component.step(inputs, dt=h, t_end=t + h))
             else:
-                component.step(inputs)
-            self._time = float(current_time) + float(step_size)
+                self._compute(lambda: component.step(inputs))
+            self._time = t + h
+            self._held = {name: current[name] for name in self._feedthrough}
             self._dirty = True
             return True
         except Exception as exc:  # noqa: BLE001
-            self._fail(f"fmi2DoStep at t = {current_time:g}", exc)
+            self._fail(f"fmi2DoStep at t = {current_time:.17g}", exc)
             return False
 
     def _get(self, vrs: list[int], fmi_type: str, nan: Any) -> list[Any]:
@@ -442,6 +551,8 @@ class LpvestSlave(Fmi2Slave):
                 return [nan] * len(vrs)
         if any(e.kind == "output" for e in elements):
             self._guard(f"fmi2Get{fmi_type} (computing the outputs)", self._refresh, None)
+            if self._nonfinite is not None:
+                self._log(Fmi2Status.error, f"fmi2Get{fmi_type}: {self._nonfinite}")
         return [self._get_element(e) for e in elements]
 
     def get_real(self, vrs: list[int]) -> list[float]:
@@ -461,6 +572,8 @@ class LpvestSlave(Fmi2Slave):
             except Exception as exc:  # noqa: BLE001 - nothing may reach pythonfmu (fmi2Fatal)
                 self._fail("fmi2GetReal (computing the outputs)", exc)
         values = self._output_values
+        if self._nonfinite is not None:
+            self._log(Fmi2Status.error, f"fmi2GetReal: {self._nonfinite}")
         return [values[i] for i in positions]
 
     def get_integer(self, vrs: list[int]) -> list[int]:
@@ -505,8 +618,10 @@ class LpvestSlave(Fmi2Slave):
             "params": copy_state(self._params),
             "inputs": copy_state(self._inputs),
             "outputs": copy_state(self._outputs),
+            "held": copy_state(self._held),
             "invalid": dict(self._invalid),
             "initialized": self._initialized,
+            "terminated": self._terminated,
             "init_error": self._init_error,
             "dirty": self._dirty,
             "time": self._time,
@@ -531,21 +646,28 @@ class LpvestSlave(Fmi2Slave):
             outputs = {
                 k: np.asarray(snap["outputs"][k], dtype=float).reshape(v.shape) for k, v in self._outputs.items()
             }
+            held = snap.get("held")
+            if held is not None:
+                held = {k: np.asarray(held[k], dtype=float).reshape(self._outputs[k].shape) for k in self._feedthrough}
             component = None
             if snap["initialized"]:
                 component = self.make_component(params)
                 component.set_state(snap["component"])
             self._params = params
             self._inputs = inputs
-            self._store_outputs(outputs)
+            self._store_outputs(outputs, check=False)
+            self._held = held
             self._step_inputs = None
             self._invalid = dict(snap["invalid"])
             self._initialized = bool(snap["initialized"])
+            self._terminated = bool(snap.get("terminated", False))
             self._init_error = str(snap["init_error"])
             self._dirty = bool(snap["dirty"])
             self._time, self._start_time = float(snap["time"]), float(snap["start_time"])
             self._component = component
             self._preview = None
+            # the status bridge reports this time as fmi2LastSuccessfulTime (lpvest/fmi/status_bridge.c)
+            self.log(repr(self._time), Fmi2Status.ok, "lpvest.time")
 
         self._guard("fmi2SetFMUstate", run, None)
 
@@ -556,4 +678,3 @@ class LpvestSlave(Fmi2Slave):
     @staticmethod
     def _fmu_state_from_bytes(state: bytes) -> bytes:  # type: ignore[override]
         return bytes(state)
-

@@ -22,12 +22,48 @@ import numpy as np
 
 from ..errors import ModelFileError
 
-__all__ = ["SPEC_FILE", "SPEC_FORMAT", "Parameter", "read_spec"]
+__all__ = [
+    "SPEC_FILE",
+    "SPEC_FORMAT",
+    "Parameter",
+    "ModelDefault",
+    "MODEL_X0",
+    "MODEL_P0",
+    "SCHEDULING_CENTRE",
+    "read_spec",
+]
 
 #: The spec file in an FMU's resources folder.
 SPEC_FILE = "lpvest_fmu.json"
 #: Version tag of the spec format.
-SPEC_FORMAT = "lpvest-fmu-1"
+SPEC_FORMAT = "lpvest-fmu-2"
+
+
+@dataclass(frozen=True)
+class ModelDefault:
+    """A parameter start value that comes from the model the FMU is built for:
+    ``"x0"`` (its initial mean), ``"P0"`` (its initial covariance) or
+    ``"scheduling-centre"`` (the centre of its scheduling box)."""
+
+    what: str
+
+    def value(self, model: Any) -> Any:
+        if self.what == "x0":
+            return [float(v) for v in np.asarray(model.x0, dtype=float)]
+        if self.what == "P0":
+            return np.asarray(model.P0, dtype=float).tolist()
+        if self.what == "scheduling-centre":
+            space = model.space
+            return [float(v) for v in (np.asarray(space.lower) + np.asarray(space.upper)) / 2]
+        raise ModelFileError(f"unknown model default {self.what!r}")
+
+
+#: Start value: the model's initial mean ``x0``.
+MODEL_X0 = ModelDefault("x0")
+#: Start value: the model's initial covariance ``P0``.
+MODEL_P0 = ModelDefault("P0")
+#: Start value: the centre of the model's scheduling box.
+SCHEDULING_CENTRE = ModelDefault("scheduling-centre")
 
 
 @dataclass(frozen=True)
@@ -49,6 +85,12 @@ class Parameter:
     minimum: float | None = None
     maximum: float | None = None
 
+    def for_model(self, model: Any) -> Parameter:
+        """This parameter with a :class:`ModelDefault` start replaced by the model's value."""
+        if isinstance(self.start, ModelDefault):
+            return Parameter(self.name, self.start.value(model), self.description, self.minimum, self.maximum)
+        return self
+
     @property
     def fmi_type(self) -> str:
         s = self.start
@@ -69,6 +111,9 @@ class Parameter:
         return np.shape(self.start) if isinstance(self.start, list | tuple | np.ndarray) else ()
 
     def to_json(self) -> dict[str, Any]:
+        if isinstance(self.start, ModelDefault):
+            return {"name": self.name, "start": {"model": self.start.what}, "description": self.description,
+                    "minimum": self.minimum, "maximum": self.maximum, "vector": True}
         start = np.asarray(self.start, dtype=float).tolist() if self.shape else self.start
         return {"name": self.name, "start": start, "description": self.description,
                 "minimum": self.minimum, "maximum": self.maximum, "vector": bool(self.shape)}
@@ -76,7 +121,9 @@ class Parameter:
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> Parameter:
         start = data["start"]
-        if data.get("vector"):
+        if isinstance(start, dict):
+            start = ModelDefault(str(start.get("model")))
+        elif data.get("vector"):
             start = np.asarray(start, dtype=float)
         return cls(data["name"], start, data.get("description", ""), data.get("minimum"), data.get("maximum"))
 

@@ -17,6 +17,14 @@
  * logging on (for the categories it chose). Messages reach the host as a
  * format string without arguments, every '%' doubled.
  *
+ * Time: fmi2GetRealStatus(fmi2LastSuccessfulTime) is the FMU's current time:
+ * the start time after fmi2SetupExperiment, t + h after a step that returned
+ * fmi2OK or fmi2Warning, unchanged after a refused step (pythonfmu's library
+ * would report the refused step's t), and after fmi2SetFMUstate the restored
+ * time, which the slave states in a log message of category "lpvest.time"
+ * (consumed here, never shown to the host). fmi2GetBooleanStatus(fmi2Terminated)
+ * is fmi2False: an lpvest slave never asks to end the simulation.
+ *
  * No Python API is used here; the Python interpreter is the host's (or loaded
  * with LD_PRELOAD for a C host), exactly as for pythonfmu's own library.
  */
@@ -117,7 +125,11 @@ typedef struct {
     size_t n_categories;
     char** categories;
     fmi2Status worst;             /* most severe status logged during the current call */
+    fmi2Real time;                /* the FMU's current time (fmi2LastSuccessfulTime) */
 } Bridge;
+
+/* the category of the slave's messages that state its time (see the top of this file) */
+#define TIME_CATEGORY "lpvest.time"
 
 static char* safe_format(const char* message);
 
@@ -125,8 +137,11 @@ static void report(fmi2CallbackLogger logger, fmi2ComponentEnvironment env, fmi2
                    const char* text) {
     if (!logger) return;
     char* fmt = safe_format(text);
-    logger(env, name ? name : "", status, status == fmi2Fatal ? "logStatusFatal" : "logStatusError",
-           fmt ? fmt : "lpvest status bridge: out of memory");
+    const char* category = status == fmi2Fatal   ? "logStatusFatal"
+                           : status == fmi2Error   ? "logStatusError"
+                           : status == fmi2Discard ? "logStatusDiscard"
+                                                   : "logStatusWarning";
+    logger(env, name ? name : "", status, category, fmt ? fmt : "lpvest status bridge: out of memory");
     free(fmt);
 }
 
@@ -220,6 +235,10 @@ static void bridge_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Sta
                           fmi2String message, ...) {
     Bridge* b = (Bridge*)env;
     if (!b) return;
+    if (category && strcmp(category, TIME_CATEGORY) == 0) {
+        if (message) b->time = strtod(message, NULL);
+        return;
+    }
     if (status > b->worst && status <= fmi2Error) b->worst = status;
     int forward = status >= fmi2Warning || (b->logging_on && category_enabled(b, category));
     if (!forward || !b->host.logger) return;
@@ -302,14 +321,26 @@ EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, si
 
 EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                       fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
-    FORWARD(c, inner.SetupExperiment(b_->inner, toleranceDefined, tolerance, startTime, stopTimeDefined, stopTime));
+    Bridge* b = BRIDGE(c);
+    if (!b) return fmi2Error;
+    b->worst = fmi2OK;
+    fmi2Status s = combine(inner.SetupExperiment(b->inner, toleranceDefined, tolerance, startTime, stopTimeDefined,
+                                                 stopTime), b->worst);
+    if (s <= fmi2Warning) b->time = startTime;
+    return s;
 }
 EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
     FORWARD(c, inner.EnterInitializationMode(b_->inner));
 }
 EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c) { FORWARD(c, inner.ExitInitializationMode(b_->inner)); }
 EXPORT fmi2Status fmi2Terminate(fmi2Component c) { FORWARD(c, inner.Terminate(b_->inner)); }
-EXPORT fmi2Status fmi2Reset(fmi2Component c) { FORWARD(c, inner.Reset(b_->inner)); }
+EXPORT fmi2Status fmi2Reset(fmi2Component c) {
+    Bridge* b = BRIDGE(c);
+    if (!b) return fmi2Error;
+    b->worst = fmi2OK;
+    b->time = 0.0;
+    return combine(inner.Reset(b->inner), b->worst);
+}
 
 EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
     FORWARD(c, inner.GetReal(b_->inner, vr, nvr, value));
@@ -387,8 +418,13 @@ EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueR
 }
 EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
                              fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
-    FORWARD(c, inner.DoStep(b_->inner, currentCommunicationPoint, communicationStepSize,
-                            noSetFMUStatePriorToCurrentPoint));
+    Bridge* b = BRIDGE(c);
+    if (!b) return fmi2Error;
+    b->worst = fmi2OK;
+    fmi2Status s = combine(inner.DoStep(b->inner, currentCommunicationPoint, communicationStepSize,
+                                        noSetFMUStatePriorToCurrentPoint), b->worst);
+    if (s <= fmi2Warning) b->time = currentCommunicationPoint + communicationStepSize;
+    return s;
 }
 EXPORT fmi2Status fmi2CancelStep(fmi2Component c) { return unsupported(c, "fmi2CancelStep"); }
 EXPORT fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status* value) {
@@ -396,15 +432,30 @@ EXPORT fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Sta
     return unsupported(c, "fmi2GetStatus");
 }
 EXPORT fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real* value) {
-    FORWARD(c, inner.GetRealStatus(b_->inner, s, value));
+    Bridge* b = BRIDGE(c);
+    if (!b || !value) return fmi2Error;
+    if (s != fmi2LastSuccessfulTime) {
+        report(b->host.logger, b->host.componentEnvironment, b->name, fmi2Discard,
+               "fmi2GetRealStatus: only fmi2LastSuccessfulTime is available");
+        return fmi2Discard;
+    }
+    *value = b->time;
+    return fmi2OK;
 }
 EXPORT fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer* value) {
     (void)s, (void)value;
     return unsupported(c, "fmi2GetIntegerStatus");
 }
 EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean* value) {
-    (void)s, (void)value;
-    return unsupported(c, "fmi2GetBooleanStatus");
+    Bridge* b = BRIDGE(c);
+    if (!b || !value) return fmi2Error;
+    if (s != fmi2Terminated) {
+        report(b->host.logger, b->host.componentEnvironment, b->name, fmi2Discard,
+               "fmi2GetBooleanStatus: only fmi2Terminated is available");
+        return fmi2Discard;
+    }
+    *value = fmi2False;
+    return fmi2OK;
 }
 EXPORT fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String* value) {
     (void)s, (void)value;

@@ -44,7 +44,7 @@ import numpy as np
 
 from ..errors import DimensionError, ExpressionError
 from ..estimators.base import Port, input_key
-from ..validation import as_vector, check_simplex
+from ..validation import as_matrix, as_vector, check_positive_definite, check_simplex
 from .affine import AffineLPV
 from .innovation import InnovationLPV
 from .ltv import LTVInputOutput, LTVStateSpace, TimeFunction
@@ -96,8 +96,13 @@ class DiscretePlant:
     seed : int, keyword-only
         Seed of the noise generator.
     x0 : array_like, shape (n_x,), optional
-        Initial state (default: the model's; for an affine model with
-        ``P0 != 0`` and ``noise=True``, a draw from ``N(x0, P0)``).
+        Initial state (default: the model's). For an affine model with
+        ``noise=True`` and a covariance ``P0 != 0``, the mean of the initial
+        state, which is drawn from ``N(x0, P0)`` first, as
+        ``AffineLPV.simulate`` does.
+    P0 : array_like, shape (n_x, n_x), optional
+        Covariance of the initial state of an affine model (default: the
+        model's ``P0``).
 
     Ports
     -----
@@ -116,6 +121,7 @@ class DiscretePlant:
         noise: bool = False,
         seed: int = 0,
         x0: object | None = None,
+        P0: object | None = None,
     ) -> None:
         reason = plant_supports(model)
         if reason is not None or isinstance(model, LTVStateSpace | LTVInputOutput):
@@ -126,6 +132,12 @@ class DiscretePlant:
         self.seed = int(seed)
         nx = model.nx
         self._x0 = None if x0 is None else as_vector(x0, "x0", nx)
+        self._P0 = None
+        if isinstance(model, AffineLPV):
+            self._P0 = model.P0 if P0 is None else check_positive_definite(
+                as_matrix(P0, "P0", (nx, nx)), "P0", semidefinite=True)
+        elif P0 is not None:
+            raise DimensionError("P0 applies to an affine model only")
         if isinstance(model, PolytopicLPV):
             if model.simplex_map is None:
                 sched = Port("alpha", (model.n_vertices,), "vertex weights")
@@ -135,7 +147,7 @@ class DiscretePlant:
             self._outputs = (
                 Port("y", (model.ny,), "measured output"),
                 Port("z", (model.nz,), "signal to be estimated"),
-                Port("x", (nx,), "state"),
+                Port("x", (nx,), "state", direct=False),
             )
             self._chol = None
         elif isinstance(model, AffineLPV):
@@ -145,7 +157,7 @@ class DiscretePlant:
             ins += [Port("w", (model.nw,), "process noise added to the drawn noise"),
                     Port("v", (model.nv,), "measurement noise added to the drawn noise")]
             self._inputs = tuple(ins)
-            self._outputs = (Port("y", (model.ny,), "measured output"), Port("x", (nx,), "state"))
+            self._outputs = (Port("y", (model.ny,), "measured output"), Port("x", (nx,), "state", direct=False))
             self._chol = np.linalg.cholesky(model.noise.joint)
         else:
             ins = [Port("p", (model.n_p,), "scheduling")]
@@ -153,7 +165,7 @@ class DiscretePlant:
                 ins.append(Port("u", (model.nu,), "input"))
             ins.append(Port("e", (model.ny,), "innovation added to the drawn one"))
             self._inputs = tuple(ins)
-            self._outputs = (Port("y", (model.ny,), "measured output"), Port("x", (nx,), "state"))
+            self._outputs = (Port("y", (model.ny,), "measured output"), Port("x", (nx,), "state", direct=False))
             self._chol = np.linalg.cholesky(model.innovation_covariance)
         self._input_names = tuple(p.name for p in self._inputs)
         self.reset()
@@ -172,12 +184,13 @@ class DiscretePlant:
         model = self.model
         self._rng = np.random.default_rng(self.seed)
         self._k = 0
-        if self._x0 is not None:
+        if isinstance(model, AffineLPV):
+            mean = model.x0 if self._x0 is None else self._x0
+            x = mean.copy()
+            if self.noise and self._P0 is not None and np.any(self._P0):
+                x = self._rng.multivariate_normal(mean, self._P0)
+        elif self._x0 is not None:
             x = self._x0.copy()
-        elif isinstance(model, AffineLPV):
-            x = model.x0.copy()
-            if self.noise and np.any(model.P0):
-                x = self._rng.multivariate_normal(model.x0, model.P0)
         elif isinstance(model, InnovationLPV):
             x = model.x0.copy()
         else:
@@ -329,8 +342,9 @@ class LTVPlant:
             self._x0 = ss.x0.copy() if ss.x0 is not None else np.zeros(ss.n)
         self.t0 = float(t0)
         self._inputs = (Port("u", (1,), "input, held over the step (use_model_input = false)"),)
-        self._outputs = (Port("y", (1,), "output"), Port("x", (ss.n,), "state"),
-                         Port("u_applied", (1,), "input applied at the current time"))
+        self._outputs = (Port("y", (1,), "output C(t) x(t)", direct=False), Port("x", (ss.n,), "state", direct=False),
+                         Port("u_applied", (1,), "input applied at the current time",
+                              direct=not self.use_model_input))
         self.reset()
 
     @property

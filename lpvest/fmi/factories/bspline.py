@@ -1,0 +1,122 @@
+"""Factory of the BSplineObserver FMU: the sliding-window B-spline observer of
+Sridhar et al. for a second-order LTV input-output model."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+
+from ...errors import LpvestError, SamplingError
+from ...estimators.base import Port
+from ...estimators.bspline import BSplineObserver, KernelModel, UnknownConstant, UnknownSpline
+
+__all__ = ["build", "SampledObserver", "coefficient"]
+
+
+def coefficient(name: str, spec: str) -> UnknownConstant | UnknownSpline | None:
+    """``"known"`` | ``"constant"`` | ``"spline:N"`` | ``"spline:N:ORDER"`` -> a declaration."""
+    text = spec.strip().lower()
+    if text == "known":
+        return None
+    if text == "constant":
+        return UnknownConstant()
+    parts = text.split(":")
+    if parts[0] == "spline" and len(parts) in (2, 3) and all(p.isdigit() for p in parts[1:]):
+        n = int(parts[1])
+        order = int(parts[2]) if len(parts) == 3 else 3
+        return UnknownSpline(n, order=order)
+    raise LpvestError(f"{name} = {spec!r}; expected 'known', 'constant', 'spline:N' or 'spline:N:ORDER'")
+
+
+class SampledObserver:
+    """The B-spline observer inside an FMU: one fmi2DoStep is one sample, so
+    the communication step must equal the observer's sample time ``dt``.
+
+    Time comes from the communication points: the first sample is at the
+    experiment's start time ``t0`` (:meth:`reset`), and every step states the
+    point it starts at (``t_end - dt``), which must be the time of the
+    observer's next sample, ``t0 + k dt`` (to round-off); a sample the FMU
+    rejects is not counted, so the clock never drifts from the host's."""
+
+    timed = True
+
+    def __init__(self, build: Callable[[float], BSplineObserver], dt: float) -> None:
+        self._build = build
+        self.dt = float(dt)
+        self._obs = build(0.0)
+
+    @property
+    def input_ports(self) -> tuple[Port, ...]:
+        return self._obs.input_ports
+
+    @property
+    def output_ports(self) -> tuple[Port, ...]:
+        return self._obs.output_ports
+
+    @property
+    def time(self) -> float:
+        """The time of the next sample, ``t0 + k dt``."""
+        return self._obs.t0 + self._obs.get_state()["k"] * self.dt
+
+    def reset(self, t0: float = 0.0) -> None:
+        if float(t0) != self._obs.t0:
+            self._obs = self._build(float(t0))
+        self._obs.reset()
+
+    def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+        return self._obs.outputs(inputs)
+
+    def step(self, inputs: Mapping[str, Any], *, dt: float, t_end: float) -> dict[str, np.ndarray]:
+        if abs(dt - self.dt) > 1e-9 * self.dt:
+            raise SamplingError(
+                f"communication step {dt:.17g} s differs from the observer's sample time dt = {self.dt:.17g} s "
+                "(one fmi2DoStep is one sample)"
+            )
+        t = t_end - dt
+        expected = self.time
+        if not math.isclose(t, expected, rel_tol=1e-9, abs_tol=1e-9 * self.dt):
+            raise SamplingError(
+                f"the step starts at t = {t:.17g} s; the observer's next sample is at {expected:.17g} s"
+            )
+        return self._obs.step(inputs)
+
+    def get_state(self) -> dict[str, Any]:
+        return self._obs.get_state()
+
+    def set_state(self, state: Mapping[str, Any]) -> None:
+        self._obs.set_state(state)
+
+
+def build(
+    model: Any,
+    *,
+    design: Any = None,
+    dt: float,
+    window: float,
+    hop: float,
+    a0: str,
+    a1: str,
+    b0: str,
+    b1: str,
+    penalty: float,
+) -> SampledObserver:
+    """The sliding-window B-spline observer (Sridhar et al.) of a second-order
+    LTV input-output model; each coefficient declared known, an unknown
+    constant or an unknown B-spline per window; ``penalty`` < 0 chooses the
+    P-spline penalty by GCV, 0 means none."""
+    unknown = {}
+    for name, spec in (("a0", a0), ("a1", a1), ("b0", b0), ("b1", b1)):
+        decl = coefficient(name, spec)
+        if decl is not None:
+            unknown[name] = decl
+    kernel_model = KernelModel.from_io(model, **unknown)
+    pen: float | str | None = "gcv" if penalty < 0 else (None if penalty == 0 else float(penalty))
+
+    def make(t0: float) -> BSplineObserver:
+        return BSplineObserver(kernel_model, dt=dt, window=window, hop=hop, t0=t0, penalty=pen,
+                               on_unidentifiable="hold")
+
+    return SampledObserver(make, dt)

@@ -1,0 +1,25 @@
+"""Factory of the HinfPD / HinfRobust FMUs: the H-infinity filter (2) of
+Peixoto et al. with the design the FMU carries."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ...design.result import HinfDesign
+from ...errors import LpvestError
+from ...estimators.hinf import HinfFilter
+
+__all__ = ["build"]
+
+
+def build(model: Any, *, design: Any) -> HinfFilter:
+    """The H-infinity filter (2) of a design carried by the FMU (JSON text).
+
+    A parameter-dependent filter is scheduled by the plant's physical
+    scheduling ``p`` when the model has a map to ``alpha`` (range-checked),
+    else by ``alpha`` (checked on the simplex); a robust one takes only ``y``."""
+    if design is None:
+        raise LpvestError("this FMU carries no filter design (resources/design.json)")
+    d = design if isinstance(design, HinfDesign) else HinfDesign.from_json(design)
+    mapping = getattr(model, "simplex_map", None) if d.scheduled else None
+    return HinfFilter(d, simplex_map=mapping)

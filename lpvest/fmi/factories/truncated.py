@@ -1,0 +1,26 @@
+"""Factory of the TruncatedKalman FMU: the truncated-memory LPV Kalman filter
+(Cox & Toth Theorem 1 with ERRATA (6a))."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ...errors import LpvestError
+from ...estimators.truncated import TruncatedKalmanFilter
+
+__all__ = ["build", "STARTS"]
+
+#: Start covariances of the restarted recursion selectable from the FMU parameter ``start``.
+STARTS = ("theorem", "steady-state")
+
+
+def build(model: Any, *, design: Any = None, tau: int, start: str, start_p: Any = None) -> TruncatedKalmanFilter:
+    """The truncated filter with memory ``tau``; ``start = "steady-state"`` starts
+    the restarted recursion from the steady-state covariance of the model frozen
+    at the scheduling value ``start_p`` (scipy's DARE)."""
+    if start not in STARTS:
+        raise LpvestError(f"start = {start!r}; expected one of {', '.join(STARTS)}")
+    p = None if start_p is None else np.asarray(start_p, dtype=float)
+    return TruncatedKalmanFilter(model, int(tau), start=start, start_p=p if start == "steady-state" else None)
