@@ -650,8 +650,8 @@ def run_example2(
         "Fig. 3 is an LMI design sweep (library only). Through FMUs: at rho = "
         + ", ".join(f"{r:g}" for r in fmu_rhos)
         + " the HinfPD FMU carrying the best-epsilon design for that rho (models/designs) runs with the "
-        "PeixotoEx2Plant FMU (parameter rho) on the scenario of Figs. 1-2, one co-simulation with a Scheduler and a Source; "
-        "cross-check: plant.simulate and HinfFilter on the carried designs, compared with the sweep's designs.",
+        "PeixotoEx2Plant FMU (parameter rho) on the scenario of Figs. 1-2, one co-simulation with a Scheduler and a "
+        "Source; cross-check: plant.simulate and HinfFilter on the carried designs, compared with the sweep's designs.",
         spec, timer, runs, {},
     )
     results: dict[str, Any] = {
