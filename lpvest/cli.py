@@ -22,6 +22,7 @@ with status 2; no traceback.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from collections.abc import Sequence
@@ -319,6 +320,10 @@ def cmd_design(args: argparse.Namespace) -> int:
     else:
         design = search_epsilon(model, kind=kind, solver=args.solver).design
     seconds = time.perf_counter() - t
+    params = _parse_params(args.param)
+    # the design names the system (and the parameters) it was made for
+    label = system.name + (f" ({', '.join(f'{k} = {v:g}' for k, v in params.items())})" if params else "")
+    design = dataclasses.replace(design, plant=label)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     design.to_json(out)

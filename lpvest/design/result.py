@@ -214,7 +214,7 @@ class HinfDesign:
     def nz(self) -> int:
         return int(self.Cf.shape[1])
 
-    def check_model(self, plant: Any, *, source: str = "design") -> None:
+    def check_model(self, plant: Any, *, source: str = "design", plant_name: str = "") -> None:
         """Raise :class:`~lpvest.errors.ModelFileError` unless this design fits
         ``plant``: same dimensions, and the same vertex matrices when the
         design recorded them (:func:`model_digest`)."""
@@ -224,11 +224,10 @@ class HinfDesign:
             if got[key] != value:
                 raise ModelFileError(f"{source}: designed for a plant with {key} = {value}; this plant has {got[key]}")
         if self.model_digest and self.model_digest != model_digest(plant):
-            name = getattr(plant, "name", "") or "this plant"
             raise ModelFileError(
                 f"{source}: designed for another plant ({self.plant or 'unnamed'}, vertex digest "
-                f"{self.model_digest[:12]}...) than {name} ({model_digest(plant)[:12]}...); design it again "
-                "with `lpvest design`"
+                f"{self.model_digest[:12]}...) than {plant_name or getattr(plant, 'name', '') or 'this one'} "
+                f"({model_digest(plant)[:12]}...); design it again with `lpvest design`"
             )
 
     @property

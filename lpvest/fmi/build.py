@@ -361,7 +361,7 @@ def _design_text(plan: FmuPlan, progress: Callable[[str], None] | None) -> tuple
             text = plan.design.read_text(encoding="utf-8")
         except OSError as exc:
             raise BuildError(f"{plan.design}: cannot be read: {exc.strerror}") from exc
-        HinfDesign.from_json(text).check_model(model, source=str(plan.design))
+        HinfDesign.from_json(text).check_model(model, source=str(plan.design), plant_name=plan.system_name)
         return text, f"file {plan.design.name}"
     if progress is not None:
         progress(f"{plan.identifier}: designing ({plan.estimator.design})")

@@ -324,8 +324,8 @@ EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefi
     Bridge* b = BRIDGE(c);
     if (!b) return fmi2Error;
     b->worst = fmi2OK;
-    fmi2Status s = combine(inner.SetupExperiment(b->inner, toleranceDefined, tolerance, startTime, stopTimeDefined,
-                                                 stopTime), b->worst);
+    fmi2Status s = inner.SetupExperiment(b->inner, toleranceDefined, tolerance, startTime, stopTimeDefined, stopTime);
+    s = combine(s, b->worst); /* after the call: the messages it logged set b->worst */
     if (s <= fmi2Warning) b->time = startTime;
     return s;
 }
@@ -339,7 +339,8 @@ EXPORT fmi2Status fmi2Reset(fmi2Component c) {
     if (!b) return fmi2Error;
     b->worst = fmi2OK;
     b->time = 0.0;
-    return combine(inner.Reset(b->inner), b->worst);
+    fmi2Status s = inner.Reset(b->inner);
+    return combine(s, b->worst);
 }
 
 EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
@@ -421,8 +422,9 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint
     Bridge* b = BRIDGE(c);
     if (!b) return fmi2Error;
     b->worst = fmi2OK;
-    fmi2Status s = combine(inner.DoStep(b->inner, currentCommunicationPoint, communicationStepSize,
-                                        noSetFMUStatePriorToCurrentPoint), b->worst);
+    fmi2Status s = inner.DoStep(b->inner, currentCommunicationPoint, communicationStepSize,
+                                noSetFMUStatePriorToCurrentPoint);
+    s = combine(s, b->worst); /* after the call: the messages it logged set b->worst */
     if (s <= fmi2Warning) b->time = currentCommunicationPoint + communicationStepSize;
     return s;
 }
