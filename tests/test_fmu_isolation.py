@@ -222,7 +222,7 @@ def test_builds_of_two_lpvest_versions_run_side_by_side(fmus, tmp_path):
     assert ours.initialize() == 0 and theirs.initialize() == 0
     versions = []
     for d in (ours, theirs):
-        said = [m for _, _, m in d.messages if m.startswith(f"[PeixotoEx1Plant] lpvest ")]
+        said = [m for _, _, m in d.messages if m.startswith("[PeixotoEx1Plant] lpvest ")]
         assert len(said) == 1, d.messages
         versions.append(said[0].split()[2:])
     assert versions[0][0] == __version__ and versions[1][0] == built[0] != __version__
