@@ -256,7 +256,8 @@ def test_the_same_inputs_give_a_byte_identical_fmu(tmp_path):
         import json
         from lpvest.fmi.build import build_fmu, plan_system
         plans = {{p.role: p for p in plan_system("peixoto-ex1")[0]}}
-        print("RESULT" + json.dumps({{r: str(build_fmu(plans[r], {str(tmp_path / 'b')!r})) for r in ("Plant", "HinfPD")}}))
+        out = {str(tmp_path / 'b')!r}
+        print("RESULT" + json.dumps({{r: str(build_fmu(plans[r], out)) for r in ("Plant", "HinfPD")}}))
     """), cwd=tmp_path)
     host = socket.gethostname().encode()
     needles = [str(tmp_path).encode(), b"/tmp/", b"/lpvest-fmu-", b"/lpvest-bridge-", str(ROOT).encode()]
