@@ -166,8 +166,11 @@ def _convert(value: Any, fmi_type: str, what: str, where: str) -> Any:
         return float(value)
     if fmi_type == "Integer":
         if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating) \
-                or float(value) != int(value):
+                or not np.isfinite(value) or float(value) != int(value):
             raise CoSimulationError(f"{what}: expected an integer, found {kind} {value!r}", where=where)
+        if not -(2**31) <= int(value) <= 2**31 - 1:  # an FMI Integer is 32-bit: no silent wrap
+            raise CoSimulationError(f"{what}: {int(value)} is outside the 32-bit range of an FMI Integer "
+                                    f"[-2147483648, 2147483647]", where=where)
         return int(value)
     if fmi_type == "Boolean":
         if not isinstance(value, bool | np.bool_):

@@ -475,3 +475,150 @@ def test_requirements_list_what_the_fmu_imports(fmus):
         assert z.read("resources/requirements.txt").decode().split() == ["numpy>=1.26"]
     with zipfile.ZipFile(fmus["SridharLtvPlant"]) as z:
         assert z.read("resources/requirements.txt").decode().split() == ["numpy>=1.26", "scipy>=1.11"]
+
+
+# -- step semantics -------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("case", "t", "h", "message"), [
+    ("zero step", 3.0, 0.0, "the communication step h = 0 must be > 0"),
+    ("negative step", 3.0, -1.0, "the communication step h = -1 must be > 0"),
+    ("NaN step", 3.0, math.nan, "must be finite"),
+    ("infinite time", math.inf, 1.0, "must be finite"),
+    ("skipped point", 4.0, 1.0, "the communication point t = 4 is not the FMU's current time 3"),
+    ("repeated point", 2.0, 1.0, "the communication point t = 2 is not the FMU's current time 3"),
+    ("not the sample time", 3.0, 0.5, "the communication step h = 0.5 is not the sample time 1"),
+])
+@pytest.mark.parametrize("name", ["PeixotoEx1Plant", "CoxTothTruncationKalman"])
+def test_a_step_that_is_not_the_next_sample_is_an_error_and_consumes_nothing(fmus, name, case, t, h, message):
+    from fmpy.fmi2 import fmi2LastSuccessfulTime
+
+    d = Driver(fmus[name])
+    assert d.initialize() == 0
+    ports = [v for v in d.md.modelVariables if v.causality == "input"]
+
+    def feed(k: int) -> None:  # some valid inputs of sample k
+        for v in ports:
+            mid = 0.5 * (float(v.min) + float(v.max)) if v.min is not None else 0.0
+            assert d.set(v.name, mid + 0.1 * math.sin(k + v.valueReference)) == 0
+
+    outputs = [v.name for v in d.md.modelVariables if v.causality == "output"]
+    for k in range(3):
+        feed(k)
+        assert d.step(float(k), 1.0) == 0
+    feed(3)
+    before = d.outputs(outputs)
+    assert d.step(t, h) == 3  # fmi2Error
+    assert any(m.startswith(f"[{name}] fmi2DoStep refused") and message in m for m in d.errors()), d.errors()
+    assert d.fmu.getRealStatus(fmi2LastSuccessfulTime) == 3.0
+    assert np.array_equal(d.outputs(outputs), before)  # nothing consumed
+    assert d.step(3.0, 1.0) == 0  # the valid step goes on
+    # the same as an instance that never saw the bad step
+    ref = Driver(fmus[name], "reference")
+    assert ref.initialize() == 0
+    d2, d = d, ref
+    for k in range(4):
+        feed(k)
+        assert d.step(float(k), 1.0) == 0
+    assert np.array_equal(d2.outputs(outputs), ref.outputs(outputs))
+    d2.free()
+    ref.free()
+
+
+def test_no_step_and_no_input_after_terminate(fmus):
+    from fmpy.fmi2 import fmi2LastSuccessfulTime
+
+    d = Driver(fmus["PeixotoEx1Plant"])
+    assert d.initialize() == 0
+    assert d.step(0.0, 1.0) == 0
+    assert d.raw("fmi2Terminate") == 0
+    assert d.step(1.0, 1.0) == 3
+    assert any("fmi2DoStep refused at t = 1 (h = 1): the FMU is terminated" in m for m in d.errors())
+    assert d.set_vector("w", 1.0) == 3
+    assert any("w[1] cannot be set after fmi2Terminate" in m for m in d.errors())
+    assert d.fmu.getRealStatus(fmi2LastSuccessfulTime) == 1.0
+    assert d.raw("fmi2Reset") == 0  # reset: a fresh instance, steps again
+    assert d.initialize() == 0 and d.step(0.0, 1.0) == 0
+    d.free()
+
+
+def test_last_successful_time_follows_the_start_time_and_a_restored_state(fmus):
+    from fmpy.fmi2 import fmi2LastSuccessfulTime
+
+    d = Driver(fmus["PeixotoEx1Plant"])
+    assert d.initialize(start_time=10.0) == 0
+    assert d.fmu.getRealStatus(fmi2LastSuccessfulTime) == 10.0
+    assert d.step(10.0, 1.0) == 0 and d.step(11.0, 1.0) == 0
+    state = d.fmu.getFMUstate()
+    assert d.step(12.0, 1.0) == 0
+    assert d.fmu.getRealStatus(fmi2LastSuccessfulTime) == 13.0
+    d.fmu.setFMUstate(state)
+    assert d.fmu.getRealStatus(fmi2LastSuccessfulTime) == 12.0
+    assert d.step(13.0, 1.0) == 3 and d.step(12.0, 1.0) == 0  # the restored time is the FMU's time
+    d.fmu.freeFMUstate(state)
+    d.free()
+
+
+def test_an_output_that_would_be_inf_is_an_error_naming_it(fmus):
+    """An overflow inside the component: numpy's warning reaches the FMI logger
+    (fmi2Warning), reading the output is fmi2Error naming it, and the sample is
+    not consumed."""
+    d = Driver(fmus["PeixotoEx1Plant"])
+    assert d.initialize() == 0
+    for k in range(2):
+        d.set_vector("p", 0.5)
+        d.set_vector("w", 1e308)
+        status = d.status(d.fmu.getReal, [d.vr["y[1]"]])
+        if k == 0:
+            assert status == 0 and d.step(0.0, 1.0) == 0  # y_0 = D_y w is finite, x_1 overflows
+    assert status == 3
+    assert any("output y[1] is not finite (NaN or inf) at t = 1" in m for m in d.errors()), d.errors()
+    assert any(s == 1 and "numpy: floating-point overflow" in m for s, _, m in d.messages), d.messages
+    assert d.step(1.0, 1.0) == 3
+    assert any("fmi2DoStep refused at t = 1 (h = 1): output y[1]" in m for m in d.errors())
+    d.free()
+
+
+def test_log_messages_are_capped(fmus):
+    d = Driver(fmus["PeixotoEx1Scheduler"])
+    assert d.initialize(kind="x" * 5000) == 3
+    assert d.errors() and all(len(m) <= 1100 for m in d.errors())
+    assert any("characters cut" in m for m in d.errors())
+    d.free()
+
+
+def test_discrete_time_fmus_declare_their_sample_time(fmus):
+    """One fmi2DoStep is one sample: the default experiment's step is the sample
+    time, the FMU cannot take other steps, and its outputs are piecewise constant."""
+    for name in sorted(EXPECTED):
+        root = ET.fromstring(z_read(fmus[name], "modelDescription.xml"))
+        step = float(root.find("DefaultExperiment").get("stepSize"))
+        cs = root.find("CoSimulation")
+        variables = {sv.get("name"): sv for sv in root.iter("ScalarVariable")}
+        outputs = [sv for sv in variables.values() if sv.get("causality") == "output"]
+        if name.endswith(("Scheduler", "Source")) or name == "SridharLtvPlant":  # functions of time
+            assert cs.get("canHandleVariableCommunicationStepSize") == "true", name
+            assert all(sv.get("variability") is None for sv in outputs), name
+        else:
+            assert cs.get("canHandleVariableCommunicationStepSize") == "false", name
+            assert all(sv.get("variability") == "discrete" for sv in outputs), name
+            sample = "dt" if name.endswith("BSplineObserver") else "sample_time"
+            assert float(variables[sample].find("Real").get("start")) == step, name
+
+
+@pytest.mark.parametrize(("seed", "match"), [
+    (2**40, r"seed: 1099511627776 is outside the 32-bit range of an FMI Integer \[-2147483648, 2147483647\]"),
+    (-(2**31) - 1, r"seed: -2147483649 is outside the 32-bit range"),
+    (math.inf, r"seed: expected an integer, found float inf"),
+    (math.nan, r"seed: expected an integer, found float nan"),
+])
+def test_an_integer_parameter_outside_32_bits_is_an_error_not_a_wrap(fmus, seed, match):
+    from lpvest.cosim import Component, CoSimulation, CoSimulationError
+
+    with pytest.raises(CoSimulationError, match=match):
+        CoSimulation([Component("plant", fmus["CoxTothEx1Plant"], {"seed": seed})], [], step_size=1.0)
+    root = ET.fromstring(z_read(fmus["CoxTothEx1Plant"], "modelDescription.xml"))
+    seed_var = next(sv for sv in root.iter("ScalarVariable") if sv.get("name") == "seed").find("Integer")
+    assert (seed_var.get("min"), seed_var.get("max")) == ("0", "2147483647")
+    with CoSimulation([Component("plant", fmus["CoxTothEx1Plant"], {"seed": 2**31 - 1})], [], step_size=1.0) as sim:
+        assert sim.run(2).shape == (3,)

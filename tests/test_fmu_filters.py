@@ -8,6 +8,8 @@ same samples, is the reference.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -251,3 +253,77 @@ def test_recording_a_vector_that_shares_its_name_with_a_string_parameter(fmus):
     sched = [Component("sched", fmus["PeixotoEx1Scheduler"])]
     with pytest.raises(CoSimulationError, match="recorded variable 'sched.kind' is a String"):
         CoSimulation(sched, [], step_size=1.0, record=["sched.kind"])
+
+
+# -- plain fmpy.simulate_fmu ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", sorted(FILTERS))
+def test_plain_simulate_fmu_gives_the_library_estimates_one_row_later(fmus, name):
+    """``fmpy.simulate_fmu(fmu, input=recorded, output_interval=h)``: fmpy sets the
+    inputs of sample k at t_k, steps, and records after the step at t_k + h,
+    where every estimate (direct feedthrough) holds its sample-k value: the row
+    at t_(k+1) is the library's estimate of sample k, and the row at t_0 (read
+    after initialization, inputs of sample 0 set) is the estimate of sample 0.
+    Same numbers to the bit: the FMU runs the library's code on the same samples."""
+    from fmpy import simulate_fmu
+
+    make, params, data, T, h = FILTERS[name]
+    est = make()
+    inputs = data(T)
+    ins = [(f"{n}[{i + 1}]", v[:, i]) for n, v in inputs.items() for i in range(v.shape[1])]
+    table = np.zeros(T, dtype=[("time", float)] + [(col, float) for col, _ in ins])
+    table["time"] = np.arange(T) * h
+    for col, values in ins:
+        table[col] = values
+    outputs = [(p, f"{p.name}[{i + 1}]" if p.shape else p.name) for p in est.output_ports
+               for i in range(int(np.prod(p.shape)) if p.shape else 1) if len(p.shape) <= 1]
+    res = simulate_fmu(str(fmus[name]), input=table, output_interval=h, stop_time=T * h, start_values=params,
+                       output=[col for _, col in outputs])
+    assert res.shape == (T + 1,)
+    np.testing.assert_array_equal(res["time"], np.arange(T + 1) * h)
+    want = {p.name: [] for p in est.output_ports}
+    for k in range(T + 1):  # sample T: only the state-like outputs (they need no new inputs)
+        sample = {n: v[min(k, T - 1)] for n, v in inputs.items()}
+        out = est.step(sample) if k < T else est.outputs(sample)
+        for p in est.output_ports:
+            want[p.name].append(np.asarray(out[p.name], dtype=float).reshape(-1))
+    for port, col in outputs:
+        i = int(col.split("[")[1].rstrip("]")) - 1 if "[" in col else 0
+        ref = np.array(want[port.name])[:, i]
+        if port.direct:  # an estimate of sample k: held until the next inputs, recorded at t_(k+1)
+            np.testing.assert_array_equal(res[col][1:], ref[:T], err_msg=col)
+            assert res[col][0] == ref[0], col
+        else:  # a state (the H-infinity filter's xf): at t_(k+1) it is already the state of sample k + 1
+            np.testing.assert_array_equal(res[col], ref, err_msg=col)
+
+
+def test_observer_resynchronises_after_a_rejected_sample(fmus):
+    """The B-spline observer keeps time from the communication points: a sample
+    whose y is rejected (NaN) is not consumed, fmi2DoStep is refused, the last
+    successful time stays where it was, and after the valid sample is set again
+    the observer goes on exactly as the library fed the valid samples."""
+    from fmpy.fmi2 import fmi2LastSuccessfulTime
+
+    make, params, data, T, h = FILTERS["SridharLtvBSplineObserver"]
+    inputs = data(T)
+    est = make()
+    d = Driver(fmus["SridharLtvBSplineObserver"])
+    assert d.initialize(**params) == 0
+    for k in range(T):
+        _feed(d, inputs, k)
+        if k in (300, 450):  # one rejected sample before the first refit, one after
+            assert d.set_vector("y", np.nan) == 3
+            assert d.step(k * h, h) == 3
+            assert d.fmu.getRealStatus(fmi2LastSuccessfulTime) == pytest.approx(k * h, rel=0, abs=1e-12)
+            assert d.step((k + 1) * h, h) == 3  # nor can the host skip it
+            _feed(d, inputs, k)
+        got = _read(d, est)
+        want = est.step({n: v[k] for n, v in inputs.items()})
+        for port in est.output_ports:
+            assert np.array_equal(got[port.name], np.asarray(want[port.name]).reshape(port.shape)), (k, port.name)
+        assert d.step(k * h, h) == 0, d.errors()
+    assert d.fmu.getRealStatus(fmi2LastSuccessfulTime) == pytest.approx(T * h, rel=1e-12)
+    assert any(re.search(r"refused at t = 0\.(301|30099)\d* .*is not the FMU's current time 0\.(3|299)", m)
+               for m in d.errors()), d.errors()
+    d.free()

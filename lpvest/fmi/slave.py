@@ -79,9 +79,9 @@ INT32 = (-(2**31), 2**31 - 1)
 _TIME_RTOL = 1e-9
 
 
-def _short(value: Any, limit: int = 60) -> str:
-    text = repr(value)
-    return text if len(text) <= limit else text[: limit - 15] + f"... ({len(text)} chars)"
+def _num(value: float) -> str:
+    """A number as short as it reads back exactly (``1.0000001``, ``-1``, ``0.3``)."""
+    return repr(float(value)).removesuffix(".0")
 
 
 class _Element:
@@ -325,9 +325,9 @@ class LpvestSlave(Fmi2Slave):
             tol = e.tol
             below = e.minimum is not None and value < e.minimum - tol
             if below or (e.maximum is not None and value > e.maximum + tol):
-                lo = "-inf" if e.minimum is None else f"{e.minimum:.17g}"
-                hi = "inf" if e.maximum is None else f"{e.maximum:.17g}"
-                self._reject(e, f"{e.what()} = {value:.17g} is outside its declared range [{lo}, {hi}]; "
+                lo = "-inf" if e.minimum is None else _num(e.minimum)
+                hi = "inf" if e.maximum is None else _num(e.maximum)
+                self._reject(e, f"{e.what()} = {_num(value)} is outside its declared range [{lo}, {hi}]; "
                              "value rejected")
                 return
         elif e.fmi_type == "Integer":
@@ -392,10 +392,10 @@ class LpvestSlave(Fmi2Slave):
             flat += a.ravel().tolist()
         self._outputs, self._output_values = outputs, flat
         self._nonfinite = (f"output {', '.join(bad[:5])}{' ...' if len(bad) > 5 else ''} is not finite "
-                           f"(NaN or inf) at t = {self._time:.17g}") if bad else None
+                           f"(NaN or inf) at t = {_num(self._time)}") if bad else None
 
     def _fp_warning(self, kind: str, flag: int) -> None:
-        self._log(Fmi2Status.warning, f"numpy: floating-point {kind} at t = {self._time:.17g}")
+        self._log(Fmi2Status.warning, f"numpy: floating-point {kind} at t = {_num(self._time)}")
 
     def _compute(self, fn: Callable[[], Any]) -> Any:
         """Run component code with numpy's floating-point warnings sent to the FMI logger."""
@@ -462,7 +462,7 @@ class LpvestSlave(Fmi2Slave):
             if self._invalid:
                 raise ValueError("invalid values were set: " + "; ".join(self._invalid.values()))
             if not self._timed and not self._params["sample_time"] > 0:
-                raise ValueError(f"parameter sample_time = {self._params['sample_time']:.17g} must be > 0")
+                raise ValueError(f"parameter sample_time = {_num(self._params['sample_time'])} must be > 0")
             component = self.make_component(self.parameters())
             ports_in = tuple((p.name, tuple(p.shape)) for p in component.input_ports)
             ports_out = tuple((p.name, tuple(p.shape)) for p in component.output_ports)
@@ -498,14 +498,14 @@ class LpvestSlave(Fmi2Slave):
         if not (math.isfinite(t) and math.isfinite(h)):
             return f"the communication point t = {t} and step h = {h} must be finite"
         if h <= 0:
-            return f"the communication step h = {h:.17g} must be > 0"
+            return f"the communication step h = {_num(h)} must be > 0"
         if abs(t - self._time) > _TIME_RTOL * max(abs(t), abs(self._time), h):
-            return (f"the communication point t = {t:.17g} is not the FMU's current time {self._time:.17g} "
+            return (f"the communication point t = {_num(t)} is not the FMU's current time {_num(self._time)} "
                     "(a skipped or repeated point; restore a state with fmi2SetFMUstate to go back)")
         if not self._timed:
             ts = float(self._params["sample_time"])
             if abs(h - ts) > _TIME_RTOL * ts:
-                return (f"the communication step h = {h:.17g} is not the sample time {ts:.17g} "
+                return (f"the communication step h = {_num(h)} is not the sample time {_num(ts)} "
                         "(one fmi2DoStep is one sample; set the parameter sample_time)")
         if self._invalid:
             return (f"invalid input(s) {', '.join(self._invalid)} (set valid values, restore a state with "
@@ -525,7 +525,7 @@ class LpvestSlave(Fmi2Slave):
                 self._refresh()
                 problem = self._nonfinite
             if problem is not None:
-                self._log(Fmi2Status.error, f"fmi2DoStep refused at t = {t:.17g} (h = {h:.17g}): {problem}")
+                self._log(Fmi2Status.error, f"fmi2DoStep refused at t = {_num(t)} (h = {_num(h)}): {problem}")
                 return False
             component = self._component
             inputs = self._step_inputs if self._step_inputs is not None else self._input_dict()
@@ -540,7 +540,7 @@ class LpvestSlave(Fmi2Slave):
             self._dirty = True
             return True
         except Exception as exc:  # noqa: BLE001
-            self._fail(f"fmi2DoStep at t = {current_time:.17g}", exc)
+            self._fail(f"fmi2DoStep at t = {_num(current_time)}", exc)
             return False
 
     def _get(self, vrs: list[int], fmi_type: str, nan: Any) -> list[Any]:

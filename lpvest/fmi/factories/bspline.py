@@ -72,14 +72,14 @@ class SampledObserver:
     def step(self, inputs: Mapping[str, Any], *, dt: float, t_end: float) -> dict[str, np.ndarray]:
         if abs(dt - self.dt) > 1e-9 * self.dt:
             raise SamplingError(
-                f"communication step {dt:.17g} s differs from the observer's sample time dt = {self.dt:.17g} s "
+                f"communication step {dt!r} s differs from the observer's sample time dt = {self.dt!r} s "
                 "(one fmi2DoStep is one sample)"
             )
         t = t_end - dt
         expected = self.time
         if not math.isclose(t, expected, rel_tol=1e-9, abs_tol=1e-9 * self.dt):
             raise SamplingError(
-                f"the step starts at t = {t:.17g} s; the observer's next sample is at {expected:.17g} s"
+                f"the step starts at t = {t!r} s; the observer's next sample is at {expected!r} s"
             )
         return self._obs.step(inputs)
 
