@@ -622,3 +622,27 @@ def test_an_integer_parameter_outside_32_bits_is_an_error_not_a_wrap(fmus, seed,
     assert (seed_var.get("min"), seed_var.get("max")) == ("0", "2147483647")
     with CoSimulation([Component("plant", fmus["CoxTothEx1Plant"], {"seed": 2**31 - 1})], [], step_size=1.0) as sim:
         assert sim.run(2).shape == (3,)
+
+
+def test_affine_plant_draws_its_initial_state_from_its_x0_and_P0_parameters(fmus):
+    """x_0 ~ N(x0, P0) from the FMU's parameters, drawn before the noise as
+    AffineLPV.simulate draws it: the same seed, the same realization."""
+    import dataclasses
+
+    model = load_system(fmus.affine_model).model()
+    x0, P0 = np.array([1.0, -0.5]), np.array([[0.5, 0.1], [0.1, 0.2]])
+    T = 60
+    k = np.arange(T)
+    p = np.c_[0.9 * np.sin(0.1 * k), 1.0 + np.cos(0.2 * k)]
+    u = np.cos(0.3 * k)[:, None]
+    d = Driver(fmus["AffineDemoPlant"])
+    params = {"x0[1]": x0[0], "x0[2]": x0[1], "P0[1,1]": P0[0, 0], "P0[1,2]": P0[0, 1], "P0[2,1]": P0[1, 0],
+              "P0[2,2]": P0[1, 1]}
+    assert d.initialize(seed=11, **params) == 0
+    got = run_plant(d, {"p": p, "u": u, "w": np.zeros((T, 2)), "v": np.zeros((T, 1))}, ["y", "x"])
+    d.free()
+    ref = dataclasses.replace(model, x0=x0, P0=P0).simulate(p, u, rng=11)
+    assert not np.allclose(ref.x[0], x0)  # drawn, not the mean
+    # same draws; one row at a time instead of one batch (BLAS rounding): round-off only
+    np.testing.assert_allclose(got["x"], ref.x, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(got["y"], ref.y, rtol=1e-12, atol=1e-14)
