@@ -257,7 +257,7 @@ def test_ports(truncation_model):
     assert [(q.name, q.shape) for q in kf.input_ports] == [("p", (1,)), ("u", (1,)), ("y", (2,))]
     assert [(q.name, q.shape) for q in kf.output_ports] == [
         ("xhat", (2,)), ("P", (2, 2)), ("xpred", (2,)), ("Ppred", (2, 2)),
-        ("yhat", (2,)), ("innovation", (2,)), ("K", (2, 2)), ("Omega", (2, 2)),
+        ("yhat", (2,)), ("innovation", (2,)), ("K", (2, 2)), ("Omega", (2, 2)), ("loglik", ()),
     ]
     no_input = LPVKalmanFilter(random_system(np.random.default_rng(0), nu=0))
     assert [q.name for q in no_input.input_ports] == ["p", "y"]
