@@ -1,30 +1,42 @@
-"""Per-step cost of the co-simulation against the same computation in-process; a script, not a test.
+"""Per-step cost of lpvest's streaming components and FMUs against minimal numpy loops; a script, not a test.
 
     .venv/bin/python benchmarks/bench_cosim.py [--steps 10000] [--repeat 3] [--fmus DIR]
                                                [--profile] [--out FILE.json]
 
 The system: Peixoto et al. Example 1, the scheduler (``theta = sin(0.25 t)``),
 the source (``w_k = sin(0.5 k) exp(-0.1 k)`` from ``k = 10``), the plant and
-the parameter-dependent H-infinity filter (the design the FMU carries):
+the parameter-dependent H-infinity filter (the design the FMU carries), run
+four ways, each recording ``p``, ``w``, ``y``, ``z``, ``zhat`` and ``xf`` at
+every sample:
 
-1. **co-simulation**: the four FMUs (``PeixotoEx1Scheduler``, ``...Source``,
-   ``...Plant``, ``...HinfPD``) under :class:`lpvest.cosim.CoSimulation` with
-   unit step, recording ``p``, ``w``, ``y``, ``z``, ``zhat`` and ``xf`` at every
-   communication point; the time of :meth:`~lpvest.cosim.CoSimulation.run`
-   only (unpacking and instantiation are reported apart);
-2. **in-process**: the same streaming components of the library
+0. **minimal loop** (the reference): the same equations written for this
+   benchmark in plain numpy, no checks, no ports, no dictionaries: the
+   weights ``alpha = ((1 - theta)/2, (1 + theta)/2)``, the six plant matrices
+   and the five filter matrices at ``alpha``, ``y, z``, ``zhat``, one solve
+   with ``H(alpha)``, the next states;
+1. **in-process**: lpvest's streaming components
    (:class:`lpvest.signals.SignalGenerator` for ``theta`` and ``w``,
    :class:`lpvest.systems.streaming.DiscretePlant`,
-   :class:`lpvest.estimators.hinf.HinfFilter`) stepped in a plain Python loop
-   that records the same values into a preallocated array: each component is
-   stepped once per sample (``step`` returns the outputs of the sample), no
-   extra work.
+   :class:`lpvest.estimators.hinf.HinfFilter`) stepped in a plain Python loop;
+2. **co-simulation**: the four FMUs (``PeixotoEx1Scheduler``, ``...Source``,
+   ``...Plant``, ``...HinfPD``) under :class:`lpvest.cosim.CoSimulation` with
+   unit step (the time of :meth:`~lpvest.cosim.CoSimulation.run` only);
+3. **libcosim**: the same four FMUs connected in a libcosim execution (Jacobi
+   stepping, so other numbers: only its time per step is reported), in a
+   subprocess.
 
-Both run in this one process, alternately, ``--repeat`` times; the best time
-of each is reported, per step, with the ratio co-simulation / in-process
-(target: at most 2). The two record the same numbers bit for bit (checked).
-``--profile`` adds a cProfile listing of one co-simulation run (the FMUs'
-Python code runs in this interpreter, so it shows up there).
+And the Kalman filter alone: :class:`lpvest.estimators.kalman.LPVKalmanFilter`
+stepped on the Cox & Toth truncation model against a minimal numpy step of
+(4a)-(4e) that computes the same outputs (filtered and predicted moments,
+innovation, gain, innovation covariance, log-likelihood).
+
+Everything runs in this one process, alternately, ``--repeat`` times; the
+best time of each is reported per step, with the ratios to the minimal loop
+(issue targets: in-process <= 2, co-simulation <= 4, Kalman step <= 1.5).
+The in-process and co-simulation runs record the same numbers bit for bit,
+the minimal loops agree with them to rounding (checked). ``--profile`` adds
+a cProfile listing of one co-simulation run (the FMUs' Python code runs in
+this interpreter, so it shows up there).
 
 The FMUs come from ``--fmus DIR`` (default ``fmu-build``, as written by
 ``lpvest build``); missing ones are built there first.
@@ -112,6 +124,114 @@ def in_process(design_json: str, steps: int) -> tuple[np.ndarray, float]:
     return out, time.perf_counter() - t0
 
 
+def minimal_loop(design_json: str, steps: int) -> tuple[np.ndarray, float]:
+    """(recorded values (steps + 1, 9), run seconds): the same equations in plain
+    numpy, written for this benchmark (no checks, no ports, no dictionaries)."""
+    from lpvest import load_system
+
+    v = load_system("peixoto-ex1").model().vertices
+    d = json.loads(design_json)["filter"]
+    A, Bw, Cz, Dz, Cy, Dy = (np.array(getattr(v, n)) for n in ("A", "Bw", "Cz", "Dz", "Cy", "Dy"))
+    H, Af, Bf, Cf, Df = (np.array(d[n]) for n in ("H", "Af", "Bf", "Cf", "Df"))
+    sin, exp = np.sin, np.exp
+    x = np.zeros(A.shape[1])
+    xf = np.zeros(H.shape[1])
+    out = np.empty((steps + 1, 9))
+    t0 = time.perf_counter()
+    for k in range(steps + 1):
+        th = sin(0.25 * k)
+        a0, a1 = 0.5 * (1.0 - th), 0.5 * (1.0 + th)
+        wk = sin(0.5 * k) * exp(-0.1 * k) if k >= 10 else 0.0
+        y = (a0 * Cy[0] + a1 * Cy[1]) @ x + (a0 * Dy[0] + a1 * Dy[1])[:, 0] * wk
+        z = (a0 * Cz[0] + a1 * Cz[1]) @ x + (a0 * Dz[0] + a1 * Dz[1])[:, 0] * wk
+        zhat = (a0 * Cf[0] + a1 * Cf[1]) @ xf + (a0 * Df[0] + a1 * Df[1]) @ y
+        row = out[k]
+        row[0], row[1], row[2] = th, wk, y[0]
+        row[3:5] = z
+        row[5:7] = zhat
+        row[7:9] = xf
+        xf = np.linalg.solve(a0 * H[0] + a1 * H[1], (a0 * Af[0] + a1 * Af[1]) @ xf + (a0 * Bf[0] + a1 * Bf[1]) @ y)
+        x = (a0 * A[0] + a1 * A[1]) @ x + (a0 * Bw[0] + a1 * Bw[1])[:, 0] * wk
+    return out, time.perf_counter() - t0
+
+
+def kalman_steps(steps: int) -> tuple[float, float, float]:
+    """(lpvest seconds, minimal seconds, largest difference of xhat): the exact
+    filter on the Cox & Toth truncation model, one step per sample."""
+    from lpvest import load_system
+    from lpvest.estimators.kalman import LPVKalmanFilter
+
+    model = load_system("cox-toth-truncation").model()
+    k = np.arange(steps)
+    p = np.sin(0.25 * k)[:, None]
+    u = np.sin(0.1 * k)[:, None]
+    y = model.simulate(p, u, rng=1).y
+    kf = LPVKalmanFilter(model)
+    samples = [{"p": p[i], "u": u[i], "y": y[i]} for i in range(steps)]
+    t0 = time.perf_counter()
+    lib = [kf.step(s)["xhat"] for s in samples]
+    t_lib = time.perf_counter() - t0
+
+    # the minimal step: matrices affine in p (the model's basis is [1, p]), (4a)-(4e) with S
+    dep = model.dependence
+    assert dep.term_names == ("1", "p")
+    stacks = {n: np.array(dep.coefficients[n]) for n in ("A", "B", "C", "D", "G", "H")}
+    Q, R, S = model.noise.Q, model.noise.R, model.noise.S
+    x, P = model.x0.copy(), model.P0.copy()
+    half_log_2pi = 0.5 * y.shape[1] * np.log(2 * np.pi)
+    loglik = 0.0
+    mine = []
+    t0 = time.perf_counter()
+    for i in range(steps):
+        pi = p[i, 0]
+        Am, Bm, Cm, Dm, Gm, Hm = (stacks[n][0] + pi * stacks[n][1] for n in ("A", "B", "C", "D", "G", "H"))
+        e = y[i] - Cm @ x - Dm @ u[i]
+        PC = P @ Cm.T
+        Om = Cm @ PC + Hm @ R @ Hm.T
+        Oinv = np.linalg.inv(Om)  # n_y x n_y: the leanest numpy way
+        K = (Am @ PC + Gm @ S @ Hm.T) @ Oinv
+        Lf = PC @ Oinv
+        xhat = x + Lf @ e
+        Pf = P - Lf @ PC.T
+        loglik -= half_log_2pi + 0.5 * (np.linalg.slogdet(Om)[1] + e @ Oinv @ e)
+        x = Am @ x + Bm @ u[i] + K @ e
+        P = Am @ P @ Am.T + Gm @ Q @ Gm.T - K @ Om @ K.T
+        P = 0.5 * (P + P.T)
+        mine.append(xhat)
+        del Pf
+    t_min = time.perf_counter() - t0
+    return t_lib, t_min, float(np.max(np.abs(np.array(lib) - np.array(mine))))
+
+
+def libcosim_per_step(paths: dict[str, Path], steps: int) -> float:
+    """Seconds per step of the four FMUs in a libcosim execution (a subprocess)."""
+    import subprocess
+    import sys
+    import textwrap
+
+    code = textwrap.dedent(f"""
+        import json, time
+        from libcosimpy.CosimExecution import CosimExecution
+        from libcosimpy.CosimSlave import CosimLocalSlave
+        from libcosimpy.CosimLogging import log_output_level, CosimLogLevel
+        log_output_level(CosimLogLevel.ERROR)
+        paths = {json.dumps({r: str(p) for r, p in paths.items()})}
+        ex = CosimExecution.from_step_size(step_size=int(1e9))
+        idx = {{r: ex.add_local_slave(CosimLocalSlave(fmu_path=p, instance_name=r)) for r, p in paths.items()}}
+        refs = {{r: {{v.name.decode(): v.reference for v in ex.slave_variables(i)}} for r, i in idx.items()}}
+        for src, dst in (("Scheduler", "Plant"), ("Scheduler", "HinfPD")):
+            ex.connect_real_variables(idx[src], refs[src]["p[1]"], idx[dst], refs[dst]["p[1]"])
+        ex.connect_real_variables(idx["Source"], refs["Source"]["w[1]"], idx["Plant"], refs["Plant"]["w[1]"])
+        ex.connect_real_variables(idx["Plant"], refs["Plant"]["y[1]"], idx["HinfPD"], refs["HinfPD"]["y[1]"])
+        ex.step(10)
+        t = time.perf_counter()
+        ex.step({steps})
+        print("RESULT", (time.perf_counter() - t) / {steps})
+    """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=1800, check=True)
+    return float(next(x for x in proc.stdout.splitlines() if x.startswith("RESULT")).split()[1])
+
+
 def profile(paths: dict[str, Path], steps: int) -> None:
     import cProfile
     import pstats
@@ -136,35 +256,54 @@ def main() -> int:
     with zipfile.ZipFile(paths["HinfPD"]) as z:
         design_json = z.read("resources/design.json").decode()
 
-    co_runs, co_setup, ip_runs = [], [], []
-    co_out = ip_out = None
+    co_runs, co_setup, ip_runs, min_runs, kf_lib, kf_min = [], [], [], [], [], []
+    co_out = ip_out = min_out = None
+    kf_diff = 0.0
     for _ in range(args.repeat):
+        min_out, run = minimal_loop(design_json, args.steps)
+        min_runs.append(run)
         co_out, setup, run = cosimulation(paths, args.steps)
         co_runs.append(run)
         co_setup.append(setup)
         ip_out, run = in_process(design_json, args.steps)
         ip_runs.append(run)
-    assert co_out is not None and ip_out is not None
+        lib, mine, kf_diff = kalman_steps(min(args.steps, 5000))
+        kf_lib.append(lib)
+        kf_min.append(mine)
+    lc = libcosim_per_step(paths, args.steps)
+    assert co_out is not None and ip_out is not None and min_out is not None
     identical = bool(np.array_equal(co_out, ip_out))
+    # the minimal loop sums the vertex matrices in another order: rounding only
+    agree = float(np.max(np.abs(min_out - ip_out)))
     n = args.steps + 1  # samples recorded (the last one without a step)
-    co_us = min(co_runs) / n * 1e6
-    ip_us = min(ip_runs) / n * 1e6
-    ratio = co_us / ip_us
+    co_us, ip_us, min_us = (min(r) / n * 1e6 for r in (co_runs, ip_runs, min_runs))
+    lc_us = lc * 1e6
+    kf_n = min(args.steps, 5000)
+    kf_lib_us, kf_min_us = min(kf_lib) / kf_n * 1e6, min(kf_min) / kf_n * 1e6
     print(f"Peixoto Example 1, scheduler + source + plant + HinfPD, {args.steps} steps, best of {args.repeat}")
-    print(f"  co-simulation (4 FMUs, lpvest.cosim): {co_us:8.1f} us/step   (set-up {min(co_setup):.2f} s)")
-    print(f"  in-process (library, Python loop):    {ip_us:8.1f} us/step")
-    print(f"  ratio co-simulation / in-process:     {ratio:8.2f}   (target <= 2)")
-    print(f"  identical results: {identical}" + ("" if identical else
-          f" (largest difference {np.max(np.abs(co_out - ip_out)):.3g})"))
+    print(f"  minimal numpy loop (reference):        {min_us:8.1f} us/step")
+    print(f"  in-process (lpvest components):        {ip_us:8.1f} us/step   {ip_us / min_us:5.2f} x minimal "
+          "(target <= 2)")
+    print(f"  co-simulation (4 FMUs, lpvest.cosim):  {co_us:8.1f} us/step   {co_us / min_us:5.2f} x minimal "
+          f"(target <= 4; set-up {min(co_setup):.2f} s)")
+    print(f"  libcosim (4 FMUs, Jacobi, subprocess): {lc_us:8.1f} us/step   {lc_us / min_us:5.2f} x minimal")
+    print(f"  identical results in-process vs co-simulation: {identical}" + ("" if identical else
+          f" (largest difference {np.max(np.abs(co_out - ip_out)):.3g})") + f"; minimal loop within {agree:.1e}")
+    print(f"Kalman filter (Cox & Toth truncation model), {kf_n} steps")
+    print(f"  minimal numpy (4a)-(4e) step:          {kf_min_us:8.1f} us/step")
+    print(f"  LPVKalmanFilter.step:                  {kf_lib_us:8.1f} us/step   {kf_lib_us / kf_min_us:5.2f} x minimal "
+          f"(target <= 1.5); xhat within {kf_diff:.1e}")
     if args.out:
         Path(args.out).write_text(json.dumps({
-            "steps": args.steps, "repeat": args.repeat, "cosim_us_per_step": co_us, "inprocess_us_per_step": ip_us,
-            "ratio": ratio, "cosim_setup_s": min(co_setup), "identical": identical,
-            "cosim_runs_s": co_runs, "inprocess_runs_s": ip_runs,
+            "steps": args.steps, "repeat": args.repeat, "minimal_us_per_step": min_us,
+            "cosim_us_per_step": co_us, "inprocess_us_per_step": ip_us, "libcosim_us_per_step": lc_us,
+            "inprocess_ratio": ip_us / min_us, "cosim_ratio": co_us / min_us, "cosim_setup_s": min(co_setup),
+            "identical": identical, "minimal_agreement": agree, "kalman_us_per_step": kf_lib_us,
+            "kalman_minimal_us_per_step": kf_min_us, "kalman_ratio": kf_lib_us / kf_min_us,
         }, indent=2))
     if args.profile:
         profile(paths, args.steps)
-    return 0 if identical else 1
+    return 0 if identical and agree < 1e-12 and kf_diff < 1e-12 else 1
 
 
 if __name__ == "__main__":
