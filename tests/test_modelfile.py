@@ -134,7 +134,7 @@ ERRORS = [
     ('C = [[1.0, 0.0]]', 'C = [[1.0, 0.0], [1.0]]',
      r"models.m.C: rows have different lengths \[1, 2\]; expected equal"),
     ('C = [[1.0, 0.0]]', 'C = [[1.0, "x"]]',
-     r"models.m.C\[1,2\]: formula 'x' must be a constant here but uses \['x'\]"),
+     r"models.m.C\[1,2\]: formula 'x' must be a constant here but uses the variable x"),
     ('C = [[1.0, 0.0]]', 'C = [[1.0, true]]', r"models.m.C\[1,2\]: expected a number, found a boolean"),
     ('C = [[1.0, 0.0]]', 'C = [[1.0, 0.0]]\nF = [[1.0]]',
      "models.m: unknown key 'F' \\(expected one of: "),
