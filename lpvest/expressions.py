@@ -277,9 +277,10 @@ def _display_tree(tree: ast.AST) -> ast.AST:
     class Ints(ast.NodeTransformer):
         def visit_Constant(self, node: ast.Constant) -> ast.AST:
             v = node.value
-            if isinstance(v, float) and v.is_integer() and abs(v) < 1e15:
-                return ast.copy_location(ast.Constant(int(v)), node)
-            return node
+            shown = ast.Constant(int(abs(v)) if v.is_integer() and abs(v) < 1e15 else abs(v))
+            if math.copysign(1.0, v) < 0:  # a sign ast.unparse would not bracket: "(-1) ** t", not "-1 ** t"
+                return ast.copy_location(ast.UnaryOp(ast.USub(), shown), node)
+            return ast.copy_location(shown, node)
 
     return Ints().visit(copy.deepcopy(tree))
 

@@ -126,6 +126,11 @@ class SystemFile:
 #: refused with the field named rather than simulated into ``inf``.
 MAX_MAGNITUDE = 1e100
 
+#: The most scheduling components a file may declare: the box has 2^n corners,
+#: which the polytopic form of an affine model, multilinear maps and the
+#: consistency checks enumerate.
+MAX_SCHEDULING = 16
+
 _PLAIN_KEY = re.compile(r"[A-Za-z0-9_-]{1,40}")
 
 
@@ -242,6 +247,9 @@ class _Reader:
         sch = self.table(data, "scheduling", "")
         self.keys(sch, "scheduling", {"names", "lower", "upper"}, {"names", "lower", "upper"})
         names = self.strings(sch["names"], "scheduling.names")
+        if not 1 <= len(names) <= MAX_SCHEDULING:
+            raise self.error("scheduling.names", f"has {len(names)} names; expected 1 to {MAX_SCHEDULING} "
+                                                 "(the box has 2^n corners: polytopic forms, range checks)")
         lower = self.numbers(sch["lower"], "scheduling.lower")
         upper = self.numbers(sch["upper"], "scheduling.upper")
         for key, vals in (("lower", lower), ("upper", upper)):
@@ -365,6 +373,9 @@ class _Reader:
         if kind == "multilinear":
             self.keys(spec, where, {"kind", "over", "lower", "upper"}, {"over", "lower", "upper"})
             over = self.strings(spec["over"], f"{where}.over")
+            if not 1 <= len(over) <= MAX_SCHEDULING:
+                raise self.error(f"{where}.over", f"has {len(over)} coordinates; expected 1 to {MAX_SCHEDULING} "
+                                                  "(the map has 2^n vertices)")
             lower = self.numbers(spec["lower"], f"{where}.lower")
             upper = self.numbers(spec["upper"], f"{where}.upper")
             with self.at(where):

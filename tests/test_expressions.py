@@ -177,3 +177,13 @@ def test_shifted_names_are_shown_as_written():
 
 def test_source_shows_whole_numbers_as_integers():
     assert Expression.parse("t^2 + 2*t - (1 + 2)").source == "t ** 2 + 2 * t - 3"
+
+
+@pytest.mark.parametrize("text", ["(-1.0)**(t)", "(-rho)**(p**538.0)", "(-2)**2", "-(2**t)", "(-0.0)*t"])
+def test_source_reads_back_as_the_same_formula(text):
+    # found by tests/test_properties.py: ast.unparse wrote the folded constant -1.0
+    # as "-1.0 ** t", which reads back as -(1.0 ** t)
+    f = Expression.parse(text, parameters={"rho": 2.0})
+    again = Expression.parse(f.source)
+    t = np.array([-1.0, 0.0, 0.5, 2.0])
+    np.testing.assert_array_equal(again(t=t, p=t), f(t=t, p=t))
