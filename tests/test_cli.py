@@ -121,8 +121,9 @@ def _run(*argv, cwd=None):
         (["validate", "nothing.fmu"], "lpvest: error: nothing.fmu: no such file"),
         (["systems", "show"], "lpvest: error: systems: expected one example name or model file, e.g. "
                               "`lpvest systems show peixoto-ex1` (or nothing, to list the examples)"),
-        (["systems", "peixoto-ex9"], "lpvest: error: no example system 'peixoto-ex9' (examples: cox-toth-ex1, "
-                                     "cox-toth-truncation, peixoto-ex1, peixoto-ex2, sridhar-ltv; or give a .toml file)"),
+        (["systems", "peixoto-ex9"],
+         "lpvest: error: no example system 'peixoto-ex9' (examples: cox-toth-ex1, cox-toth-truncation, peixoto-ex1, "
+         "peixoto-ex2, sridhar-ltv; or give a .toml file)"),
         (["systems", "show", "peixoto-ex2", "--param", "rho"], "lpvest: error: --param 'rho': expected NAME=VALUE"),
         (["systems", "show", "peixoto-ex2", "--param", "rho=nan"],
          "lpvest: error: ROOT/models/peixoto_ex2.toml: parameters.rho (override): expected a finite number, found nan"),

@@ -25,8 +25,7 @@ from typing import Any
 import numpy as np
 import pytest
 import tomli_w
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 
 from lpvest.cli import describe_model, main
 from lpvest.cosim import CoSimulationError
