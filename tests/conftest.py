@@ -12,15 +12,15 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(20261121)
 
 
+from hypothesis import HealthCheck, settings  # noqa: E402
+
 # the FMU sets, built once per session (tests/conftest_fmu.py)
+from .conftest_fmu import experiment_fmus as experiment_fmus, fmus as fmus  # noqa: E402
+
 # -- property-based tests (hypothesis): fixed seed in CI ---------------------------------------
 # derandomize: every run explores the same examples, so CI is reproducible; a
 # failure found is then kept as a plain regression test. For a wider search
 # set HYPOTHESIS_PROFILE=explore (random seed) and LPVEST_PROPERTY_SCALE=10.
-from hypothesis import HealthCheck, settings  # noqa: E402
-
-from .conftest_fmu import experiment_fmus as experiment_fmus, fmus as fmus  # noqa: E402
-
 settings.register_profile(
     "lpvest",
     derandomize=True,
