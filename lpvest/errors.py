@@ -24,6 +24,7 @@ __all__ = [
     "ArgumentError",
     "ArgumentTypeError",
     "OutputError",
+    "InternalError",
     "abbreviate",
     "MESSAGE_LIMIT",
 ]
@@ -98,6 +99,11 @@ class ArgumentError(LpvestError, ValueError):
 class ArgumentTypeError(LpvestError, TypeError):
     """An argument has the wrong type, e.g. a polytopic model given to the
     Kalman filter, which needs an affine one."""
+
+
+class InternalError(LpvestError, RuntimeError):
+    """A check of lpvest's own consistency failed: a bug in lpvest (please
+    report it), not a problem with the input."""
 
 
 class OutputError(LpvestError, OSError):

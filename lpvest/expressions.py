@@ -506,28 +506,26 @@ def _is_c(node: ast.AST, v: float | None = None) -> bool:
     return isinstance(node, ast.Constant) and (v is None or node.value == v)
 
 
-def _const_op(op: ast.operator, a: float, b: float) -> float | None:
-    try:
+def _const_op(op: ast.operator, a: float, b: float) -> float:
+    """``a op b`` as the evaluation would compute it: IEEE arithmetic (an
+    overflow is inf, a negative number to a fractional power nan)."""
+    x, y = np.float64(a), np.float64(b)
+    with np.errstate(all="ignore"):
         if isinstance(op, ast.Add):
-            return a + b
+            return float(x + y)
         if isinstance(op, ast.Sub):
-            return a - b
+            return float(x - y)
         if isinstance(op, ast.Mult):
-            return a * b
+            return float(x * y)
         if isinstance(op, ast.Div):
-            return a / b
-        value = a**b
-        return None if isinstance(value, complex) else value
-    except (ZeroDivisionError, OverflowError):
-        return None
+            return float(x / y)
+        return float(np.power(x, y))
 
 
 def _bin(left: ast.expr, op: ast.operator, right: ast.expr) -> ast.expr:
     """``left op right`` with zeros, ones and constants folded."""
     if _is_c(left) and _is_c(right):
-        value = _const_op(op, left.value, right.value)  # type: ignore[attr-defined]
-        if value is not None:
-            return _c(value)
+        return _c(_const_op(op, left.value, right.value))  # type: ignore[attr-defined]
     if isinstance(op, ast.Add):
         if _is_c(left, 0.0):
             return right
@@ -598,6 +596,8 @@ def _diff_node(node: ast.expr, var: str, memo: dict[int, ast.expr]) -> ast.expr:
         if isinstance(node.op, ast.Mult):
             return _bin(_bin(du, ast.Mult(), v), ast.Add(), _bin(u, ast.Mult(), dv))
         if isinstance(node.op, ast.Div):
+            if _is_c(dv, 0.0):  # u / c: no c**2 (which may overflow where c does not)
+                return _bin(du, ast.Div(), v)
             num = _bin(_bin(du, ast.Mult(), v), ast.Sub(), _bin(u, ast.Mult(), dv))
             return _bin(num, ast.Div(), _bin(v, ast.Pow(), _c(2.0)))
         if isinstance(node.op, ast.Pow):

@@ -271,7 +271,8 @@ def read_ssp(path: str | Path) -> SspSystem:
             root = ET.fromstring(z.read(info))
     except CoSimulationError:
         raise
-    except (OSError, KeyError, ValueError, zipfile.BadZipFile, ET.ParseError, EOFError, RuntimeError) as exc:
+    except (OSError, KeyError, ValueError, LookupError, zipfile.BadZipFile, ET.ParseError, EOFError,
+            RuntimeError) as exc:  # (LookupError: an XML declaration naming an unknown encoding)
         text = abbreviate(" ".join(str(exc).split()), 80)[1:-1]
         raise _ssp_error(path, f"not an SSP file with a SystemStructure.ssd: {text}") from exc
     system = root.find("ssd:System", NS)

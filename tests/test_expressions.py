@@ -187,3 +187,11 @@ def test_source_reads_back_as_the_same_formula(text):
     again = Expression.parse(f.source)
     t = np.array([-1.0, 0.0, 0.5, 2.0])
     np.testing.assert_array_equal(again(t=t, p=t), f(t=t, p=t))
+
+
+def test_derivative_of_a_division_by_a_huge_constant():
+    # found by tests/test_properties.py: d(t/1e308) was (1e308 - 0)/1e308**2, whose
+    # constant 1e308**2 raised OverflowError from the evaluation
+    d = Expression.parse("t/1e308").derivative("t")
+    assert d(t=1.0) == 1e-308
+    assert Expression.parse("t*1e300*1e10").derivative("t")(t=0.5) == np.inf  # IEEE: the constant overflows

@@ -320,3 +320,15 @@ def test_an_ssp_file_that_is_not_a_zip_archive(tmp_path):
     path.write_bytes(b"\x00\x01junk")
     with pytest.raises(CoSimulationError, match=f"^{path}: not an SSP file with a SystemStructure.ssd: "):
         read_ssp(path)
+
+
+def test_an_xml_declaration_with_an_unknown_encoding(tmp_path):
+    # found by tests/test_properties.py: ElementTree raised LookupError
+    path = _ssp_file(tmp_path)
+    with zipfile.ZipFile(path) as z:
+        ssd = z.read("SystemStructure.ssd").replace(b'encoding="UTF-8"', b'encoding="nan"')
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("SystemStructure.ssd", ssd)
+    with pytest.raises(CoSimulationError, match=f"^{path}: not an SSP file with a SystemStructure.ssd: unknown "
+                                                "encoding: nan$"):
+        read_ssp(path)

@@ -82,7 +82,15 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError, LMIInfeasibleError, NonFiniteError
+from ..errors import (
+    ArgumentError,
+    ArgumentTypeError,
+    DimensionError,
+    InternalError,
+    LMIInfeasibleError,
+    NonFiniteError,
+    abbreviate,
+)
 from ..systems.polytopic import PolytopicLPV
 from .result import KIND_PD, KIND_ROBUST, HinfDesign
 
@@ -299,7 +307,7 @@ def lmi_matrices(
     ``(a, b) = (epsilon, 1)``, or ``multiplier_ab`` for the rescaled form.
     """
     if (epsilon is None) == (multiplier_ab is None):
-        raise ValueError("give exactly one of epsilon and multiplier_ab")
+        raise ArgumentError("give exactly one of epsilon and multiplier_ab")
     a, b = (float(epsilon), 1.0) if multiplier_ab is None else multiplier_ab  # type: ignore[arg-type]
     var = {k: ([np.asarray(m, dtype=float) for m in v] if k != "delta" else float(v)) for k, v in variables.items()}
     return _lmis(_vertex_data(plant, a, b), var, a, b, robust=robust, bmat=_np_bmat, printed_phi21=printed_phi21)
@@ -369,13 +377,12 @@ class HinfProgram:
         import cvxpy as cp
 
         if kind not in (KIND_PD, KIND_ROBUST):
-            raise ValueError(f"kind must be {KIND_PD!r} or {KIND_ROBUST!r}; found {kind!r}")
+            raise ArgumentError(f"kind must be {KIND_PD!r} or {KIND_ROBUST!r}; found {abbreviate(kind, 30)}")
         dims = {"n_vertices": n_vertices, "nx": nx, "ny": ny, "nz": nz, "nw": nw}
         for name, value in dims.items():
             if int(value) != value or value < 1:
                 raise DimensionError(f"{name} must be a positive integer; found {value!r}")
-        if not margin > 0:
-            raise ValueError(f"margin must be positive; found {margin!r}")
+        _check_margin(margin)
         t0 = time.perf_counter()
         self.n_vertices, self.nx, self.ny, self.nz, self.nw = (int(v) for v in dims.values())
         self.kind = kind
@@ -425,7 +432,7 @@ class HinfProgram:
         self.n_lmis = len(lmis)
         self._problem = cp.Problem(cp.Minimize(self._var["delta"]), constraints)
         if not self._problem.is_dpp():  # pragma: no cover - a construction bug, not user input
-            raise RuntimeError("the H-infinity LMI program is not DPP")
+            raise InternalError("the H-infinity LMI program is not DPP (a bug in its construction)")
         # compile now (placeholder parameter values), so that every solve only
         # substitutes parameters: the compile time is paid once, here
         self._set_parameters({k: np.zeros((N, *sh)) for k, sh in shapes.items()}, 1.0, 0.0)
@@ -538,7 +545,7 @@ class HinfProgram:
         raising on failure: the certified design or ``None`` and the status."""
         self._check_dims(plant)
         if (epsilon is None) == (phi is None):
-            raise ValueError("give exactly one of epsilon and phi")
+            raise ArgumentError("give exactly one of epsilon and phi")
         if phi is not None:
             a, b = _ab_of_phi(phi)
             eps = _epsilon_of_phi(phi)
@@ -632,9 +639,14 @@ class HinfProgram:
         )
 
 
+def _check_margin(margin: object) -> None:
+    if isinstance(margin, bool) or not isinstance(margin, int | float) or not 0 < margin < math.inf:
+        raise ArgumentError(f"margin must be a positive finite number; found {abbreviate(margin, 30)}")
+
+
 def _check_plant(plant: object) -> None:
     if not isinstance(plant, PolytopicLPV):
-        raise TypeError(f"the plant must be a PolytopicLPV; found {type(plant).__name__}")
+        raise ArgumentTypeError(f"the plant must be a PolytopicLPV; found {type(plant).__name__}")
 
 
 def _unstable_vertex(plant: PolytopicLPV) -> tuple[int, float] | None:
@@ -670,10 +682,11 @@ def _program_for(
     if program is not None:
         program._check_dims(plant)
         if program.kind != kind:
-            raise ValueError(f"the program is for a {program.kind} filter, not {kind}")
+            raise ArgumentError(f"the program is for a {program.kind} filter, not {abbreviate(kind, 30)}")
         return program
     if kind not in (KIND_PD, KIND_ROBUST):
-        raise ValueError(f"kind must be {KIND_PD!r} or {KIND_ROBUST!r}; found {kind!r}")
+        raise ArgumentError(f"kind must be {KIND_PD!r} or {KIND_ROBUST!r}; found {abbreviate(kind, 30)}")
+    _check_margin(margin)
     dims = (plant.n_vertices, plant.nx, plant.ny, plant.nz, plant.nw)
     opts = tuple(sorted((solver_options or {}).items()))
     return _cached_program(dims, kind, str(solver).upper(), float(margin), opts)
@@ -852,8 +865,8 @@ def search_epsilon(
     """
     from scipy.optimize import minimize_scalar
 
-    if n_grid < 3:
-        raise ValueError(f"n_grid must be at least 3; found {n_grid}")
+    if isinstance(n_grid, bool) or not isinstance(n_grid, int) or n_grid < 3:
+        raise ArgumentError(f"n_grid must be an integer, at least 3; found {abbreviate(n_grid, 30)}")
     prog = _program_for(plant, kind, solver, margin, solver_options, program)
     points: dict[float, DesignAttempt] = {}
 

@@ -45,7 +45,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError, ModelFileError
+from ..errors import ArgumentError, DimensionError, ModelFileError, abbreviate
 from ..validation import as_vector, check_simplex
 
 __all__ = [
@@ -141,7 +141,7 @@ class HinfDesign:
 
     def __post_init__(self) -> None:
         if self.kind not in (KIND_PD, KIND_ROBUST):
-            raise ValueError(f"kind must be {KIND_PD!r} or {KIND_ROBUST!r}; found {self.kind!r}")
+            raise ArgumentError(f"kind must be {KIND_PD!r} or {KIND_ROBUST!r}; found {abbreviate(self.kind, 30)}")
         arrays = {}
         for name in (*_FILTER_NAMES, "lyapunov"):
             arr = np.array(getattr(self, name), dtype=float)
