@@ -179,7 +179,7 @@ def _convert(value: Any, fmi_type: str, what: str, where: str) -> Any:
                 or not np.isfinite(value) or float(value) != int(value):
             raise CoSimulationError(f"{what}: expected an integer, found {kind} {shown}", where=where)
         if not _INT_RANGE[0] <= int(value) <= _INT_RANGE[1]:
-            raise CoSimulationError(f"{what}: {int(value)} is outside the range of an FMI Integer "
+            raise CoSimulationError(f"{what}: {shown} is outside the range of an FMI Integer "
                                     f"[{_INT_RANGE[0]}, {_INT_RANGE[1]}]", where=where)
         return int(value)
     if fmi_type == "Boolean":

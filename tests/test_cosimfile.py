@@ -239,3 +239,19 @@ def test_the_readme_scripting_example_runs(fmus, capsys):
     out = capsys.readouterr().out.splitlines()
     assert out[0].startswith("['get sched: ") and "'set filter: p[1], y[1]'" in out[0]
     assert float(out[1]) == pytest.approx(1.07, abs=0.005)
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [("inf", "expected an integer, found float inf"), ("nan", "expected an integer, found float nan"),
+     ("1e308", "1e+308 is outside the range of an FMI Integer [-2147483648, 2147483647]"),
+     ("4294967296", "4294967296 is outside the range of an FMI Integer [-2147483648, 2147483647]")],
+)
+def test_integer_parameters_out_of_range(fmus, tmp_path, value, message):
+    # issue 12: seed = inf gave OverflowError, nan ValueError; found by tests/test_properties.py:
+    # tau = 3e308 printed a 309-digit integer
+    f = tmp_path / "run.toml"
+    f.write_text(_edit(BASE, 'fmu = "PeixotoEx1Scheduler"',
+                       f'fmu = "PeixotoEx1Scheduler"\nparameters = {{ seed = {value} }}'))
+    with pytest.raises(ModelFileError, match=re.escape(f"{f}: components.sched.parameters.seed: seed: {message}")):
+        load_cosim(f, fmu_dir=fmus.out).check()
