@@ -63,7 +63,14 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError, ExpressionError, IdentifiabilityError, NonFiniteError, SamplingError
+from ..errors import (
+    DimensionError,
+    ExpressionError,
+    IdentifiabilityError,
+    NonFiniteError,
+    SamplingError,
+    abbreviate,
+)
 from ..systems.ltv import LTVInputOutput, LTVStateSpace, TimeFunction
 from ..validation import as_vector, check_finite
 from .base import Port
@@ -136,6 +143,9 @@ class UnknownSpline:
         Number of B-spline basis functions (the paper's ``n``), at least ``order``.
     order : int, optional
         B-spline order (degree + 1; the paper's ``p``): 3 = quadratic (default).
+        Order 1 (piecewise constant) is for ``a_0`` and ``b_0`` only: the
+        kernels of ``a_1`` and ``b_1`` need their derivative (10), which a
+        piecewise constant function does not have at its knots.
     knots : {"uniform", "clamped"} or array_like, optional
         ``"uniform"`` (default, the paper's "uniform knot sequence"): equally
         spaced knots extended beyond the window so that the splines cover it
@@ -151,14 +161,16 @@ class UnknownSpline:
 
     def __init__(self, n_basis: int, order: int = 3, knots: str | Sequence[float] | np.ndarray = "uniform") -> None:
         if isinstance(n_basis, bool) or not isinstance(n_basis, int | np.integer):
-            raise DimensionError(f"n_basis must be an integer; found {n_basis!r}")
+            raise DimensionError(f"n_basis must be an integer; found {abbreviate(n_basis, 30)}")
         if isinstance(order, bool) or not isinstance(order, int | np.integer) or not 1 <= order <= 8:
-            raise DimensionError(f"order must be an integer in [1, 8]; found {order!r}")
+            raise DimensionError(f"order must be an integer in [1, 8]; found {abbreviate(order, 30)}")
         if n_basis < order:
             raise DimensionError(f"n_basis = {n_basis} B-splines of order {order}: need n_basis >= order")
         if isinstance(knots, str):
             if knots not in ("uniform", "clamped"):
-                raise DimensionError(f"knots must be 'uniform', 'clamped' or a knot vector; found {knots!r}")
+                raise DimensionError(
+                    f"knots must be 'uniform', 'clamped' or a knot vector; found {abbreviate(knots, 30)}"
+                )
             kn: str | tuple[float, ...] = knots
         else:
             arr = as_vector(knots, "knots", int(n_basis) + int(order))
@@ -211,7 +223,13 @@ class KernelModel:
 
     def __init__(self, a0: object, a1: object, b0: object = 0.0, b1: object = 0.0) -> None:
         for name, value in zip(COEFFICIENTS, (a0, a1, b0, b1), strict=True):
-            object.__setattr__(self, name, _as_coefficient(value, name))
+            coefficient = _as_coefficient(value, name)
+            if name[1] == "1" and isinstance(coefficient, UnknownSpline) and coefficient.order < 2:
+                raise DimensionError(
+                    f"{name}: a B-spline of order 1 (piecewise constant) has no derivative, which the kernels of "
+                    f"{name} need (10); use order 2 or more"
+                )
+            object.__setattr__(self, name, coefficient)
 
     @classmethod
     def from_io(cls, io: LTVInputOutput, **unknown: Coefficient) -> KernelModel:
@@ -614,6 +632,25 @@ class _Parts:
     bands: tuple[_Band, ...]
 
 
+def _check_known(
+    name: str, f: TimeFunction, samples: np.ndarray, nodes: np.ndarray, phi: np.ndarray, dphi: np.ndarray | None
+) -> None:
+    """A known coefficient (and the derivative the kernels use) must be finite
+    at every sample and quadrature node of the window: a pole there (``b0 =
+    1/(t - 2)`` at ``t = 2``) is a clear error, not an infinite estimate."""
+    for what, values, where in ((name, phi, nodes), (f"{name}'", dphi, nodes),
+                                (name, None if f.is_constant else f(samples), samples)):
+        if values is None:
+            continue
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            raise NonFiniteError(
+                f"the known coefficient {what} = {abbreviate(f.text, 40)[1:-1]} is {values[bad[0]]} at "
+                f"t = {where[bad[0]]:.10g} (in the window [{samples[0]:.6g}, {samples[-1]:.6g}]); "
+                "expected finite values"
+            )
+
+
 def _hull(*moments: range) -> range:
     """The smallest range of moments holding all of ``moments``."""
     return range(min(r.start for r in moments), max(r.stop for r in moments))
@@ -641,6 +678,7 @@ def _parts(plan: _Plan, a: float, u: np.ndarray, y: np.ndarray) -> _Parts:
     for name, f in funcs.items():
         phi = f(quad.x)
         dphi = f.derivative()(quad.x) if name[1] == "1" and not f.is_constant else None
+        _check_known(name, f, t, quad.x, phi, dphi)
         if not np.any(phi) and (dphi is None or not np.any(dphi)):
             continue
         ident, deriv = coefficient_terms(quad, int(name[1]), phi, dphi, y_nodes if name[0] == "a" else u_nodes)
@@ -854,6 +892,36 @@ def _unidentifiable_message(plan: _Plan, participation: np.ndarray, reason: str)
     return f"{reason}; the data do not determine: {'; '.join(names)} (practical identifiability, Definition 1)"
 
 
+def _check_excitation(plan: _Plan, u: np.ndarray, y: np.ndarray) -> None:
+    """The coefficients of a signal that is zero (to round-off, relative to its
+    own peak) on every sample farther than one interpolation stencil from the
+    window's ends are not determined by the data.
+
+    Every kernel vanishes at both ends (as ``s^2``, ``r^2`` for ``a_0``, ``b_0``
+    and as ``s``, ``r`` for ``a_1``, ``b_1``), and within a stencil of an end
+    the quadrature sees the signal only through the interpolation of those few
+    samples: such a column of ``P`` is nonzero (about ``(h / L)^2`` of a
+    column of a signal spread over the window, so the rank test of the scaled
+    ``P`` passes it) but it is quadrature error, not information. Example: an
+    input nonzero at the last sample only (an input switched on as the window
+    ends) gave ``b0 = -0.006`` for a true ``-9``.
+    """
+    m, edge = plan.m, plan.quad.points
+    eps = np.finfo(float).eps
+    for letter, name, v in (("a", "output y", y), ("b", "input u", u)):
+        names = [b.name for b in plan.blocks if b.name[0] == letter]
+        peak = float(np.max(np.abs(v))) if v.size else 0.0
+        if not names or peak == 0.0:  # a zero signal: its columns of P are zero, reported below
+            continue
+        interior = float(np.max(np.abs(v[edge : m - edge]))) if m > 2 * edge else 0.0
+        if interior <= m * eps * peak:
+            raise IdentifiabilityError(
+                f"the {name} is zero except within {edge} samples of the window's ends (where the kernels "
+                f"vanish; what remains there is quadrature error); the data do not determine: "
+                f"{', '.join(names)} (practical identifiability, Definition 1)"
+            )
+
+
 def _rank_check(plan: _Plan, R: np.ndarray, rtol: float) -> np.ndarray:
     """Singular values of the scaled ``P`` (from its R factor); raise when the rank is deficient."""
     s = R.shape[1]
@@ -984,8 +1052,10 @@ def _fitted(
         sample_values[block.name] = _combine(block.sample_values, coef[block.sample_first + np.arange(k)[:, None]])
         spline = BSpline(block.knots + quad.a, coef.copy(), k - 1, extrapolate=True)
         splines[block.name] = spline
+        # (order 1: piecewise constant, derivative zero between the knots)
+        derivative = spline.derivative() if k > 1 else (lambda x: np.zeros_like(np.asarray(x, dtype=float)))
         functions[block.name] = TimeFunction.from_callable(
-            spline, derivative=spline.derivative(), name=f"B-spline estimate of {block.name}"
+            spline, derivative=derivative, name=f"B-spline estimate of {block.name}"
         )
     y_e, dy_e = finish_identity(quad, ident, deriv, sample_values["a1"], sample_values["b1"], u)
     return sample_values, functions, constants, splines, y_e, dy_e
@@ -1003,6 +1073,7 @@ def _fit(
 ) -> KernelFit:
     from scipy.linalg import qr
 
+    _check_excitation(plan, u, y)
     parts = _parts(plan, a, u, y)
     s = plan.n_unknowns
     mi = instants.size
