@@ -79,11 +79,14 @@ class LMIInfeasibleError(LpvestError, RuntimeError):
     ----------
     status : str
         The solver status string (``problem.status`` in cvxpy).
+    detail : str
+        Every solve tried and why it was rejected (the message shows its start).
     """
 
-    def __init__(self, message: str, *, status: str = "") -> None:
+    def __init__(self, message: str, *, status: str = "", detail: str = "") -> None:
         super().__init__(message)
         self.status = status
+        self.detail = detail
 
 
 class SamplingError(LpvestError, ValueError):
