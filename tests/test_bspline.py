@@ -820,3 +820,20 @@ def test_a_known_coefficient_that_is_not_finite_at_a_sample_is_named(coefficient
     known[coefficient] = formula
     with pytest.raises(NonFiniteError, match=rf"^the known coefficient {coefficient} = .* is -?(inf|nan) at t = "):
         fit_kernel_model(KernelModel(**known), t, np.sin(3 * t), y)
+
+
+def test_the_build_plan_of_a_third_order_model_has_no_observer(tmp_path):
+    # `lpvest build --model` wrote the plant and then failed on the observer (order 3)
+    from lpvest.estimators.bspline import observer_supports
+    from lpvest.fmi.build import plan_system
+
+    path = tmp_path / "third.toml"
+    path.write_text('[system]\nname = "third"\ntitle = "a third-order LTV model"\n'
+                    '[models.io]\ntype = "ltv-io"\na = ["t + 1", 3, 3]\nb = [1]\ninput = "sin(t)"\n')
+    plans, notes = plan_system(path)
+    assert [p.role for p in plans] == ["Plant"]
+    assert "third: model 'io' gets no BSplineObserver: the B-spline observer is for second-order models (11); " \
+           "this one has order 3" in notes
+    assert observer_supports(load_system("sridhar-ltv").model()) is None
+    assert observer_supports(load_system("sridhar-ltv").model("state_space")).startswith("the B-spline observer "
+                                                                                         "needs an ltv-io model")

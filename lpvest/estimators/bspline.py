@@ -105,6 +105,7 @@ __all__ = [
     "spline_knots",
     "reconstruct_state",
     "BSplineObserver",
+    "observer_supports",
 ]
 
 #: The coefficients of (11), in this order.
@@ -1219,6 +1220,16 @@ def fit_kernel_model(
     plan = _build_plan(model, times.size, h, points=points, difference_order=difference_order)
     idx = _instant_indices(instants, times.size)
     return _fit(plan, float(times[0]), uu, yy, penalty=penalty, instants=idx, rank_rtol=rank_rtol)
+
+
+def observer_supports(model: object) -> str | None:
+    """Why :class:`BSplineObserver` cannot estimate ``model`` (``None`` when
+    it can): the kernel identity (9) is for second-order input-output models."""
+    if not isinstance(model, LTVInputOutput):
+        return f"the B-spline observer needs an ltv-io model, not a {type(model).__name__}"
+    if model.order != 2:
+        return f"the B-spline observer is for second-order models (11); this one has order {model.order}"
+    return None
 
 
 class KernelRegression(NamedTuple):

@@ -187,7 +187,10 @@ def plan_system(
             plans.append(FmuPlan(f"{stem}Source", "Source", "lpvest_source.py",
                                  description=f"Input u and disturbance w of {title}", **common))
     for ek in estimator_kinds() if kinds is None else kinds:
-        if ek.applies_to(model):
+        reason = ek.unsupported(model) if ek.applies_to(model) else None
+        if reason is not None:
+            notes.append(f"{system.name}: model {key!r} gets no {ek.role}: {reason}")
+        elif ek.applies_to(model):
             # a filter designed at build time is designed for the model at the
             # file's parameter values: those are then not FMU parameters
             plans.append(FmuPlan(f"{stem}{ek.role}", ek.role, "lpvest_estimator.py",

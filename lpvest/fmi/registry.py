@@ -59,6 +59,10 @@ class EstimatorKind:
     files : tuple of Path
         Extra Python files or packages copied into ``resources/`` (for
         estimators that live outside lpvest, e.g. in a user's own module).
+    supports : str, optional
+        ``"module:function"`` returning why a model of the right type cannot
+        have this estimator (``None`` when it can); the build plan leaves such
+        an estimator out with a note.
     """
 
     role: str
@@ -68,11 +72,16 @@ class EstimatorKind:
     design: str | None = None
     description: str = ""
     files: tuple[Path, ...] = field(default=())
+    supports: str | None = None
 
     def applies_to(self, model: object) -> bool:
         from ..modelfile import MODEL_TYPES
 
         return any(isinstance(model, MODEL_TYPES[t]) for t in self.models if t in MODEL_TYPES)
+
+    def unsupported(self, model: object) -> str | None:
+        """Why this estimator cannot be built for ``model`` (``None``: it can)."""
+        return None if self.supports is None else resolve(self.supports)(model)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -114,7 +123,8 @@ ESTIMATOR_KINDS: list[EstimatorKind] = [
                               Parameter("b0", "known", "b0: known | constant | spline:N[:order]"),
                               Parameter("b1", "known", "b1: known | constant | spline:N[:order]"),
                               Parameter("penalty", 0.0, "P-spline penalty (0: none, < 0: by GCV)")),
-                  description="sliding-window B-spline joint parameter and state observer (Sridhar et al.)"),
+                  description="sliding-window B-spline joint parameter and state observer (Sridhar et al.)",
+                  supports="lpvest.estimators.bspline:observer_supports"),
     EstimatorKind("HinfPD", "lpvest.fmi.factories:hinf", models=("polytopic",),
                   design="lpvest.fmi.factories:hinf_pd_design",
                   description="gain-scheduled H-infinity filter (Peixoto et al. Theorem 1), best epsilon"),
