@@ -89,20 +89,24 @@ def within_contract(
     prefix: str,
     error: type[LpvestError] = LpvestError,
     given: str | bytes = "",
+    refused: Callable[[object], bool] | None = None,
+    limit: float = CPU_LIMIT,
 ) -> str | None:
     """Run ``action`` under the contract; return the error message (``None``
     when the input was accepted). Raises ``AssertionError`` when the contract
-    is broken; counts the outcome in :data:`TALLIES`."""
+    is broken; counts the outcome in :data:`TALLIES`. ``refused`` tells from
+    the action's result that the input was refused without an exception (a
+    command line's exit status 2)."""
     tally = TALLIES.setdefault(generator, Tally())
     previous = signal.signal(signal.SIGPROF, _on_timer)
-    signal.setitimer(signal.ITIMER_PROF, CPU_LIMIT)
+    signal.setitimer(signal.ITIMER_PROF, limit)
     faulthandler.dump_traceback_later(HANG_LIMIT, exit=True)
     start = time.process_time()
     try:
-        action()
+        result = action()
     except ContractTimeout:
         tally.timeouts += 1
-        raise AssertionError(f"{generator}: the input took more than {CPU_LIMIT} s of CPU time") from None
+        raise AssertionError(f"{generator}: the input took more than {limit} s of CPU time") from None
     except error as exc:
         message = str(exc)
         problems = check_message(message, prefix, given)
@@ -116,7 +120,10 @@ def within_contract(
         tally.other += 1
         raise
     else:
-        tally.accepted += 1
+        if refused is not None and refused(result):
+            tally.typed += 1
+        else:
+            tally.accepted += 1
         return None
     finally:
         signal.setitimer(signal.ITIMER_PROF, 0)
