@@ -203,8 +203,9 @@ def check_box(
     bad = (p < lower - tol) | (p > upper + tol)
     if np.any(bad):
         j = int(np.argmax(bad))
+        # the value in full (shortest round trip): 1 + 1e-7 shows as 1.0000001, not as 1
         raise SchedulingRangeError(
-            f"{what} {names[j]} = {p[j]:.6g} is outside its declared range "
+            f"{what} {names[j]} = {float(p[j])!r} is outside its declared range "
             f"[{lower[j]:.6g}, {upper[j]:.6g}]"
         )
 

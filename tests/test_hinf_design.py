@@ -408,3 +408,12 @@ def test_a_plant_unstable_inside_the_polytope_is_refused_at_once():
         assert info.value.status == "infeasible"
         assert len(str(info.value)) <= 300 and "\n" not in str(info.value)
         assert "so no filter exists" in info.value.detail
+
+
+def test_errors_from_a_design_name_the_system_and_model():
+    # issue 12: the message named the model key "plant" only, not which file's plant
+    plant = load_system("peixoto-ex2", parameters={"rho": 22.0}).model()
+    with pytest.raises(LMIInfeasibleError, match=r"^parameter-dependent H-infinity LMIs for peixoto-ex2/plant at "
+                                                 r"epsilon = 1, solver CLARABEL: no certified solution \(not solved: "
+                                                 r"vertex 1 of the plant has spectral radius 1\.03"):
+        design_hinf(plant, epsilon=1.0)

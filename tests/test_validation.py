@@ -76,3 +76,13 @@ def test_as_rng():
     assert as_rng(5).standard_normal() == np.random.default_rng(5).standard_normal()
     with pytest.raises(TypeError, match="rng must be"):
         as_rng("seed")
+
+
+def test_a_value_just_outside_the_box_is_printed_with_the_digits_that_show_it():
+    # issue 12: 1 + 1e-7 was printed as "p = 1 is outside its declared range [-1, 1]"
+    from lpvest import SchedulingRangeError
+    from lpvest.validation import check_box
+
+    with pytest.raises(SchedulingRangeError, match=r"^scheduling value p = 1\.0000001 is outside its declared "
+                                                   r"range \[-1, 1\]$"):
+        check_box(np.array([1.0 + 1e-7]), np.array([-1.0]), np.array([1.0]), ["p"])
