@@ -122,7 +122,8 @@ def simulate_system(
     first sample when the simulation leaves the floating-point range (an
     unstable model, or one with huge coefficients), rather than writing inf.
     """
-    sim = _simulate(system, model_key, steps=steps, schedule=schedule, seed=seed, t_end=t_end)
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is reported below, by signal and sample
+        sim = _simulate(system, model_key, steps=steps, schedule=schedule, seed=seed, t_end=t_end)
     for name, col in sim.columns.items():
         bad = np.flatnonzero(~np.isfinite(col))
         if bad.size:
