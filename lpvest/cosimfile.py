@@ -380,7 +380,8 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
                           f"found {stop!r} ({ratio:.6g} steps)")
         where_steps = "stop_time"
     if n_steps > MAX_STEPS:
-        raise r.error(where_steps, f"{n_steps:,} steps: at most {MAX_STEPS:,} (the results are kept in memory)")
+        raise r.error(where_steps,
+                      f"{float(n_steps):.6g} steps: at most {MAX_STEPS:,} (the results are kept in memory)")
     if not math.isfinite(t0 + n_steps * h):
         raise r.error(where_steps, f"the stop time start_time + steps * step_size = {t0 + n_steps * h} "
                                    "is not a finite number")

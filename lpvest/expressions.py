@@ -18,6 +18,7 @@ from __future__ import annotations
 import ast
 import copy
 import math
+import warnings
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -345,7 +346,9 @@ class Expression:
         try:
             # '^' is a power (math notation); replaced before parsing so that it
             # binds like '**' (Python's '^' binds looser than '*')
-            tree = ast.parse(src.strip().replace("^", "**"), mode="eval")
+            with warnings.catch_warnings():  # e.g. "invalid decimal literal" for "1e": the error follows
+                warnings.simplefilter("ignore", SyntaxWarning)
+                tree = ast.parse(src.strip().replace("^", "**"), mode="eval")
         except SyntaxError as exc:
             raise ExpressionError(f"formula {abbreviate(src)} is not valid: {abbreviate(exc.msg, 80)[1:-1]}") from None
         except (ValueError, MemoryError, RecursionError):  # null bytes; nesting beyond the parser's stack

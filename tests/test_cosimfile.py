@@ -255,3 +255,12 @@ def test_integer_parameters_out_of_range(fmus, tmp_path, value, message):
                        f'fmu = "PeixotoEx1Scheduler"\nparameters = {{ seed = {value} }}'))
     with pytest.raises(ModelFileError, match=re.escape(f"{f}: components.sched.parameters.seed: seed: {message}")):
         load_cosim(f, fmu_dir=fmus.out).check()
+
+
+def test_a_stop_time_of_too_many_steps(fmus, tmp_path):
+    # found by tests/test_properties.py: the step count was printed with all its 300 digits
+    f = tmp_path / "run.toml"
+    f.write_text(_edit(BASE, "steps = 10", "stop_time = 1e300"))
+    with pytest.raises(ModelFileError, match=re.escape(f"{f}: stop_time: 1e+300 steps: at most 100,000,000 (the "
+                                                       "results are kept in memory)")):
+        load_cosim(f, fmu_dir=fmus.out)

@@ -195,3 +195,12 @@ def test_derivative_of_a_division_by_a_huge_constant():
     d = Expression.parse("t/1e308").derivative("t")
     assert d(t=1.0) == 1e-308
     assert Expression.parse("t*1e300*1e10").derivative("t")(t=0.5) == np.inf  # IEEE: the constant overflows
+
+
+def test_a_malformed_number_is_an_error_without_a_python_warning(recwarn):
+    # found by tests/test_properties.py: ast.parse warned "invalid decimal literal" before the error
+    with pytest.raises(ExpressionError, match=r"^formula '1or p': BoolOp is not allowed in a formula$"):
+        Expression.parse("1or p")
+    with pytest.raises(ExpressionError, match=r"^formula '0x1for' is not valid: invalid syntax$"):
+        Expression.parse("0x1for")
+    assert not [w for w in recwarn if issubclass(w.category, SyntaxWarning)]

@@ -401,6 +401,8 @@ def mutated_ssd(draw, seed: str) -> bytes:
         if draw(st.booleans()):
             # an attribute value replaced
             parts = raw.split(b'"')
+            if len(parts) < 3:
+                continue
             i = draw(st.integers(0, len(parts) // 2 - 1)) * 2 + 1
             parts[i] = draw(st.one_of(
                 st.sampled_from(["../evil.fmu", "/abs.fmu", "resources/../../x.fmu", "", "nan", "inf", "-1", "1e999",
@@ -446,7 +448,9 @@ def command_lines(draw) -> list[str]:
     argv = [command]
     if command == "systems" and draw(st.booleans()):
         argv.append("show")
-    if command in ("systems", "simulate", "cosim") or draw(st.booleans()):
+    if command == "reproduce":  # names that are not experiments (a reproduction takes minutes), or list
+        argv.append(draw(st.sampled_from(["list", "nothing", README, "-1", "all --out"])))
+    elif command in ("systems", "simulate", "cosim") or draw(st.booleans()):
         argv += draw(st.lists(targets, min_size=0 if command == "systems" else 1, max_size=2))
     for flag, choices in options.get(command, {}).items():
         for _ in range(draw(st.integers(0, 2 if flag == "--schedule" else 1))):
