@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import ModelFileError
+from .errors import ModelFileError, abbreviate
 
 __all__ = ["models_dir", "example_systems", "find_system", "ExampleEntry"]
 
@@ -52,4 +52,4 @@ def find_system(source: str | Path) -> Path:
         if e.name == str(source):
             return e.path
     names = ", ".join(e.name for e in entries)
-    raise ModelFileError(f"no example system {str(source)!r} (examples: {names}; or give a .toml file)")
+    raise ModelFileError(f"no example system {abbreviate(str(source), 30)} (examples: {names}; or give a .toml file)")

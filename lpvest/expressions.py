@@ -189,12 +189,12 @@ class _Validator(ast.NodeTransformer):
         if node.id in self.parameters:
             value = float(self.parameters[node.id])
             if not math.isfinite(value):
-                raise self.fail(f"parameter {node.id!r} is not finite ({value})")
+                raise self.fail(f"parameter {abbreviate(node.id, 30)} is not finite ({value})")
             return ast.copy_location(ast.Constant(value), node)
         if node.id in CONSTANTS:
             return ast.copy_location(ast.Constant(CONSTANTS[node.id]), node)
         if node.id in FUNCTIONS:
-            raise self.fail(f"function {node.id!r} used without arguments")
+            raise self.fail(f"function {abbreviate(node.id, 30)} used without arguments")
         return node
 
     def visit_Call(self, node: ast.Call) -> ast.AST:

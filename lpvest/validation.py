@@ -21,6 +21,7 @@ from .errors import (
     NotPositiveDefiniteError,
     NumericalError,
     SchedulingRangeError,
+    abbreviate,
 )
 
 __all__ = [
@@ -77,8 +78,9 @@ def check_finite(arr: np.ndarray, name: str) -> np.ndarray:
 def _as_float_array(value: object, name: str) -> np.ndarray:
     try:
         arr = np.array(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise DimensionError(f"{name} is not a numeric array: {exc}") from exc
+    except (TypeError, ValueError, OverflowError) as exc:  # (OverflowError: an int beyond float)
+        raise DimensionError(f"{name} is not a numeric array ({abbreviate(' '.join(str(exc).split()), 100)[1:-1]})"
+                             ) from exc
     return arr
 
 
@@ -203,9 +205,11 @@ def check_box(
     bad = (p < lower - tol) | (p > upper + tol)
     if np.any(bad):
         j = int(np.argmax(bad))
-        # the value in full (shortest round trip): 1 + 1e-7 shows as 1.0000001, not as 1
+        # the value with the digits that show why (1 + 1e-7 as 1.0000001, not as 1)
+        value = float(p[j])
+        shown = f"{value:g}" if float(f"{value:g}") == value else repr(value)
         raise SchedulingRangeError(
-            f"{what} {names[j]} = {float(p[j])!r} is outside its declared range "
+            f"{what} {names[j]} = {shown} is outside its declared range "
             f"[{lower[j]:.6g}, {upper[j]:.6g}]"
         )
 

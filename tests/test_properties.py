@@ -493,3 +493,90 @@ def test_command_lines_end_with_a_status_and_at_most_one_error_line(scratch, war
 
     # 3 s: an accepted `simulate` draws and writes a PNG (about 0.7 s of matplotlib)
     within_contract("command lines", run, prefix="", refused=lambda status: status == 2, limit=3.0)
+
+
+# -- public API arguments --------------------------------------------------------------------------
+
+arrays = st.one_of(
+    st.none(),
+    scalars,
+    st.lists(st.lists(st.one_of(st.floats(), st.integers(-3, 3)), min_size=0, max_size=4), max_size=5),
+    st.lists(st.floats(), max_size=6),
+    st.integers(0, 3).flatmap(lambda n: st.lists(st.lists(st.lists(st.floats(-2, 2), min_size=n, max_size=n),
+                                                          min_size=1, max_size=3), min_size=1, max_size=3)),
+    st.sampled_from([np.eye(2), -np.eye(2), np.full((2, 2), np.nan), np.array([[1.0, 2.0], [2.0, 1.0]]),
+                     np.zeros((2, 2)), np.ones((3, 2)), np.array([[1e308, 0.0], [0.0, -1e308]]), np.zeros((0, 2)),
+                     np.ones((6, 1)), np.linspace(-1, 1, 6)[:, None], np.array(["a", "b"])]),
+)
+
+
+def _api_cases() -> dict[str, tuple[Any, Any]]:
+    """Public functions and constructors, each with a strategy for its arguments
+    (drawn around valid values, so that many calls get past the first check)."""
+    from lpvest import (
+        AffineLPV,
+        KernelModel,
+        LTVInputOutput,
+        NoiseCovariance,
+        PolytopicLPV,
+        SchedulingSpace,
+        UnknownConstant,
+        UnknownSpline,
+        load_system,
+    )
+    from lpvest.estimators.bspline import fit_kernel_model
+    from lpvest.estimators.kalman import LPVKalmanFilter, kalman_filter
+
+    space = SchedulingSpace(["p"], [-1.0], [1.0])
+    affine = load_system("cox-toth-truncation").model()
+    poly = load_system("peixoto-ex1").model()
+    either = lambda good: st.one_of(st.just(good), arrays)  # noqa: E731
+    t = np.linspace(0.0, 1.0, 101)
+    return {
+        "SchedulingSpace": (lambda a: SchedulingSpace(*a), st.tuples(
+            st.one_of(st.just(["p"]), st.lists(st.one_of(text, st.integers()), max_size=3)),
+            either([-1.0]), either([1.0]))),
+        "AffineLPV.from_matrices": (lambda a: AffineLPV.from_matrices(space, [], A=a[0], C=a[1], Q=a[2], R=a[3],
+                                                                    S=a[4]),
+                                    st.tuples(either([[0.5]]), either([[1.0]]), either([[0.1]]), either([[0.01]]),
+                                              either(None))),
+        "NoiseCovariance": (lambda a: NoiseCovariance(*a), st.tuples(either(np.eye(2)), either([[1.0]]),
+                                                                     either(None))),
+        "PolytopicLPV": (lambda a: PolytopicLPV({n: a[i] if i < len(a) else getattr(poly.vertices, n)
+                                                 for i, n in enumerate(("A", "Bw", "Cz", "Dz", "Cy", "Dy"))}),
+                         st.lists(arrays, max_size=3)),
+        "PolytopicLPV.simulate": (lambda a: poly.simulate(a[0], a[1]), st.tuples(
+            either(np.full((6, 2), 0.5)), either(np.zeros((6, 1))))),
+        "AffineLPV.simulate": (lambda a: affine.simulate(a[0], a[1], rng=0), st.tuples(
+            either(np.zeros((6, 1))), either(np.zeros((6, 1))))),
+        "LTVInputOutput": (lambda a: LTVInputOutput(a[0], a[1], x0=a[2]), st.tuples(
+            st.one_of(st.just(["t + 1", 1.0]), st.lists(st.one_of(file_formulas, scalars), max_size=3)),
+            st.one_of(st.just([1.0]), st.lists(st.one_of(file_formulas, scalars), max_size=2)), either(None))),
+        "UnknownSpline": (lambda a: UnknownSpline(*a), st.tuples(
+            st.one_of(st.integers(-2, 12), scalars), st.one_of(st.integers(0, 9), scalars),
+            st.one_of(st.sampled_from(["uniform", "clamped", "periodic"]), arrays))),
+        "KernelModel": (lambda a: KernelModel(*a), st.tuples(
+            st.one_of(st.just(UnknownConstant()), file_formulas, scalars), st.one_of(st.just(1.0), file_formulas),
+            st.one_of(st.just(0.0), file_formulas, scalars))),
+        "fit_kernel_model": (lambda a: fit_kernel_model(KernelModel(a0=UnknownConstant(), a1=UnknownConstant()),
+                                                        a[0], a[1], a[2], penalty=a[3]),
+                             st.tuples(either(t), either(np.sin(t)), either(np.exp(-t)),
+                                       st.one_of(st.none(), st.just("gcv"), scalars))),
+        "kalman_filter": (lambda a: kalman_filter(affine, a[0], a[1], a[2]), st.tuples(
+            either(np.zeros((6, 1))), either(np.zeros((6, 1))), either(np.zeros((6, 2))))),
+        "LPVKalmanFilter": (lambda a: LPVKalmanFilter(affine, x0=a[0], P0=a[1]), st.tuples(
+            either(None), either(None))),
+    }
+
+
+API_CASES = _api_cases()
+
+
+@settings(max_examples=examples(1500))
+@given(data=st.data())
+def test_public_api_arguments_are_accepted_or_refused_by_a_typed_error(data):
+    name = data.draw(st.sampled_from(sorted(API_CASES)), label="function")
+    call, arguments = API_CASES[name]
+    args = data.draw(arguments, label="arguments")
+    with np.errstate(all="ignore"):
+        within_contract("API arguments", lambda: call(args), prefix="", given=repr(args))

@@ -381,7 +381,7 @@ class HinfProgram:
         dims = {"n_vertices": n_vertices, "nx": nx, "ny": ny, "nz": nz, "nw": nw}
         for name, value in dims.items():
             if int(value) != value or value < 1:
-                raise DimensionError(f"{name} must be a positive integer; found {value!r}")
+                raise DimensionError(f"{name} must be a positive integer; found {abbreviate(value, 30)}")
         _check_margin(margin)
         t0 = time.perf_counter()
         self.n_vertices, self.nx, self.ny, self.nz, self.nw = (int(v) for v in dims.values())

@@ -267,7 +267,7 @@ class HinfDesign:
         version = field(data, "version")
         if version != DESIGN_FORMAT_VERSION:
             raise ModelFileError(
-                f"{source}: design format version {version!r}; this lpvest reads {DESIGN_FORMAT_VERSION}"
+                f"{source}: design format version {abbreviate(version, 30)}; this lpvest reads {DESIGN_FORMAT_VERSION}"
             )
         filt = field(data, "filter")
         solver = field(data, "solver")
@@ -302,7 +302,8 @@ class HinfDesign:
         for key in ("n_vertices", "nx", "ny", "nz"):
             if field(data, key) != getattr(design, key):
                 raise ModelFileError(
-                    f"{source}: {key} = {data[key]!r} disagrees with the matrices ({getattr(design, key)})"
+                    f"{source}: {key} = {abbreviate(data[key], 30)} disagrees with the matrices "
+                    f"({getattr(design, key)})"
                 )
         return design
 

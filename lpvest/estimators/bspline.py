@@ -242,7 +242,8 @@ class KernelModel:
             )
         bad = sorted(set(unknown) - set(COEFFICIENTS))
         if bad:
-            raise DimensionError(f"unknown coefficient name {bad[0]!r}; expected one of {', '.join(COEFFICIENTS)}")
+            raise DimensionError(f"unknown coefficient name {abbreviate(bad[0], 30)}; expected one of "
+                                 f"{', '.join(COEFFICIENTS)}")
         b = (*io.b, *(TimeFunction.of(0.0) for _ in range(2 - len(io.b))))
         known = {"a0": io.a[0], "a1": io.a[1], "b0": b[0], "b1": b[1]}
         known.update(unknown)
@@ -871,7 +872,8 @@ def _instant_indices(instants: object, m: int) -> np.ndarray:
         return np.arange(0, m, int(instants))
     idx = np.asarray(instants)
     if idx.ndim != 1 or idx.dtype.kind not in "iu":
-        raise DimensionError(f"instants must be None, a stride or a 1-D array of sample indices; found {instants!r}")
+        raise DimensionError(f"instants must be None, a stride or a 1-D array of sample indices; found "
+                             f"{abbreviate(instants, 30)}")
     if idx.size and (idx.min() < 0 or idx.max() >= m):
         raise DimensionError(f"instants hold sample indices outside [0, {m - 1}]")
     if np.unique(idx).size != idx.size:
@@ -1137,11 +1139,12 @@ def _fit(
 def _check_options(penalty: object, difference_order: int, rank_rtol: float) -> None:
     if penalty is not None and not (isinstance(penalty, str) and penalty == "gcv"):
         if isinstance(penalty, bool) or not isinstance(penalty, int | float) or not np.isfinite(penalty) or penalty < 0:
-            raise DimensionError(f"penalty must be None, 'gcv' or a finite lambda >= 0; found {penalty!r}")
+            raise DimensionError(f"penalty must be None, 'gcv' or a finite lambda >= 0; found "
+                                 f"{abbreviate(penalty, 30)}")
     if isinstance(difference_order, bool) or not isinstance(difference_order, int) or difference_order < 1:
-        raise DimensionError(f"difference_order must be an integer >= 1; found {difference_order!r}")
+        raise DimensionError(f"difference_order must be an integer >= 1; found {abbreviate(difference_order, 30)}")
     if not 0 < rank_rtol < 1:
-        raise DimensionError(f"rank_rtol must lie in (0, 1); found {rank_rtol!r}")
+        raise DimensionError(f"rank_rtol must lie in (0, 1); found {abbreviate(rank_rtol, 30)}")
 
 
 def fit_kernel_model(
@@ -1348,10 +1351,11 @@ def reconstruct_state(
 
 def _samples_of(duration: float, dt: float, name: str) -> int:
     if isinstance(duration, bool) or not isinstance(duration, int | float) or not duration > 0 or duration == np.inf:
-        raise DimensionError(f"{name} must be a positive duration in seconds; found {duration!r}")
+        raise DimensionError(f"{name} must be a positive duration in seconds; found {abbreviate(duration, 30)}")
     k = duration / dt
     if abs(k - round(k)) > 1e-6 * max(1.0, k):
-        raise SamplingError(f"{name} = {duration!r} s is not a whole number of sample steps dt = {dt!r} s")
+        raise SamplingError(f"{name} = {abbreviate(duration, 30)} s is not a whole number of sample steps dt "
+                            f"= {abbreviate(dt, 30)} s")
     return int(round(k))
 
 
@@ -1444,12 +1448,13 @@ class BSplineObserver:
         if not model.unknowns:
             raise IdentifiabilityError("the model has no unknown coefficient: nothing to estimate")
         if isinstance(dt, bool) or not isinstance(dt, int | float) or not np.isfinite(dt) or dt <= 0:
-            raise DimensionError(f"dt must be a positive sample time; found {dt!r}")
+            raise DimensionError(f"dt must be a positive sample time; found {abbreviate(dt, 30)}")
         _check_options(penalty, difference_order, rank_rtol)
         if on_unidentifiable not in ("raise", "hold"):
-            raise DimensionError(f"on_unidentifiable must be 'raise' or 'hold'; found {on_unidentifiable!r}")
+            raise DimensionError(f"on_unidentifiable must be 'raise' or 'hold'; found "
+                                 f"{abbreviate(on_unidentifiable, 30)}")
         if not isinstance(report, int | float) or not 0.0 <= report <= 1.0:
-            raise DimensionError(f"report must be a fraction in [0, 1]; found {report!r}")
+            raise DimensionError(f"report must be a fraction in [0, 1]; found {abbreviate(report, 30)}")
         self.model = model
         self.dt = float(dt)
         self.t0 = float(t0)

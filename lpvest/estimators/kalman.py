@@ -1075,7 +1075,8 @@ class _Reader:
         if len(inputs) != len(self.names) or not self._keys.issuperset(inputs):
             extra = sorted(set(inputs) - self._keys)
             if extra:
-                raise DimensionError(f"unknown input {extra[0]!r}; the inputs are {', '.join(self.names)}")
+                raise DimensionError(f"unknown input {abbreviate(extra[0], 30)}; the inputs are "
+                                     f"{', '.join(self.names)}")
         p = self._vec(inputs, "p")
         y = self._vec(inputs, "y")
         u = self._vec(inputs, "u") if self._nu else _EMPTY
