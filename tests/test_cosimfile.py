@@ -264,3 +264,17 @@ def test_a_stop_time_of_too_many_steps(fmus, tmp_path):
     with pytest.raises(ModelFileError, match=re.escape(f"{f}: stop_time: 1e+300 steps: at most 100,000,000 (the "
                                                        "results are kept in memory)")):
         load_cosim(f, fmu_dir=fmus.out)
+
+
+@pytest.mark.parametrize(
+    ("raw", "message"),
+    [(b"\xff\xfes\x00t\x00", r"not a TOML text file: byte 1 \(b'\\xff'\) is not UTF-8 \(the file is UTF-16"),
+     (b"step_size = " + b"[" * 500 + b"1" + b"]" * 500, r"not valid TOML: arrays or tables nested too deeply$")],
+    ids=["utf-16", "nested 500 deep"],
+)
+def test_a_cosimulation_file_that_is_not_toml_text(tmp_path, raw, message):
+    # issue 12: UnicodeDecodeError and RecursionError escaped, as for model files
+    f = tmp_path / "run.toml"
+    f.write_bytes(raw)
+    with pytest.raises(ModelFileError, match=f"^{re.escape(str(f))}: {message}"):
+        load_cosim(f)
