@@ -13,6 +13,7 @@ exception, a bad message, a timeout) fails the test and is counted.
 from __future__ import annotations
 
 import faulthandler
+import gc
 import signal
 import time
 from collections.abc import Callable
@@ -98,6 +99,11 @@ def within_contract(
     the action's result that the input was refused without an exception (a
     command line's exit status 2)."""
     tally = TALLIES.setdefault(generator, Tally())
+    # no garbage collection inside the timed call: a collection of the test
+    # runner's garbage would count against the input (and the timer's
+    # exception, raised inside a gc callback, would be ignored)
+    gc_was_enabled = gc.isenabled()
+    gc.disable()
     previous = signal.signal(signal.SIGPROF, _on_timer)
     signal.setitimer(signal.ITIMER_PROF, limit)
     faulthandler.dump_traceback_later(HANG_LIMIT, exit=True)
@@ -128,6 +134,8 @@ def within_contract(
     finally:
         signal.setitimer(signal.ITIMER_PROF, 0)
         signal.signal(signal.SIGPROF, previous)
+        if gc_was_enabled:
+            gc.enable()
         faulthandler.cancel_dump_traceback_later()
         tally.slowest = max(tally.slowest, time.process_time() - start)
 

@@ -209,7 +209,7 @@ def mutate_bytes(draw, raw: bytes) -> bytes:
         at = draw(st.integers(0, max(len(raw) - 1, 0)))
         return raw[:at] + bytes([raw[at] ^ 0x80]) + raw[at + 1:] if raw else raw
     if op == "utf16":
-        return raw.decode("utf-8").encode("utf-16")
+        return raw.decode("utf-8", "replace").encode("utf-16")
     if op == "bom":
         return b"\xef\xbb\xbf" + raw
     if op == "junk":
