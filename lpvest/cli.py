@@ -29,7 +29,7 @@ from typing import NoReturn
 
 import numpy as np
 
-from .errors import ArgumentError, LpvestError, OutputError, abbreviate
+from .errors import ArgumentError, LpvestError, OutputError, abbreviate, shorten
 
 __all__ = ["main", "describe_model"]
 
@@ -54,7 +54,7 @@ def _out_dir(path: str, option: str = "--out") -> Path:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         reason = "it is a file, not a folder" if isinstance(exc, FileExistsError) else exc.strerror or exc
-        raise OutputError(f"{option} {abbreviate(str(out), 60)[1:-1]}: cannot create the output folder ({reason})"
+        raise OutputError(f"{option} {shorten(str(out), 60)}: cannot create the output folder ({reason})"
                           ) from None
     return out
 
@@ -339,7 +339,7 @@ def cmd_cosim(args: argparse.Namespace) -> int:
 def _check_fmu_file(path: Path) -> None:
     """One line when ``path`` is not an FMU at all (a zip archive with a
     modelDescription.xml); fmpy's validation judges the rest."""
-    shown = abbreviate(str(path), 80)[1:-1]
+    shown = shorten(str(path), 80)
     try:
         if not path.is_file():
             raise ArgumentError(f"{shown}: no such file" if not path.exists() else f"{shown}: not a file")
@@ -367,7 +367,7 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message: str) -> NoReturn:
         text = " ".join(message.split())
-        self.exit(2, f"{self.prog}: error: {abbreviate(text, 240)[1:-1]} (see {self.prog} --help)\n")
+        self.exit(2, f"{self.prog}: error: {shorten(text, 240)} (see {self.prog} --help)\n")
 
 
 #: Description and examples of each subcommand, for ``lpvest COMMAND --help``
@@ -517,7 +517,7 @@ def _one_line(exc: BaseException) -> str:
     """The error as one line: an lpvest error's own message; for a system
     error, its reason and the file."""
     if isinstance(exc, OSError) and not isinstance(exc, LpvestError):
-        where = f": {abbreviate(str(exc.filename), 80)[1:-1]}" if exc.filename else ""
+        where = f": {shorten(str(exc.filename), 80)}" if exc.filename else ""
         return f"{exc.strerror or type(exc).__name__}{where}"
     return " ".join(str(exc).split())
 

@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import LpvestError, abbreviate
+from .errors import LpvestError, abbreviate, shorten
 
 __all__ = [
     "Component",
@@ -207,7 +207,7 @@ def _model_description(path: Path, component: str, where: str) -> Any:
         try:
             md = read_model_description(str(path))
         except Exception as exc:  # fmpy raises plain exceptions for bad files
-            text = abbreviate(" ".join(str(exc).split()), 80)[1:-1]
+            text = shorten(" ".join(str(exc).split()), 80)
             raise CoSimulationError(f"component {component}: {path} is not a valid FMU: {text}", where=where) from exc
         if len(_DESCRIPTIONS) >= 64:
             _DESCRIPTIONS.pop(next(iter(_DESCRIPTIONS)))
@@ -363,7 +363,7 @@ class CoSimulation:
                 instanceName=spec.name,
             )
         except Exception as exc:  # fmpy raises plain exceptions for a missing binary, a bad archive
-            text = abbreviate(" ".join(str(exc).split()), 80)[1:-1]
+            text = shorten(" ".join(str(exc).split()), 80)
             raise CoSimulationError(f"component {spec.name}: {spec.fmu} cannot be loaded: {text}",
                                     where=f"components.{spec.name}.fmu") from exc
 
@@ -375,7 +375,7 @@ class CoSimulation:
         if unit is None:
             known = ", ".join(u.spec.name for u in self._units)
             raise CoSimulationError(f"{what} {abbreviate(qualified)}: no component {abbreviate(comp, 24)} "
-                                    f"(components: {abbreviate(known, 60)[1:-1]})", where=where)
+                                    f"(components: {shorten(known, 60)})", where=where)
         elems = _expand(unit.variables, name)
         if not elems:
             raise CoSimulationError(f"{what} {abbreviate(qualified)}: {comp} has no variable {abbreviate(name, 24)}",
@@ -575,7 +575,7 @@ class CoSimulation:
             at = "" if t is None else f" at t = {t:g}"
             log = _log_text(unit)
             raise CoSimulationError(f"component {unit.spec.name}: {what} failed{at}: "
-                                    f"{abbreviate(' '.join(str(exc).split()), 60)[1:-1]} ({log})",
+                                    f"{shorten(' '.join(str(exc).split()), 60)} ({log})",
                                     where=f"components.{unit.spec.name}" if where is None else where) from exc
 
     def _set_start_values(self, unit: _Unit) -> None:

@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 
 from .cosim import Component, Connection, CoSimulation, CoSimulationError
-from .errors import ModelFileError, abbreviate
+from .errors import ModelFileError, abbreviate, shorten
 from .modelfile import read_toml
 from .plotting import save_figure
 
@@ -326,7 +326,7 @@ class _Reader:
             raise self.error(where, f"expected 'component.variable', found {abbreviate(text)}")
         if comp not in components:
             raise self.error(where, f"no component {abbreviate(comp, 24)} in {abbreviate(text)} "
-                                    f"(components: {abbreviate(', '.join(components), 60)[1:-1]})")
+                                    f"(components: {shorten(', '.join(components), 60)})")
 
 
 def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimFile:

@@ -26,6 +26,7 @@ __all__ = [
     "OutputError",
     "InternalError",
     "abbreviate",
+    "shorten",
     "MESSAGE_LIMIT",
 ]
 
@@ -132,3 +133,19 @@ def abbreviate(value: object, limit: int = 40) -> str:
         head, tail = text[: keep * 3 // 4], text[-(keep // 4) :]
         return f"{head + '...' + tail!r} ({len(text):,} characters)"
     return shown[: max(limit - 3, 8)] + "..."
+
+
+def shorten(text: str, limit: int = 80) -> str:
+    """``text`` for a message without quotes (a path, a list of names, another
+    error's message), on one line and at most about ``limit`` characters.
+
+    >>> shorten("a, b, c")
+    'a, b, c'
+    >>> shorten("x" * 100, 20)
+    'xxxxxxx...xx (100 characters)'
+    """
+    flat = " ".join(str(text).split())
+    if len(flat) <= limit:
+        return flat
+    keep = max(limit - 10, 8)
+    return f"{flat[: keep * 3 // 4]}...{flat[-(keep // 4):]} ({len(flat):,} characters)"

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ExpressionError, abbreviate
+from .errors import ExpressionError, abbreviate, shorten
 
 __all__ = [
     "Expression",
@@ -350,7 +350,7 @@ class Expression:
                 warnings.simplefilter("ignore", SyntaxWarning)
                 tree = ast.parse(src.strip().replace("^", "**"), mode="eval")
         except SyntaxError as exc:
-            raise ExpressionError(f"formula {abbreviate(src)} is not valid: {abbreviate(exc.msg, 80)[1:-1]}") from None
+            raise ExpressionError(f"formula {abbreviate(src)} is not valid: {shorten(exc.msg, 80)}") from None
         except (ValueError, MemoryError, RecursionError):  # null bytes; nesting beyond the parser's stack
             raise ExpressionError(
                 f"formula {abbreviate(src)} is not valid: nested deeper than {MAX_FORMULA_DEPTH} levels"
@@ -373,7 +373,7 @@ class Expression:
                 known = ", ".join(sorted(allowed)) or "none"
                 raise ExpressionError(
                     f"formula {abbreviate(src)} uses unknown name {abbreviate(unknown[0], 24)} "
-                    f"(known: {abbreviate(known, 60)[1:-1]})"
+                    f"(known: {shorten(known, 60)})"
                 )
         return expr
 
@@ -443,7 +443,7 @@ class Expression:
             shown = ", ".join(sorted(_shown(n) for n in self.names))
             raise ExpressionError(
                 f"formula {abbreviate(self.text)} must be a constant here but uses the variable "
-                f"{abbreviate(shown, 60)[1:-1]}"
+                f"{shorten(shown, 60)}"
             )
         value = self.tree.body.value if isinstance(self.tree.body, ast.Constant) else self.evaluate({})
         return float(value)

@@ -47,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import LpvestError, ModelFileError, abbreviate
+from .errors import LpvestError, ModelFileError, abbreviate, shorten
 from .expressions import CONSTANTS, FUNCTIONS, Expression, FormulaMatrix
 from .scheduling import (
     BasisFunction,
@@ -111,7 +111,7 @@ class SystemFile:
         try:
             return self.models[key]
         except KeyError:
-            known = abbreviate(", ".join(self.models), 80)[1:-1]
+            known = shorten(", ".join(self.models), 80)
             raise ModelFileError(
                 f"{self.path or self.name}: no model {abbreviate(key, 30)} (models: {known})"
             ) from None
@@ -282,7 +282,7 @@ class _Reader:
         stray = sorted(set(bounds_tab) - set(texts))
         if stray:
             raise self.error(f"{where}.bounds.{_key(stray[0])}", "is not a basis function of this model "
-                             f"(basis: {abbreviate(', '.join(texts), 60)[1:-1] or 'none'})")
+                             f"(basis: {shorten(', '.join(texts), 60) or 'none'})")
         out: list[BasisFunction] = []
         for text in texts:
             b = bounds_tab.get(text)
@@ -609,7 +609,7 @@ _RESERVED = frozenset({"t", "shift", *FUNCTIONS, *CONSTANTS})
 
 def _names(keys: Iterable[str]) -> str:
     """A list of names for a message, shortened."""
-    return abbreviate(", ".join(keys), 80)[1:-1] or "none"
+    return shorten(", ".join(keys), 80) or "none"
 
 
 def _build(

@@ -27,7 +27,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from .errors import DimensionError, ExpressionError, SchedulingRangeError, abbreviate
+from .errors import DimensionError, ExpressionError, SchedulingRangeError, abbreviate, shorten
 from .expressions import Expression
 from .validation import as_vector, check_box, check_finite
 
@@ -164,7 +164,7 @@ class Monomial:
         if exps is None or sum(exps) == 0:
             raise ExpressionError(
                 f"basis function {abbreviate(text)} is not a product of powers of "
-                f"{abbreviate(', '.join(space.names), 60)[1:-1]}"
+                f"{shorten(', '.join(space.names), 60)}"
             )
         return cls(exps, text)
 

@@ -78,7 +78,7 @@ from typing import Any
 import numpy as np
 
 from .cosim import Component, Connection, CoSimulation, CoSimulationError
-from .errors import abbreviate
+from .errors import abbreviate, shorten
 
 __all__ = ["write_ssp", "read_ssp", "SspSystem", "simulate_ssp", "IMPORTERS"]
 
@@ -273,7 +273,7 @@ def read_ssp(path: str | Path) -> SspSystem:
         raise
     except (OSError, KeyError, ValueError, LookupError, zipfile.BadZipFile, ET.ParseError, EOFError,
             RuntimeError) as exc:  # (LookupError: an XML declaration naming an unknown encoding)
-        text = abbreviate(" ".join(str(exc).split()), 80)[1:-1]
+        text = shorten(" ".join(str(exc).split()), 80)
         raise _ssp_error(path, f"not an SSP file with a SystemStructure.ssd: {text}") from exc
     system = root.find("ssd:System", NS)
     if system is None:

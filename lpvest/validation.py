@@ -21,7 +21,7 @@ from .errors import (
     NotPositiveDefiniteError,
     NumericalError,
     SchedulingRangeError,
-    abbreviate,
+    shorten,
 )
 
 __all__ = [
@@ -79,7 +79,7 @@ def _as_float_array(value: object, name: str) -> np.ndarray:
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError, OverflowError) as exc:  # (OverflowError: an int beyond float)
-        raise DimensionError(f"{name} is not a numeric array ({abbreviate(' '.join(str(exc).split()), 100)[1:-1]})"
+        raise DimensionError(f"{name} is not a numeric array ({shorten(' '.join(str(exc).split()), 100)})"
                              ) from exc
     return arr
 

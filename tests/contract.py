@@ -70,7 +70,7 @@ def check_message(message: str, prefix: str, given: str | bytes = "") -> list[st
     """What is wrong with an error message (empty: nothing). ``given`` is the
     input: what the user wrote may be quoted, even if it looks internal."""
     problems = []
-    if "\n" in message or "\r" in message:
+    if len(message.splitlines()) > 1 or message.endswith(("\n", "\r")):
         problems.append("more than one line")
     if len(message) > MESSAGE_LIMIT:
         problems.append(f"{len(message)} characters (more than {MESSAGE_LIMIT})")

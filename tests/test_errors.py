@@ -85,3 +85,26 @@ def test_a_long_value_is_never_echoed_whole(plant):
 )
 def test_abbreviate(value, limit, shown):
     assert abbreviate(value, limit) == shown
+
+
+def test_shorten():
+    from lpvest.errors import shorten
+
+    assert shorten("a,\n  b") == "a, b"
+    assert shorten("x" * 100, 20) == "xxxxxxx...xx (100 characters)"
+
+
+@pytest.mark.parametrize(
+    ("source", "match"),
+    [("a\x00b", r"^no example system 'a\\x00b' \(examples: "),
+     ("x" * 5000, r"^no example system 'xxx.*' \(5,000 characters\) \(examples: "),
+     ("y" * 5000 + ".toml", r"^yyy.*yyy\.toml \(5,005 characters\): no such model file$"),
+     (3, r"^expected a model file or an example name, found int$")],
+    ids=["nul", "long name", "long path", "int"],
+)
+def test_load_system_of_a_name_the_system_cannot_look_up(source, match):
+    # a NUL character raised ValueError and a 5000-character name OSError from Path.exists()
+    from lpvest.errors import ModelFileError
+
+    with pytest.raises(ModelFileError, match=match):
+        load_system(source)

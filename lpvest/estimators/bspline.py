@@ -70,6 +70,7 @@ from ..errors import (
     NonFiniteError,
     SamplingError,
     abbreviate,
+    shorten,
 )
 from ..systems.ltv import LTVInputOutput, LTVStateSpace, TimeFunction
 from ..validation import as_vector, check_finite
@@ -647,7 +648,7 @@ def _check_known(
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size:
             raise NonFiniteError(
-                f"the known coefficient {what} = {abbreviate(f.text, 40)[1:-1]} is {values[bad[0]]} at "
+                f"the known coefficient {what} = {shorten(f.text, 40)} is {values[bad[0]]} at "
                 f"t = {where[bad[0]]:.10g} (in the window [{samples[0]:.6g}, {samples[-1]:.6g}]); "
                 "expected finite values"
             )

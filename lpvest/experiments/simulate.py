@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ArgumentError, ArgumentTypeError, NonFiniteError, NumericalError, abbreviate
+from ..errors import ArgumentError, ArgumentTypeError, NonFiniteError, NumericalError, abbreviate, shorten
 from ..expressions import Expression
 from ..modelfile import SystemFile
 from ..plotting import save_figure
@@ -86,7 +86,7 @@ def _schedule(space: SchedulingSpace, formulas: list[str] | None, k: np.ndarray)
     if len(formulas) != space.dim:
         given = f"{len(formulas)} formula{'s' * (len(formulas) != 1)}"
         raise ArgumentError(f"schedule: {given} given; expected {space.dim} (one per scheduling component: "
-                            f"{abbreviate(', '.join(space.names), 60)[1:-1]})")
+                            f"{shorten(', '.join(space.names), 60)})")
     cols = []
     for f in formulas:
         expr = Expression.parse(f, allowed=["k"])

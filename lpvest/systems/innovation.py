@@ -24,7 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError, ExpressionError, NumericalError, abbreviate
+from ..errors import DimensionError, ExpressionError, NumericalError, abbreviate, shorten
 from ..expressions import Expression, FormulaMatrix, shift_name
 from ..scheduling import SchedulingSpace
 from ..validation import as_matrix, as_rng, as_signal, as_vector, check_positive_definite
@@ -185,7 +185,7 @@ class InnovationLPV:
             at = ", ".join(f"{n} = {float(v)!r}" for n, v in zip(self.space.names, p[back + t], strict=True))
             raise NumericalError(
                 f"the gain K is not finite at t={t} (K[{i + 1},{j + 1}] = {abbreviate(self.K.entries[i][j].text)}, "
-                f"scheduling {abbreviate(at, 80)[1:-1]}): the realization is not defined there"
+                f"scheduling {shorten(at, 80)}): the realization is not defined there"
             )
         x = self.x0 if x0 is None else as_vector(x0, "x0", self.nx)
         X = np.empty((T, self.nx))
