@@ -340,12 +340,24 @@ def test_model_files_are_accepted_or_refused_by_one_line_naming_the_file(scratch
     path = scratch / "m.toml"
     path.write_bytes(raw)
 
+    loaded = []
+
     def load() -> None:
         system = load_system(path)
         for key, model in system.models.items():
             describe_model(key, model)  # what `lpvest systems show` prints
+        loaded.append(system)
 
     within_contract("model files", load, prefix=f"{path}: ", error=ModelFileError, given=raw)
+    if loaded:  # an accepted file: its discrete-time models simulate, or say why not
+        from lpvest.experiments.simulate import simulate_system
+        from lpvest.systems import LTVInputOutput, LTVStateSpace
+
+        system = loaded[0]
+        for key, model in system.models.items():
+            if not isinstance(model, LTVInputOutput | LTVStateSpace):  # (an ODE solve: not a second's work)
+                within_contract("simulations of them", lambda k=key: simulate_system(system, k, steps=8),
+                                prefix="", given=raw)
 
 
 COSIM_SEEDS = {p.name: p.read_text() for p in sorted((ROOT / "examples").glob("*.toml"))}
