@@ -16,6 +16,7 @@ HYPOTHESIS_PROFILE=explore searches with a random seed instead.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import math
 import os
@@ -363,9 +364,19 @@ def test_model_files_are_accepted_or_refused_by_one_line_naming_the_file(scratch
 COSIM_SEEDS = {p.name: p.read_text() for p in sorted((ROOT / "examples").glob("*.toml"))}
 
 
+@pytest.fixture(scope="module")
+def warm_cosim(fmus, scratch) -> None:
+    """The seed files checked once: each FMU's model description is read (and
+    cached) here, not inside the first generated example's time."""
+    for name, seed in COSIM_SEEDS.items():
+        path = scratch / name
+        path.write_text(seed)
+        assert load_cosim(path, fmu_dir=fmus.out).check()
+
+
 @settings(max_examples=examples(1200))
 @given(raw=mutated_files(COSIM_SEEDS))
-def test_cosimulation_files_are_accepted_or_refused_by_one_line_naming_the_file(fmus, scratch, raw):
+def test_cosimulation_files_are_accepted_or_refused_by_one_line_naming_the_file(fmus, scratch, warm_cosim, raw):
     path = scratch / "run.toml"
     path.write_bytes(raw)
     # load and check against the FMUs' model descriptions (no instance: thousands per run)
@@ -587,9 +598,23 @@ def _api_cases() -> dict[str, tuple[Any, Any]]:
 API_CASES = _api_cases()
 
 
+@pytest.fixture(scope="module")
+def warm_api() -> None:
+    """Each function called once first, with the simplest arguments of its
+    strategy (mostly the valid ones): the imports a function makes on first
+    use, scipy's among them, are not an input's time."""
+    from hypothesis import find
+
+    from lpvest.errors import LpvestError
+
+    for call, arguments in API_CASES.values():
+        with np.errstate(all="ignore"), contextlib.suppress(LpvestError):
+            call(find(arguments, lambda _: True))
+
+
 @settings(max_examples=examples(1500))
 @given(data=st.data())
-def test_public_api_arguments_are_accepted_or_refused_by_a_typed_error(data):
+def test_public_api_arguments_are_accepted_or_refused_by_a_typed_error(warm_api, data):
     name = data.draw(st.sampled_from(sorted(API_CASES)), label="function")
     call, arguments = API_CASES[name]
     args = data.draw(arguments, label="arguments")
