@@ -14,15 +14,19 @@ __version__ = "0.1.0"
 
 from .catalog import example_systems as example_systems
 from .errors import (
+    ArgumentError as ArgumentError,
+    ArgumentTypeError as ArgumentTypeError,
     DimensionError as DimensionError,
     ExpressionError as ExpressionError,
     IdentifiabilityError as IdentifiabilityError,
+    InternalError as InternalError,
     LMIInfeasibleError as LMIInfeasibleError,
     LpvestError as LpvestError,
     ModelFileError as ModelFileError,
     NonFiniteError as NonFiniteError,
     NotPositiveDefiniteError as NotPositiveDefiniteError,
     NumericalError as NumericalError,
+    OutputError as OutputError,
     SchedulingRangeError as SchedulingRangeError,
 )
 from .expressions import Expression as Expression, FormulaMatrix as FormulaMatrix
@@ -118,6 +122,10 @@ from .estimators.truncated import (
 __all__ = [
     "__version__",
     "example_systems",
+    "ArgumentError",
+    "ArgumentTypeError",
+    "InternalError",
+    "OutputError",
     "DimensionError",
     "ExpressionError",
     "IdentifiabilityError",

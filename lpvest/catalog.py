@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import ModelFileError
+from .errors import ModelFileError, abbreviate, shorten
 
 __all__ = ["models_dir", "example_systems", "find_system", "stored_design", "ExampleEntry"]
 
@@ -42,17 +42,28 @@ def example_systems() -> list[ExampleEntry]:
 
 def find_system(source: str | Path) -> Path:
     """The file for ``source``: an existing path, or an example system's name."""
+    if not isinstance(source, str | Path):
+        raise ModelFileError(f"expected a model file or an example name, found {type(source).__name__}")
     path = Path(source)
-    if path.suffix == ".toml" or path.exists():
-        if not path.is_file():
-            raise ModelFileError(f"{path}: no such model file")
+    if path.suffix == ".toml" or _exists(path):
+        if not _exists(path) or path.is_dir():
+            raise ModelFileError(f"{shorten(str(path), 120)}: no such model file")
         return path
     entries = example_systems()
     for e in entries:
         if e.name == str(source):
             return e.path
     names = ", ".join(e.name for e in entries)
-    raise ModelFileError(f"no example system {str(source)!r} (examples: {names}; or give a .toml file)")
+    raise ModelFileError(f"no example system {abbreviate(str(source), 30)} (examples: {names}; or give a .toml file)")
+
+
+def _exists(path: Path) -> bool:
+    """``path.exists()``, and ``False`` for a name the system cannot look up
+    (too long, a NUL character)."""
+    try:
+        return path.exists()
+    except (OSError, ValueError):
+        return False
 
 
 def stored_design(system_name: str, role: str) -> Path | None:

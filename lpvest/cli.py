@@ -16,7 +16,8 @@
     lpvest validate FMU...                  validate FMUs (fmpy.validation)
 
 Errors in the user's input print one line (``lpvest: error: ...``) and exit
-with status 2; no traceback.
+with status 2; no traceback (``lpvest --debug ...`` shows it). Every
+subcommand has a description and examples in ``lpvest COMMAND --help``.
 """
 
 from __future__ import annotations
@@ -25,12 +26,14 @@ import argparse
 import dataclasses
 import sys
 import time
+import zipfile
 from collections.abc import Sequence
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
-from .errors import LpvestError
+from .errors import ArgumentError, LpvestError, OutputError, abbreviate, shorten
 
 __all__ = ["main", "describe_model"]
 
@@ -39,13 +42,51 @@ def _parse_params(items: Sequence[str] | None) -> dict[str, float]:
     out = {}
     for item in items or ():
         name, sep, value = item.partition("=")
-        if not sep:
-            raise LpvestError(f"--param {item!r}: expected NAME=VALUE")
+        if not sep or not name.strip():
+            raise ArgumentError(f"--param {abbreviate(item)}: expected NAME=VALUE")
         try:
             out[name.strip()] = float(value)
         except ValueError:
-            raise LpvestError(f"--param {item!r}: {value!r} is not a number") from None
+            raise ArgumentError(f"--param {abbreviate(item)}: {abbreviate(value, 30)} is not a number") from None
     return out
+
+
+def _out_dir(path: str, option: str = "--out") -> Path:
+    """The output folder, created; one line naming the option if it cannot be."""
+    out = Path(path)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        reason = "it is a file, not a folder" if isinstance(exc, FileExistsError) else exc.strerror or exc
+        raise OutputError(f"{option} {shorten(str(out), 60)}: cannot create the output folder ({reason})"
+                          ) from None
+    return out
+
+
+def _seed(text: str) -> int:
+    """``--seed``: a non-negative integer (numpy's seeds)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, found {abbreviate(text, 30)}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, found {value}")
+    return value
+
+
+def _steps(text: str) -> int:
+    """``--steps``: 2 .. MAX_STEPS samples."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of samples, found {abbreviate(text, 30)}") from None
+    if not 2 <= value <= MAX_STEPS:
+        raise argparse.ArgumentTypeError(f"expected 2 to {MAX_STEPS:,} samples, found {value}")
+    return value
+
+
+#: The most samples ``lpvest simulate`` writes (every one goes into the CSV and the plot).
+MAX_STEPS = 1_000_000
 
 
 def _fmt(m: np.ndarray, indent: str = "      ") -> str:
@@ -154,7 +195,7 @@ def cmd_systems(args: argparse.Namespace) -> int:
     from .catalog import example_systems
     from .modelfile import load_system
 
-    if args.action is None:
+    if not args.words:
         entries = example_systems()
         width = max(len(e.name) for e in entries)
         for e in entries:
@@ -162,9 +203,13 @@ def cmd_systems(args: argparse.Namespace) -> int:
             models = ", ".join(f"{k} ({_model_summary(m)})" for k, m in system.models.items())
             print(f"{e.name:<{width}}  {e.title}  [models: {models}]")
         return 0
-    if args.action != "show" or not args.target:
-        raise LpvestError("usage: lpvest systems [show NAME|FILE.toml]")
-    system = load_system(args.target, parameters=_parse_params(args.param))
+    words = list(args.words)
+    if words[0] == "show":  # `lpvest systems show NAME` and `lpvest systems NAME` are the same
+        words = words[1:]
+    if len(words) != 1:
+        raise ArgumentError("systems: expected one example name or model file, e.g. `lpvest systems show "
+                            "peixoto-ex1` (or nothing, to list the examples)")
+    system = load_system(words[0], parameters=_parse_params(args.param))
     print(f"{system.name}: {system.title}")
     if system.source:
         print(f"  source: {system.source}")
@@ -189,12 +234,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from .experiments.simulate import simulate_system
     from .modelfile import load_system
 
-    if args.steps < 2:
-        raise LpvestError(f"--steps must be at least 2; found {args.steps}")
     system = load_system(args.target, parameters=_parse_params(args.param))
     sim = simulate_system(system, args.model, steps=args.steps, schedule=args.schedule, seed=args.seed)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = _out_dir(args.out)
     stem = f"{system.name}-{sim.model}"
     csv = sim.write_csv(out / f"{stem}.csv")
     png = sim.plot(out / f"{stem}.png")
@@ -220,8 +262,9 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
             print(f"{exp.name:<28} {exp.title}")
         return 0
     if args.name != "all" and args.name not in experiments:
-        raise LpvestError(f"no experiment {args.name!r} (known: {', '.join(experiments) or 'none'})")
-    out = Path(args.out)
+        raise ArgumentError(f"no experiment {abbreviate(args.name, 30)} (known: {', '.join(experiments) or 'none'}; "
+                            "or all, list)")
+    out = _out_dir(args.out)
     fmus = ExperimentFmus(Path(args.fmus) if args.fmus else out / "fmu-cache",
                           progress=lambda msg: print(msg, file=sys.stderr, flush=True))
 
@@ -346,9 +389,8 @@ def cmd_cosim(args: argparse.Namespace) -> int:
         print("note: fmpy's simulate_ssp and libcosim step all components in parallel (Jacobi): each connection "
               "adds a one-step delay where an output feeds through from an input (see lpvest.ssp)")
         return 0
+    out = _out_dir(args.out)
     result = spec.run(progress=None)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     stem = spec.path.stem
     print(result.summary())
     print(f"wrote {result.write_csv(out / f'{stem}.csv')}")
@@ -357,22 +399,108 @@ def cmd_cosim(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_fmu_file(path: Path) -> None:
+    """One line when ``path`` is not an FMU at all (a zip archive with a
+    modelDescription.xml); fmpy's validation judges the rest."""
+    shown = shorten(str(path), 80)
+    try:
+        if not path.is_file():
+            raise ArgumentError(f"{shown}: no such file" if not path.exists() else f"{shown}: not a file")
+        with zipfile.ZipFile(path) as z:
+            if "modelDescription.xml" not in z.namelist():
+                raise ArgumentError(f"{shown}: not an FMU (the archive has no modelDescription.xml)")
+    except (zipfile.BadZipFile, EOFError):
+        raise ArgumentError(f"{shown}: not an FMU (not a zip archive)") from None
+    except OSError as exc:
+        raise ArgumentError(f"{shown}: cannot be read ({exc.strerror or exc})") from None
+
+
 def cmd_validate(args: argparse.Namespace) -> int:
     from .fmi.build import format_table, validate_fmus
 
+    for name in args.fmus:
+        _check_fmu_file(Path(name))
     results = validate_fmus(args.fmus)
     print(format_table(results))
     return 0 if all(r.ok for r in results) else 1
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line (and status 2)."""
+
+    def error(self, message: str) -> NoReturn:
+        text = " ".join(message.split())
+        self.exit(2, f"{self.prog}: error: {shorten(text, 240)} (see {self.prog} --help)\n")
+
+
+#: Description and examples of each subcommand, for ``lpvest COMMAND --help``
+#: (a subcommand that sets its own in ``add_parser`` keeps them).
+HELP: dict[str, tuple[str, str]] = {
+    "systems": (
+        "List the example systems (models/*.toml), or show one system in detail: its models, dimensions, "
+        "matrices and scheduling map. A model file of your own is checked the same way.",
+        "lpvest systems\n  lpvest systems show peixoto-ex2 --param rho=10\n  lpvest systems peixoto-ex1\n"
+        "  lpvest systems show my_plant.toml --model plant"),
+    "simulate": (
+        "Simulate one model of an example system or a model file with default signals (a scheduling sinusoid "
+        "spanning 90 %% of the box, the model's own noise, seeded) and write a CSV, a plot and a summary.",
+        "lpvest simulate cox-toth-ex1 --model io --schedule \"0.5 + 0.3*sin(k)\" --out out/sim\n"
+        "  lpvest simulate peixoto-ex2 --param rho=10 --steps 200\n"
+        "  lpvest simulate my_plant.toml --schedule \"sin(0.1*k)\" --schedule \"0.5\"   # two scheduling components"),
+    "reproduce": (
+        "Reproduce a paper example through FMUs (built into OUT/fmu-cache or reused): tables in the terminal, "
+        "figures and results.json in OUT/NAME; 'all' runs every example and writes OUT/report.md.",
+        "lpvest reproduce list\n  lpvest reproduce peixoto-fig1 --out out\n  lpvest reproduce all --out out --quick"),
+    "regress": (
+        "Co-simulate the FMUs of each paper example briefly and compare with the stored regression references "
+        "(tests/data/reference); --update rewrites them after a deliberate change.",
+        "lpvest regress\n  lpvest regress peixoto-fig1\n  lpvest regress --update"),
+    "build": (
+        "Build the FMUs of every example system (or of the given model files) and validate them with fmpy. "
+        "An H-infinity filter FMU carries a design: the one given with --design, the one stored with an example "
+        "system (models/designs), or one solved at build time.",
+        "lpvest build\n  lpvest build --out my-fmus --model my_plant.toml\n"
+        "  lpvest build --model my_plant.toml --kinds Plant,HinfPD --design pd.json"),
+    "design": (
+        "Design an H-infinity filter by LMIs (Peixoto et al. Theorem 1, or Corollary 1 with --kind robust) and "
+        "write it as JSON, for `lpvest build --design`; the best epsilon unless --epsilon is given.",
+        "lpvest design peixoto-ex1 --out pd.json\n"
+        "  lpvest design peixoto-ex2 --param rho=11 --kind robust --epsilon 150 --out robust.json"),
+    "cosim": (
+        "Co-simulate FMUs described in a TOML file (format: lpvest/cosimfile.py, examples/*.toml): CSV, plot "
+        "and summary; or write the system as an SSP file.",
+        "lpvest cosim examples/peixoto_ex1_hinf.toml --out out/cosim\n"
+        "  lpvest cosim examples/cox_toth_kalman.toml --fmus my-fmus/\n"
+        "  lpvest cosim examples/peixoto_ex1_hinf.toml --ssp system.ssp"),
+    "validate": (
+        "Validate FMUs with fmpy.validation; the exit status is 1 if any FMU has a problem.",
+        "lpvest validate fmu-build/*.fmu"),
+}
+
+
+def _describe_subcommands(sub: argparse._SubParsersAction) -> None:
+    """Description, examples and ``--debug`` for every subcommand."""
+    for name, p in sub.choices.items():
+        description, examples = HELP.get(name, (None, None))
+        p.formatter_class = argparse.RawDescriptionHelpFormatter
+        if p.description is None and description is not None:
+            p.description = description
+        if p.epilog is None and examples is not None:
+            p.epilog = "examples:\n  " + examples
+        p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                       help="show the traceback of an error")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="lpvest", description="Estimation for LPV and LTV systems.")
+    parser = _Parser(prog="lpvest", description="Estimation for LPV and LTV systems.",
+                     epilog="lpvest COMMAND --help describes each command, with examples.")
     parser.add_argument("--version", action="version", version=f"lpvest {_version()}")
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser.add_argument("--debug", action="store_true", help="show the traceback of an error")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser("systems", help="list the example systems, or show one")
-    p.add_argument("action", nargs="?", choices=["show"], help="show one system in detail")
-    p.add_argument("target", nargs="?", help="example name or model file (.toml)")
+    p.add_argument("words", nargs="*", metavar="[show] NAME|FILE.toml",
+                   help="an example name or a model file to show in detail (default: list the examples)")
     p.add_argument("--model", help="show only this model of the system")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="override a model parameter")
     p.set_defaults(func=cmd_systems)
@@ -380,10 +508,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("simulate", help="simulate one model and write CSV and a plot")
     p.add_argument("target", help="example name or model file (.toml)")
     p.add_argument("--model", help="model of the system (default: the file's default)")
-    p.add_argument("--steps", type=int, default=100, help="number of samples (default 100)")
-    p.add_argument("--schedule", nargs="+", metavar="FORMULA",
-                   help="scheduling per component as formulas of the step k, e.g. '0.5*sin(0.25*k)'")
-    p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    p.add_argument("--steps", type=_steps, default=100, help="number of samples (default 100)")
+    p.add_argument("--schedule", action="append", metavar="FORMULA",
+                   help="scheduling as a formula of the step k, e.g. '0.5*sin(0.25*k)'; once per scheduling "
+                        "component (default: a sinusoid spanning 90%% of the box)")
+    p.add_argument("--seed", type=_seed, default=0, help="noise seed, a non-negative integer (default 0)")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="override a model parameter")
     p.add_argument("--out", default="out/simulate", help="output folder (default out/simulate)")
     p.set_defaults(func=cmd_simulate)
@@ -442,6 +571,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("validate", help="validate FMUs with fmpy (exit status 1 on any problem)")
     p.add_argument("fmus", nargs="+", metavar="FMU", help="FMU files")
     p.set_defaults(func=cmd_validate)
+    _describe_subcommands(sub)
     return parser
 
 
@@ -454,16 +584,33 @@ def _version() -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    debug = getattr(args, "debug", False)
     try:
         return int(args.func(args))
-    except LpvestError as exc:
-        print(f"lpvest: error: {exc}", file=sys.stderr)
-        return 2
     except BrokenPipeError:  # e.g. `lpvest systems show X | head`: the reader left
         import os
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except (LpvestError, OSError) as exc:  # the user's input, or a file the system refuses
+        if debug:
+            import traceback
+
+            traceback.print_exc()
+        print(f"lpvest: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("lpvest: interrupted", file=sys.stderr)
+        return 130
+
+
+def _one_line(exc: BaseException) -> str:
+    """The error as one line: an lpvest error's own message; for a system
+    error, its reason and the file."""
+    if isinstance(exc, OSError) and not isinstance(exc, LpvestError):
+        where = f": {shorten(str(exc.filename), 80)}" if exc.filename else ""
+        return f"{exc.strerror or type(exc).__name__}{where}"
+    return " ".join(str(exc).split())
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import LpvestError
+from .errors import LpvestError, abbreviate, shorten
 
 __all__ = [
     "Component",
@@ -118,7 +118,7 @@ class Connection:
             return cls(*spec)
         parts = [s.strip() for s in str(spec).split("->")]
         if len(parts) != 2 or not all(parts):
-            raise CoSimulationError(f"connection {spec!r}: expected 'comp.output -> comp.input'")
+            raise CoSimulationError(f"connection {abbreviate(spec)}: expected 'comp.output -> comp.input'")
         return cls(parts[0], parts[1])
 
 
@@ -151,34 +151,68 @@ class _Unit:
 
 
 def _log_text(unit: _Unit) -> str:
-    """The component's last messages of status warning or worse (else its last
-    message), for an error."""
+    """The component's last message of status warning or worse (else its last
+    message), on one line and shortened, for an error."""
     bad = [m for m in unit.log if not m.startswith("[OK]")]
-    return "; ".join((bad or unit.log)[-3:]) or "no log message"
+    last = (bad or unit.log)[-1:]
+    text = " ".join(" ".join(last).split())
+    return (text if len(text) <= 200 else text[:197] + "...") or "no log message"
+
+
+#: The range of an FMI 2.0 Integer (fmi2Integer is a 32-bit int).
+_INT_RANGE = (-(2**31), 2**31 - 1)
 
 
 def _convert(value: Any, fmi_type: str, what: str, where: str) -> Any:
     """A start value as the Python type of its FMI type; a clear error otherwise."""
     kind = type(value).__name__
+    shown = abbreviate(value, 30)
     if fmi_type == "Real":
         if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
-            raise CoSimulationError(f"{what}: expected a number, found {kind} {value!r}", where=where)
-        return float(value)
+            raise CoSimulationError(f"{what}: expected a number, found {kind} {shown}", where=where)
+        number = float(value)
+        if not np.isfinite(number):
+            raise CoSimulationError(f"{what}: expected a finite number, found {number}", where=where)
+        return number
     if fmi_type == "Integer":
         if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating) \
                 or not np.isfinite(value) or float(value) != int(value):
-            raise CoSimulationError(f"{what}: expected an integer, found {kind} {value!r}", where=where)
-        if not -(2**31) <= int(value) <= 2**31 - 1:  # an FMI Integer is 32-bit: no silent wrap
-            raise CoSimulationError(f"{what}: {int(value)} is outside the 32-bit range of an FMI Integer "
-                                    f"[-2147483648, 2147483647]", where=where)
+            raise CoSimulationError(f"{what}: expected an integer, found {kind} {shown}", where=where)
+        if not _INT_RANGE[0] <= int(value) <= _INT_RANGE[1]:
+            raise CoSimulationError(f"{what}: {shown} is outside the range of an FMI Integer "
+                                    f"[{_INT_RANGE[0]}, {_INT_RANGE[1]}]", where=where)
         return int(value)
     if fmi_type == "Boolean":
         if not isinstance(value, bool | np.bool_):
-            raise CoSimulationError(f"{what}: expected true or false, found {kind} {value!r}", where=where)
+            raise CoSimulationError(f"{what}: expected true or false, found {kind} {shown}", where=where)
         return bool(value)
     if not isinstance(value, str):
-        raise CoSimulationError(f"{what}: expected a string, found {kind} {value!r}", where=where)
+        raise CoSimulationError(f"{what}: expected a string, found {kind} {shown}", where=where)
+    if "\x00" in value:
+        raise CoSimulationError(f"{what}: a string may not hold a NUL character", where=where)
     return value
+
+
+_DESCRIPTIONS: dict[tuple[str, int, int], Any] = {}
+
+
+def _model_description(path: Path, component: str, where: str) -> Any:
+    """fmpy's model description of the FMU at ``path`` (read once per file
+    version: cached by path, size and modification time)."""
+    from fmpy import read_model_description
+
+    stat = path.stat()
+    key = (str(path.resolve()), stat.st_size, stat.st_mtime_ns)
+    if key not in _DESCRIPTIONS:
+        try:
+            md = read_model_description(str(path))
+        except Exception as exc:  # fmpy raises plain exceptions for bad files
+            text = shorten(" ".join(str(exc).split()), 80)
+            raise CoSimulationError(f"component {component}: {path} is not a valid FMU: {text}", where=where) from exc
+        if len(_DESCRIPTIONS) >= 64:
+            _DESCRIPTIONS.pop(next(iter(_DESCRIPTIONS)))
+        _DESCRIPTIONS[key] = md
+    return _DESCRIPTIONS[key]
 
 
 def _expand(names: Iterable[str], base: str) -> list[str]:
@@ -225,47 +259,78 @@ class CoSimulation:
     ) -> None:
         if not step_size > 0:
             raise CoSimulationError(f"step_size must be positive; found {step_size}", where="step_size")
-        names = [c.name for c in components]
-        dup = {n for n in names if names.count(n) > 1}
-        if dup:
-            raise CoSimulationError(f"component names are not unique: {sorted(dup)}", where="components")
-        for n in names:
-            if not n.isidentifier():
-                raise CoSimulationError(f"component name {n!r} is not an identifier", where=f"components.{n}")
         self.step_size = float(step_size)
         self.start_time = float(start_time)
         self._tmp = Path(tempfile.mkdtemp(prefix="lpvest-cosim-"))
         self._units: list[_Unit] = []
         self._closed = False
         try:
-            for i, c in enumerate(components):
-                self._units.append(self._load(i, c))
-            self._links = self._connect(connections)
-            self._record = self._record_list(record)
-            self._schedule = self._order()
+            self._setup(components, connections, record)
             for unit in self._units:
-                self._check_parameters(unit)
+                self._open(unit)
             self._instantiate()
         except BaseException:
             self.close()
             raise
 
-    # -- set-up ---------------------------------------------------------------
-    def _load(self, index: int, spec: Component) -> _Unit:
-        from fmpy import extract, read_model_description
-        from fmpy.fmi2 import FMU2Slave
+    @classmethod
+    def check(
+        cls,
+        components: Sequence[Component],
+        connections: Sequence[str | tuple[str, str] | Connection] = (),
+        *,
+        step_size: float,
+        start_time: float = 0.0,
+        record: Sequence[str] | None = None,
+    ) -> CoSimulation:
+        """Every check the constructor makes (FMU files, names, connections,
+        types, algebraic loops, parameter values against each FMU's model
+        description) without instantiating an FMU. Raises
+        :class:`CoSimulationError` as the constructor would; returns the
+        checked set-up for inspection (:attr:`execution_order`,
+        :attr:`recorded`), which cannot :meth:`run`."""
+        if not step_size > 0:
+            raise CoSimulationError(f"step_size must be positive; found {step_size}", where="step_size")
+        sim = cls.__new__(cls)
+        sim._closed = True  # nothing to free
+        sim._units = []
+        sim.step_size, sim.start_time = float(step_size), float(start_time)
+        sim._setup(components, connections, record)
+        return sim
 
+    def _setup(
+        self,
+        components: Sequence[Component],
+        connections: Sequence[str | tuple[str, str] | Connection],
+        record: Sequence[str] | None,
+    ) -> None:
+        """Read the model descriptions and check the set-up (no instance yet)."""
+        names = [c.name for c in components]
+        dup = {n for n in names if names.count(n) > 1}
+        if dup:
+            raise CoSimulationError(f"component names are not unique: {abbreviate(sorted(dup))}", where="components")
+        for n in names:
+            if not isinstance(n, str) or not n.isidentifier():
+                raise CoSimulationError(f"component name {abbreviate(n, 30)} is not an identifier",
+                                        where=f"components.{abbreviate(n, 30)}")
+        for i, c in enumerate(components):
+            self._units.append(self._describe(i, c))
+        self._links = self._connect(connections)
+        self._record = self._record_list(record)
+        self._schedule = self._order()
+        for unit in self._units:
+            self._check_parameters(unit)
+
+    # -- set-up ---------------------------------------------------------------
+    def _describe(self, index: int, spec: Component) -> _Unit:
+        """What the model description of the component's FMU says."""
         path = Path(spec.fmu)
         where = f"components.{spec.name}.fmu"
         if not path.is_file():
             raise CoSimulationError(f"component {spec.name}: FMU file {path} does not exist", where=where)
-        try:
-            md = read_model_description(str(path))
-        except Exception as exc:  # fmpy raises plain exceptions for bad files
-            raise CoSimulationError(f"component {spec.name}: {path} is not a valid FMU: {exc}", where=where) from exc
+        md = _model_description(path, spec.name, where)
         if md.fmiVersion != "2.0" or md.coSimulation is None:
             raise CoSimulationError(f"component {spec.name}: {path} is not an FMI 2.0 co-simulation FMU", where=where)
-        unzip = extract(str(path), unzipdir=str(self._tmp / spec.name))
         variables: dict[str, _Var] = {}
         for v in md.modelVariables:
             if v.type in _TYPES or v.type == "String":
@@ -281,26 +346,40 @@ class CoSimulation:
                 depends[o] = {d.name for d in listed[o].dependencies if d.causality == "input"}
             else:
                 depends[o] = set(inputs)  # FMI 2.0: no list = depends on all
-        fmu = FMU2Slave(
-            guid=md.guid,
-            unzipDirectory=unzip,
-            modelIdentifier=md.coSimulation.modelIdentifier,
-            instanceName=spec.name,
-        )
-        return _Unit(spec, md, fmu, variables, inputs, outputs, depends, [])
+        return _Unit(spec, md, None, variables, inputs, outputs, depends, [])
+
+    def _open(self, unit: _Unit) -> None:
+        """Unpack the component's FMU and load its binary."""
+        from fmpy import extract
+        from fmpy.fmi2 import FMU2Slave
+
+        spec, md = unit.spec, unit.md
+        try:
+            unzip = extract(str(spec.fmu), unzipdir=str(self._tmp / spec.name))
+            unit.fmu = FMU2Slave(
+                guid=md.guid,
+                unzipDirectory=unzip,
+                modelIdentifier=md.coSimulation.modelIdentifier,
+                instanceName=spec.name,
+            )
+        except Exception as exc:  # fmpy raises plain exceptions for a missing binary, a bad archive
+            text = shorten(" ".join(str(exc).split()), 80)
+            raise CoSimulationError(f"component {spec.name}: {spec.fmu} cannot be loaded: {text}",
+                                    where=f"components.{spec.name}.fmu") from exc
 
     def _var(self, qualified: str, what: str, where: str = "") -> list[_Var]:
         comp, sep, name = qualified.partition(".")
         if not sep:
-            raise CoSimulationError(f"{what} {qualified!r}: expected 'component.variable'", where=where)
+            raise CoSimulationError(f"{what} {abbreviate(qualified)}: expected 'component.variable'", where=where)
         unit = next((u for u in self._units if u.spec.name == comp), None)
         if unit is None:
             known = ", ".join(u.spec.name for u in self._units)
-            raise CoSimulationError(f"{what} {qualified!r}: no component {comp!r} (components: {known})",
-                                    where=where)
+            raise CoSimulationError(f"{what} {abbreviate(qualified)}: no component {abbreviate(comp, 24)} "
+                                    f"(components: {shorten(known, 60)})", where=where)
         elems = _expand(unit.variables, name)
         if not elems:
-            raise CoSimulationError(f"{what} {qualified!r}: {comp} has no variable {name!r}", where=where)
+            raise CoSimulationError(f"{what} {abbreviate(qualified)}: {comp} has no variable {abbreviate(name, 24)}",
+                                    where=where)
         if len(elems) == 1 and elems[0] == name and unit.variables[name].type not in _TYPES:
             # a String variable and a vector of the same base name (the observer's
             # parameter a0 and its output a0[1]): the numeric vector is meant
@@ -421,7 +500,7 @@ class CoSimulation:
             numeric = [v for v in found if v.type in _TYPES]
             if not numeric:
                 raise CoSimulationError(
-                    f"recorded variable {r!r} is a {found[0].type}; only Real, Integer and Boolean "
+                    f"recorded variable {abbreviate(r)} is a {found[0].type}; only Real, Integer and Boolean "
                     "variables can be recorded", where=f"record[{i + 1}]")
             for v in numeric:
                 if (v.comp, v.name) not in seen:
@@ -437,7 +516,7 @@ class CoSimulation:
             where = f"components.{name}.parameters.{par}"
             elems = _expand(unit.variables, par)
             if not elems:
-                raise CoSimulationError(f"component {name}: no variable {par!r} to set", where=where)
+                raise CoSimulationError(f"component {name}: no variable {abbreviate(par, 30)} to set", where=where)
             items = value if isinstance(value, list | tuple | np.ndarray) else [value]
             flat = np.asarray(items, dtype=object).ravel().tolist()
             if len(flat) != len(elems):
@@ -495,14 +574,16 @@ class CoSimulation:
                 raise
             at = "" if t is None else f" at t = {t:g}"
             log = _log_text(unit)
-            raise CoSimulationError(f"component {unit.spec.name}: {what} failed{at}: {exc} ({log})",
+            raise CoSimulationError(f"component {unit.spec.name}: {what} failed{at}: "
+                                    f"{shorten(' '.join(str(exc).split()), 60)} ({log})",
                                     where=f"components.{unit.spec.name}" if where is None else where) from exc
 
     def _set_start_values(self, unit: _Unit) -> None:
         setters = {"Real": unit.fmu.setReal, "Integer": unit.fmu.setInteger,
                    "Boolean": unit.fmu.setBoolean, "String": unit.fmu.setString}
         for v, x, par in unit.start_values:
-            self._call(unit, f"setting {v.name} = {x!r}", lambda s=setters[v.type], r=v.vr, x=x: s([r], [x]),
+            self._call(unit, f"setting {v.name} = {abbreviate(x, 30)}",
+                       lambda s=setters[v.type], r=v.vr, x=x: s([r], [x]),
                        where=f"components.{unit.spec.name}.parameters.{par}")
 
     def run(

@@ -39,7 +39,9 @@ Examples
 
 from __future__ import annotations
 
+import datetime
 import math
+import re
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -49,7 +51,7 @@ from typing import Any
 import numpy as np
 
 from .cosim import Component, Connection, CoSimulation, CoSimulationError
-from .errors import ModelFileError
+from .errors import ModelFileError, abbreviate, shorten
 from .modelfile import read_toml
 from .plotting import save_figure
 
@@ -58,6 +60,34 @@ __all__ = ["CoSimFile", "CoSimResult", "load_cosim", "DEFAULT_FMU_DIR"]
 #: Where FMUs named without a path are looked up when neither the file nor the
 #: caller says (the default output folder of ``lpvest build``).
 DEFAULT_FMU_DIR = "fmu-build"
+
+#: The most steps a file may ask for: the master keeps every recorded value in
+#: memory (8 bytes per variable and step).
+MAX_STEPS = 100_000_000
+
+_PLAIN_KEY = re.compile(r"[A-Za-z0-9_-]{1,40}")
+
+
+def _key(key: object) -> str:
+    """A TOML key as it appears in a field path: bare when it is a plain short
+    name, else quoted (and shortened)."""
+    return key if isinstance(key, str) and _PLAIN_KEY.fullmatch(key) else abbreviate(key, 30)
+
+
+def _path_text(path: Path, limit: int = 120) -> str:
+    """A path for a message: as is, or shortened when longer than ``limit``."""
+    text = str(path)
+    return text if len(text) <= limit else abbreviate(text, limit)
+
+
+def _is_file(path: Path) -> bool:
+    """``path.is_file()``, and ``False`` for a name the system cannot even look
+    up (too long, a NUL character)."""
+    try:
+        return path.is_file()
+    except (OSError, ValueError):
+        return False
+
 
 _TOP_KEYS = {"title", "description", "step_size", "steps", "stop_time", "start_time", "fmu_dir", "connections",
              "record", "plots", "components"}
@@ -70,7 +100,9 @@ def _kind(value: Any) -> str:
     if isinstance(value, int | float):
         return f"a number ({value!r})"
     if isinstance(value, str):
-        return f"a string ({value!r})"
+        return f"a string ({abbreviate(value, 30)})"
+    if isinstance(value, datetime.date | datetime.time):
+        return "a date/time"
     return {dict: "a table", list: "a list"}.get(type(value), type(value).__name__)
 
 
@@ -114,15 +146,31 @@ class CoSimFile:
         except CoSimulationError as exc:
             raise self._reword(exc) from exc
         try:
-            recorded = set(sim.recorded)
-            for i, panel in enumerate(self.plots):
-                for name in panel:
-                    if not _expand_recorded(name, recorded):
-                        raise self.error(f"plots[{i + 1}]", f"{name!r} is not recorded (see record)")
+            self._check_plots(sim)
         except BaseException:
             sim.close()
             raise
         return sim
+
+    def _check_plots(self, sim: CoSimulation) -> None:
+        recorded = set(sim.recorded)
+        for i, panel in enumerate(self.plots):
+            for name in panel:
+                if not _expand_recorded(name, recorded):
+                    raise self.error(f"plots[{i + 1}]", f"{abbreviate(name)} is not recorded (see record)")
+
+    def check(self) -> list[str]:
+        """Check this file against the FMUs' model descriptions (variables,
+        connections, types, parameter values, plots) without instantiating an
+        FMU: :meth:`run` then fails only if an FMU rejects a value at run time.
+        Returns the execution order."""
+        try:
+            sim = CoSimulation.check(self.components, self.connections, step_size=self.step_size,
+                                     start_time=self.start_time, record=self.record)
+        except CoSimulationError as exc:
+            raise self._reword(exc) from exc
+        self._check_plots(sim)
+        return sim.execution_order
 
     def run(self, *, progress: bool | None = None) -> CoSimResult:
         """Co-simulate: ``n_steps`` steps from ``start_time``."""
@@ -275,9 +323,10 @@ class _Reader:
     def variable(self, text: str, where: str, components: Sequence[str]) -> None:
         comp, sep, name = text.partition(".")
         if not sep or not comp or not name:
-            raise self.error(where, f"expected 'component.variable', found {text!r}")
+            raise self.error(where, f"expected 'component.variable', found {abbreviate(text)}")
         if comp not in components:
-            raise self.error(where, f"no component {comp!r} in {text!r} (components: {', '.join(components)})")
+            raise self.error(where, f"no component {abbreviate(comp, 24)} in {abbreviate(text)} "
+                                    f"(components: {shorten(', '.join(components), 60)})")
 
 
 def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimFile:
@@ -303,7 +352,7 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
     r = _Reader(path)
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
-        raise r.error(unknown[0], f"unknown key (expected one of: {', '.join(sorted(_TOP_KEYS))})")
+        raise r.error(_key(unknown[0]), f"unknown key (expected one of: {', '.join(sorted(_TOP_KEYS))})")
     title = data.get("title", "")
     if not isinstance(title, str):
         raise r.error("title", f"expected a string, found {_kind(title)}")
@@ -318,13 +367,24 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
         if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
             raise r.error("steps", f"expected a positive integer, found {_kind(steps)}")
         n_steps = int(steps)
+        where_steps = "steps"
     else:
         stop = r.number(data, "stop_time")
         ratio = (stop - t0) / h
+        if not math.isfinite(ratio):
+            raise r.error("stop_time", f"expected start_time + a positive whole number of steps of {h:g}, "
+                          f"found {stop!r} (more steps than a float can count)")
         n_steps = int(round(ratio))
         if n_steps < 1 or abs(ratio - n_steps) > 1e-9 * max(1.0, abs(ratio)):
             raise r.error("stop_time", f"expected start_time + a positive whole number of steps of {h:g}, "
                           f"found {stop!r} ({ratio:.6g} steps)")
+        where_steps = "stop_time"
+    if n_steps > MAX_STEPS:
+        raise r.error(where_steps,
+                      f"{float(n_steps):.6g} steps: at most {MAX_STEPS:,} (the results are kept in memory)")
+    if not math.isfinite(t0 + n_steps * h):
+        raise r.error(where_steps, f"the stop time start_time + steps * step_size = {t0 + n_steps * h} "
+                                   "is not a finite number")
 
     # components
     comps_raw = data.get("components")
@@ -342,34 +402,37 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
         folder = Path(DEFAULT_FMU_DIR)
     components = []
     for name, spec in comps_raw.items():
-        where = f"components.{name}"
+        where = f"components.{_key(name)}"
         if not name.isidentifier():
-            raise r.error(where, f"expected a component name that is an identifier, found {name!r}")
+            raise r.error(where, f"expected a component name that is an identifier, found {abbreviate(name, 30)}")
         if not isinstance(spec, dict):
             raise r.error(where, f"expected a table, found {_kind(spec)}")
         bad = sorted(set(spec) - _COMPONENT_KEYS)
         if bad:
-            raise r.error(f"{where}.{bad[0]}", f"unknown key (expected one of: {', '.join(sorted(_COMPONENT_KEYS))})")
+            raise r.error(f"{where}.{_key(bad[0])}",
+                          f"unknown key (expected one of: {', '.join(sorted(_COMPONENT_KEYS))})")
         fmu = spec.get("fmu")
         if not isinstance(fmu, str) or not fmu:
             raise r.error(f"{where}.fmu", "missing (expected a built FMU's name or a path to an .fmu file)"
                           if fmu is None else f"expected a string, found {_kind(fmu)}")
         if fmu.lower().endswith(".fmu") or "/" in fmu or "\\" in fmu:
             fmu_path = path.parent / fmu
-            if not fmu_path.is_file():
-                raise r.error(f"{where}.fmu", f"expected an FMU file, found no file {fmu_path}")
+            if not _is_file(fmu_path):
+                raise r.error(f"{where}.fmu", f"expected an FMU file, found no file {_path_text(fmu_path)}")
         else:
             fmu_path = folder / f"{fmu}.fmu"
-            if not fmu_path.is_file():
-                raise r.error(f"{where}.fmu", f"no FMU {fmu}.fmu in {folder} (build the FMUs with "
-                              f"`lpvest build --out {folder}`, or point --fmus or fmu_dir at their folder)")
+            if not _is_file(fmu_path):
+                shown = _path_text(folder, 80)
+                name_shown = f"{fmu}.fmu" if len(fmu) <= 40 else abbreviate(f"{fmu}.fmu", 40)
+                raise r.error(f"{where}.fmu", f"no FMU {name_shown} in {shown} (build the FMUs "
+                              f"with `lpvest build --out {shown}`, or point --fmus or fmu_dir at their folder)")
         params = spec.get("parameters", {})
         if not isinstance(params, dict):
             raise r.error(f"{where}.parameters", f"expected a table of start values, found {_kind(params)}")
         for pname, value in params.items():
             if isinstance(value, dict) or (isinstance(value, list) and any(isinstance(v, dict | list)
                                                                            for v in value)):
-                raise r.error(f"{where}.parameters.{pname}",
+                raise r.error(f"{where}.parameters.{_key(pname)}",
                               f"expected a number, string, boolean or a list of them, found {_kind(value)}")
         feed = spec.get("feedthrough")
         if feed is not None and not isinstance(feed, bool):
@@ -385,7 +448,7 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
             try:
                 c = Connection.parse(text)
             except CoSimulationError:
-                raise r.error(where, f"expected 'comp.output -> comp.input', found {text!r}") from None
+                raise r.error(where, f"expected 'comp.output -> comp.input', found {abbreviate(text)}") from None
             r.variable(c.source, where, names)
             r.variable(c.target, where, names)
             connections.append(text)

@@ -21,7 +21,20 @@ __all__ = [
     "NumericalError",
     "LMIInfeasibleError",
     "SamplingError",
+    "ArgumentError",
+    "ArgumentTypeError",
+    "OutputError",
+    "InternalError",
+    "abbreviate",
+    "shorten",
+    "MESSAGE_LIMIT",
 ]
+
+#: The longest message an input error should have (characters): one line a
+#: terminal shows whole. Values quoted in a message are shortened by
+#: :func:`abbreviate` so that a 20,000-character formula is never echoed whole.
+MESSAGE_LIMIT = 300
+
 
 
 class LpvestError(Exception):
@@ -67,13 +80,72 @@ class LMIInfeasibleError(LpvestError, RuntimeError):
     ----------
     status : str
         The solver status string (``problem.status`` in cvxpy).
+    detail : str
+        Every solve tried and why it was rejected (the message shows its start).
     """
 
-    def __init__(self, message: str, *, status: str = "") -> None:
+    def __init__(self, message: str, *, status: str = "", detail: str = "") -> None:
         super().__init__(message)
         self.status = status
+        self.detail = detail
 
 
 class SamplingError(LpvestError, ValueError):
     """Sample times are not strictly increasing or not uniformly spaced where a
     method needs a uniform grid (e.g. the B-spline kernel estimator)."""
+
+
+class ArgumentError(LpvestError, ValueError):
+    """An argument's value is outside what the function accepts, e.g.
+    ``design_hinf(plant, kind="bad")`` or ``margin=-1``."""
+
+
+class ArgumentTypeError(LpvestError, TypeError):
+    """An argument has the wrong type, e.g. a polytopic model given to the
+    Kalman filter, which needs an affine one."""
+
+
+class InternalError(LpvestError, RuntimeError):
+    """A check of lpvest's own consistency failed: a bug in lpvest (please
+    report it), not a problem with the input."""
+
+
+class OutputError(LpvestError, OSError):
+    """An output file or folder cannot be written (the message names it)."""
+
+
+def abbreviate(value: object, limit: int = 40) -> str:
+    """``repr(value)`` for a message, at most about ``limit`` characters: a
+    longer one keeps its start and end and says how long it was, e.g.
+    ``'1+1+1+1+1+1+1+...+1+1' (199,999 characters)``.
+
+    >>> abbreviate("x" * 100, 20)
+    "'xxxxxxx...xx' (100 characters)"
+    >>> abbreviate(0.5)
+    '0.5'
+    """
+    text = value if isinstance(value, str) else None
+    shown = repr(value) if text is None else repr(text)
+    if len(shown) <= limit:
+        return shown
+    if text is not None:
+        keep = max(limit - 10, 8)
+        head, tail = text[: keep * 3 // 4], text[-(keep // 4) :]
+        return f"{head + '...' + tail!r} ({len(text):,} characters)"
+    return shown[: max(limit - 3, 8)] + "..."
+
+
+def shorten(text: str, limit: int = 80) -> str:
+    """``text`` for a message without quotes (a path, a list of names, another
+    error's message), on one line and at most about ``limit`` characters.
+
+    >>> shorten("a, b, c")
+    'a, b, c'
+    >>> shorten("x" * 100, 20)
+    'xxxxxxx...xx (100 characters)'
+    """
+    flat = " ".join(str(text).split())
+    if len(flat) <= limit:
+        return flat
+    keep = max(limit - 10, 8)
+    return f"{flat[: keep * 3 // 4]}...{flat[-(keep // 4):]} ({len(flat):,} characters)"

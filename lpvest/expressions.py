@@ -16,16 +16,28 @@ The derivative, needed by the LTV kernels, is a small symbolic rule set here.
 from __future__ import annotations
 
 import ast
+import copy
 import math
-from collections.abc import Iterable, Mapping
+import warnings
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from .errors import ExpressionError
+from .errors import ExpressionError, abbreviate, shorten
 
-__all__ = ["Expression", "FormulaMatrix", "FormulaVector", "FUNCTIONS", "CONSTANTS", "shift_name"]
+__all__ = [
+    "Expression",
+    "FormulaMatrix",
+    "FormulaVector",
+    "FUNCTIONS",
+    "CONSTANTS",
+    "shift_name",
+    "MAX_FORMULA_LENGTH",
+    "MAX_FORMULA_DEPTH",
+    "MAX_DERIVATIVE_SIZE",
+]
 
 #: Functions a formula may call (numpy ufuncs, so formulas work on arrays).
 FUNCTIONS: dict[str, Any] = {
@@ -44,6 +56,15 @@ FUNCTIONS: dict[str, Any] = {
 #: Named constants a formula may use.
 CONSTANTS: dict[str, float] = {"pi": math.pi, "e": math.e}
 
+#: The longest formula accepted (characters). Model formulas are a line; the
+#: bound keeps parsing, differentiating and compiling a formula far below a
+#: second, whatever the text.
+MAX_FORMULA_LENGTH = 2000
+#: The deepest nesting of operations accepted (``1+1+...+1`` with 100 terms, or
+#: 100 nested calls). Python's parser and compiler recurse on the syntax tree;
+#: the derivative roughly doubles the depth and must still compile.
+MAX_FORMULA_DEPTH = 100
+
 _BINOPS = (ast.Add, ast.Sub, ast.Mult, ast.Div, ast.Pow)
 # the only globals a formula sees: the whitelisted functions, no builtins
 _GLOBALS: dict[str, Any] = {"__builtins__": {}, **FUNCTIONS}
@@ -61,16 +82,71 @@ def _unshift(var: str) -> tuple[str, int]:
     return name, (-1 if k[0] == "m" else 1) * int(k[1:])
 
 
+def _shown(var: str) -> str:
+    """A variable as the user wrote it: ``shift(p, 1)`` for the internal name of a shifted ``p``."""
+    if var.startswith(_SHIFT_PREFIX):
+        name, k = _unshift(var)
+        return f"shift({name}, {k})"
+    return var
+
+
+def _depth(tree: ast.AST) -> int:
+    """The nesting depth of a syntax tree, without recursion."""
+    deepest = 0
+    stack = [(tree, 1)]
+    while stack:
+        node, d = stack.pop()
+        deepest = max(deepest, d)
+        if d > MAX_FORMULA_DEPTH + 1:
+            break
+        stack.extend((child, d + 1) for child in ast.iter_child_nodes(node))
+    return deepest
+
+
+def _arithmetic_failure(exc: BaseException) -> str:
+    """What went wrong in a floating-point evaluation, in words."""
+    text = str(exc)
+    if "divide by zero encountered in log" in text:
+        return "takes the log of zero"
+    if isinstance(exc, ZeroDivisionError) or "divide by zero" in text:
+        return "divides by zero"
+    if isinstance(exc, OverflowError) or "overflow" in text:
+        return "overflows (its value exceeds the floating-point range, about 1.8e308)"
+    return "is undefined (e.g. the log or square root of a negative number)"
+
+
+def _fold(text: str, node: ast.expr) -> ast.Constant:
+    """The value of an operation on constants, in floating point, as a constant
+    node; a division by zero, an overflow or a non-real result is an error."""
+    code = compile(ast.fix_missing_locations(ast.Expression(node)), "<lpvest formula>", "eval")
+    try:
+        with np.errstate(all="raise"):
+            value = eval(code, _GLOBALS, {})  # noqa: S307 (whitelisted AST of constants)
+    except (ArithmeticError, ValueError) as exc:
+        raise ExpressionError(f"formula {abbreviate(text)} {_arithmetic_failure(exc)}") from None
+    if isinstance(value, complex) or np.iscomplexobj(value):
+        raise ExpressionError(f"formula {abbreviate(text)} is not a real number (a negative number to a "
+                              "fractional power)")
+    value = float(value)
+    if math.isinf(value):
+        raise ExpressionError(f"formula {abbreviate(text)} {_arithmetic_failure(OverflowError())}")
+    if math.isnan(value):
+        raise ExpressionError(f"formula {abbreviate(text)} {_arithmetic_failure(ValueError())}")
+    return ast.copy_location(ast.Constant(value), node)
+
+
 class _Validator(ast.NodeTransformer):
-    """Check a parsed formula against the whitelist; rewrite
-    ``shift(p, k)`` to a plain name and parameters to their values."""
+    """Check a parsed formula against the whitelist; rewrite ``shift(p, k)``
+    to a plain name, parameters to their values, and every number to a float;
+    fold operations on constants (so that ``9**9**9`` is an error at once,
+    never a long computation with Python integers)."""
 
     def __init__(self, text: str, parameters: Mapping[str, float]) -> None:
         self.text = text
         self.parameters = parameters
 
     def fail(self, what: str) -> ExpressionError:
-        return ExpressionError(f"formula {self.text!r}: {what}")
+        return ExpressionError(f"formula {abbreviate(self.text)}: {what}")
 
     def visit_Expression(self, node: ast.Expression) -> ast.AST:
         node.body = self.visit(node.body)
@@ -81,28 +157,44 @@ class _Validator(ast.NodeTransformer):
             raise self.fail(f"operator {type(node.op).__name__} is not allowed")
         node.left = self.visit(node.left)
         node.right = self.visit(node.right)
+        if isinstance(node.left, ast.Constant) and isinstance(node.right, ast.Constant):
+            return _fold(self.text, node)
+        if isinstance(node.op, ast.Div) and isinstance(node.right, ast.Constant) and node.right.value == 0.0:
+            raise ExpressionError(f"formula {abbreviate(self.text)} {_arithmetic_failure(ZeroDivisionError())}")
         return node
 
     def visit_UnaryOp(self, node: ast.UnaryOp) -> ast.AST:
         if not isinstance(node.op, ast.USub | ast.UAdd):
             raise self.fail(f"operator {type(node.op).__name__} is not allowed")
         node.operand = self.visit(node.operand)
+        if isinstance(node.operand, ast.Constant):
+            return _fold(self.text, node)
         return node
 
     def visit_Constant(self, node: ast.Constant) -> ast.AST:
         if isinstance(node.value, bool) or not isinstance(node.value, int | float):
-            raise self.fail(f"constant {node.value!r} is not a number")
-        return node
+            raise self.fail(f"constant {abbreviate(node.value, 24)} is not a number")
+        try:
+            value = float(node.value)
+        except OverflowError:
+            value = math.inf
+        if not math.isfinite(value):
+            raise self.fail(f"the number {abbreviate(node.value, 24)} is not finite in floating point "
+                            "(largest about 1.8e308)")
+        return ast.copy_location(ast.Constant(value), node)
 
     def visit_Name(self, node: ast.Name) -> ast.AST:
         if node.id.startswith("__"):
-            raise self.fail(f"name {node.id!r} is not allowed")
+            raise self.fail(f"name {abbreviate(node.id, 24)} is not allowed")
         if node.id in self.parameters:
-            return ast.copy_location(ast.Constant(float(self.parameters[node.id])), node)
+            value = float(self.parameters[node.id])
+            if not math.isfinite(value):
+                raise self.fail(f"parameter {abbreviate(node.id, 30)} is not finite ({value})")
+            return ast.copy_location(ast.Constant(value), node)
         if node.id in CONSTANTS:
             return ast.copy_location(ast.Constant(CONSTANTS[node.id]), node)
         if node.id in FUNCTIONS:
-            raise self.fail(f"function {node.id!r} used without arguments")
+            raise self.fail(f"function {abbreviate(node.id, 30)} used without arguments")
         return node
 
     def visit_Call(self, node: ast.Call) -> ast.AST:
@@ -110,23 +202,21 @@ class _Validator(ast.NodeTransformer):
             raise self.fail("only calls like sin(x) are allowed")
         fname = node.func.id
         if fname == "shift":
-            ok = (
-                len(node.args) == 2
-                and isinstance(node.args[0], ast.Name)
-                and _int_literal(node.args[1]) is not None
-            )
-            if not ok:
+            k = _int_literal(node.args[1]) if len(node.args) == 2 else None
+            if k is None or not isinstance(node.args[0], ast.Name) or node.args[0].id.startswith("__"):
                 raise self.fail("shift takes a variable and an integer, e.g. shift(p, 1)")
-            k = _int_literal(node.args[1])
-            assert k is not None
+            if abs(k) > 1000:
+                raise self.fail(f"shift by {k} samples: at most 1000 are allowed")
             return ast.copy_location(ast.Name(shift_name(node.args[0].id, k), ast.Load()), node)
         if fname not in FUNCTIONS:
             raise self.fail(
-                f"unknown function {fname!r}; allowed: {', '.join(sorted(FUNCTIONS))}, shift"
+                f"unknown function {abbreviate(fname, 24)}; allowed: {', '.join(sorted(FUNCTIONS))}, shift"
             )
         if len(node.args) != 1:
             raise self.fail(f"{fname} takes one argument")
         node.args = [self.visit(node.args[0])]
+        if isinstance(node.args[0], ast.Constant):
+            return _fold(self.text, node)
         return node
 
     def generic_visit(self, node: ast.AST) -> ast.AST:
@@ -152,6 +242,48 @@ def _free_names(tree: ast.AST) -> frozenset[str]:
         for n in ast.walk(tree)
         if isinstance(n, ast.Name) and n.id not in FUNCTIONS and isinstance(n.ctx, ast.Load)
     )
+
+
+def _real(value: Any) -> Any:
+    """A Python number or integer array as float (numpy scalar or array), so
+    that arithmetic follows IEEE rules: ``1.0 / 0.0`` is ``inf``, not an exception."""
+    if isinstance(value, complex) or np.iscomplexobj(value):
+        return value
+    return np.asarray(value, dtype=float)[()]
+
+
+def _has_complex(result: Any) -> bool:
+    if isinstance(result, tuple):
+        return any(isinstance(r, complex) for r in result)
+    return isinstance(result, complex)
+
+
+def _evaluate(code: Any, values: Mapping[str, Any]) -> Any:
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        try:
+            result = eval(code, _GLOBALS, values)  # noqa: S307 (whitelisted AST)
+        except (ZeroDivisionError, OverflowError):
+            result = None  # Python numbers raise where IEEE arithmetic gives inf: again in numpy
+        if result is None or (_has_complex(result) and not any(
+                isinstance(v, complex) or np.iscomplexobj(v) for v in values.values())):
+            # (a negative Python float to a fractional power is complex; in numpy it is nan)
+            result = eval(code, _GLOBALS, {k: _real(v) for k, v in values.items()})  # noqa: S307
+    return result
+
+
+def _display_tree(tree: ast.AST) -> ast.AST:
+    """A copy of ``tree`` with whole-number constants as integers (``t ** 2``,
+    not ``t ** 2.0``), for display only."""
+
+    class Ints(ast.NodeTransformer):
+        def visit_Constant(self, node: ast.Constant) -> ast.AST:
+            v = node.value
+            shown = ast.Constant(int(abs(v)) if v.is_integer() and abs(v) < 1e15 else abs(v))
+            if math.copysign(1.0, v) < 0:  # a sign ast.unparse would not bracket: "(-1) ** t", not "-1 ** t"
+                return ast.copy_location(ast.UnaryOp(ast.USub(), shown), node)
+            return ast.copy_location(shown, node)
+
+    return Ints().visit(copy.deepcopy(tree))
 
 
 @dataclass(frozen=True, eq=False)
@@ -196,14 +328,37 @@ class Expression:
             Variable names the formula may use; any other name is an error.
         """
         if isinstance(text, bool) or not isinstance(text, str | int | float):
-            raise ExpressionError(f"formula {text!r} is neither text nor a number")
-        src = repr(float(text)) if not isinstance(text, str) else text
+            raise ExpressionError(f"formula {abbreviate(text)} is neither text nor a number")
+        if not isinstance(text, str):
+            try:
+                number = float(text)
+            except OverflowError:
+                number = math.inf
+            if not math.isfinite(number):
+                raise ExpressionError(f"formula value {abbreviate(text, 24)} is not a finite number")
+            src = repr(number)
+        else:
+            src = text
+        if len(src) > MAX_FORMULA_LENGTH:
+            raise ExpressionError(
+                f"formula {abbreviate(src)} is too long: at most {MAX_FORMULA_LENGTH:,} characters"
+            )
         try:
             # '^' is a power (math notation); replaced before parsing so that it
             # binds like '**' (Python's '^' binds looser than '*')
-            tree = ast.parse(src.strip().replace("^", "**"), mode="eval")
+            with warnings.catch_warnings():  # e.g. "invalid decimal literal" for "1e": the error follows
+                warnings.simplefilter("ignore", SyntaxWarning)
+                tree = ast.parse(src.strip().replace("^", "**"), mode="eval")
         except SyntaxError as exc:
-            raise ExpressionError(f"formula {src!r} is not valid: {exc.msg}") from exc
+            raise ExpressionError(f"formula {abbreviate(src)} is not valid: {shorten(exc.msg, 80)}") from None
+        except (ValueError, MemoryError, RecursionError):  # null bytes; nesting beyond the parser's stack
+            raise ExpressionError(
+                f"formula {abbreviate(src)} is not valid: nested deeper than {MAX_FORMULA_DEPTH} levels"
+            ) from None
+        if _depth(tree) > MAX_FORMULA_DEPTH + 1:
+            raise ExpressionError(
+                f"formula {abbreviate(src)} is nested deeper than {MAX_FORMULA_DEPTH} levels"
+            )
         tree = _Validator(src, dict(parameters or {})).visit(tree)
         ast.fix_missing_locations(tree)
         expr = cls._from_tree(src, tree)
@@ -217,7 +372,8 @@ class Expression:
             if unknown:
                 known = ", ".join(sorted(allowed)) or "none"
                 raise ExpressionError(
-                    f"formula {src!r} uses unknown name {unknown[0]!r} (known: {known})"
+                    f"formula {abbreviate(src)} uses unknown name {abbreviate(unknown[0], 24)} "
+                    f"(known: {shorten(known, 60)})"
                 )
         return expr
 
@@ -252,12 +408,12 @@ class Expression:
 
     @property
     def source(self) -> str:
-        """The formula as canonical text (``shift`` restored)."""
-        text = ast.unparse(self.tree)
+        """The formula as canonical text (``shift`` restored; whole numbers
+        without a decimal point)."""
+        text = ast.unparse(_display_tree(self.tree))
         for n in self.names:
             if n.startswith(_SHIFT_PREFIX):
-                name, k = _unshift(n)
-                text = text.replace(n, f"shift({name}, {k})")
+                text = text.replace(n, _shown(n))
         return text
 
     def __str__(self) -> str:
@@ -268,28 +424,40 @@ class Expression:
         return self.evaluate(values)
 
     def evaluate(self, values: Mapping[str, Any]) -> Any:
-        """Evaluate with ``values`` for the free names (arrays broadcast)."""
+        """Evaluate with ``values`` for the free names (arrays broadcast).
+
+        Arithmetic follows IEEE floating point whatever the type of the values
+        (Python numbers or numpy arrays): a division by zero gives ``inf``, an
+        overflow ``inf``, a negative number to a fractional power ``nan``;
+        callers that need finite values check them (:meth:`value` does).
+        """
         missing = self._names - values.keys()
         if missing:
-            n = sorted(missing)[0]
-            shown = f"shift({_unshift(n)[0]}, {_unshift(n)[1]})" if n.startswith(_SHIFT_PREFIX) else n
-            raise ExpressionError(f"formula {self.text!r} needs a value for {shown!r}")
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            return eval(self._code, _GLOBALS, values)  # noqa: S307 (whitelisted AST)
+            shown = _shown(sorted(missing)[0])
+            raise ExpressionError(f"formula {abbreviate(self.text)} needs a value for {shown!r}")
+        return _evaluate(self._code, values)
 
     def value(self) -> float:
-        """The value of a constant formula."""
+        """The value of a constant formula (finite: an error otherwise)."""
         if not self.is_constant:
+            shown = ", ".join(sorted(_shown(n) for n in self.names))
             raise ExpressionError(
-                f"formula {self.text!r} must be a constant here but uses {sorted(self.names)}"
+                f"formula {abbreviate(self.text)} must be a constant here but uses the variable "
+                f"{shorten(shown, 60)}"
             )
-        return float(self.evaluate({}))
+        value = self.tree.body.value if isinstance(self.tree.body, ast.Constant) else self.evaluate({})
+        return float(value)
 
     # -- calculus -------------------------------------------------------------
     def derivative(self, var: str) -> Expression:
         """The symbolic derivative with respect to ``var``."""
-        d = _simplify(_diff(self.tree.body, var))
-        tree = ast.fix_missing_locations(ast.Expression(d))
+        tree = ast.Expression(_diff(self.tree.body, var, {}))
+        if _written_size(tree, MAX_DERIVATIVE_SIZE) > MAX_DERIVATIVE_SIZE:
+            raise ExpressionError(
+                f"formula {abbreviate(self.text)} is too complex to differentiate: its derivative has more than "
+                f"{MAX_DERIVATIVE_SIZE:,} operations"
+            )
+        _locate(tree)
         return Expression._from_tree(f"d/d{var}({self.text})", tree)
 
     def monomial_exponents(self, names: tuple[str, ...]) -> tuple[int, ...] | None:
@@ -321,6 +489,16 @@ class Expression:
 
 
 # -- symbolic differentiation ------------------------------------------------
+#
+# The derivative is built with constructors that fold zeros, ones and constants
+# as they go (no later simplification pass). Subtrees are shared, not copied:
+# ``d(u v) = du v + u dv`` refers to ``u`` and ``v`` themselves, so the
+# derivative of a formula of n operations and depth d has O(n) new nodes and at
+# most O(n d) once written out, which :data:`MAX_DERIVATIVE_SIZE` bounds.
+
+#: The largest derivative (operations, written out) :meth:`Expression.derivative`
+#: builds; formulas within the length and depth limits stay well below it.
+MAX_DERIVATIVE_SIZE = 20_000
 
 
 def _c(v: float) -> ast.Constant:
@@ -331,7 +509,53 @@ def _is_c(node: ast.AST, v: float | None = None) -> bool:
     return isinstance(node, ast.Constant) and (v is None or node.value == v)
 
 
+def _const_op(op: ast.operator, a: float, b: float) -> float:
+    """``a op b`` as the evaluation would compute it: IEEE arithmetic (an
+    overflow is inf, a negative number to a fractional power nan)."""
+    x, y = np.float64(a), np.float64(b)
+    with np.errstate(all="ignore"):
+        if isinstance(op, ast.Add):
+            return float(x + y)
+        if isinstance(op, ast.Sub):
+            return float(x - y)
+        if isinstance(op, ast.Mult):
+            return float(x * y)
+        if isinstance(op, ast.Div):
+            return float(x / y)
+        return float(np.power(x, y))
+
+
 def _bin(left: ast.expr, op: ast.operator, right: ast.expr) -> ast.expr:
+    """``left op right`` with zeros, ones and constants folded."""
+    if _is_c(left) and _is_c(right):
+        return _c(_const_op(op, left.value, right.value))  # type: ignore[attr-defined]
+    if isinstance(op, ast.Add):
+        if _is_c(left, 0.0):
+            return right
+        if _is_c(right, 0.0):
+            return left
+    elif isinstance(op, ast.Sub):
+        if _is_c(right, 0.0):
+            return left
+        if _is_c(left, 0.0):
+            return _neg(right)
+    elif isinstance(op, ast.Mult):
+        if _is_c(left, 0.0) or _is_c(right, 0.0):
+            return _c(0.0)
+        if _is_c(left, 1.0):
+            return right
+        if _is_c(right, 1.0):
+            return left
+    elif isinstance(op, ast.Div):
+        if _is_c(left, 0.0):
+            return _c(0.0)
+        if _is_c(right, 1.0):
+            return left
+    elif isinstance(op, ast.Pow):
+        if _is_c(right, 1.0):
+            return left
+        if _is_c(right, 0.0):
+            return _c(1.0)
     return ast.BinOp(left, op, right)
 
 
@@ -340,20 +564,34 @@ def _call(fname: str, arg: ast.expr) -> ast.expr:
 
 
 def _neg(x: ast.expr) -> ast.expr:
+    if _is_c(x):
+        return _c(-x.value)  # type: ignore[attr-defined]
+    if isinstance(x, ast.UnaryOp) and isinstance(x.op, ast.USub):
+        return x.operand
     return ast.UnaryOp(ast.USub(), x)
 
 
-def _diff(node: ast.expr, var: str) -> ast.expr:
+def _diff(node: ast.expr, var: str, memo: dict[int, ast.expr]) -> ast.expr:
+    """d node / d var; ``memo`` holds the derivative of every shared subtree once."""
+    key = id(node)
+    if key in memo:
+        return memo[key]
+    out = _diff_node(node, var, memo)
+    memo[key] = out
+    return out
+
+
+def _diff_node(node: ast.expr, var: str, memo: dict[int, ast.expr]) -> ast.expr:
     if isinstance(node, ast.Constant):
         return _c(0.0)
     if isinstance(node, ast.Name):
         return _c(1.0 if node.id == var else 0.0)
     if isinstance(node, ast.UnaryOp):
-        d = _diff(node.operand, var)
+        d = _diff(node.operand, var, memo)
         return _neg(d) if isinstance(node.op, ast.USub) else d
     if isinstance(node, ast.BinOp):
         u, v = node.left, node.right
-        du, dv = _diff(u, var), _diff(v, var)
+        du, dv = _diff(u, var, memo), _diff(v, var, memo)
         if isinstance(node.op, ast.Add):
             return _bin(du, ast.Add(), dv)
         if isinstance(node.op, ast.Sub):
@@ -361,94 +599,72 @@ def _diff(node: ast.expr, var: str) -> ast.expr:
         if isinstance(node.op, ast.Mult):
             return _bin(_bin(du, ast.Mult(), v), ast.Add(), _bin(u, ast.Mult(), dv))
         if isinstance(node.op, ast.Div):
+            if _is_c(dv, 0.0):  # u / c: no c**2 (which may overflow where c does not)
+                return _bin(du, ast.Div(), v)
             num = _bin(_bin(du, ast.Mult(), v), ast.Sub(), _bin(u, ast.Mult(), dv))
             return _bin(num, ast.Div(), _bin(v, ast.Pow(), _c(2.0)))
         if isinstance(node.op, ast.Pow):
-            if _is_c(_simplify(dv), 0.0):  # u**c
-                c = v
-                return _bin(
-                    _bin(c, ast.Mult(), _bin(u, ast.Pow(), _bin(c, ast.Sub(), _c(1.0)))),
-                    ast.Mult(),
-                    du,
-                )
+            if _is_c(dv, 0.0):  # u**c
+                return _bin(_bin(v, ast.Mult(), _bin(u, ast.Pow(), _bin(v, ast.Sub(), _c(1.0)))), ast.Mult(), du)
             # u**v = exp(v log u)
-            inner = _bin(
-                _bin(dv, ast.Mult(), _call("log", u)),
-                ast.Add(),
-                _bin(v, ast.Mult(), _bin(du, ast.Div(), u)),
-            )
+            inner = _bin(_bin(dv, ast.Mult(), _call("log", u)), ast.Add(), _bin(v, ast.Mult(), _bin(du, ast.Div(), u)))
             return _bin(node, ast.Mult(), inner)
     if isinstance(node, ast.Call):
         assert isinstance(node.func, ast.Name)
         f, u = node.func.id, node.args[0]
-        du = _diff(u, var)
-        outer: dict[str, ast.expr] = {
-            "sin": _call("cos", u),
-            "cos": _neg(_call("sin", u)),
-            "tan": _bin(_c(1.0), ast.Add(), _bin(_call("tan", u), ast.Pow(), _c(2.0))),
-            "exp": _call("exp", u),
-            "log": _bin(_c(1.0), ast.Div(), u),
-            "sqrt": _bin(_c(0.5), ast.Div(), _call("sqrt", u)),
-            "sinh": _call("cosh", u),
-            "cosh": _call("sinh", u),
-            "tanh": _bin(_c(1.0), ast.Sub(), _bin(_call("tanh", u), ast.Pow(), _c(2.0))),
-            "arctan": _bin(_c(1.0), ast.Div(), _bin(_c(1.0), ast.Add(), _bin(u, ast.Pow(), _c(2.0)))),
+        du = _diff(u, var, memo)
+        if _is_c(du, 0.0):
+            return _c(0.0)
+        outer: dict[str, Callable[[], ast.expr]] = {
+            "sin": lambda: _call("cos", u),
+            "cos": lambda: _neg(_call("sin", u)),
+            "tan": lambda: _bin(_c(1.0), ast.Add(), _bin(_call("tan", u), ast.Pow(), _c(2.0))),
+            "exp": lambda: node,
+            "log": lambda: _bin(_c(1.0), ast.Div(), u),
+            "sqrt": lambda: _bin(_c(0.5), ast.Div(), node),
+            "sinh": lambda: _call("cosh", u),
+            "cosh": lambda: _call("sinh", u),
+            "tanh": lambda: _bin(_c(1.0), ast.Sub(), _bin(node, ast.Pow(), _c(2.0))),
+            "arctan": lambda: _bin(_c(1.0), ast.Div(), _bin(_c(1.0), ast.Add(), _bin(u, ast.Pow(), _c(2.0)))),
+            "abs": lambda: _bin(u, ast.Div(), node),
         }
-        if f == "abs":
-            return _bin(_bin(u, ast.Div(), _call("abs", u)), ast.Mult(), du)
-        return _bin(outer[f], ast.Mult(), du)
-    raise ExpressionError(f"cannot differentiate {ast.unparse(node)!r}")  # pragma: no cover
+        return _bin(outer[f](), ast.Mult(), du)
+    raise ExpressionError(f"cannot differentiate a {type(node).__name__}")  # pragma: no cover
 
 
-def _simplify(node: ast.expr) -> ast.expr:
-    """Fold the zeros and ones that differentiation leaves behind."""
-    if isinstance(node, ast.UnaryOp):
-        x = _simplify(node.operand)
-        if _is_c(x):
-            return _c(-x.value if isinstance(node.op, ast.USub) else x.value)  # type: ignore[attr-defined]
-        return ast.UnaryOp(node.op, x)
-    if isinstance(node, ast.BinOp):
-        a, b = _simplify(node.left), _simplify(node.right)
-        op = node.op
-        if _is_c(a) and _is_c(b):
-            try:
-                val = eval(  # noqa: S307 (two numeric constants)
-                    compile(ast.fix_missing_locations(ast.Expression(ast.BinOp(a, op, b))), "", "eval")
-                )
-                return _c(val)
-            except (ZeroDivisionError, OverflowError, ValueError):
-                return ast.BinOp(a, op, b)
-        if isinstance(op, ast.Add):
-            if _is_c(a, 0.0):
-                return b
-            if _is_c(b, 0.0):
-                return a
-        if isinstance(op, ast.Sub):
-            if _is_c(b, 0.0):
-                return a
-            if _is_c(a, 0.0):
-                return _neg(b)
-        if isinstance(op, ast.Mult):
-            if _is_c(a, 0.0) or _is_c(b, 0.0):
-                return _c(0.0)
-            if _is_c(a, 1.0):
-                return b
-            if _is_c(b, 1.0):
-                return a
-        if isinstance(op, ast.Div):
-            if _is_c(a, 0.0):
-                return _c(0.0)
-            if _is_c(b, 1.0):
-                return a
-        if isinstance(op, ast.Pow):
-            if _is_c(b, 1.0):
-                return a
-            if _is_c(b, 0.0):
-                return _c(1.0)
-        return ast.BinOp(a, op, b)
-    if isinstance(node, ast.Call):
-        return ast.Call(node.func, [_simplify(node.args[0])], [])
-    return node
+def _locate(tree: ast.AST) -> None:
+    """:func:`ast.fix_missing_locations` for a tree with shared subtrees
+    (each node once; the compiler needs a location on every node)."""
+    seen: set[int] = set()
+    stack = [tree]
+    while stack:
+        node = stack.pop()
+        if id(node) in seen:
+            continue
+        seen.add(id(node))
+        if "lineno" in node._attributes:
+            for attr in ("lineno", "col_offset", "end_lineno", "end_col_offset"):
+                if getattr(node, attr, None) is None:
+                    setattr(node, attr, 1 if "lineno" in attr else 0)
+        stack.extend(ast.iter_child_nodes(node))
+
+
+def _written_size(tree: ast.AST, limit: int) -> int:
+    """The number of nodes of ``tree`` with shared subtrees counted at every
+    use (what the compiler sees); stops counting past ``limit``."""
+    sizes: dict[int, int] = {}
+    stack: list[tuple[ast.AST, bool]] = [(tree, False)]
+    while stack:
+        node, done = stack.pop()
+        if id(node) in sizes:
+            continue
+        children = list(ast.iter_child_nodes(node))
+        if done:
+            sizes[id(node)] = min(limit + 1, 1 + sum(sizes[id(c)] for c in children))
+        else:
+            stack.append((node, True))
+            stack.extend((c, False) for c in children if id(c) not in sizes)
+    return sizes[id(tree)]
 
 
 @dataclass(frozen=True, eq=False)
@@ -556,8 +772,7 @@ class FormulaVector:
         if missing:
             for f in self.formulas:
                 f.evaluate(values)  # raises naming the formula
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            vals = eval(self._code, _GLOBALS, values)  # noqa: S307 (whitelisted AST)
+        vals = _evaluate(self._code, values)
         if all(isinstance(v, float | int) for v in vals):
             return np.array(vals, dtype=float)
         shape = np.broadcast_shapes(*(np.shape(v) for v in vals))

@@ -35,8 +35,11 @@ formula may contain.
 
 from __future__ import annotations
 
+import datetime
+import math
+import re
 import tomllib
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,8 +47,8 @@ from typing import Any
 
 import numpy as np
 
-from .errors import LpvestError, ModelFileError
-from .expressions import Expression, FormulaMatrix
+from .errors import LpvestError, ModelFileError, abbreviate, shorten
+from .expressions import CONSTANTS, FUNCTIONS, Expression, FormulaMatrix
 from .scheduling import (
     BasisFunction,
     CallableBasis,
@@ -108,12 +111,33 @@ class SystemFile:
         try:
             return self.models[key]
         except KeyError:
+            known = shorten(", ".join(self.models), 80)
             raise ModelFileError(
-                f"{self.path or self.name}: no model {key!r} (models: {', '.join(self.models)})"
+                f"{self.path or self.name}: no model {abbreviate(key, 30)} (models: {known})"
             ) from None
 
 
 # -- reading -----------------------------------------------------------------
+
+
+#: The largest magnitude of a number in a model file. A product of three such
+#: numbers is still finite (1e300 < 1.8e308), so matrix products and a covariance
+#: step ``A P A^T`` of the file's own data cannot overflow; larger numbers are
+#: refused with the field named rather than simulated into ``inf``.
+MAX_MAGNITUDE = 1e100
+
+#: The most scheduling components a file may declare: the box has 2^n corners,
+#: which the polytopic form of an affine model, multilinear maps and the
+#: consistency checks enumerate.
+MAX_SCHEDULING = 16
+
+_PLAIN_KEY = re.compile(r"[A-Za-z0-9_-]{1,40}")
+
+
+def _key(key: object) -> str:
+    """A TOML key as it appears in a field path: bare when it is a plain short
+    name, else quoted (and shortened)."""
+    return key if isinstance(key, str) and _PLAIN_KEY.fullmatch(key) else abbreviate(key, 30)
 
 
 class _Reader:
@@ -123,6 +147,12 @@ class _Reader:
     def __init__(self, origin: str, parameters: Mapping[str, float]) -> None:
         self.origin = origin
         self.parameters = dict(parameters)
+        self.system_name = ""
+
+    def name_of(self, key: str) -> str:
+        """A model's name: ``system/key`` (what errors from designs and
+        simulations call it)."""
+        return f"{self.system_name}/{key}" if self.system_name else key
 
     def error(self, where: str, msg: str) -> ModelFileError:
         return ModelFileError(f"{self.origin}: {where}: {msg}")
@@ -143,14 +173,15 @@ class _Reader:
             return {}
         val = data[key]
         if not isinstance(val, dict):
-            raise self.error(f"{where}.{key}" if where else key, f"expected a table, found {_kind(val)}")
+            raise self.error(f"{where}.{key}" if where and where != key else key,
+                             f"expected a table, found {_kind(val)}")
         return val
 
     def keys(self, data: Mapping, where: str, allowed: set[str], required: set[str] = frozenset()) -> None:
         unknown = sorted(set(data) - allowed)
         if unknown:
             raise self.error(
-                where, f"unknown key {unknown[0]!r} (expected one of: {', '.join(sorted(allowed))})"
+                where, f"unknown key {abbreviate(unknown[0], 30)} (expected one of: {', '.join(sorted(allowed))})"
             )
         missing = sorted(required - set(data))
         if missing:
@@ -170,11 +201,18 @@ class _Reader:
         if isinstance(value, bool):
             raise self.error(where, "expected a number, found a boolean")
         if isinstance(value, int | float):
-            return float(value)
-        if isinstance(value, str):
+            number = float(value)  # TOML integers have at most 64 bits
+        elif isinstance(value, str):
             with self.at(where):
-                return Expression.parse(value, parameters=self.parameters).value()
-        raise self.error(where, f"expected a number or formula, found {_kind(value)}")
+                number = Expression.parse(value, parameters=self.parameters).value()
+        else:
+            raise self.error(where, f"expected a number or formula, found {_kind(value)}")
+        if not math.isfinite(number):
+            raise self.error(where, f"expected a finite number, found {number}")
+        if abs(number) > MAX_MAGNITUDE:
+            raise self.error(where, f"{number:.6g} is too large: numbers in a model file are at most "
+                                    f"{MAX_MAGNITUDE:g} in magnitude")
+        return number
 
     def numbers(self, value: Any, where: str) -> list[float]:
         if not isinstance(value, list):
@@ -187,12 +225,15 @@ class _Reader:
             return np.array([[self.number(value, where)]])
         if not isinstance(value, list) or not value or not all(isinstance(r, list) for r in value):
             raise self.error(where, f"expected a matrix (list of rows), found {_kind(value)}")
-        widths = {len(r) for r in value}
+        widths = sorted({len(r) for r in value})
         if len(widths) != 1:
-            raise self.error(where, f"rows have different lengths {sorted(widths)}; expected equal")
+            shown = ", ".join(map(str, widths[:4])) + (", ..." if len(widths) > 4 else "")
+            raise self.error(where, f"rows have different lengths [{shown}]; expected equal")
+        if widths[0] == 0:
+            raise self.error(where, "expected a matrix (list of rows), found empty rows")
         return np.array(
             [[self.number(v, f"{where}[{i + 1},{j + 1}]") for j, v in enumerate(r)] for i, r in enumerate(value)]
-        ).reshape(len(value), widths.pop())
+        ).reshape(len(value), widths[0])
 
     def strings(self, value: Any, where: str) -> list[str]:
         if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
@@ -206,6 +247,9 @@ class _Reader:
         sch = self.table(data, "scheduling", "")
         self.keys(sch, "scheduling", {"names", "lower", "upper"}, {"names", "lower", "upper"})
         names = self.strings(sch["names"], "scheduling.names")
+        if not 1 <= len(names) <= MAX_SCHEDULING:
+            raise self.error("scheduling.names", f"has {len(names)} names; expected 1 to {MAX_SCHEDULING} "
+                                                 "(the box has 2^n corners: polytopic forms, range checks)")
         lower = self.numbers(sch["lower"], "scheduling.lower")
         upper = self.numbers(sch["upper"], "scheduling.upper")
         for key, vals in (("lower", lower), ("upper", upper)):
@@ -215,7 +259,7 @@ class _Reader:
                 )
         clash = sorted(set(names) & set(self.parameters))
         if clash:
-            raise self.error("scheduling.names", f"{clash[0]!r} is also a parameter name")
+            raise self.error("scheduling.names", f"{abbreviate(clash[0], 30)} is also a parameter name")
         with self.at("scheduling"):
             return SchedulingSpace(names, lower, upper)
 
@@ -235,14 +279,18 @@ class _Reader:
             for val in matrices.values():
                 if isinstance(val, dict):
                     texts.extend(k for k in val if k != CONSTANT_TERM and k not in texts)
+        stray = sorted(set(bounds_tab) - set(texts))
+        if stray:
+            raise self.error(f"{where}.bounds.{_key(stray[0])}", "is not a basis function of this model "
+                             f"(basis: {shorten(', '.join(texts), 60) or 'none'})")
         out: list[BasisFunction] = []
         for text in texts:
             b = bounds_tab.get(text)
             bnd = None
             if b is not None:
-                nums = self.numbers(b, f"{where}.bounds.{text}")
+                nums = self.numbers(b, f"{where}.bounds.{_key(text)}")
                 if len(nums) != 2:
-                    raise self.error(f"{where}.bounds.{text}", "expected [lower, upper]")
+                    raise self.error(f"{where}.bounds.{_key(text)}", "expected [lower, upper]")
                 bnd = (nums[0], nums[1])
             with self.at(f"{where}.basis"):
                 out.append(parse_basis(text, space, bounds=bnd))
@@ -259,7 +307,7 @@ class _Reader:
             if isinstance(val, dict):
                 if not val:
                     raise self.error(f"{where}.{n}", "has no terms")
-                out[n] = {term: self.matrix(m, f"{where}.{n}.{term}") for term, m in val.items()}
+                out[n] = {term: self.matrix(m, f"{where}.{n}.{_key(term)}") for term, m in val.items()}
             else:
                 out[n] = self.matrix(val, f"{where}.{n}")
         return out
@@ -274,7 +322,7 @@ class _Reader:
 
     # -- model types ----------------------------------------------------------
     def model(self, key: str, spec: Any, space: SchedulingSpace | None) -> Model:
-        where = f"models.{key}"
+        where = f"models.{_key(key)}"
         if not isinstance(spec, dict):
             raise self.error(where, f"expected a table, found {_kind(spec)}")
         kind = self.string(spec, "type", where)
@@ -288,7 +336,7 @@ class _Reader:
         }.get(kind)
         if reader is None:
             known = ", ".join(MODEL_TYPES)
-            raise self.error(f"{where}.type", f"unknown model type {kind!r} (expected one of: {known})")
+            raise self.error(f"{where}.type", f"unknown model type {abbreviate(kind, 30)} (expected one of: {known})")
         return reader(key, spec, space, where)  # type: ignore[operator]
 
     def affine(self, key: str, spec: Mapping, space: SchedulingSpace | None, where: str) -> AffineLPV:
@@ -306,7 +354,7 @@ class _Reader:
         x0 = self.numbers(spec["x0"], f"{where}.x0") if "x0" in spec else None
         P0 = self.matrix(spec["P0"], f"{where}.P0") if "P0" in spec else None
         with self.at(where):
-            return AffineLPV.from_matrices(space, basis, **mats, **noise, x0=x0, P0=P0, name=key)  # type: ignore[arg-type]
+            return AffineLPV.from_matrices(space, basis, **mats, **noise, x0=x0, P0=P0, name=self.name_of(key))  # type: ignore[arg-type]
 
     def simplex_map(self, spec: Any, space: SchedulingSpace | None, where: str) -> SimplexMap:
         if not isinstance(spec, dict):
@@ -325,12 +373,16 @@ class _Reader:
         if kind == "multilinear":
             self.keys(spec, where, {"kind", "over", "lower", "upper"}, {"over", "lower", "upper"})
             over = self.strings(spec["over"], f"{where}.over")
+            if not 1 <= len(over) <= MAX_SCHEDULING:
+                raise self.error(f"{where}.over", f"has {len(over)} coordinates; expected 1 to {MAX_SCHEDULING} "
+                                                  "(the map has 2^n vertices)")
             lower = self.numbers(spec["lower"], f"{where}.lower")
             upper = self.numbers(spec["upper"], f"{where}.upper")
             with self.at(where):
                 coords = [parse_basis(o, space) for o in over]
                 return MultilinearSimplexMap(space, coords, lower, upper)
-        raise self.error(f"{where}.kind", f"unknown map kind {kind!r} (expected 'formulas' or 'multilinear')")
+        raise self.error(f"{where}.kind",
+                         f"unknown map kind {abbreviate(kind, 30)} (expected 'formulas' or 'multilinear')")
 
     def polytopic(self, key: str, spec: Mapping, space: SchedulingSpace | None, where: str) -> PolytopicLPV:
         self.keys(spec, where, {"type", "title", "map", "vertex", "common", "affine"})
@@ -347,10 +399,10 @@ class _Reader:
             if "common" in spec:
                 raise self.error(f"{where}.common", "only used together with [[...vertex]] tables")
             with self.at(where):
-                model = PolytopicLPV.from_affine(affine, parameters=self.parameters, name=key)
+                model = PolytopicLPV.from_affine(affine, parameters=self.parameters, name=self.name_of(key))
             if mapping is not None:
                 self.check_consistent(model.vertices._asdict(), mapping, affine, where)
-                model = PolytopicLPV(model.vertices, mapping, affine, self.parameters, key)
+                model = PolytopicLPV(model.vertices, mapping, affine, self.parameters, self.name_of(key))
             return model
         vertices = spec["vertex"]
         if not isinstance(vertices, list) or not all(isinstance(v, dict) for v in vertices) or not vertices:
@@ -377,7 +429,7 @@ class _Reader:
                 raise self.error(f"{where}.vertex", f"{n} has different shapes at the vertices: {sorted(shapes)}")
             arrays[n] = np.stack(mats)
         with self.at(where):
-            model = PolytopicLPV(arrays, mapping, affine, self.parameters, key)
+            model = PolytopicLPV(arrays, mapping, affine, self.parameters, self.name_of(key))
         if affine is not None:
             if mapping is None:
                 raise self.error(where, "a model with both vertices and an affine form needs a [map]")
@@ -418,7 +470,7 @@ class _Reader:
         omega = self.matrix(spec["innovation_covariance"], f"{where}.innovation_covariance")
         x0 = self.numbers(spec["x0"], f"{where}.x0") if "x0" in spec else None
         with self.at(where):
-            return InnovationLPV(dep, K, omega, x0, key)
+            return InnovationLPV(dep, K, omega, x0, self.name_of(key))
 
     def formulas(self, value: Any, where: str, allowed: list[str]) -> list[Expression]:
         if not isinstance(value, list):
@@ -438,7 +490,7 @@ class _Reader:
         e = self.formulas(spec.get("e", []), f"{where}.e", names)
         var = self.number(spec.get("noise_variance", 1.0), f"{where}.noise_variance")
         with self.at(where):
-            return LPVInputOutput(space, y, u, e, var, key)
+            return LPVInputOutput(space, y, u, e, var, self.name_of(key))
 
     def ltv_io(self, key: str, spec: Mapping, space: SchedulingSpace | None, where: str) -> LTVInputOutput:
         self.keys(spec, where, {"type", "title", "a", "b", "input", "x0"}, {"a", "b"})
@@ -447,7 +499,7 @@ class _Reader:
         u = self.formulas([spec["input"]], f"{where}.input", ["t"])[0] if "input" in spec else None
         x0 = self.numbers(spec["x0"], f"{where}.x0") if "x0" in spec else None
         with self.at(where):
-            return LTVInputOutput(a, b, input=u, x0=x0, name=key)
+            return LTVInputOutput(a, b, input=u, x0=x0, name=self.name_of(key))
 
     def ltv_ss(self, key: str, spec: Mapping, space: SchedulingSpace | None, where: str) -> LTVStateSpace:
         self.keys(spec, where, {"type", "title", "A", "B", "C", "input", "x0"}, {"A", "B", "C"})
@@ -458,24 +510,33 @@ class _Reader:
         u = self.formulas([spec["input"]], f"{where}.input", ["t"])[0] if "input" in spec else None
         x0 = self.numbers(spec["x0"], f"{where}.x0") if "x0" in spec else None
         with self.at(where):
-            return LTVStateSpace(mats["A"], mats["B"], mats["C"], input=u, x0=x0, name=key)
+            return LTVStateSpace(mats["A"], mats["B"], mats["C"], input=u, x0=x0, name=self.name_of(key))
 
 
 def _kind(value: Any) -> str:
-    return {dict: "a table", list: "a list", str: "a string", bool: "a boolean"}.get(
-        type(value), type(value).__name__
-    )
+    """What a TOML value is, for a message (numbers with their value)."""
+    if isinstance(value, bool):
+        return f"a boolean ({str(value).lower()})"
+    if isinstance(value, int | float):
+        return f"a number ({value!r})"
+    if isinstance(value, str):
+        return f"a string ({abbreviate(value, 30)})"
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, list):
+        return "a list"
+    if isinstance(value, datetime.date | datetime.time):
+        return "a date/time"
+    return type(value).__name__
 
 
 def loads_system(
     text: str, *, origin: str = "<string>", parameters: Mapping[str, float] | None = None
 ) -> SystemFile:
     """Parse a model file from TOML text (``origin`` names it in errors)."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ModelFileError(f"{origin}: not valid TOML: {exc}") from exc
-    return _build(data, origin, parameters, None)
+    if not isinstance(text, str):
+        raise ModelFileError(f"{origin}: expected the TOML text as a string, found {_kind(text)}")
+    return _build(parse_toml(text, origin), origin, parameters, None)
 
 
 def load_system(
@@ -504,18 +565,51 @@ def load_system(
     return _build(read_toml(path), str(path), parameters, path)
 
 
+def parse_toml(text: str, origin: str) -> dict[str, Any]:
+    """The parsed TOML ``text``; malformed text is a one-line
+    :class:`ModelFileError` naming ``origin``."""
+    try:
+        return tomllib.loads(text)
+    except RecursionError:
+        raise ModelFileError(f"{origin}: not valid TOML: arrays or tables nested too deeply") from None
+    except ValueError as exc:  # TOMLDecodeError, or an integer of more than 4300 digits
+        raise ModelFileError(f"{origin}: not valid TOML: {_one_line(str(exc), 160)}") from None
+
+
 def read_toml(path: str | Path) -> dict[str, Any]:
     """The parsed TOML file ``path``; an unreadable or malformed file is a
     one-line :class:`ModelFileError` naming it (shared by every file lpvest reads)."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        raw = path.read_bytes()
     except OSError as exc:
-        raise ModelFileError(f"{path}: cannot be read: {exc.strerror}") from exc
+        raise ModelFileError(f"{path}: cannot be read: {exc.strerror or type(exc).__name__}") from None
+    except ValueError as exc:  # e.g. a NUL character in the path
+        raise ModelFileError(f"{abbreviate(str(path))}: cannot be read: {_one_line(str(exc), 80)}") from None
     try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ModelFileError(f"{path}: not valid TOML: {exc}") from exc
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ModelFileError(
+            f"{path}: not a TOML text file: byte {exc.start + 1} ({raw[exc.start:exc.start + 1]!r}) is not UTF-8"
+            + (" (the file is UTF-16; save it as UTF-8)" if raw[:2] in (b"\xff\xfe", b"\xfe\xff") else "")
+        ) from None
+    return parse_toml(text, str(path))
+
+
+def _one_line(text: str, limit: int) -> str:
+    """``text`` on one line, at most about ``limit`` characters."""
+    flat = " ".join(text.split())
+    return flat if len(flat) <= limit else flat[: limit - 3] + "..."
+
+
+#: Names a parameter may not have: the time variable of LTV formulas and the
+#: names formulas already give a meaning.
+_RESERVED = frozenset({"t", "shift", *FUNCTIONS, *CONSTANTS})
+
+
+def _names(keys: Iterable[str]) -> str:
+    """A list of names for a message, shortened."""
+    return shorten(", ".join(keys), 80) or "none"
 
 
 def _build(
@@ -525,17 +619,26 @@ def _build(
     r.keys(data, "file", {"system", "parameters", "scheduling", "models"}, {"system", "models"})
     sysmeta = r.table(data, "system", "system")
     r.keys(sysmeta, "system", {"name", "title", "source", "description", "default"}, {"name", "title"})
+    name = r.string(sysmeta, "name", "system")
+    title = r.string(sysmeta, "title", "system")
+    if not name.strip() or len(name) > 100 or not name.isprintable():
+        raise r.error("system.name", f"expected a short printable name, found {abbreviate(name, 30)}")
+    r.system_name = name
     params_tab = r.table(data, "parameters", "parameters", required=False)
     params: dict[str, float] = {}
     for k, v in params_tab.items():
-        if not k.isidentifier():
-            raise r.error(f"parameters.{k}", "is not a valid name")
+        if not k.isidentifier() or k.startswith("__"):
+            raise r.error(f"parameters.{_key(k)}", "is not a valid name (expected a letter, then letters, digits, _)")
+        if k in _RESERVED:
+            raise r.error(f"parameters.{k}", f"{k!r} is a name formulas reserve (t, shift, the functions and "
+                                             "constants); choose another")
         params[k] = r.number(v, f"parameters.{k}")
     for k, v in (overrides or {}).items():
         if k not in params:
-            known = ", ".join(params) or "none"
-            raise r.error("parameters", f"no parameter {k!r} to override (known: {known})")
-        params[k] = float(v)
+            raise r.error("parameters", f"no parameter {abbreviate(k, 30)} to override (known: {_names(params)})")
+        if isinstance(v, bool) or not isinstance(v, int | float | np.integer | np.floating):
+            raise r.error(f"parameters.{k}", f"override: expected a number, found {_kind(v)}")
+        params[k] = r.number(float(v), f"parameters.{k} (override)")
     r.parameters = params
     space = r.scheduling(data)
     models_tab = r.table(data, "models", "models")
@@ -544,10 +647,10 @@ def _build(
     models = {key: r.model(key, spec, space) for key, spec in models_tab.items()}
     default = r.string(sysmeta, "default", "system", next(iter(models)))
     if default not in models:
-        raise r.error("system.default", f"no model {default!r} (models: {', '.join(models)})")
+        raise r.error("system.default", f"no model {abbreviate(default, 30)} (models: {_names(models)})")
     return SystemFile(
-        name=r.string(sysmeta, "name", "system"),
-        title=r.string(sysmeta, "title", "system"),
+        name=name,
+        title=title,
         models=models,
         default=default,
         scheduling=space,

@@ -27,7 +27,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from .errors import DimensionError, ExpressionError, SchedulingRangeError
+from .errors import DimensionError, ExpressionError, SchedulingRangeError, abbreviate, shorten
 from .expressions import Expression
 from .validation import as_vector, check_box, check_finite
 
@@ -61,10 +61,11 @@ class SchedulingSpace:
     def __init__(self, names: Sequence[str], lower: Sequence[float], upper: Sequence[float]):
         names = tuple(str(n) for n in names)
         if len(set(names)) != len(names):
-            raise ExpressionError(f"scheduling names are not unique: {list(names)}")
+            dup = next(n for n in names if names.count(n) > 1)
+            raise ExpressionError(f"scheduling names are not unique: {abbreviate(dup, 30)} appears twice")
         for n in names:
             if not n.isidentifier() or n.startswith("__"):
-                raise ExpressionError(f"scheduling name {n!r} is not a valid identifier")
+                raise ExpressionError(f"scheduling name {abbreviate(n, 30)} is not a valid identifier")
         lo = as_vector(lower, "scheduling lower bound", len(names))
         hi = as_vector(upper, "scheduling upper bound", len(names))
         bad = np.flatnonzero(lo > hi)
@@ -162,7 +163,8 @@ class Monomial:
         exps = expr.monomial_exponents(space.names)
         if exps is None or sum(exps) == 0:
             raise ExpressionError(
-                f"basis function {text!r} is not a product of powers of {', '.join(space.names)}"
+                f"basis function {abbreviate(text)} is not a product of powers of "
+                f"{shorten(', '.join(space.names), 60)}"
             )
         return cls(exps, text)
 
@@ -225,7 +227,7 @@ class FormulaBasis:
     def bounds(self, space: SchedulingSpace) -> tuple[float, float]:
         if self.declared_bounds is None:
             raise ExpressionError(
-                f"basis function {self.name!r} is not a monomial: give its bounds over the "
+                f"basis function {abbreviate(self.name)} is not a monomial: give its bounds over the "
                 "scheduling box to convert the model to polytopic form"
             )
         return self.declared_bounds
@@ -253,7 +255,7 @@ class CallableBasis:
     def bounds(self, space: SchedulingSpace) -> tuple[float, float]:
         if self.declared_bounds is None:
             raise ExpressionError(
-                f"basis function {self.name!r} is a Python callable: give its bounds over "
+                f"basis function {abbreviate(self.name)} is a Python callable: give its bounds over "
                 "the scheduling box to convert the model to polytopic form"
             )
         return self.declared_bounds
@@ -267,12 +269,12 @@ def parse_basis(
     :class:`FormulaBasis` (with optional ``bounds``)."""
     expr = Expression.parse(text, allowed=space.names)
     if expr.shifts and any(k != 0 for ks in expr.shifts.values() for k in ks):
-        raise ExpressionError(f"basis function {text!r} may not use shift(); it depends on p_t only")
+        raise ExpressionError(f"basis function {abbreviate(text)} may not use shift(); it depends on p_t only")
     exps = expr.monomial_exponents(space.names)
     if exps is not None and sum(exps) > 0 and bounds is None:
         return Monomial(exps, text)
     if expr.is_constant:
-        raise ExpressionError(f"basis function {text!r} is constant; use the constant term '1'")
+        raise ExpressionError(f"basis function {abbreviate(text)} is constant; use the constant term '1'")
     return FormulaBasis(expr, space.names, bounds, text)
 
 

@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import DimensionError, LpvestError
+from .errors import DimensionError, LpvestError, abbreviate
 
 __all__ = [
     "SIGNAL_KINDS",
@@ -78,12 +78,15 @@ def parse_table(text: str, n: int, *, name: str = "table") -> tuple[np.ndarray, 
         fields = [f for f in re.split(r"[,\s]+", row) if f]
         if len(fields) != n + 1:
             raise SignalError(
-                f"{name} row {i + 1} ({row!r}) has {len(fields)} numbers; expected {n + 1} (t and {n} values)"
+                f"{name} row {i + 1} ({abbreviate(row, 30)}) has {len(fields)} numbers; expected {n + 1} "
+                f"(t and {n} values)"
             )
         try:
             data.append([float(f) for f in fields])
         except ValueError:
-            raise SignalError(f"{name} row {i + 1} ({row!r}) holds something that is not a number") from None
+            raise SignalError(
+                f"{name} row {i + 1} ({abbreviate(row, 30)}) holds something that is not a number"
+            ) from None
     arr = np.array(data)
     if not np.all(np.isfinite(arr)):
         raise SignalError(f"{name} holds a non-finite number")
@@ -144,7 +147,9 @@ class SignalSpec:
         a pair ``(times, values)``.
         """
         if kind not in SIGNAL_KINDS:
-            raise SignalError(f"{prefix}kind = {kind!r} is not a signal kind (one of {', '.join(SIGNAL_KINDS)})")
+            raise SignalError(
+                f"{prefix}kind = {abbreviate(kind, 30)} is not a signal kind (one of {', '.join(SIGNAL_KINDS)})"
+            )
         if n < 0:
             raise SignalError(f"a signal needs n >= 0 components; found {n}")
 
@@ -152,7 +157,7 @@ class SignalSpec:
             try:
                 arr = np.array(value, dtype=float)
             except (TypeError, ValueError):
-                raise SignalError(f"{prefix}{label} = {value!r} is not a number") from None
+                raise SignalError(f"{prefix}{label} = {abbreviate(value, 30)} is not a number") from None
             if arr.ndim == 0:
                 arr = np.full(n, float(arr))
             if arr.shape != (n,):

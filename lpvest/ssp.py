@@ -78,6 +78,7 @@ from typing import Any
 import numpy as np
 
 from .cosim import Component, Connection, CoSimulation, CoSimulationError
+from .errors import abbreviate, shorten
 
 __all__ = ["write_ssp", "read_ssp", "SspSystem", "simulate_ssp", "IMPORTERS"]
 
@@ -206,23 +207,92 @@ class SspSystem:
     stop_time: float | None = None
 
 
+#: The largest SystemStructure.ssd read (bytes): a description of a few
+#: components is some kilobytes; the bound keeps a hostile archive from
+#: unpacking gigabytes into memory.
+MAX_SSD_BYTES = 16 * 2**20
+
+
+def _ssp_error(path: Path, message: str) -> CoSimulationError:
+    return CoSimulationError(f"{path}: {message}")
+
+
+def _safe_member(source: str) -> bool:
+    """An archive member name that stays inside the archive: relative, no
+    ``..``, no drive or backslash (libcosim unpacks the SSP and opens it)."""
+    if not source or "\\" in source or "\x00" in source or source.startswith("/") or ":" in source.split("/")[0]:
+        return False
+    return all(part not in ("", ".", "..") for part in source.split("/"))
+
+
+def _number(path: Path, where: str, text: str | None, *, positive: bool = False) -> float:
+    try:
+        value = float(text)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise _ssp_error(path, f"{where}: expected a number, found {abbreviate(text, 30)}") from None
+    if not math.isfinite(value) or (positive and not value > 0):
+        raise _ssp_error(path, f"{where}: expected a {'positive' if positive else 'finite'} number, found {value!r}")
+    return value
+
+
+def _checked_value(path: Path, where: str, typ: str, text: str) -> str:
+    """A parameter value as written in the SSD, checked against its type."""
+    if typ == "Real":
+        _number(path, where, text)
+    elif typ == "Integer":
+        try:
+            value = int(text.strip())
+        except ValueError:
+            raise _ssp_error(path, f"{where}: expected an integer, found {abbreviate(text, 30)}") from None
+        if not -(2**31) <= value < 2**31:
+            raise _ssp_error(path, f"{where}: {value} is outside the range of an FMI Integer")
+    elif typ == "Boolean" and text.strip().lower() not in ("true", "false", "1", "0"):
+        raise _ssp_error(path, f"{where}: expected true or false, found {abbreviate(text, 30)}")
+    return text
+
+
 def read_ssp(path: str | Path) -> SspSystem:
-    """The system, parameter values and default experiment of an SSP file."""
+    """The system, parameter values and default experiment of an SSP file.
+
+    Every FMU a component names must be a member of the archive given by a
+    relative name without ``..`` (an importer unpacks the archive and opens
+    it); numbers and parameter values must parse as their types. Anything
+    else raises :class:`~lpvest.cosim.CoSimulationError` naming the file and
+    the element.
+    """
     path = Path(path)
     try:
         with zipfile.ZipFile(path) as z:
-            root = ET.fromstring(z.read("SystemStructure.ssd"))
-    except (OSError, KeyError, zipfile.BadZipFile, ET.ParseError) as exc:
-        raise CoSimulationError(f"{path}: not an SSP file with a SystemStructure.ssd: {exc}") from exc
+            members = set(z.namelist())
+            info = z.getinfo("SystemStructure.ssd")
+            if info.file_size > MAX_SSD_BYTES:
+                raise _ssp_error(path, f"SystemStructure.ssd has {info.file_size:,} bytes; at most "
+                                       f"{MAX_SSD_BYTES:,} are read")
+            root = ET.fromstring(z.read(info))
+    except CoSimulationError:
+        raise
+    except (OSError, KeyError, ValueError, LookupError, zipfile.BadZipFile, ET.ParseError, EOFError,
+            RuntimeError) as exc:  # (LookupError: an XML declaration naming an unknown encoding)
+        text = shorten(" ".join(str(exc).split()), 80)
+        raise _ssp_error(path, f"not an SSP file with a SystemStructure.ssd: {text}") from exc
     system = root.find("ssd:System", NS)
     if system is None:
-        raise CoSimulationError(f"{path}: SystemStructure.ssd has no System")
+        raise _ssp_error(path, "SystemStructure.ssd has no System")
     components: dict[str, str] = {}
     parameters: dict[str, list[tuple[str, str, str]]] = {}
     outputs: dict[str, list[str]] = {}
-    for c in system.findall("ssd:Elements/ssd:Component", NS):
+    for i, c in enumerate(system.findall("ssd:Elements/ssd:Component", NS)):
         cname = c.get("name", "")
-        components[cname] = c.get("source", "")
+        where = f"component {abbreviate(cname, 30)}" if cname else f"component {i + 1}"
+        if not cname or cname in components:
+            raise _ssp_error(path, f"{where}: expected a unique, non-empty name")
+        source = c.get("source", "")
+        if not _safe_member(source):
+            raise _ssp_error(path, f"{where}: source {abbreviate(source, 60)} is not a relative path inside "
+                                   "the archive (no '..', no absolute path)")
+        if source not in members:
+            raise _ssp_error(path, f"{where}: source {abbreviate(source, 60)} is not in the archive")
+        components[cname] = source
         outputs[cname] = [k.get("name", "") for k in c.findall("ssd:Connectors/ssd:Connector", NS)
                           if k.get("kind") == "output"]
         values = []
@@ -232,22 +302,33 @@ def read_ssp(path: str | Path) -> SspSystem:
                 for typ in ("Real", "Integer", "Boolean", "String"):
                     e = p.find(f"ssv:{typ}", NS)
                     if e is not None:
-                        values.append((p.get("name", ""), typ, e.get("value", "")))
+                        name = p.get("name", "")
+                        text = _checked_value(path, f"{where}: parameter {abbreviate(name, 30)}", typ,
+                                              e.get("value", ""))
+                        values.append((name, typ, text))
         parameters[cname] = values
-    connections = [(f"{c.get('startElement')}.{c.get('startConnector')}",
-                    f"{c.get('endElement')}.{c.get('endConnector')}")
-                   for c in system.findall("ssd:Connections/ssd:Connection", NS)]
+    connections = []
+    for i, c in enumerate(system.findall("ssd:Connections/ssd:Connection", NS)):
+        ends = [c.get(k) for k in ("startElement", "startConnector", "endElement", "endConnector")]
+        if not all(ends):
+            raise _ssp_error(path, f"connection {i + 1}: expected startElement, startConnector, endElement and "
+                                   "endConnector")
+        for element in (ends[0], ends[2]):
+            if element not in components:
+                raise _ssp_error(path, f"connection {i + 1}: no component {abbreviate(element, 30)}")
+        connections.append((f"{ends[0]}.{ends[1]}", f"{ends[2]}.{ends[3]}"))
     step = None
     start, stop = 0.0, None
     exp = root.find("ssd:DefaultExperiment", NS)
     if exp is not None:
-        start = float(exp.get("startTime", "0"))
-        stop = float(exp.get("stopTime")) if exp.get("stopTime") is not None else None
+        start = _number(path, "DefaultExperiment startTime", exp.get("startTime", "0"))
+        if exp.get("stopTime") is not None:
+            stop = _number(path, "DefaultExperiment stopTime", exp.get("stopTime"))
         for a in exp.findall("ssd:Annotations/ssc:Annotation", NS):
             if a.get("type") == _OSP_TYPE:
                 alg = a.find("osp:Algorithm/osp:FixedStepAlgorithm", NS)
                 if alg is not None and alg.get("baseStepSize") is not None:
-                    step = float(alg.get("baseStepSize"))  # type: ignore[arg-type]
+                    step = _number(path, "FixedStepAlgorithm baseStepSize", alg.get("baseStepSize"), positive=True)
     return SspSystem(root.get("name", ""), components, connections, parameters, outputs, step, start, stop)
 
 
@@ -294,7 +375,7 @@ def simulate_ssp(
     The stepping is each importer's own (Jacobi, see the module documentation).
     """
     if importer not in IMPORTERS:
-        raise CoSimulationError(f"importer {importer!r}: expected one of {', '.join(IMPORTERS)}")
+        raise CoSimulationError(f"importer {abbreviate(importer, 30)}: expected one of {', '.join(IMPORTERS)}")
     system = read_ssp(path)
     if system.step_size is None:
         raise CoSimulationError(f"{path}: the SSD declares no step size (OSP FixedStepAlgorithm baseStepSize)")
@@ -303,7 +384,10 @@ def simulate_ssp(
         end = stop_time if stop_time is not None else system.stop_time
         if end is None:
             raise CoSimulationError(f"{path}: no stop time in the file; give n_steps or stop_time")
-        n_steps = int(round((end - t0) / h))
+        ratio = (end - t0) / h
+        if not math.isfinite(ratio) or ratio > 1e9:
+            raise CoSimulationError(f"{path}: from {t0:g} to {end:g} in steps of {h:g}: too many steps")
+        n_steps = int(round(ratio))
     if n_steps < 1:
         raise CoSimulationError(f"n_steps must be at least 1; found {n_steps}")
     names = [f"{c}.{o}" for c, outs in system.outputs.items() for o in outs]

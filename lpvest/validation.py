@@ -8,11 +8,21 @@ definiteness are judged with tolerances relative to the matrix's own scale
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
 
-from .errors import DimensionError, NonFiniteError, NotPositiveDefiniteError, SchedulingRangeError
+from .errors import (
+    ArgumentError,
+    ArgumentTypeError,
+    DimensionError,
+    NonFiniteError,
+    NotPositiveDefiniteError,
+    NumericalError,
+    SchedulingRangeError,
+    shorten,
+)
 
 __all__ = [
     "as_matrix",
@@ -68,8 +78,9 @@ def check_finite(arr: np.ndarray, name: str) -> np.ndarray:
 def _as_float_array(value: object, name: str) -> np.ndarray:
     try:
         arr = np.array(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise DimensionError(f"{name} is not a numeric array: {exc}") from exc
+    except (TypeError, ValueError, OverflowError) as exc:  # (OverflowError: an int beyond float)
+        raise DimensionError(f"{name} is not a numeric array ({shorten(' '.join(str(exc).split()), 100)})"
+                             ) from exc
     return arr
 
 
@@ -129,8 +140,11 @@ def check_symmetric(m: np.ndarray, name: str, *, rtol: float = SYMMETRY_RTOL) ->
     """Raise unless ``m`` is square and symmetric relative to its own norm."""
     if m.ndim != 2 or m.shape[0] != m.shape[1]:
         raise DimensionError(f"{name} has shape {_shape_text(m.shape)}; expected a square matrix")
-    scale = np.max(np.abs(m)) if m.size else 0.0
-    asym = np.max(np.abs(m - m.T)) if m.size else 0.0
+    check_finite(m, name)
+    scale = float(np.max(np.abs(m))) if m.size else 0.0
+    # compared at unit scale (a power of two: exact), as m - m^T of entries near 1e308 would overflow
+    e = math.frexp(scale)[1]
+    asym = math.ldexp(float(np.max(np.abs(np.ldexp(m, -e) - np.ldexp(m.T, -e)))), e) if scale > 0 else 0.0
     if asym > rtol * scale:
         raise NotPositiveDefiniteError(
             f"{name} is not symmetric: max |{name} - {name}^T| = {asym:.3g} "
@@ -147,14 +161,19 @@ def check_positive_definite(
     Definiteness is relative: the smallest eigenvalue must exceed
     ``rtol * max(|eigenvalue|)`` (default ``rtol = n * eps``); for
     ``semidefinite=True`` it must exceed ``-rtol * max(|eigenvalue|)``.
-    Returns the symmetrised matrix ``(m + m^T) / 2``.
+    Returns the symmetrised matrix ``(m + m^T) / 2``. The eigenvalues are
+    computed at unit scale (``m`` times a power of two), so no entry overflows.
     """
     check_symmetric(m, name)
     n = m.shape[0]
     if n == 0:
         return m
-    sym = 0.5 * (m + m.T)
-    eig = np.linalg.eigvalsh(sym)
+    sym = 0.5 * m + 0.5 * m.T
+    e = math.frexp(float(np.max(np.abs(sym))))[1]  # scaling by 2^-e is exact
+    try:
+        eig = np.ldexp(np.linalg.eigvalsh(np.ldexp(sym, -e)), e)
+    except np.linalg.LinAlgError as exc:  # pragma: no cover - eigvalsh of a finite symmetric matrix converges
+        raise NumericalError(f"{name}: the eigenvalues of {name} could not be computed ({exc})") from None
     scale = float(np.max(np.abs(eig)))
     tol = (rtol if rtol is not None else max(n, 10) * np.finfo(float).eps) * scale
     lo = float(eig[0])
@@ -186,8 +205,11 @@ def check_box(
     bad = (p < lower - tol) | (p > upper + tol)
     if np.any(bad):
         j = int(np.argmax(bad))
+        # the value with the digits that show why (1 + 1e-7 as 1.0000001, not as 1)
+        value = float(p[j])
+        shown = f"{value:g}" if float(f"{value:g}") == value else repr(value)
         raise SchedulingRangeError(
-            f"{what} {names[j]} = {p[j]:.6g} is outside its declared range "
+            f"{what} {names[j]} = {shown} is outside its declared range "
             f"[{lower[j]:.6g}, {upper[j]:.6g}]"
         )
 
@@ -214,5 +236,7 @@ def as_rng(rng: np.random.Generator | int | None) -> np.random.Generator:
     if isinstance(rng, np.random.Generator):
         return rng
     if rng is None or (isinstance(rng, int | np.integer) and not isinstance(rng, bool)):
+        if rng is not None and rng < 0:
+            raise ArgumentError(f"rng: a seed must be a non-negative integer; found {rng}")
         return np.random.default_rng(rng)
-    raise TypeError(f"rng must be a numpy Generator, an integer seed or None, not {type(rng).__name__}")
+    raise ArgumentTypeError(f"rng must be a numpy Generator, an integer seed or None, not {type(rng).__name__}")

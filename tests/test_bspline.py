@@ -582,7 +582,7 @@ def test_option_and_declaration_errors(small):
         KernelModel.from_io(LTVInputOutput(a=[1.0], b=[1.0]))
     with pytest.raises(IdentifiabilityError, match="no unknown coefficient"):
         fit_kernel_model(KernelModel.from_io(io), t, d.u, d.y)
-    with pytest.raises(NonFiniteError, match="known coefficients are finite"):
+    with pytest.raises(NonFiniteError, match=r"the known coefficient a0 = sqrt\(t - 2\) is nan at t = 0\.00112"):
         fit_kernel_model(KernelModel(a0="sqrt(t - 2)", a1=UnknownConstant()), t, d.u, d.y)
 
 
@@ -741,3 +741,99 @@ def test_observer_configuration_errors(stream):
 def test_docstring_examples(module):
     result = doctest.testmod(module, optionflags=doctest.NORMALIZE_WHITESPACE)
     assert result.attempted > 0 and result.failed == 0
+
+
+# -- edge cases that gave a wrong answer instead of an error (issue 12) -----------------------------
+
+
+@pytest.mark.parametrize("nonzero", [1, 3, 6])
+def test_an_input_only_at_the_window_end_does_not_determine_b0(nonzero):
+    # y'' + y' + 4.25 y - 9 u = 0 with u = 0 but at the last samples: inside the window y is the free
+    # response, and b0's column of P is quadrature error (1e-8 of the others): the estimate was
+    # b0 = -0.006 for the true -9, and the observer FMU called it valid
+    t = np.linspace(0.0, 4.0, 4001)
+    y = np.exp(-0.5 * t) * np.sin(2 * t)
+    u = np.zeros_like(t)
+    u[-nonzero:] = 1.0
+    model = KernelModel(a0=UnknownConstant(), a1=UnknownConstant(), b0=UnknownConstant())
+    with pytest.raises(IdentifiabilityError, match=r"^the input u is zero except within 6 samples of the window's "
+                                                   r"ends .* do not determine: b0 \(practical identifiability"):
+        fit_kernel_model(model, t, u, y)
+    u[-nonzero:] = 0.0
+    u[0] = 1.0  # the other end: the same
+    with pytest.raises(IdentifiabilityError, match="do not determine: b0"):
+        fit_kernel_model(model, t, u, y)
+
+
+def test_an_input_reaching_into_the_window_determines_b0(small):
+    # the control: the same check passes an input that is nonzero beyond the end stencils
+    io, t, d = small
+    u = np.where(t > t[-1] - 40 * (t[1] - t[0]), d.u, 0.0)
+    assert np.count_nonzero(u[6:-6]) > 30
+    model = KernelModel.from_io(io, b0=UnknownConstant())
+    fit_kernel_model(model, t, d.u, d.y)  # whole input: accepted
+    with pytest.raises(IdentifiabilityError, match="the input u is zero except"):
+        fit_kernel_model(model, t, np.where(np.arange(t.size) >= t.size - 6, d.u, 0.0), d.y)
+
+
+def test_the_observer_reports_windows_whose_input_starts_at_their_end_invalid():
+    dt = 0.01
+    io = LTVInputOutput(a=["t**2 + 1", 1.0], b=[-9.0], input=lambda t: np.where(t >= 1.995, 1.0, 0.0))
+    t = np.arange(250) * dt  # one full window, [0, 2] (the next ends at 2.5)
+    d = io.simulate(t)
+    model = KernelModel.from_io(io, b0=UnknownConstant())
+    obs = BSplineObserver(model, dt=dt, window=2.0, hop=0.5, on_unidentifiable="hold")
+    out = run_streaming(obs, {"u": d.u[:, None], "y": d.y[:, None]})
+    assert d.u[199] == 0.0 and d.u[200] == 1.0  # the window [0, 2] sees the input at its last sample only
+    assert np.all(out["valid"][:, 0] == 0)
+    with pytest.raises(IdentifiabilityError, match="the input u is zero except within 6 samples"):
+        run_streaming(BSplineObserver(model, dt=dt, window=2.0, hop=0.5), {"u": d.u[:, None], "y": d.y[:, None]})
+
+
+def test_a_spline_of_order_1_recovers_a_piecewise_constant_a0():
+    # UnknownSpline(order=1) was accepted and then always crashed inside scipy (the derivative of a
+    # degree-0 spline); oracle: noiseless exact recovery of an a0 that jumps at a knot
+    io = LTVInputOutput(a=[lambda t: np.where(np.asarray(t) < 2.0, 4.0, 6.0), 1.0], b=[-2.0], input="sin(3*t)",
+                        x0=[1.0, 0.0])
+    t = np.linspace(0.0, 4.0, 4001)
+    d = io.simulate(t)
+    fit = fit_kernel_model(KernelModel(a0=UnknownSpline(4, order=1), a1=UnknownConstant(), b0=UnknownConstant()),
+                           t, d.u, d.y)
+    np.testing.assert_allclose(fit.beta, [4.0, 4.0, 6.0, 6.0, 1.0, -2.0], rtol=0, atol=1e-8)  # DOP853 at rtol 1e-12
+    np.testing.assert_array_equal(fit.coefficients["a0"].derivative()(np.array([1.0, 3.0])), [0.0, 0.0])
+
+
+@pytest.mark.parametrize("name", ["a1", "b1"])
+def test_a_spline_of_order_1_is_refused_where_its_derivative_is_needed(name):
+    coefficients = {"a0": UnknownConstant(), "a1": 1.0, name: UnknownSpline(4, order=1)}
+    with pytest.raises(DimensionError, match=rf"^{name}: a B-spline of order 1 \(piecewise constant\) has no "
+                                             rf"derivative, which the kernels of {name} need \(10\); use order 2"):
+        KernelModel(**coefficients)
+
+
+@pytest.mark.parametrize(("coefficient", "formula"), [("b0", "1/(t - 2)"), ("a1", "1/(t - 2)"), ("a0", "log(t - 1)")])
+def test_a_known_coefficient_that_is_not_finite_at_a_sample_is_named(coefficient, formula):
+    # b0 = 1/(t - 2) went through to the result as inf at t = 2
+    t = np.linspace(0.0, 4.0, 4001)
+    y = np.exp(-0.5 * t) * np.sin(2 * t)
+    known = {"a0": UnknownConstant(), "a1": UnknownConstant(), "b0": UnknownConstant()}
+    known[coefficient] = formula
+    with pytest.raises(NonFiniteError, match=rf"^the known coefficient {coefficient} = .* is -?(inf|nan) at t = "):
+        fit_kernel_model(KernelModel(**known), t, np.sin(3 * t), y)
+
+
+def test_the_build_plan_of_a_third_order_model_has_no_observer(tmp_path):
+    # `lpvest build --model` wrote the plant and then failed on the observer (order 3)
+    from lpvest.estimators.bspline import observer_supports
+    from lpvest.fmi.build import plan_system
+
+    path = tmp_path / "third.toml"
+    path.write_text('[system]\nname = "third"\ntitle = "a third-order LTV model"\n'
+                    '[models.io]\ntype = "ltv-io"\na = ["t + 1", 3, 3]\nb = [1]\ninput = "sin(t)"\n')
+    plans, notes = plan_system(path)
+    assert [p.role for p in plans] == ["Plant"]
+    assert "third: model 'io' gets no BSplineObserver: the B-spline observer is for second-order models (11); " \
+           "this one has order 3" in notes
+    assert observer_supports(load_system("sridhar-ltv").model()) is None
+    assert observer_supports(load_system("sridhar-ltv").model("state_space")).startswith("the B-spline observer "
+                                                                                         "needs an ltv-io model")

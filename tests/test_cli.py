@@ -1,7 +1,9 @@
 """The lpvest command line."""
 
+import argparse
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -88,3 +90,86 @@ def test_output_piped_into_head_ends_quietly():
     )
     assert proc.stdout.startswith("peixoto-ex1: ")
     assert "Traceback" not in proc.stderr and "BrokenPipe" not in proc.stderr
+
+
+# -- every expected failure is one line and status 2 (issue 12) -----------------------------------
+
+
+def _run(*argv, cwd=None):
+    return subprocess.run([sys.executable, "-m", "lpvest.cli", *argv], capture_output=True, text=True,
+                          check=False, cwd=cwd)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["simulate", "cox-toth-ex1", "--schedule", "0.5", "--schedule", "0.2", "--out", "OUT"],
+         "lpvest: error: schedule: 2 formulas given; expected 1 (one per scheduling component: p)"),
+        (["simulate", "peixoto-ex1", "--seed", "-1"],
+         "lpvest simulate: error: argument --seed: expected a non-negative integer, found -1 "
+         "(see lpvest simulate --help)"),
+        (["simulate", "peixoto-ex1", "--steps", "1"],
+         "lpvest simulate: error: argument --steps: expected 2 to 1,000,000 samples, found 1 "
+         "(see lpvest simulate --help)"),
+        (["simulate", "peixoto-ex1", "--out", "/dev/null"],
+         "lpvest: error: --out /dev/null: cannot create the output folder (it is a file, not a folder)"),
+        (["simulate", "cox-toth-ex1", "--schedule", "1/k", "--out", "OUT"],
+         "lpvest: error: schedule: formula '1/k' is inf at k = 0"),
+        (["simulate", "peixoto-ex1", "--schedule", "9**9**9", "--out", "OUT"],
+         "lpvest: error: formula '9**9**9' overflows (its value exceeds the floating-point range, about 1.8e308)"),
+        (["validate", "README.md"], "lpvest: error: README.md: not an FMU (not a zip archive)"),
+        (["validate", "nothing.fmu"], "lpvest: error: nothing.fmu: no such file"),
+        (["systems", "show"], "lpvest: error: systems: expected one example name or model file, e.g. "
+                              "`lpvest systems show peixoto-ex1` (or nothing, to list the examples)"),
+        (["systems", "peixoto-ex9"],
+         "lpvest: error: no example system 'peixoto-ex9' (examples: cox-toth-ex1, cox-toth-truncation, peixoto-ex1, "
+         "peixoto-ex2, sridhar-ltv; or give a .toml file)"),
+        (["systems", "show", "peixoto-ex2", "--param", "rho"], "lpvest: error: --param 'rho': expected NAME=VALUE"),
+        (["systems", "show", "peixoto-ex2", "--param", "rho=nan"],
+         "lpvest: error: ROOT/models/peixoto_ex2.toml: parameters.rho (override): expected a finite number, found nan"),
+        (["reproduce", "nothing"], "lpvest: error: no experiment 'nothing' (known: "),
+        (["bogus"], "lpvest: error: argument COMMAND: invalid choice: 'bogus' (choose from "),
+    ],
+)
+def test_expected_failures_are_one_line_with_status_2(tmp_path, argv, message):
+    root = str(Path(__file__).resolve().parent.parent)
+    argv = [a.replace("OUT", str(tmp_path / "out")) for a in argv]
+    proc = _run(*argv, cwd=root)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.count("\n") == 1, proc.stderr
+    assert proc.stderr.startswith(message.replace("ROOT", root)), proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+def test_debug_shows_the_traceback():
+    proc = _run("simulate", "peixoto-ex1", "--out", "/dev/null", "--debug")
+    assert proc.returncode == 2
+    assert "Traceback (most recent call last)" in proc.stderr and "OutputError" in proc.stderr
+    assert proc.stderr.endswith("lpvest: error: --out /dev/null: cannot create the output folder "
+                                "(it is a file, not a folder)\n")
+
+
+def test_systems_name_is_systems_show_name(capsys):
+    assert main(["systems", "peixoto-ex1"]) == 0
+    short = capsys.readouterr().out
+    assert main(["systems", "show", "peixoto-ex1"]) == 0
+    assert capsys.readouterr().out == short and short.startswith("peixoto-ex1: ")
+
+
+def test_schedule_does_not_swallow_the_file_name(tmp_path, capsys):
+    # `--schedule FORMULA` takes one formula: the example name after it is the target
+    assert main(["simulate", "--schedule", "0.5", "peixoto-ex1", "--steps", "5", "--out", str(tmp_path)]) == 0
+    assert "simulated peixoto-ex1 / plant: 5 samples" in capsys.readouterr().out
+
+
+def test_every_subcommand_has_a_description_and_examples():
+    from lpvest.cli import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    assert set(sub.choices) >= {"systems", "simulate", "reproduce", "regress", "build", "cosim", "validate"}
+    for name, p in sub.choices.items():
+        text = p.format_help()
+        assert p.description and len(p.description) > 40, name
+        assert "examples:\n  lpvest " + name in text, name
+        assert "--debug" in text, name

@@ -240,3 +240,42 @@ def test_the_readme_scripting_example_runs(fmus, capsys):
     out = capsys.readouterr().out.splitlines()
     assert out[0].startswith("['get sched: ") and "'set filter: p[1], y[1]'" in out[0]
     assert float(out[1]) == pytest.approx(1.07, abs=0.005)
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [("inf", "expected an integer, found float inf"), ("nan", "expected an integer, found float nan"),
+     ("1e308", "1e+308 is outside the range of an FMI Integer [-2147483648, 2147483647]"),
+     ("4294967296", "4294967296 is outside the range of an FMI Integer [-2147483648, 2147483647]")],
+)
+def test_integer_parameters_out_of_range(fmus, tmp_path, value, message):
+    # issue 12: seed = inf gave OverflowError, nan ValueError; found by tests/test_properties.py:
+    # tau = 3e308 printed a 309-digit integer
+    f = tmp_path / "run.toml"
+    f.write_text(_edit(BASE, 'fmu = "PeixotoEx1Scheduler"',
+                       f'fmu = "PeixotoEx1Scheduler"\nparameters = {{ seed = {value} }}'))
+    with pytest.raises(ModelFileError, match=re.escape(f"{f}: components.sched.parameters.seed: seed: {message}")):
+        load_cosim(f, fmu_dir=fmus.out).check()
+
+
+def test_a_stop_time_of_too_many_steps(fmus, tmp_path):
+    # found by tests/test_properties.py: the step count was printed with all its 300 digits
+    f = tmp_path / "run.toml"
+    f.write_text(_edit(BASE, "steps = 10", "stop_time = 1e300"))
+    with pytest.raises(ModelFileError, match=re.escape(f"{f}: stop_time: 1e+300 steps: at most 100,000,000 (the "
+                                                       "results are kept in memory)")):
+        load_cosim(f, fmu_dir=fmus.out)
+
+
+@pytest.mark.parametrize(
+    ("raw", "message"),
+    [(b"\xff\xfes\x00t\x00", r"not a TOML text file: byte 1 \(b'\\xff'\) is not UTF-8 \(the file is UTF-16"),
+     (b"step_size = " + b"[" * 500 + b"1" + b"]" * 500, r"not valid TOML: arrays or tables nested too deeply$")],
+    ids=["utf-16", "nested 500 deep"],
+)
+def test_a_cosimulation_file_that_is_not_toml_text(tmp_path, raw, message):
+    # issue 12: UnicodeDecodeError and RecursionError escaped, as for model files
+    f = tmp_path / "run.toml"
+    f.write_bytes(raw)
+    with pytest.raises(ModelFileError, match=f"^{re.escape(str(f))}: {message}"):
+        load_cosim(f)

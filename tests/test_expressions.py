@@ -87,3 +87,120 @@ def test_formula_matrix_shapes_and_errors():
         FormulaMatrix.parse([[0, 1], [2]], name="A")
     with pytest.raises(ExpressionError, match="A\\[2,1\\]: formula 'x' uses unknown name 'x'"):
         FormulaMatrix.parse([[0, 1], ["x", 1]], name="A", allowed=["t"])
+
+
+# -- floating point, bounded size and depth (issue 12) ---------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("9**9**9", r"^formula '9\*\*9\*\*9' overflows"),  # was: a Python integer computation that never ended
+        ("t + 9**9**9", r"^formula 't \+ 9\*\*9\*\*9' overflows"),
+        ("10**400", r"^formula '10\*\*400' overflows"),
+        ("1e308*10", r"^formula '1e308\*10' overflows"),
+        ("exp(1000)", r"^formula 'exp\(1000\)' overflows"),
+        ("1/0", r"^formula '1/0' divides by zero"),
+        ("t/(1 - 1)", r"^formula 't/\(1 - 1\)' divides by zero"),
+        ("0**-1", r"^formula '0\*\*-1' divides by zero"),
+        ("log(0)", r"^formula 'log\(0\)' takes the log of zero"),
+        ("sqrt(-1)", r"^formula 'sqrt\(-1\)' is undefined"),
+        ("(-8)**(1/3)", r"^formula '\(-8\)\*\*\(1/3\)' is not a real number"),
+        ("1e999", r"^formula '1e999': the number inf is not finite"),
+        ("1" * 400, r"^formula '1111.*' \(400 characters\): the number 1111.* is not finite"),
+        ("shift(p, 100000)", r"^formula 'shift\(p, 100000\)': shift by 100000 samples: at most 1000"),
+    ],
+)
+def test_constant_arithmetic_is_checked_in_floating_point(text, match):
+    with pytest.raises(ExpressionError, match=match):
+        Expression.parse(text)
+
+
+@pytest.mark.parametrize(
+    "text",
+    ["1" + "+1" * 100_000,  # 100k terms: was RecursionError
+     "(" * 100_000 + "1" + ")" * 100_000,
+     "-" * 100_000 + "1",  # 100k deep: was MemoryError
+     "sin(" * 60_000 + "t" + ")" * 60_000],
+)
+def test_huge_formulas_are_refused_by_length(text):
+    with pytest.raises(ExpressionError, match=r"is too long: at most 2,000 characters$") as info:
+        Expression.parse(text)
+    assert len(str(info.value)) < 120  # abbreviated, never echoed whole
+
+
+@pytest.mark.parametrize(
+    "text",
+    ["1" + "+t" * 150, "-" * 150 + "t", "sin(" * 150 + "t" + ")" * 150],
+)
+def test_deep_formulas_are_refused_by_depth(text):
+    with pytest.raises(ExpressionError, match=r"nested deeper than 100 levels$"):
+        Expression.parse(text)
+
+
+def test_parentheses_are_no_depth_up_to_the_parsers_limit():
+    assert Expression.parse("(" * 150 + "t" + ")" * 150).source == "t"
+    with pytest.raises(ExpressionError, match="is not valid: too many nested parentheses$"):
+        Expression.parse("(" * 250 + "t" + ")" * 250)
+
+
+def test_a_formula_at_the_limits_parses_differentiates_and_evaluates():
+    text = "+".join(["t"] * 99)  # depth 99
+    f = Expression.parse(text)
+    assert float(f(t=2.0)) == 198.0
+    assert float(f.derivative("t")(t=2.0)) == 99.0
+
+
+def test_null_bytes_and_non_finite_numbers_are_typed_errors():
+    with pytest.raises(ExpressionError, match=r"^formula 't\\x00' is not valid"):
+        Expression.parse("t\x00")
+    with pytest.raises(ExpressionError, match="^formula value nan is not a finite number"):
+        Expression.parse(float("nan"))
+    with pytest.raises(ExpressionError, match=r"^formula value 1000.* is not a finite number"):
+        Expression.parse(10**400)
+    with pytest.raises(ExpressionError, match="^formula 'rho': parameter 'rho' is not finite"):
+        Expression.parse("rho", parameters={"rho": float("inf")})
+
+
+def test_evaluation_follows_ieee_arithmetic_for_python_and_numpy_numbers():
+    f = Expression.parse("1/t + t**0.5")
+    assert f(t=0.0) == np.inf  # Python floats raise ZeroDivisionError; the formula gives inf as numpy does
+    assert np.isnan(f(t=-1.0))  # Python gives a complex number; the formula nan
+    np.testing.assert_array_equal(f(t=np.array([0.0, -1.0, 4.0])), [np.inf, np.nan, 2.25])
+    assert Expression.parse("2**t")(t=2000.0) == np.inf
+
+
+def test_shifted_names_are_shown_as_written():
+    with pytest.raises(ExpressionError, match=r"must be a constant here but uses the variable shift\(p, 1\)$"):
+        Expression.parse("shift(p, 1)").value()
+
+
+def test_source_shows_whole_numbers_as_integers():
+    assert Expression.parse("t^2 + 2*t - (1 + 2)").source == "t ** 2 + 2 * t - 3"
+
+
+@pytest.mark.parametrize("text", ["(-1.0)**(t)", "(-rho)**(p**538.0)", "(-2)**2", "-(2**t)", "(-0.0)*t"])
+def test_source_reads_back_as_the_same_formula(text):
+    # found by tests/test_properties.py: ast.unparse wrote the folded constant -1.0
+    # as "-1.0 ** t", which reads back as -(1.0 ** t)
+    f = Expression.parse(text, parameters={"rho": 2.0})
+    again = Expression.parse(f.source)
+    t = np.array([-1.0, 0.0, 0.5, 2.0])
+    np.testing.assert_array_equal(again(t=t, p=t), f(t=t, p=t))
+
+
+def test_derivative_of_a_division_by_a_huge_constant():
+    # found by tests/test_properties.py: d(t/1e308) was (1e308 - 0)/1e308**2, whose
+    # constant 1e308**2 raised OverflowError from the evaluation
+    d = Expression.parse("t/1e308").derivative("t")
+    assert d(t=1.0) == 1e-308
+    assert Expression.parse("t*1e300*1e10").derivative("t")(t=0.5) == np.inf  # IEEE: the constant overflows
+
+
+def test_a_malformed_number_is_an_error_without_a_python_warning(recwarn):
+    # found by tests/test_properties.py: ast.parse warned "invalid decimal literal" before the error
+    with pytest.raises(ExpressionError, match=r"^formula '1or p': BoolOp is not allowed in a formula$"):
+        Expression.parse("1or p")
+    with pytest.raises(ExpressionError, match=r"^formula '0x1for' is not valid: invalid syntax$"):
+        Expression.parse("0x1for")
+    assert not [w for w in recwarn if issubclass(w.category, SyntaxWarning)]

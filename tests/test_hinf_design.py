@@ -341,7 +341,8 @@ def test_unstable_plant_raises_infeasible():
     with pytest.raises(LMIInfeasibleError, match="vertex 1 of the plant has spectral radius 1.03") as info:
         design_hinf(plant, epsilon=1.0)
     assert info.value.status == "infeasible"
-    with pytest.raises(LMIInfeasibleError, match="every epsilon tried") as info:
+    with pytest.raises(LMIInfeasibleError,
+                       match=r"at every epsilon, solver CLARABEL: no certified solution \(not solved: vertex") as info:
         search_epsilon(plant, n_grid=4)
     assert info.value.status == "infeasible"
 
@@ -388,3 +389,31 @@ def test_wrong_dimensions_and_types():
         HinfDesign(**{**d.__dict__, "Bf": np.zeros((2, 2, 3))})
     with pytest.raises(DimensionError, match="a robust design needs 1 set"):
         HinfDesign(**{**d.__dict__, "kind": KIND_ROBUST})
+
+
+def test_a_plant_unstable_inside_the_polytope_is_refused_at_once():
+    # every vertex is Schur (spectral radius 0.5) but A(alpha) at the midpoint has eigenvalue 2: the
+    # search took 38 s and ended in "solver_error ... try another solver"; the LMIs imply A(alpha) Schur on
+    # the whole simplex, so the answer is known before any solve
+    plant = PolytopicLPV({
+        "A": [[[0.5, 3.0], [0.0, 0.5]], [[0.5, 0.0], [3.0, 0.5]]], "Bw": [[[1], [0]], [[1], [0]]],
+        "Cz": [[[1, 0]], [[1, 0]]], "Dz": [[[0]], [[0]]], "Cy": [[[0, 1]], [[0, 1]]], "Dy": [[[1]], [[1]]],
+    }, name="unstable-inside")
+    assert max(np.max(np.abs(np.linalg.eigvals(a))) for a in plant.vertices.A) == 0.5
+    for call in (lambda: search_epsilon(plant), lambda: design_hinf(plant, epsilon=1.0, kind=KIND_ROBUST)):
+        with pytest.raises(LMIInfeasibleError, match=r"for unstable-inside at .*: no certified solution \(not solved: "
+                                                     r"A\(alpha\) at alpha = \(0\.5, 0\.5\) has spectral radius 2 >= 1 "
+                                                     r"although every vertex is Schur") as info:
+            call()
+        assert info.value.status == "infeasible"
+        assert len(str(info.value)) <= 300 and "\n" not in str(info.value)
+        assert "so no filter exists" in info.value.detail
+
+
+def test_errors_from_a_design_name_the_system_and_model():
+    # issue 12: the message named the model key "plant" only, not which file's plant
+    plant = load_system("peixoto-ex2", parameters={"rho": 22.0}).model()
+    with pytest.raises(LMIInfeasibleError, match=r"^parameter-dependent H-infinity LMIs for peixoto-ex2/plant at "
+                                                 r"epsilon = 1, solver CLARABEL: no certified solution \(not solved: "
+                                                 r"vertex 1 of the plant has spectral radius 1\.03"):
+        design_hinf(plant, epsilon=1.0)

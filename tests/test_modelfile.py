@@ -1,6 +1,7 @@
 """Model files: round trip and every validation error path."""
 
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -134,7 +135,7 @@ ERRORS = [
     ('C = [[1.0, 0.0]]', 'C = [[1.0, 0.0], [1.0]]',
      r"models.m.C: rows have different lengths \[1, 2\]; expected equal"),
     ('C = [[1.0, 0.0]]', 'C = [[1.0, "x"]]',
-     r"models.m.C\[1,2\]: formula 'x' must be a constant here but uses \['x'\]"),
+     r"models.m.C\[1,2\]: formula 'x' must be a constant here but uses the variable x"),
     ('C = [[1.0, 0.0]]', 'C = [[1.0, true]]', r"models.m.C\[1,2\]: expected a number, found a boolean"),
     ('C = [[1.0, 0.0]]', 'C = [[1.0, 0.0]]\nF = [[1.0]]',
      "models.m: unknown key 'F' \\(expected one of: "),
@@ -251,3 +252,87 @@ def test_innovation_and_io_errors(tmp_path):
     path = _write(tmp_path, base.replace("innovation_covariance = [[1.0]]", "innovation_covariance = [[-1.0]]", 1))
     with pytest.raises(ModelFileError, match="models.minimal: innovation covariance is not positive definite"):
         load_system(path)
+
+
+# -- every malformed file is one line naming file and field (issue 12) -----------------------------
+
+EX2 = (Path(__file__).resolve().parent.parent / "models" / "peixoto_ex2.toml").read_text()
+A22 = r"models\.plant\.vertex\[1\]\.A\[2,2\]"
+TRUNC = (Path(__file__).resolve().parent.parent / "models" / "cox_toth_truncation.toml").read_text()
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        # were ZeroDivisionError, OverflowError and a computation that never ended
+        (EX2.replace('"-0.05*rho"', '"1/0"'), rf"{A22}: formula '1/0' divides by zero$"),
+        (EX2.replace('"-0.05*rho"', '"10**400"'), rf"{A22}: formula '10\*\*400' overflows"),
+        (EX2.replace('"-0.05*rho"', '"9**9**9"'), rf"{A22}: formula '9\*\*9\*\*9' overflows"),
+        (EX2.replace('"-0.05*rho"', '"' + "+".join(["rho"] * 50_000) + '"'),
+         r"models\.plant\.vertex\[1\]\.A\[2,2\]: formula 'rho\+rho.*' \(199,999 characters\) is too long"),
+        # was LinAlgError from the definiteness check (an entry of -1e308), and 1e308 accepted
+        (TRUNC.replace("Q = [[0.02,", "Q = [[-1e308,"),
+         r"models\.plant\.Q\[1,1\]: -1e\+308 is too large: numbers in a model file are at most 1e\+100 in magnitude$"),
+        (EX2.replace('"-0.05*rho"', "1e308"), r"models\.plant\.vertex\[1\]\.A\[2,2\]: 1e\+308 is too large"),
+        (EX2.replace('"-0.05*rho"', "nan"), rf"{A22}: expected a finite number, found nan$"),
+        (EX2.replace("rho = 1.0", "rho = inf"), r"parameters\.rho: expected a finite number, found inf$"),
+        (EX2.replace("rho = 1.0", "t = 1.0"), r"parameters\.t: 't' is a name formulas reserve"),
+        # was RecursionError inside the TOML parser
+        (EX2.replace('"-0.05*rho"', "[" * 500 + "1" + "]" * 500),
+         r"not valid TOML: arrays or tables nested too deeply$"),
+        # a 20,000-character value was echoed whole
+        (EX2.replace('type = "polytopic"', 'type = "' + "x" * 20_000 + '"'),
+         r"models\.plant\.type: unknown model type 'xxxx.*' \(20,000 characters\) \(expected one of"),
+        (EX2.replace("[scheduling]", '[scheduling]\n"' + "k" * 5000 + '" = 1', 1),
+         r"scheduling: unknown key 'kkkk.*' \(5,000 characters\)"),
+    ],
+    ids=["1/0", "10**400", "9**9**9", "100k terms", "-1e308", "1e308", "nan", "inf parameter", "reserved name",
+         "nested 500 deep", "long value", "long key"],
+)
+def test_malformed_values_are_one_short_line(tmp_path, text, message):
+    path = tmp_path / "m.toml"
+    path.write_text(text)
+    with pytest.raises(ModelFileError, match=f"^{path}: {message}") as info:
+        load_system(path)
+    assert "\n" not in str(info.value) and len(str(info.value)) <= 300 + len(str(path))
+
+
+@pytest.mark.parametrize(
+    ("raw", "message"),
+    [
+        (EX2.encode("utf-16"), r"not a TOML text file: byte 1 \(b'\\xff'\) is not UTF-8 \(the file is UTF-16; "
+                               r"save it as UTF-8\)$"),
+        (b"\x89PNG\r\n\x1a\n\x00\x00", r"not a TOML text file: byte 1 \(b'\\x89'\) is not UTF-8$"),
+        (b"a = " + b"1" * 5000, r"not valid TOML: Exceeds the limit \(4300 digits\)"),
+    ],
+    ids=["utf-16", "binary", "5000 digits"],
+)
+def test_files_that_are_not_toml_text(tmp_path, raw, message):
+    # were UnicodeDecodeError (modelfile.py read UTF-8 and caught only OSError) and ValueError
+    path = tmp_path / "m.toml"
+    path.write_bytes(raw)
+    with pytest.raises(ModelFileError, match=f"^{path}: {message}"):
+        load_system(path)
+
+
+def test_a_utf8_byte_order_mark_is_accepted(tmp_path):
+    path = tmp_path / "m.toml"
+    path.write_bytes(b"\xef\xbb\xbf" + EX2.encode())
+    assert load_system(path).name == "peixoto-ex2"
+
+
+def test_models_are_named_system_slash_key():
+    assert load_system("peixoto-ex1").model().name == "peixoto-ex1/plant"
+    assert load_system("cox-toth-ex1").model("io").name == "cox-toth-ex1/io"
+
+
+def test_a_model_unstable_along_the_schedule_is_an_error_not_inf(tmp_path):
+    # entries of 1e100 are accepted, but the simulation leaves the floating-point range: a clear error
+    from lpvest.errors import NumericalError
+    from lpvest.experiments.simulate import simulate_system
+
+    path = tmp_path / "m.toml"
+    path.write_text(EX2.replace('"-0.05*rho"', "1e100"))
+    with pytest.raises(NumericalError, match=r"^simulating peixoto-ex2 / model plant: y is -?inf at k = 15 "
+                                             r"\(the model is unstable along this schedule"):
+        simulate_system(load_system(path), steps=20)

@@ -244,3 +244,95 @@ def test_the_readme_numbers_for_the_example_file(fmus, tmp_path):
     assert np.linalg.norm(e_jacobi) / w == pytest.approx(1.60, abs=0.005)
     with zipfile.ZipFile(fmus["PeixotoEx1HinfPD"]) as z:
         assert HinfDesign.from_json(z.read("resources/design.json").decode()).gamma == pytest.approx(1.21, abs=0.005)
+
+
+# -- reading an SSP file that is not ours (issue 12) ------------------------------------------------
+
+SSD = """<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon"
+    xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues"
+    xmlns:osp="http://opensimulationplatform.com/SSP/OSPAnnotations" name="s" version="1.0">
+  <ssd:System name="s">
+    <ssd:Elements>
+      <ssd:Component name="plant" source="SOURCE" type="application/x-fmu-sharedlibrary">
+        <ssd:Connectors><ssd:Connector name="y[1]" kind="output"><ssc:Real/></ssd:Connector></ssd:Connectors>
+        <ssd:ParameterBindings><ssd:ParameterBinding><ssd:ParameterValues>
+          <ssv:ParameterSet version="1.0" name="plant"><ssv:Parameters>
+            <ssv:Parameter name="seed"><ssv:Integer value="SEED"/></ssv:Parameter>
+          </ssv:Parameters></ssv:ParameterSet>
+        </ssd:ParameterValues></ssd:ParameterBinding></ssd:ParameterBindings>
+      </ssd:Component>
+    </ssd:Elements>
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="0.0" stopTime="STOP">
+    <ssd:Annotations><ssc:Annotation type="com.opensimulationplatform">
+      <osp:Algorithm><osp:FixedStepAlgorithm baseStepSize="STEP"/></osp:Algorithm>
+    </ssc:Annotation></ssd:Annotations>
+  </ssd:DefaultExperiment>
+</ssd:SystemStructureDescription>
+"""
+
+
+def _ssp_file(tmp_path, source="resources/Plant.fmu", seed="3", stop="10.0", step="1.0", members=None):
+    path = tmp_path / "hand.ssp"
+    ssd = SSD.replace("SOURCE", source).replace("SEED", seed).replace("STOP", stop).replace("STEP", step)
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("SystemStructure.ssd", ssd)
+        for m in members if members is not None else ["resources/Plant.fmu"]:
+            z.writestr(m, b"not read")
+    return path
+
+
+def test_a_hand_written_ssp_file_is_read(tmp_path):
+    system = read_ssp(_ssp_file(tmp_path))
+    assert system.components == {"plant": "resources/Plant.fmu"}
+    assert system.parameters == {"plant": [("seed", "Integer", "3")]}
+    assert (system.step_size, system.start_time, system.stop_time) == (1.0, 0.0, 10.0)
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        # libcosim unpacks the archive and opens the source: '..' would reach outside its folder
+        ({"source": "../evil.fmu", "members": ["../evil.fmu"]},
+         r"component 'plant': source '\.\./evil\.fmu' is not a relative path inside the archive"),
+        ({"source": "resources/../../evil.fmu"},
+         r"component 'plant': source 'resources/\.\./\.\./evil\.fmu' is not a relative path"),
+        ({"source": "/etc/evil.fmu"},
+         r"component 'plant': source '/etc/evil\.fmu' is not a relative path inside the archive"),
+        ({"source": "C:/evil.fmu"},
+         r"component 'plant': source 'C:/evil\.fmu' is not a relative path inside the archive"),
+        ({"source": "resources/Other.fmu"}, r"component 'plant': source 'resources/Other\.fmu' is not in the archive"),
+        ({"seed": "inf"}, r"component 'plant': parameter 'seed': expected an integer, found 'inf'"),
+        ({"seed": "99999999999"},
+         r"component 'plant': parameter 'seed': 99999999999 is outside the range of an FMI Integer"),
+        ({"stop": "soon"}, r"DefaultExperiment stopTime: expected a number, found 'soon'"),
+        ({"step": "-1"}, r"FixedStepAlgorithm baseStepSize: expected a positive number, found -1\.0"),
+        ({"step": "nan"}, r"FixedStepAlgorithm baseStepSize: expected a positive number, found nan"),
+    ],
+)
+def test_an_unsafe_or_malformed_ssp_file_is_one_line_naming_it(tmp_path, change, message):
+    path = _ssp_file(tmp_path, **change)
+    with pytest.raises(CoSimulationError, match=f"^{path}: {message}") as info:
+        read_ssp(path)
+    assert "\n" not in str(info.value)
+
+
+def test_an_ssp_file_that_is_not_a_zip_archive(tmp_path):
+    path = tmp_path / "x.ssp"
+    path.write_bytes(b"\x00\x01junk")
+    with pytest.raises(CoSimulationError, match=f"^{path}: not an SSP file with a SystemStructure.ssd: "):
+        read_ssp(path)
+
+
+def test_an_xml_declaration_with_an_unknown_encoding(tmp_path):
+    # found by tests/test_properties.py: ElementTree raised LookupError
+    path = _ssp_file(tmp_path)
+    with zipfile.ZipFile(path) as z:
+        ssd = z.read("SystemStructure.ssd").replace(b'encoding="UTF-8"', b'encoding="nan"')
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("SystemStructure.ssd", ssd)
+    with pytest.raises(CoSimulationError, match=f"^{path}: not an SSP file with a SystemStructure.ssd: unknown "
+                                                "encoding: nan$"):
+        read_ssp(path)

@@ -76,3 +76,28 @@ def test_as_rng():
     assert as_rng(5).standard_normal() == np.random.default_rng(5).standard_normal()
     with pytest.raises(TypeError, match="rng must be"):
         as_rng("seed")
+
+
+def test_a_value_just_outside_the_box_is_printed_with_the_digits_that_show_it():
+    # issue 12: 1 + 1e-7 was printed as "p = 1 is outside its declared range [-1, 1]"
+    from lpvest import SchedulingRangeError
+    from lpvest.validation import check_box
+
+    with pytest.raises(SchedulingRangeError, match=r"^scheduling value p = 1\.0000001 is outside its declared "
+                                                   r"range \[-1, 1\]$"):
+        check_box(np.array([1.0 + 1e-7]), np.array([-1.0]), np.array([1.0]), ["p"])
+
+
+@pytest.mark.parametrize(("entry", "match"), [(-1e308, "Q is not positive definite: smallest eigenvalue -1e\\+308"),
+                                              (1e308, None)])
+def test_definiteness_of_matrices_near_the_float_range(entry, match):
+    # issue 12: an entry of -1e308 raised LinAlgError (Q + Q^T overflowed to inf before eigvalsh)
+    from lpvest import NotPositiveDefiniteError
+    from lpvest.validation import check_positive_definite
+
+    q = np.array([[entry, 0.0], [0.0, 1.0 if match else 0.5e308]])
+    if match is None:
+        np.testing.assert_array_equal(check_positive_definite(q, "Q"), q)
+    else:
+        with pytest.raises(NotPositiveDefiniteError, match=match):
+            check_positive_definite(q, "Q")

@@ -26,7 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError, NumericalError
+from ..errors import DimensionError, NumericalError, abbreviate
 from ..estimators.kalman import KalmanModel, _initial, _riccati_sweep, covariance_step
 from ..estimators.truncated import restart_covariance, start_covariance
 from ..systems.affine import AffineLPV
@@ -199,7 +199,7 @@ def monotonicity(errors: TruncationErrors, *, which: str = "K", floor: float = 1
     (True, 0)
     """
     if which not in ("K", "P"):
-        raise DimensionError(f"which must be 'K' or 'P'; found {which!r}")
+        raise DimensionError(f"which must be 'K' or 'P'; found {abbreviate(which, 30)}")
     E = errors.K_error if which == "K" else errors.P_error
     sup = errors.max_K_error if which == "K" else errors.max_P_error
     taus = errors.taus

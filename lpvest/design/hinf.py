@@ -82,7 +82,15 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError, LMIInfeasibleError, NonFiniteError
+from ..errors import (
+    ArgumentError,
+    ArgumentTypeError,
+    DimensionError,
+    InternalError,
+    LMIInfeasibleError,
+    NonFiniteError,
+    abbreviate,
+)
 from ..systems.polytopic import PolytopicLPV
 from .result import KIND_PD, KIND_ROBUST, HinfDesign, model_digest
 
@@ -299,7 +307,7 @@ def lmi_matrices(
     ``(a, b) = (epsilon, 1)``, or ``multiplier_ab`` for the rescaled form.
     """
     if (epsilon is None) == (multiplier_ab is None):
-        raise ValueError("give exactly one of epsilon and multiplier_ab")
+        raise ArgumentError("give exactly one of epsilon and multiplier_ab")
     a, b = (float(epsilon), 1.0) if multiplier_ab is None else multiplier_ab  # type: ignore[arg-type]
     var = {k: ([np.asarray(m, dtype=float) for m in v] if k != "delta" else float(v)) for k, v in variables.items()}
     return _lmis(_vertex_data(plant, a, b), var, a, b, robust=robust, bmat=_np_bmat, printed_phi21=printed_phi21)
@@ -369,13 +377,12 @@ class HinfProgram:
         import cvxpy as cp
 
         if kind not in (KIND_PD, KIND_ROBUST):
-            raise ValueError(f"kind must be {KIND_PD!r} or {KIND_ROBUST!r}; found {kind!r}")
+            raise ArgumentError(f"kind must be {KIND_PD!r} or {KIND_ROBUST!r}; found {abbreviate(kind, 30)}")
         dims = {"n_vertices": n_vertices, "nx": nx, "ny": ny, "nz": nz, "nw": nw}
         for name, value in dims.items():
             if int(value) != value or value < 1:
-                raise DimensionError(f"{name} must be a positive integer; found {value!r}")
-        if not margin > 0:
-            raise ValueError(f"margin must be positive; found {margin!r}")
+                raise DimensionError(f"{name} must be a positive integer; found {abbreviate(value, 30)}")
+        _check_margin(margin)
         t0 = time.perf_counter()
         self.n_vertices, self.nx, self.ny, self.nz, self.nw = (int(v) for v in dims.values())
         self.kind = kind
@@ -425,7 +432,7 @@ class HinfProgram:
         self.n_lmis = len(lmis)
         self._problem = cp.Problem(cp.Minimize(self._var["delta"]), constraints)
         if not self._problem.is_dpp():  # pragma: no cover - a construction bug, not user input
-            raise RuntimeError("the H-infinity LMI program is not DPP")
+            raise InternalError("the H-infinity LMI program is not DPP (a bug in its construction)")
         # compile now (placeholder parameter values), so that every solve only
         # substitutes parameters: the compile time is paid once, here
         self._set_parameters({k: np.zeros((N, *sh)) for k, sh in shapes.items()}, 1.0, 0.0)
@@ -538,7 +545,7 @@ class HinfProgram:
         raising on failure: the certified design or ``None`` and the status."""
         self._check_dims(plant)
         if (epsilon is None) == (phi is None):
-            raise ValueError("give exactly one of epsilon and phi")
+            raise ArgumentError("give exactly one of epsilon and phi")
         if phi is not None:
             a, b = _ab_of_phi(phi)
             eps = _epsilon_of_phi(phi)
@@ -546,14 +553,8 @@ class HinfProgram:
             eps = float(epsilon)  # type: ignore[arg-type]
             a, b = multiplier(eps)
             eps = abs(eps) if math.isinf(eps) else eps
-        unstable = _unstable_vertex(plant)
-        if unstable is not None:
-            i, radius = unstable
-            detail = (
-                f"not solved: vertex {i + 1} of the plant has spectral radius {radius:.6g} >= 1, and the LMIs "
-                f"(6)-(7) with P_i > 0 imply that every vertex A_i is Schur (at alpha_k = alpha_(k+1) = e_i they "
-                f"are a Lyapunov inequality for the block-triangular plant-filter matrix)"
-            )
+        detail = _instability(plant)
+        if detail is not None:
             return DesignAttempt(None, "infeasible", math.inf, detail)
         self._set_parameters(plant.vertices._asdict(), a, b)
         attempts: list[str] = []
@@ -588,7 +589,8 @@ class HinfProgram:
         res = self.attempt(plant, epsilon)
         if res.design is None:
             raise LMIInfeasibleError(
-                _infeasible_message(plant, self, f"epsilon = {epsilon:g}", res.detail), status=res.status
+                _infeasible_message(plant, self, f"epsilon = {epsilon:g}", res.detail), status=res.status,
+                detail=res.detail,
             )
         return res.design
 
@@ -633,23 +635,63 @@ class HinfProgram:
         )
 
 
+def _check_margin(margin: object) -> None:
+    if isinstance(margin, bool) or not isinstance(margin, int | float) or not 0 < margin < math.inf:
+        raise ArgumentError(f"margin must be a positive finite number; found {abbreviate(margin, 30)}")
+
+
 def _check_plant(plant: object) -> None:
     if not isinstance(plant, PolytopicLPV):
-        raise TypeError(f"the plant must be a PolytopicLPV; found {type(plant).__name__}")
+        raise ArgumentTypeError(f"the plant must be a PolytopicLPV; found {type(plant).__name__}")
 
 
-def _unstable_vertex(plant: PolytopicLPV) -> tuple[int, float] | None:
-    """The first vertex whose ``A_i`` is not Schur, with its spectral radius."""
-    for i, a in enumerate(plant.vertices.A):
-        radius = float(np.max(np.abs(np.linalg.eigvals(a))))
-        if radius >= 1.0:
-            return i, radius
-    return None
+def _simplex_points(n_vertices: int) -> np.ndarray:
+    """Points of the unit simplex where the plant's stability is checked: the
+    vertices, every edge finely (an instability between two vertices is the
+    common case), the barycentre and a fixed sample of the interior."""
+    eye = np.eye(n_vertices)
+    per_edge = 101 if n_vertices <= 4 else 21
+    s = np.linspace(0.0, 1.0, per_edge)[1:-1, None]
+    edges = [(1.0 - s) * eye[i] + s * eye[j] for i in range(n_vertices) for j in range(i + 1, n_vertices)]
+    interior = np.random.default_rng(0).dirichlet(np.ones(n_vertices), size=64) if n_vertices > 2 else np.zeros((0, 2))
+    return np.vstack([eye, *edges, np.full((1, n_vertices), 1.0 / n_vertices), interior])
+
+
+def _instability(plant: PolytopicLPV) -> str | None:
+    """Why no filter exists when ``A(alpha)`` is not Schur somewhere on the
+    simplex (``None`` when it is Schur at every point checked).
+
+    The LMIs (6)-(7), relaxed by Lemma 1, hold for every pair
+    ``(alpha_k, alpha_(k+1))`` of the simplex; at ``alpha_k = alpha_(k+1) =
+    alpha`` they are a Lyapunov inequality, with ``P(alpha) > 0``, for the
+    block-triangular plant-filter matrix, whose diagonal holds ``A(alpha)``.
+    So a spectral radius ``>= 1`` anywhere on the simplex makes them infeasible:
+    a clear answer at once instead of a long search ending in a solver failure.
+    """
+    alpha = _simplex_points(plant.n_vertices)
+    A = np.einsum("pi,irc->prc", alpha, plant.vertices.A)
+    radius = np.max(np.abs(np.linalg.eigvals(A)), axis=1)
+    bad = np.flatnonzero(radius >= 1.0)
+    if not bad.size:
+        return None
+    k = int(bad[np.argmax(radius[bad])])
+    if k < plant.n_vertices:
+        return (f"not solved: vertex {k + 1} of the plant has spectral radius {radius[k]:.6g} >= 1, and the LMIs "
+                f"(6)-(7) with P_i > 0 imply that every vertex A_i is Schur (at alpha_k = alpha_(k+1) = e_i they "
+                f"are a Lyapunov inequality for the block-triangular plant-filter matrix)")
+    at = ", ".join(f"{a:.3g}" for a in alpha[k])
+    return (f"not solved: A(alpha) at alpha = ({at}) has spectral radius {radius[k]:.6g} >= 1 although every "
+            "vertex is Schur; the LMIs imply A(alpha) Schur on the whole simplex (at alpha_k = alpha_(k+1) = alpha "
+            "they are a Lyapunov inequality), so no filter exists")
 
 
 def _infeasible_message(plant: PolytopicLPV, prog: HinfProgram, where: str, detail: str) -> str:
+    """One line: what failed, and the start of why (``LMIInfeasibleError.detail`` holds all of it)."""
     name = plant.name or "(unnamed plant)"
-    return f"{prog.kind} H-infinity LMIs for {name} at {where}, solver {prog.solver}: no certified solution ({detail})"
+    reason = " ".join(detail.split())
+    if len(reason) > 170:
+        reason = reason[:167] + "..."
+    return f"{prog.kind} H-infinity LMIs for {name} at {where}, solver {prog.solver}: no certified solution ({reason})"
 
 
 @functools.lru_cache(maxsize=16)
@@ -671,10 +713,11 @@ def _program_for(
     if program is not None:
         program._check_dims(plant)
         if program.kind != kind:
-            raise ValueError(f"the program is for a {program.kind} filter, not {kind}")
+            raise ArgumentError(f"the program is for a {program.kind} filter, not {abbreviate(kind, 30)}")
         return program
     if kind not in (KIND_PD, KIND_ROBUST):
-        raise ValueError(f"kind must be {KIND_PD!r} or {KIND_ROBUST!r}; found {kind!r}")
+        raise ArgumentError(f"kind must be {KIND_PD!r} or {KIND_ROBUST!r}; found {abbreviate(kind, 30)}")
+    _check_margin(margin)
     dims = (plant.n_vertices, plant.nx, plant.ny, plant.nz, plant.nw)
     opts = tuple(sorted((solver_options or {}).items()))
     return _cached_program(dims, kind, str(solver).upper(), float(margin), opts)
@@ -853,9 +896,13 @@ def search_epsilon(
     """
     from scipy.optimize import minimize_scalar
 
-    if n_grid < 3:
-        raise ValueError(f"n_grid must be at least 3; found {n_grid}")
+    if isinstance(n_grid, bool) or not isinstance(n_grid, int) or n_grid < 3:
+        raise ArgumentError(f"n_grid must be an integer, at least 3; found {abbreviate(n_grid, 30)}")
     prog = _program_for(plant, kind, solver, margin, solver_options, program)
+    unstable = _instability(plant)
+    if unstable is not None:  # no epsilon can help: say so at once
+        raise LMIInfeasibleError(_infeasible_message(plant, prog, "every epsilon", unstable), status="infeasible",
+                                 detail=unstable)
     points: dict[float, DesignAttempt] = {}
 
     def evaluate(phi: float) -> float:
@@ -871,10 +918,10 @@ def search_epsilon(
     if not finite:
         tried = [points[_canonical_phi(p)] for p in grid]
         statuses = sorted({t.status for t in tried})
-        detail = "; ".join(sorted({t.detail for t in tried}))[:2000]
+        detail = "; ".join(sorted({t.detail for t in tried}))
         raise LMIInfeasibleError(
             _infeasible_message(plant, prog, f"every epsilon tried ({n_grid} values)", detail),
-            status=statuses[0] if len(statuses) == 1 else " | ".join(statuses),
+            status=statuses[0] if len(statuses) == 1 else " | ".join(statuses), detail=detail,
         )
     penalty = 10.0 * max(finite) + 1.0
     minima = [

@@ -47,7 +47,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError, ModelFileError
+from ..errors import ArgumentError, DimensionError, ModelFileError, abbreviate
 from ..validation import as_vector, check_simplex
 
 __all__ = [
@@ -160,7 +160,7 @@ class HinfDesign:
 
     def __post_init__(self) -> None:
         if self.kind not in (KIND_PD, KIND_ROBUST):
-            raise ValueError(f"kind must be {KIND_PD!r} or {KIND_ROBUST!r}; found {self.kind!r}")
+            raise ArgumentError(f"kind must be {KIND_PD!r} or {KIND_ROBUST!r}; found {abbreviate(self.kind, 30)}")
         arrays = {}
         for name in (*_FILTER_NAMES, "lyapunov"):
             arr = np.array(getattr(self, name), dtype=float)
@@ -303,7 +303,7 @@ class HinfDesign:
         version = field(data, "version")
         if version != DESIGN_FORMAT_VERSION:
             raise ModelFileError(
-                f"{source}: design format version {version!r}; this lpvest reads {DESIGN_FORMAT_VERSION}"
+                f"{source}: design format version {abbreviate(version, 30)}; this lpvest reads {DESIGN_FORMAT_VERSION}"
             )
         filt = field(data, "filter")
         solver = field(data, "solver")
@@ -339,7 +339,8 @@ class HinfDesign:
         for key in ("n_vertices", "nx", "ny", "nz"):
             if field(data, key) != getattr(design, key):
                 raise ModelFileError(
-                    f"{source}: {key} = {data[key]!r} disagrees with the matrices ({getattr(design, key)})"
+                    f"{source}: {key} = {abbreviate(data[key], 30)} disagrees with the matrices "
+                    f"({getattr(design, key)})"
                 )
         return design
 

@@ -63,7 +63,15 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError, ExpressionError, IdentifiabilityError, NonFiniteError, SamplingError
+from ..errors import (
+    DimensionError,
+    ExpressionError,
+    IdentifiabilityError,
+    NonFiniteError,
+    SamplingError,
+    abbreviate,
+    shorten,
+)
 from ..systems.ltv import LTVInputOutput, LTVStateSpace, TimeFunction
 from ..validation import as_vector, check_finite
 from .base import Port
@@ -98,6 +106,7 @@ __all__ = [
     "spline_knots",
     "reconstruct_state",
     "BSplineObserver",
+    "observer_supports",
 ]
 
 #: The coefficients of (11), in this order.
@@ -136,6 +145,9 @@ class UnknownSpline:
         Number of B-spline basis functions (the paper's ``n``), at least ``order``.
     order : int, optional
         B-spline order (degree + 1; the paper's ``p``): 3 = quadratic (default).
+        Order 1 (piecewise constant) is for ``a_0`` and ``b_0`` only: the
+        kernels of ``a_1`` and ``b_1`` need their derivative (10), which a
+        piecewise constant function does not have at its knots.
     knots : {"uniform", "clamped"} or array_like, optional
         ``"uniform"`` (default, the paper's "uniform knot sequence"): equally
         spaced knots extended beyond the window so that the splines cover it
@@ -151,14 +163,16 @@ class UnknownSpline:
 
     def __init__(self, n_basis: int, order: int = 3, knots: str | Sequence[float] | np.ndarray = "uniform") -> None:
         if isinstance(n_basis, bool) or not isinstance(n_basis, int | np.integer):
-            raise DimensionError(f"n_basis must be an integer; found {n_basis!r}")
+            raise DimensionError(f"n_basis must be an integer; found {abbreviate(n_basis, 30)}")
         if isinstance(order, bool) or not isinstance(order, int | np.integer) or not 1 <= order <= 8:
-            raise DimensionError(f"order must be an integer in [1, 8]; found {order!r}")
+            raise DimensionError(f"order must be an integer in [1, 8]; found {abbreviate(order, 30)}")
         if n_basis < order:
             raise DimensionError(f"n_basis = {n_basis} B-splines of order {order}: need n_basis >= order")
         if isinstance(knots, str):
             if knots not in ("uniform", "clamped"):
-                raise DimensionError(f"knots must be 'uniform', 'clamped' or a knot vector; found {knots!r}")
+                raise DimensionError(
+                    f"knots must be 'uniform', 'clamped' or a knot vector; found {abbreviate(knots, 30)}"
+                )
             kn: str | tuple[float, ...] = knots
         else:
             arr = as_vector(knots, "knots", int(n_basis) + int(order))
@@ -211,7 +225,13 @@ class KernelModel:
 
     def __init__(self, a0: object, a1: object, b0: object = 0.0, b1: object = 0.0) -> None:
         for name, value in zip(COEFFICIENTS, (a0, a1, b0, b1), strict=True):
-            object.__setattr__(self, name, _as_coefficient(value, name))
+            coefficient = _as_coefficient(value, name)
+            if name[1] == "1" and isinstance(coefficient, UnknownSpline) and coefficient.order < 2:
+                raise DimensionError(
+                    f"{name}: a B-spline of order 1 (piecewise constant) has no derivative, which the kernels of "
+                    f"{name} need (10); use order 2 or more"
+                )
+            object.__setattr__(self, name, coefficient)
 
     @classmethod
     def from_io(cls, io: LTVInputOutput, **unknown: Coefficient) -> KernelModel:
@@ -223,7 +243,8 @@ class KernelModel:
             )
         bad = sorted(set(unknown) - set(COEFFICIENTS))
         if bad:
-            raise DimensionError(f"unknown coefficient name {bad[0]!r}; expected one of {', '.join(COEFFICIENTS)}")
+            raise DimensionError(f"unknown coefficient name {abbreviate(bad[0], 30)}; expected one of "
+                                 f"{', '.join(COEFFICIENTS)}")
         b = (*io.b, *(TimeFunction.of(0.0) for _ in range(2 - len(io.b))))
         known = {"a0": io.a[0], "a1": io.a[1], "b0": b[0], "b1": b[1]}
         known.update(unknown)
@@ -614,6 +635,25 @@ class _Parts:
     bands: tuple[_Band, ...]
 
 
+def _check_known(
+    name: str, f: TimeFunction, samples: np.ndarray, nodes: np.ndarray, phi: np.ndarray, dphi: np.ndarray | None
+) -> None:
+    """A known coefficient (and the derivative the kernels use) must be finite
+    at every sample and quadrature node of the window: a pole there (``b0 =
+    1/(t - 2)`` at ``t = 2``) is a clear error, not an infinite estimate."""
+    for what, values, where in ((name, phi, nodes), (f"{name}'", dphi, nodes),
+                                (name, None if f.is_constant else f(samples), samples)):
+        if values is None:
+            continue
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            raise NonFiniteError(
+                f"the known coefficient {what} = {shorten(f.text, 40)} is {values[bad[0]]} at "
+                f"t = {where[bad[0]]:.10g} (in the window [{samples[0]:.6g}, {samples[-1]:.6g}]); "
+                "expected finite values"
+            )
+
+
 def _hull(*moments: range) -> range:
     """The smallest range of moments holding all of ``moments``."""
     return range(min(r.start for r in moments), max(r.stop for r in moments))
@@ -641,6 +681,7 @@ def _parts(plan: _Plan, a: float, u: np.ndarray, y: np.ndarray) -> _Parts:
     for name, f in funcs.items():
         phi = f(quad.x)
         dphi = f.derivative()(quad.x) if name[1] == "1" and not f.is_constant else None
+        _check_known(name, f, t, quad.x, phi, dphi)
         if not np.any(phi) and (dphi is None or not np.any(dphi)):
             continue
         ident, deriv = coefficient_terms(quad, int(name[1]), phi, dphi, y_nodes if name[0] == "a" else u_nodes)
@@ -832,7 +873,8 @@ def _instant_indices(instants: object, m: int) -> np.ndarray:
         return np.arange(0, m, int(instants))
     idx = np.asarray(instants)
     if idx.ndim != 1 or idx.dtype.kind not in "iu":
-        raise DimensionError(f"instants must be None, a stride or a 1-D array of sample indices; found {instants!r}")
+        raise DimensionError(f"instants must be None, a stride or a 1-D array of sample indices; found "
+                             f"{abbreviate(instants, 30)}")
     if idx.size and (idx.min() < 0 or idx.max() >= m):
         raise DimensionError(f"instants hold sample indices outside [0, {m - 1}]")
     if np.unique(idx).size != idx.size:
@@ -852,6 +894,36 @@ def _unidentifiable_message(plan: _Plan, participation: np.ndarray, reason: str)
                 which = ", ".join(str(i) for i in idx[:8]) + (", ..." if idx.size > 8 else "")
                 names.append(f"{block.name} (B-spline basis functions {which})")
     return f"{reason}; the data do not determine: {'; '.join(names)} (practical identifiability, Definition 1)"
+
+
+def _check_excitation(plan: _Plan, u: np.ndarray, y: np.ndarray) -> None:
+    """The coefficients of a signal that is zero (to round-off, relative to its
+    own peak) on every sample farther than one interpolation stencil from the
+    window's ends are not determined by the data.
+
+    Every kernel vanishes at both ends (as ``s^2``, ``r^2`` for ``a_0``, ``b_0``
+    and as ``s``, ``r`` for ``a_1``, ``b_1``), and within a stencil of an end
+    the quadrature sees the signal only through the interpolation of those few
+    samples: such a column of ``P`` is nonzero (about ``(h / L)^2`` of a
+    column of a signal spread over the window, so the rank test of the scaled
+    ``P`` passes it) but it is quadrature error, not information. Example: an
+    input nonzero at the last sample only (an input switched on as the window
+    ends) gave ``b0 = -0.006`` for a true ``-9``.
+    """
+    m, edge = plan.m, plan.quad.points
+    eps = np.finfo(float).eps
+    for letter, name, v in (("a", "output y", y), ("b", "input u", u)):
+        names = [b.name for b in plan.blocks if b.name[0] == letter]
+        peak = float(np.max(np.abs(v))) if v.size else 0.0
+        if not names or peak == 0.0:  # a zero signal: its columns of P are zero, reported below
+            continue
+        interior = float(np.max(np.abs(v[edge : m - edge]))) if m > 2 * edge else 0.0
+        if interior <= m * eps * peak:
+            raise IdentifiabilityError(
+                f"the {name} is zero except within {edge} samples of the window's ends (where the kernels "
+                f"vanish; what remains there is quadrature error); the data do not determine: "
+                f"{', '.join(names)} (practical identifiability, Definition 1)"
+            )
 
 
 def _rank_check(plan: _Plan, R: np.ndarray, rtol: float) -> np.ndarray:
@@ -984,8 +1056,10 @@ def _fitted(
         sample_values[block.name] = _combine(block.sample_values, coef[block.sample_first + np.arange(k)[:, None]])
         spline = BSpline(block.knots + quad.a, coef.copy(), k - 1, extrapolate=True)
         splines[block.name] = spline
+        # (order 1: piecewise constant, derivative zero between the knots)
+        derivative = spline.derivative() if k > 1 else (lambda x: np.zeros_like(np.asarray(x, dtype=float)))
         functions[block.name] = TimeFunction.from_callable(
-            spline, derivative=spline.derivative(), name=f"B-spline estimate of {block.name}"
+            spline, derivative=derivative, name=f"B-spline estimate of {block.name}"
         )
     y_e, dy_e = finish_identity(quad, ident, deriv, sample_values["a1"], sample_values["b1"], u)
     return sample_values, functions, constants, splines, y_e, dy_e
@@ -1003,6 +1077,7 @@ def _fit(
 ) -> KernelFit:
     from scipy.linalg import qr
 
+    _check_excitation(plan, u, y)
     parts = _parts(plan, a, u, y)
     s = plan.n_unknowns
     mi = instants.size
@@ -1065,11 +1140,12 @@ def _fit(
 def _check_options(penalty: object, difference_order: int, rank_rtol: float) -> None:
     if penalty is not None and not (isinstance(penalty, str) and penalty == "gcv"):
         if isinstance(penalty, bool) or not isinstance(penalty, int | float) or not np.isfinite(penalty) or penalty < 0:
-            raise DimensionError(f"penalty must be None, 'gcv' or a finite lambda >= 0; found {penalty!r}")
+            raise DimensionError(f"penalty must be None, 'gcv' or a finite lambda >= 0; found "
+                                 f"{abbreviate(penalty, 30)}")
     if isinstance(difference_order, bool) or not isinstance(difference_order, int) or difference_order < 1:
-        raise DimensionError(f"difference_order must be an integer >= 1; found {difference_order!r}")
+        raise DimensionError(f"difference_order must be an integer >= 1; found {abbreviate(difference_order, 30)}")
     if not 0 < rank_rtol < 1:
-        raise DimensionError(f"rank_rtol must lie in (0, 1); found {rank_rtol!r}")
+        raise DimensionError(f"rank_rtol must lie in (0, 1); found {abbreviate(rank_rtol, 30)}")
 
 
 def fit_kernel_model(
@@ -1148,6 +1224,16 @@ def fit_kernel_model(
     plan = _build_plan(model, times.size, h, points=points, difference_order=difference_order)
     idx = _instant_indices(instants, times.size)
     return _fit(plan, float(times[0]), uu, yy, penalty=penalty, instants=idx, rank_rtol=rank_rtol)
+
+
+def observer_supports(model: object) -> str | None:
+    """Why :class:`BSplineObserver` cannot estimate ``model`` (``None`` when
+    it can): the kernel identity (9) is for second-order input-output models."""
+    if not isinstance(model, LTVInputOutput):
+        return f"the B-spline observer needs an ltv-io model, not a {type(model).__name__}"
+    if model.order != 2:
+        return f"the B-spline observer is for second-order models (11); this one has order {model.order}"
+    return None
 
 
 class KernelRegression(NamedTuple):
@@ -1266,10 +1352,11 @@ def reconstruct_state(
 
 def _samples_of(duration: float, dt: float, name: str) -> int:
     if isinstance(duration, bool) or not isinstance(duration, int | float) or not duration > 0 or duration == np.inf:
-        raise DimensionError(f"{name} must be a positive duration in seconds; found {duration!r}")
+        raise DimensionError(f"{name} must be a positive duration in seconds; found {abbreviate(duration, 30)}")
     k = duration / dt
     if abs(k - round(k)) > 1e-6 * max(1.0, k):
-        raise SamplingError(f"{name} = {duration!r} s is not a whole number of sample steps dt = {dt!r} s")
+        raise SamplingError(f"{name} = {abbreviate(duration, 30)} s is not a whole number of sample steps dt "
+                            f"= {abbreviate(dt, 30)} s")
     return int(round(k))
 
 
@@ -1362,12 +1449,13 @@ class BSplineObserver:
         if not model.unknowns:
             raise IdentifiabilityError("the model has no unknown coefficient: nothing to estimate")
         if isinstance(dt, bool) or not isinstance(dt, int | float) or not np.isfinite(dt) or dt <= 0:
-            raise DimensionError(f"dt must be a positive sample time; found {dt!r}")
+            raise DimensionError(f"dt must be a positive sample time; found {abbreviate(dt, 30)}")
         _check_options(penalty, difference_order, rank_rtol)
         if on_unidentifiable not in ("raise", "hold"):
-            raise DimensionError(f"on_unidentifiable must be 'raise' or 'hold'; found {on_unidentifiable!r}")
+            raise DimensionError(f"on_unidentifiable must be 'raise' or 'hold'; found "
+                                 f"{abbreviate(on_unidentifiable, 30)}")
         if not isinstance(report, int | float) or not 0.0 <= report <= 1.0:
-            raise DimensionError(f"report must be a fraction in [0, 1]; found {report!r}")
+            raise DimensionError(f"report must be a fraction in [0, 1]; found {abbreviate(report, 30)}")
         self.model = model
         self.dt = float(dt)
         self.t0 = float(t0)

@@ -37,7 +37,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..design.result import HinfDesign
-from ..errors import DimensionError, NumericalError
+from ..errors import ArgumentTypeError, DimensionError, NumericalError
 from ..systems.polytopic import SimplexMap
 from ..validation import as_signal, as_vector, check_simplex
 from .base import Port, input_key
@@ -152,10 +152,10 @@ class HinfFilter:
         self, design: HinfDesign, *, simplex_map: SimplexMap | None = None, xf0: object | None = None
     ) -> None:
         if not isinstance(design, HinfDesign):
-            raise TypeError(f"design must be an HinfDesign; found {type(design).__name__}")
+            raise ArgumentTypeError(f"design must be an HinfDesign; found {type(design).__name__}")
         if simplex_map is not None:
             if not design.scheduled:
-                raise TypeError("a robust filter takes no scheduling input: do not pass simplex_map")
+                raise ArgumentTypeError("a robust filter takes no scheduling input: do not pass simplex_map")
             if simplex_map.n_vertices != design.n_vertices:
                 raise DimensionError(
                     f"the simplex map gives {simplex_map.n_vertices} weights; the design has "

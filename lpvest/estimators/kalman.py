@@ -60,7 +60,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError, NonFiniteError, NumericalError
+from ..errors import ArgumentError, ArgumentTypeError, DimensionError, NonFiniteError, NumericalError, abbreviate
 from ..systems.affine import AffineLPV, NoiseCovariance
 from ..validation import (
     as_matrix,
@@ -191,7 +191,7 @@ class KalmanModel:
 
     def __init__(self, model: AffineLPV, *, noise: NoiseCovariance | object | None = None) -> None:
         if not isinstance(model, AffineLPV):
-            raise TypeError(f"the Kalman filter needs an AffineLPV model, not {type(model).__name__}")
+            raise ArgumentTypeError(f"the Kalman filter needs an AffineLPV model, not {type(model).__name__}")
         if noise is None:
             noise = model.noise
         elif not isinstance(noise, NoiseCovariance):
@@ -837,8 +837,9 @@ def kalman_filter(
     NumericalError
         ``Omega_t`` is singular, or (``method="scan"``) ``H R H^T`` is; the
         message names ``t``.
-    ValueError, TypeError
-        ``method`` is not one of the three names.
+    ArgumentError, ArgumentTypeError
+        ``method`` is not one of the three names (they derive from
+        ``ValueError`` and ``TypeError``).
 
     Examples
     --------
@@ -857,9 +858,10 @@ def kalman_filter(
     True
     """
     if not isinstance(method, str):
-        raise TypeError(f"method must be a string, one of {', '.join(map(repr, _METHODS))}; found {method!r}")
+        raise ArgumentTypeError(f"method must be a string, one of {', '.join(map(repr, _METHODS))}; "
+                                f"found {abbreviate(method, 30)}")
     if method not in _METHODS:
-        raise ValueError(f"method must be one of {', '.join(map(repr, _METHODS))}; found {method!r}")
+        raise ArgumentError(f"method must be one of {', '.join(map(repr, _METHODS))}; found {abbreviate(method, 30)}")
     km = model if isinstance(model, KalmanModel) and noise is None else KalmanModel(
         model.model if isinstance(model, KalmanModel) else model, noise=noise
     )
@@ -1073,7 +1075,8 @@ class _Reader:
         if len(inputs) != len(self.names) or not self._keys.issuperset(inputs):
             extra = sorted(set(inputs) - self._keys)
             if extra:
-                raise DimensionError(f"unknown input {extra[0]!r}; the inputs are {', '.join(self.names)}")
+                raise DimensionError(f"unknown input {abbreviate(extra[0], 30)}; the inputs are "
+                                     f"{', '.join(self.names)}")
         p = self._vec(inputs, "p")
         y = self._vec(inputs, "y")
         u = self._vec(inputs, "u") if self._nu else _EMPTY

@@ -69,7 +69,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError, SamplingError
+from ..errors import DimensionError, SamplingError, abbreviate
 from ..validation import as_vector
 
 __all__ = [
@@ -319,9 +319,10 @@ def product_quadrature(
     10
     """
     if isinstance(points, bool) or not isinstance(points, int | np.integer) or not 2 <= points <= 12 or points % 2:
-        raise DimensionError(f"points (interpolation stencil) must be an even integer in [2, 12]; found {points!r}")
+        raise DimensionError(f"points (interpolation stencil) must be an even integer in [2, 12]; found "
+                             f"{abbreviate(points, 30)}")
     if not h > 0 or not np.isfinite(h):
-        raise DimensionError(f"the sample spacing must be positive and finite; found {h!r}")
+        raise DimensionError(f"the sample spacing must be positive and finite; found {abbreviate(h, 30)}")
     if m < points:
         raise DimensionError(
             f"the data have {m} samples; the {points}-point quadrature needs at least {points}"
@@ -402,7 +403,8 @@ def check_uniform_samples(t: object, name: str = "t") -> tuple[np.ndarray, float
     d = np.diff(times)
     if np.any(d <= 0):
         j = int(np.argmax(d <= 0))
-        raise SamplingError(f"{name} is not strictly increasing: {name}[{j + 1}] = {times[j + 1]!r} <= {name}[{j}]")
+        raise SamplingError(f"{name} is not strictly increasing: {name}[{j + 1}] = "
+                            f"{abbreviate(times[j + 1], 30)} <= {name}[{j}]")
     h = (times[-1] - times[0]) / (times.size - 1)
     dev = np.abs(d - h)
     if np.max(dev) > SAMPLING_RTOL * h:

@@ -60,7 +60,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError, NonFiniteError, NotPositiveDefiniteError, NumericalError
+from ..errors import DimensionError, NonFiniteError, NotPositiveDefiniteError, NumericalError, abbreviate
 from ..systems.affine import AffineLPV, NoiseCovariance
 from ..validation import as_matrix, as_signal, as_vector, check_positive_definite
 from .base import Port
@@ -313,7 +313,7 @@ def start_covariance(
             if start_p is None:
                 raise DimensionError("start='steady-state' needs start_p, the frozen scheduling value")
             return steady_state(km, start_p).P_filt
-        raise DimensionError(f"start must be 'theorem', 'steady-state' or a matrix; found {start!r}")
+        raise DimensionError(f"start must be 'theorem', 'steady-state' or a matrix; found {abbreviate(start, 30)}")
     n = km.nx
     return check_positive_definite(as_matrix(start, "start covariance", (n, n)), "start covariance", semidefinite=True)
 
@@ -435,7 +435,7 @@ class TruncatedKalmanFilter:
         noise: NoiseCovariance | object | None = None,
     ) -> None:
         if isinstance(tau, bool) or not isinstance(tau, int | np.integer) or tau < 0:
-            raise DimensionError(f"tau must be a non-negative integer; found {tau!r}")
+            raise DimensionError(f"tau must be a non-negative integer; found {abbreviate(tau, 30)}")
         self._tau = int(tau)
         self._km = KalmanModel(model, noise=noise)
         self._x0, self._P0 = _initial(self._km, x0, P0)

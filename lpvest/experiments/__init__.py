@@ -20,6 +20,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ..errors import InternalError
+
 if TYPE_CHECKING:
     from .fmus import FmuRun
 
@@ -63,7 +65,7 @@ def registry() -> dict[str, Experiment]:
         module = importlib.import_module(f"{__name__}.{info.name}")
         for exp in getattr(module, "EXPERIMENTS", ()):
             if exp.name in out:
-                raise RuntimeError(f"experiment name {exp.name!r} is defined twice")
+                raise InternalError(f"experiment name {exp.name!r} is defined twice")
             out[exp.name] = exp
     return out
 

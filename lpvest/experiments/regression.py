@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import LpvestError
+from ..errors import LpvestError, abbreviate
 from .fmus import CoSimSpec, ExperimentFmus, as_experiment_fmus
 
 __all__ = [
@@ -279,7 +279,8 @@ def regress(
     cache = as_experiment_fmus(fmus)
     unknown = set(names) - {r.name for r in REFERENCES}
     if unknown:
-        raise LpvestError(f"no reference {sorted(unknown)[0]!r} (known: {', '.join(r.name for r in REFERENCES)})")
+        raise LpvestError(f"no reference {abbreviate(sorted(unknown)[0], 30)} (known: "
+                          f"{', '.join(r.name for r in REFERENCES)})")
     failed = []
     for ref in (r for r in REFERENCES if not names or r.name in names):
         data, designs = simulate_reference(ref, cache)

@@ -20,7 +20,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import LpvestError
+from ..errors import LpvestError, abbreviate
 from . import ExperimentResult, write_results
 from .fmus import ExperimentFmus, as_experiment_fmus
 
@@ -61,7 +61,7 @@ def reproduce(
     experiments = registry()
     unknown = [n for n in names if n not in experiments]
     if unknown:
-        raise LpvestError(f"no experiment {unknown[0]!r} (known: {', '.join(experiments) or 'none'})")
+        raise LpvestError(f"no experiment {abbreviate(unknown[0], 30)} (known: {', '.join(experiments) or 'none'})")
     cache = as_experiment_fmus(fmus)
     out = Path(out)
     say = echo or (lambda _text: None)

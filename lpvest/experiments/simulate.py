@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import ArgumentError, ArgumentTypeError, NonFiniteError, NumericalError, abbreviate, shorten
 from ..expressions import Expression
 from ..modelfile import SystemFile
 from ..plotting import save_figure
@@ -83,9 +84,18 @@ def peixoto_disturbance(k: np.ndarray, onset: int = 10) -> np.ndarray:
 def _schedule(space: SchedulingSpace, formulas: list[str] | None, k: np.ndarray) -> np.ndarray:
     formulas = formulas or default_schedule(space)
     if len(formulas) != space.dim:
-        raise ValueError(f"--schedule needs {space.dim} formulas (one per {', '.join(space.names)})")
-    cols = [np.broadcast_to(Expression.parse(f, allowed=["k"]).evaluate({"k": k}), k.shape) for f in formulas]
-    return np.column_stack(cols).astype(float)
+        given = f"{len(formulas)} formula{'s' * (len(formulas) != 1)}"
+        raise ArgumentError(f"schedule: {given} given; expected {space.dim} (one per scheduling component: "
+                            f"{shorten(', '.join(space.names), 60)})")
+    cols = []
+    for f in formulas:
+        expr = Expression.parse(f, allowed=["k"])
+        values = np.broadcast_to(np.asarray(expr.evaluate({"k": k}), dtype=float), k.shape)
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            raise NonFiniteError(f"schedule: formula {abbreviate(f)} is {values[bad[0]]} at k = {k[bad[0]]:g}")
+        cols.append(values)
+    return np.column_stack(cols)
 
 
 def _add(columns: dict, groups: dict, group: str, prefix: str, arr: np.ndarray) -> None:
@@ -106,7 +116,32 @@ def simulate_system(
     seed: int = 0,
     t_end: float = 20.0,
 ) -> Simulation:
-    """Simulate one model of ``system`` with default signals (see module doc)."""
+    """Simulate one model of ``system`` with default signals (see module doc).
+
+    Raises :class:`~lpvest.errors.NumericalError` naming the signal and the
+    first sample when the simulation leaves the floating-point range (an
+    unstable model, or one with huge coefficients), rather than writing inf.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is reported below, by signal and sample
+        sim = _simulate(system, model_key, steps=steps, schedule=schedule, seed=seed, t_end=t_end)
+    for name, col in sim.columns.items():
+        bad = np.flatnonzero(~np.isfinite(col))
+        if bad.size:
+            at = f"{sim.time_name} = {sim.columns[sim.time_name][bad[0]]:g}"
+            raise NumericalError(f"simulating {system.name} / model {sim.model}: {name} is {col[bad[0]]} at {at} "
+                                 "(the model is unstable along this schedule, or its numbers are too large)")
+    return sim
+
+
+def _simulate(
+    system: SystemFile,
+    model_key: str | None,
+    *,
+    steps: int,
+    schedule: list[str] | None,
+    seed: int,
+    t_end: float,
+) -> Simulation:
     key = model_key or system.default
     model = system.model(key)
     columns: dict[str, np.ndarray] = {}
@@ -166,5 +201,5 @@ def simulate_system(
         _add(columns, groups, "noise", "e", e)
         _add(columns, groups, "output", "y", traj.y)
         return Simulation(system.name, key, "k", columns, groups)
-    raise TypeError(f"cannot simulate a {type(model).__name__}")  # pragma: no cover
+    raise ArgumentTypeError(f"cannot simulate a {type(model).__name__}")  # pragma: no cover
 

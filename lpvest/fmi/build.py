@@ -233,7 +233,10 @@ def plan_system(
                                  description=f"Input u and disturbance w of {title}", **common))
     given = {role: Path(path) for role, path in (designs or {}).items()}
     for ek in estimator_kinds() if kinds is None else kinds:
-        if ek.applies_to(model):
+        reason = ek.unsupported(model) if ek.applies_to(model) else None
+        if reason is not None:
+            notes.append(f"{system.name}: model {key!r} gets no {ek.role}: {reason}")
+        elif ek.applies_to(model):
             design = None
             if ek.design:
                 design = given.pop(ek.role, None)

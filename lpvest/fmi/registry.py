@@ -71,6 +71,10 @@ class EstimatorKind:
         that keeps time itself (``timed``); default: a discrete-time filter,
         which gets the FMU parameter ``sample_time`` (one fmi2DoStep is one
         sample).
+    supports : str, optional
+        ``"module:function"`` returning why a model of the right type cannot
+        have this estimator (``None`` when it can); the build plan leaves such
+        an estimator out with a note.
     """
 
     role: str
@@ -82,11 +86,16 @@ class EstimatorKind:
     files: tuple[Path, ...] = field(default=())
     requirements: tuple[str, ...] = ()
     sample_time: str | None = None
+    supports: str | None = None
 
     def applies_to(self, model: object) -> bool:
         from ..modelfile import MODEL_TYPES
 
         return any(isinstance(model, MODEL_TYPES[t]) for t in self.models if t in MODEL_TYPES)
+
+    def unsupported(self, model: object) -> str | None:
+        """Why this estimator cannot be built for ``model`` (``None``: it can)."""
+        return None if self.supports is None else resolve(self.supports)(model)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -136,7 +145,8 @@ ESTIMATOR_KINDS: list[EstimatorKind] = [
                               Parameter("b1", "known", "b1: known | constant | spline:N[:order]"),
                               Parameter("penalty", 0.0, "P-spline penalty (0: none, < 0: by GCV)")),
                   requirements=("scipy",), sample_time="dt",
-                  description="sliding-window B-spline joint parameter and state observer (Sridhar et al.)"),
+                  description="sliding-window B-spline joint parameter and state observer (Sridhar et al.)",
+                  supports="lpvest.estimators.bspline:observer_supports"),
     EstimatorKind("HinfPD", "lpvest.fmi.factories.hinf:build", models=("polytopic",),
                   design="lpvest.fmi.designs:hinf_pd",
                   description="gain-scheduled H-infinity filter (Peixoto et al. Theorem 1), best epsilon"),

@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError, ExpressionError
+from ..errors import DimensionError, ExpressionError, abbreviate
 from ..expressions import Expression
 from ..scheduling import BasisFunction, SchedulingSpace
 from ..validation import as_matrix, as_rng, as_signal, as_vector, check_positive_definite
@@ -130,10 +130,10 @@ class AffineDependence:
                     if pos is None:
                         known = ", ".join([CONSTANT_TERM] + [b.name for b in basis])
                         raise ExpressionError(
-                            f"{key}: term {term!r} is not a basis function (known: {known})"
+                            f"{key}: term {abbreviate(term, 30)} is not a basis function (known: {known})"
                         )
                     if pos in terms:
-                        raise ExpressionError(f"{key}: term {term!r} is given twice")
+                        raise ExpressionError(f"{key}: term {abbreviate(term, 30)} is given twice")
                     label = f"{key}[{term}]"
                     terms[pos] = as_matrix(value, label, shape)
                     shape = terms[pos].shape

@@ -24,7 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError, ExpressionError, NumericalError
+from ..errors import DimensionError, ExpressionError, NumericalError, abbreviate, shorten
 from ..expressions import Expression, FormulaMatrix, shift_name
 from ..scheduling import SchedulingSpace
 from ..validation import as_matrix, as_rng, as_signal, as_vector, check_positive_definite
@@ -103,7 +103,7 @@ class InnovationLPV:
             raise DimensionError(f"K has shape {K.shape}; expected ({nx}, {ny})")
         unknown = set(K.shifts) - set(dependence.space.names)
         if unknown:
-            raise ExpressionError(f"K uses unknown name {sorted(unknown)[0]!r}")
+            raise ExpressionError(f"K uses unknown name {abbreviate(sorted(unknown)[0], 30)}")
         omega = check_positive_definite(
             as_matrix(innovation_covariance, "innovation covariance", (ny, ny)),
             "innovation covariance",
@@ -181,10 +181,11 @@ class InnovationLPV:
         K = self.K.evaluate(_window_values(self.space, p, back, T))
         K = np.broadcast_to(K, (T, self.nx, self.ny))
         if not np.all(np.isfinite(K)):
-            t = int(np.argwhere(~np.isfinite(K))[0][0])
+            t, i, j = (int(v) for v in np.argwhere(~np.isfinite(K))[0])
+            at = ", ".join(f"{n} = {float(v)!r}" for n, v in zip(self.space.names, p[back + t], strict=True))
             raise NumericalError(
-                f"the gain K is not finite at t={t} (formula {self.K.entries[0][0].text!r}, "
-                f"scheduling {p[back + t]}...): the realization is not defined there"
+                f"the gain K is not finite at t={t} (K[{i + 1},{j + 1}] = {abbreviate(self.K.entries[i][j].text)}, "
+                f"scheduling {shorten(at, 80)}): the realization is not defined there"
             )
         x = self.x0 if x0 is None else as_vector(x0, "x0", self.nx)
         X = np.empty((T, self.nx))
@@ -235,7 +236,7 @@ class LPVInputOutput:
             for i, c in enumerate(seq):
                 ex = c if isinstance(c, Expression) else Expression.parse(c, allowed=space.names)
                 if any(k != 0 for ks in ex.shifts.values() for k in ks):
-                    raise ExpressionError(f"{label}[{i}] = {ex.text!r}: coefficients depend on p_t only")
+                    raise ExpressionError(f"{label}[{i}] = {abbreviate(ex.text)}: coefficients depend on p_t only")
                 out.append(ex)
             return tuple(out)
 

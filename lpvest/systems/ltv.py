@@ -24,7 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError, ExpressionError
+from ..errors import DimensionError, ExpressionError, abbreviate
 from ..expressions import Expression, FormulaMatrix
 from ..validation import as_vector, check_finite
 
@@ -59,7 +59,7 @@ class TimeFunction:
             name = getattr(value, "__name__", "callable")
             return cls(value, f"<{name}>")
         else:
-            raise ExpressionError(f"{value!r} is neither a formula of t, a number nor a callable")
+            raise ExpressionError(f"{abbreviate(value, 30)} is neither a formula of t, a number nor a callable")
         return cls(lambda t, _e=expr: _e.evaluate({"t": t}), expr.text, expr)
 
     @classmethod
