@@ -48,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import LpvestError
+from ..errors import ArgumentError, LpvestError, abbreviate
 from ..fmi.registry import EstimatorKind, estimator_kinds
 
 __all__ = [
@@ -414,7 +414,7 @@ def column(result: np.ndarray, base: str) -> np.ndarray:
     pat = re.compile(re.escape(base) + r"\[(\d+(?:,\d+)*)\]$")
     found = sorted((tuple(int(i) for i in m.group(1).split(",")), n) for n in names if (m := pat.match(n)))
     if not found:
-        raise KeyError(f"no recorded variable {base!r}")
+        raise ArgumentError(f"no recorded variable {abbreviate(base, 40)}")
     return np.column_stack([np.asarray(result[n], dtype=float) for _, n in found])
 
 

@@ -3,7 +3,7 @@
 A port ``y`` of shape ``(2,)`` becomes the FMI variables ``y[1]``, ``y[2]``; a
 port ``P`` of shape ``(2, 2)`` becomes ``P[1,1]``, ``P[1,2]``, ``P[2,1]``,
 ``P[2,2]`` (row-major); a scalar port (shape ``()``) is the variable ``name``
-itself. This module imports only the standard library.
+itself. This module imports only the standard library (and lpvest.errors).
 
 >>> element_names("y", (2,))
 ['y[1]', 'y[2]']
@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import itertools
 import re
+
+from ..errors import ArgumentError
 
 __all__ = ["element_names", "fmu_name", "parse_element"]
 
@@ -35,7 +37,7 @@ def parse_element(variable: str) -> tuple[str, tuple[int, ...]]:
     """``"P[2,1]"`` -> ``("P", (2, 1))`` (1-based); ``"tau"`` -> ``("tau", ())``."""
     m = _ELEMENT.match(variable)
     if not m:
-        raise ValueError(f"{variable!r} is not a structured FMI variable name")
+        raise ArgumentError(f"{variable!r} is not a structured FMI variable name")
     index = m.group("index")
     return m.group("base"), tuple(int(i) for i in index.split(",")) if index else ()
 

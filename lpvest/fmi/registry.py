@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ..errors import ArgumentError, ArgumentTypeError
 from .spec import MODEL_P0, MODEL_X0, SCHEDULING_CENTRE, Parameter
 
 __all__ = ["EstimatorKind", "ESTIMATOR_KINDS", "estimator_kinds", "resolve"]
@@ -111,12 +112,12 @@ def resolve(target: str) -> Callable[..., Any]:
     """The function named ``"module:function"`` (``function`` may be dotted)."""
     module, sep, name = target.partition(":")
     if not sep or not module or not name:
-        raise ValueError(f"{target!r} is not of the form 'module:function'")
+        raise ArgumentError(f"{target!r} is not of the form 'module:function'")
     obj: Any = importlib.import_module(module)
     for part in name.split("."):
         obj = getattr(obj, part)
     if not callable(obj):
-        raise TypeError(f"{target} is not callable")
+        raise ArgumentTypeError(f"{target} is not callable")
     return obj  # type: ignore[no-any-return]
 
 

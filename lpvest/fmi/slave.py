@@ -60,6 +60,7 @@ from pythonfmu.fmi2slave import Fmi2Slave
 from pythonfmu.variables import Boolean, Integer, Real, String
 
 from .. import __version__
+from ..errors import ArgumentError
 from .naming import element_names
 from .spec import Parameter, read_spec
 from .state import copy_state, decode_state, encode_state
@@ -237,14 +238,14 @@ class LpvestSlave(Fmi2Slave):
 
     def _add_parameter(self, par: Parameter) -> None:
         if par.name in self._param_defs:
-            raise ValueError(f"parameter {par.name!r} is declared twice")
+            raise ArgumentError(f"parameter {par.name!r} is declared twice")
         minimum, maximum = par.minimum, par.maximum
         if par.fmi_type == "Integer":
             # an FMI Integer is 32-bit: declare it, so that no value wraps silently
             minimum = INT32[0] if minimum is None else max(int(minimum), INT32[0])
             maximum = INT32[1] if maximum is None else min(int(maximum), INT32[1])
             if not minimum <= int(par.start) <= maximum:
-                raise ValueError(f"parameter {par.name}: start {par.start} is outside [{minimum}, {maximum}]")
+                raise ArgumentError(f"parameter {par.name}: start {par.start} is outside [{minimum}, {maximum}]")
         self._param_defs[par.name] = par
         if par.shape:
             self._params[par.name] = np.array(par.start, dtype=float).reshape(par.shape)
@@ -446,7 +447,7 @@ class LpvestSlave(Fmi2Slave):
         def run() -> None:
             t0 = float(start_time)
             if not math.isfinite(t0):
-                raise ValueError(f"start time {t0} is not finite")
+                raise ArgumentError(f"start time {t0} is not finite")
             self._start_time = t0
             self._time = t0
             self._preview = None
@@ -460,16 +461,16 @@ class LpvestSlave(Fmi2Slave):
     def exit_initialization_mode(self) -> None:
         def run() -> None:
             if self._invalid:
-                raise ValueError("invalid values were set: " + "; ".join(self._invalid.values()))
+                raise ArgumentError("invalid values were set: " + "; ".join(self._invalid.values()))
             if not self._timed and not self._params["sample_time"] > 0:
-                raise ValueError(f"parameter sample_time = {_num(self._params['sample_time'])} must be > 0")
+                raise ArgumentError(f"parameter sample_time = {_num(self._params['sample_time'])} must be > 0")
             component = self.make_component(self.parameters())
             ports_in = tuple((p.name, tuple(p.shape)) for p in component.input_ports)
             ports_out = tuple((p.name, tuple(p.shape)) for p in component.output_ports)
             if ports_in != tuple((p.name, tuple(p.shape)) for p in self._input_ports) or ports_out != tuple(
                 (p.name, tuple(p.shape)) for p in self._output_ports
             ):
-                raise ValueError("these parameters change the FMU's inputs or outputs; rebuild the FMU instead")
+                raise ArgumentError("these parameters change the FMU's inputs or outputs; rebuild the FMU instead")
             self._reset_component(component, self._start_time)
             self._component = component
             self._feedthrough = self._direct_outputs(component)
@@ -638,10 +639,10 @@ class LpvestSlave(Fmi2Slave):
         def run() -> None:
             snap = decode_state(bytes(state))
             if snap.get("identifier") != self.modelName:
-                raise ValueError(f"the state belongs to {snap.get('identifier')!r}, not to {self.modelName!r}")
+                raise ArgumentError(f"the state belongs to {snap.get('identifier')!r}, not to {self.modelName!r}")
             params = snap["params"]
             if set(params) != set(self._params):
-                raise ValueError("the state's parameters do not match this FMU")
+                raise ArgumentError("the state's parameters do not match this FMU")
             inputs = {k: np.asarray(snap["inputs"][k], dtype=float).reshape(v.shape) for k, v in self._inputs.items()}
             outputs = {
                 k: np.asarray(snap["outputs"][k], dtype=float).reshape(v.shape) for k, v in self._outputs.items()

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ModelFileError
+from ..errors import ArgumentTypeError, ModelFileError
 
 __all__ = [
     "SPEC_FILE",
@@ -104,7 +104,7 @@ class Parameter:
             return "String"
         if isinstance(s, list | tuple | np.ndarray):
             return "Real"
-        raise TypeError(f"parameter {self.name}: unsupported start value {s!r}")
+        raise ArgumentTypeError(f"parameter {self.name}: unsupported start value {s!r}")
 
     @property
     def shape(self) -> tuple[int, ...]:

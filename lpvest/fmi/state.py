@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import ArgumentError, ArgumentTypeError
+
 __all__ = ["encode_state", "decode_state", "copy_state", "FORMAT"]
 
 #: Version tag stored in every serialized state.
@@ -36,7 +38,7 @@ def _encode(obj: Any) -> Any:
     if isinstance(obj, np.ndarray):
         arr = np.ascontiguousarray(obj)
         if arr.dtype.kind not in "fiub":
-            raise TypeError(f"cannot serialize an array of dtype {arr.dtype}")
+            raise ArgumentTypeError(f"cannot serialize an array of dtype {arr.dtype}")
         dtype = arr.dtype.newbyteorder("<") if arr.dtype.byteorder == ">" else arr.dtype
         return {
             _ARRAY: base64.b64encode(arr.astype(dtype, copy=False).tobytes()).decode("ascii"),
@@ -49,7 +51,7 @@ def _encode(obj: Any) -> Any:
         out = {}
         for k, v in obj.items():
             if not isinstance(k, str):
-                raise TypeError(f"state keys must be strings; found {k!r}")
+                raise ArgumentTypeError(f"state keys must be strings; found {k!r}")
             out[k] = _encode(v)
         return out
     if isinstance(obj, tuple):
@@ -58,7 +60,7 @@ def _encode(obj: Any) -> Any:
         return [_encode(v) for v in obj]
     if obj is None or isinstance(obj, bool | int | float | str):
         return obj
-    raise TypeError(f"cannot serialize a {type(obj).__name__} in an FMU state")
+    raise ArgumentTypeError(f"cannot serialize a {type(obj).__name__} in an FMU state")
 
 
 def _decode(obj: Any) -> Any:
@@ -84,10 +86,10 @@ def decode_state(data: bytes) -> dict[str, Any]:
     try:
         doc = json.loads(bytes(data).decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ValueError(f"not a serialized lpvest FMU state: {exc}") from exc
+        raise ArgumentError(f"not a serialized lpvest FMU state: {exc}") from exc
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         found = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
-        raise ValueError(f"not a serialized lpvest FMU state (format {found!r}; expected {FORMAT!r})")
+        raise ArgumentError(f"not a serialized lpvest FMU state (format {found!r}; expected {FORMAT!r})")
     return _decode(doc["state"])
 
 
