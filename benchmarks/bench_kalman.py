@@ -54,7 +54,6 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 from lpvest import AffineLPV, Monomial, SchedulingSpace  # noqa: E402
-from lpvest.estimators import run_streaming  # noqa: E402
 from lpvest.estimators.kalman import (  # noqa: E402
     KalmanModel,
     KalmanState,
@@ -62,6 +61,7 @@ from lpvest.estimators.kalman import (  # noqa: E402
     kalman_filter,
     kalman_step,
 )
+from lpvest.protocol import run_streaming  # noqa: E402
 
 
 def random_model(nx: int, ny: int, nu: int, rng: np.random.Generator, *, cross: bool = False) -> AffineLPV:

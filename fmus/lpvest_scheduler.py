@@ -1,6 +1,6 @@
 """Scheduler FMU: the scheduling signal of an LPV model (slave script).
 
-A thin adapter over :class:`lpvest.fmi.components.SchedulerComponent` and
+A thin adapter over :class:`lpvest.signals.SchedulerComponent` and
 :mod:`lpvest.signals`. Outputs ``p[j]`` (declared range: the model's scheduling
 box) and, for a polytopic model, ``alpha[i]`` on the unit simplex. The value
 at each communication point ``t`` is reported before fmi2DoStep.
@@ -15,10 +15,9 @@ scheduling box is an error at initialization naming the parameter. Default:
 ``p = centre + half-width * sin(0.25 t)`` (Peixoto et al.: ``theta_k = sin(0.25 k)``).
 """
 
-from lpvest.fmi.components import SchedulerComponent
 from lpvest.fmi.slave import LpvestSlave
 from lpvest.fmi.spec import Parameter
-from lpvest.signals import SignalSpec
+from lpvest.signals import SchedulerComponent, SignalSpec
 
 
 class LpvestScheduler(LpvestSlave):

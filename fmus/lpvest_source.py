@@ -1,6 +1,6 @@
 """Source FMU: the external input u and the disturbance w of an LPV model (slave script).
 
-A thin adapter over :class:`lpvest.fmi.components.SourceComponent` and
+A thin adapter over :class:`lpvest.signals.SourceComponent` and
 :mod:`lpvest.signals`. Outputs ``u[i]`` (when the model has inputs) and
 ``w[i]`` (the disturbance of a polytopic model; the external process noise of
 an affine one). The value at each communication point is reported before
@@ -15,10 +15,9 @@ from ``k = 10``, the default for ``w`` of a polytopic model), ``gaussian``
 ``s.table``.
 """
 
-from lpvest.fmi.components import SourceComponent
 from lpvest.fmi.slave import LpvestSlave
 from lpvest.fmi.spec import Parameter
-from lpvest.signals import SignalSpec
+from lpvest.signals import SignalSpec, SourceComponent
 from lpvest.systems.polytopic import PolytopicLPV
 
 KINDS = ("zero", "sinusoid", "decaying", "gaussian", "constant", "random", "table")

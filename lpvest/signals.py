@@ -44,11 +44,14 @@ from typing import Any
 import numpy as np
 
 from .errors import DimensionError, LpvestError, abbreviate
+from .protocol import Port, TimedComponent
 
 __all__ = [
     "SIGNAL_KINDS",
     "SignalSpec",
     "SignalGenerator",
+    "SchedulerComponent",
+    "SourceComponent",
     "SignalError",
     "sample_signal",
     "parse_table",
@@ -339,3 +342,124 @@ def sample_signal(spec: SignalSpec, times: Sequence[float] | np.ndarray) -> np.n
     for i in range(1, t.size):
         out[i] = gen.advance(t[i])
     return out
+
+
+# ---------------------------------------------------------------------------
+# signals as streaming components (the Scheduler and Source FMUs)
+# ---------------------------------------------------------------------------
+class SchedulerComponent(TimedComponent):
+    """The scheduling signal ``p`` (and ``alpha = map(p)`` for a polytopic model),
+    a timed streaming component (:mod:`lpvest.protocol`): the value at the
+    current time, then the signal moves to ``t + h``.
+
+    The signal must stay inside the scheduling box: a specification that can
+    leave it is rejected with an error naming the parameter (``prefix``: how
+    the FMU names the parameters).
+
+    Examples
+    --------
+    >>> from lpvest import load_system
+    >>> plant = load_system("peixoto-ex1").model()
+    >>> sched = SchedulerComponent(SignalSpec.build("sinusoid", 1, amplitude=1.0, omega=0.25), plant.space,
+    ...                            plant.simplex_map)
+    >>> sched.reset(0.0)
+    >>> out = sched.step({}, dt=1.0)
+    >>> out["p"], out["alpha"], sched.outputs({})["p"]
+    (array([0.]), array([0.5, 0.5]), array([0.24740396]))
+    """
+
+    def __init__(self, signal: SignalSpec, space: Any, simplex_map: Any = None, *, prefix: str = "") -> None:
+        if signal.n != space.dim:
+            raise SignalError(f"the scheduling signal has {signal.n} components; the model has {space.dim}")
+        lo, hi = signal.bounds()
+        for j, name in enumerate(space.names):
+            tol = 1e-12 * max(1.0, abs(space.lower[j]), abs(space.upper[j]))
+            if lo[j] >= space.lower[j] - tol and hi[j] <= space.upper[j] + tol:
+                continue
+            box = f"[{space.lower[j]:g}, {space.upper[j]:g}]"
+            where = f"takes p[{j + 1}] ({name}) to [{lo[j]:.6g}, {hi[j]:.6g}], outside its declared range {box}"
+            if signal.kind in ("sinusoid", "decaying"):
+                culprit = (f"{prefix}amplitude[{j + 1}] = {signal.amplitude[j]:g} with "
+                           f"{prefix}offset[{j + 1}] = {signal.offset[j]:g}")
+            elif signal.kind == "constant":
+                culprit = f"{prefix}offset[{j + 1}] = {signal.offset[j]:g}"
+            elif signal.kind == "table":
+                culprit = f"{prefix}table (column {j + 1})"
+            else:
+                culprit = f"{prefix}kind = {signal.kind!r} (std[{j + 1}] = {signal.std[j]:g})"
+            raise SignalError(f"{culprit} {where}")
+        if signal.kind == "random":
+            # a random walk is clipped to its bounds: they must be the box
+            if np.any(signal.lower < space.lower) or np.any(signal.upper > space.upper):
+                raise SignalError(f"{prefix}lower/{prefix}upper of the random scheduling must lie in the box")
+        self.signal = signal
+        self.space = space
+        self.simplex_map = simplex_map
+        self._gen = SignalGenerator(signal)
+        ports = [Port("p", (space.dim,), "scheduling", direct=False)]
+        if simplex_map is not None:
+            ports.append(Port("alpha", (simplex_map.n_vertices,), "vertex weights", direct=False))
+        super().__init__((), tuple(ports))
+
+    @property
+    def time(self) -> float:
+        return self._gen.time
+
+    def _reset(self) -> None:
+        self._gen.start(self.t0)
+
+    def _read(self, inputs: Any) -> None:
+        return None
+
+    def _evaluate(self, sample: None) -> tuple[dict[str, np.ndarray], None]:
+        p = np.clip(self._gen.value, self.space.lower, self.space.upper)
+        out = {"p": p}
+        if self.simplex_map is not None:
+            out["alpha"] = np.asarray(self.simplex_map(p), dtype=float)
+        return out, None
+
+    def _commit(self, pending: None, t_end: float = 0.0) -> None:
+        self._gen.advance(t_end)
+
+    def get_state(self) -> dict[str, Any]:
+        return self._gen.get_state()
+
+    def _set_state(self, state: Any) -> None:
+        self._gen.set_state(dict(state))
+
+
+class SourceComponent(TimedComponent):
+    """Named signals (e.g. ``u`` and ``w``), each with its own specification,
+    as a timed streaming component (:mod:`lpvest.protocol`)."""
+
+    def __init__(self, signals: dict[str, SignalSpec], descriptions: dict[str, str] | None = None) -> None:
+        self.signals = dict(signals)
+        self._gens = {name: SignalGenerator(spec) for name, spec in self.signals.items()}
+        desc = descriptions or {}
+        outputs = tuple(Port(name, (spec.n,), desc.get(name, ""), direct=False) for name, spec in self.signals.items())
+        super().__init__((), outputs)
+
+    @property
+    def time(self) -> float:
+        return next(iter(self._gens.values())).time if self._gens else self.t0
+
+    def _reset(self) -> None:
+        for gen in self._gens.values():
+            gen.start(self.t0)
+
+    def _read(self, inputs: Any) -> None:
+        return None
+
+    def _evaluate(self, sample: None) -> tuple[dict[str, np.ndarray], None]:
+        return {name: gen.value for name, gen in self._gens.items()}, None
+
+    def _commit(self, pending: None, t_end: float = 0.0) -> None:
+        for gen in self._gens.values():
+            gen.advance(t_end)
+
+    def get_state(self) -> dict[str, Any]:
+        return {name: gen.get_state() for name, gen in self._gens.items()}
+
+    def _set_state(self, state: Any) -> None:
+        for name, gen in self._gens.items():
+            gen.set_state(dict(state[name]))

@@ -27,7 +27,7 @@ from lpvest import (
     reconstruct_state,
 )
 from lpvest.estimators import bspline as bs, kernels
-from lpvest.estimators.base import StreamingEstimator, run_streaming
+from lpvest.protocol import Sampled as StreamingEstimator, run_streaming
 
 # -- shared data -------------------------------------------------------------------------------
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from lpvest import load_system
-from lpvest.estimators.base import StreamingEstimator
+from lpvest.protocol import Sampled as StreamingEstimator
 from tests.fmu_driver import Driver
 
 

@@ -194,11 +194,11 @@ def _copy_of_lpvest(tmp_path: Path, version: str) -> Path:
     text, n = re.subn(r'__version__ = "([^"]+)"', rf'__version__ = "\1+{version}"', init.read_text(), count=1)
     assert n == 1
     init.write_text(text)
-    streaming = tree / "lpvest" / "systems" / "streaming.py"
-    code = streaming.read_text()
-    old = 'out = {"y": m.Cy @ x + m.Dy @ w,'
+    polytopic = tree / "lpvest" / "systems" / "polytopic.py"
+    code = polytopic.read_text()
+    old = 'return (m["Cy"] @ x + m["Dy"] @ w,'
     assert old in code
-    streaming.write_text(code.replace(old, 'out = {"y": m.Cy @ x + m.Dy @ w + 1000.0,', 1))
+    polytopic.write_text(code.replace(old, 'return (m["Cy"] @ x + m["Dy"] @ w + 1000.0,', 1))
     return tree
 
 

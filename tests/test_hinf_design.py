@@ -9,6 +9,7 @@ on a grid of (alpha_k, alpha_{k+1}).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -205,7 +206,7 @@ def test_rescaling_is_exact():
     k = np.arange(60.0)
     alpha = scenario_alpha(plant, k)
     y = np.random.default_rng(0).standard_normal((60, 1))
-    paper_design = HinfDesign(**{**design.__dict__, **{n: np.stack(paper[n]) for n in ("H", "Af", "Bf", "Cf", "Df")}})
+    paper_design = dataclasses.replace(design, **{n: np.stack(paper[n]) for n in ("H", "Af", "Bf", "Cf", "Df")})
     from lpvest.estimators.hinf import hinf_filter_batch
 
     np.testing.assert_allclose(hinf_filter_batch(paper_design, y, alpha).zhat,
@@ -386,9 +387,9 @@ def test_wrong_dimensions_and_types():
         design_hinf(ex1(), epsilon=float("nan"))
     _, d = get_design("ex1-pd-150")
     with pytest.raises(DimensionError, match=r"Df has shape \(2, 2, 1\); expected \(2, 2, 3\)"):
-        HinfDesign(**{**d.__dict__, "Bf": np.zeros((2, 2, 3))})
+        dataclasses.replace(d, Bf=np.zeros((2, 2, 3)))
     with pytest.raises(DimensionError, match="a robust design needs 1 set"):
-        HinfDesign(**{**d.__dict__, "kind": KIND_ROBUST})
+        dataclasses.replace(d, kind=KIND_ROBUST)
 
 
 def test_a_plant_unstable_inside_the_polytope_is_refused_at_once():

@@ -11,8 +11,8 @@ import pytest
 from lpvest import load_system
 from lpvest.design import KIND_PD, KIND_ROBUST, design_hinf
 from lpvest.errors import DimensionError, NonFiniteError, SchedulingRangeError
-from lpvest.estimators import StreamingEstimator, run_streaming
 from lpvest.estimators.hinf import HinfFilter, hinf_filter_batch
+from lpvest.protocol import Sampled as StreamingEstimator, run_streaming
 from tests import hinf_oracle as oracle
 
 _DESIGNS = {}
@@ -178,7 +178,7 @@ for name in ("cvxpy", "scipy", "matplotlib", "clarabel"):
 import numpy as np
 from lpvest.design.result import HinfDesign
 from lpvest.estimators.hinf import HinfFilter
-from lpvest.estimators import run_streaming
+from lpvest.protocol import run_streaming
 d = HinfDesign.from_json(r"{path}")
 out = run_streaming(HinfFilter(d), {{"alpha": np.load(r"{tmp_path / 'alpha.npy'}"),
                                       "y": np.load(r"{tmp_path / 'y.npy'}")}})

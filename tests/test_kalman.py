@@ -17,7 +17,7 @@ from lpvest import (
     SchedulingSpace,
     load_system,
 )
-from lpvest.estimators import StreamingEstimator, kalman as kalman_module, run_streaming
+from lpvest.estimators import kalman as kalman_module
 from lpvest.estimators.kalman import (
     KalmanModel,
     KalmanState,
@@ -26,6 +26,7 @@ from lpvest.estimators.kalman import (
     kalman_step,
     simulate_innovation_form,
 )
+from lpvest.protocol import Sampled as StreamingEstimator, run_streaming
 from tests.kalman_helpers import oracle, random_schedule, random_system
 
 #: every batch test runs with both algorithms of kalman_filter (the "auto"

@@ -6,8 +6,15 @@ import numpy as np
 import pytest
 
 from lpvest import load_system
-from lpvest.fmi.components import SchedulerComponent, SourceComponent
-from lpvest.signals import SignalError, SignalGenerator, SignalSpec, parse_table, sample_signal
+from lpvest.signals import (
+    SchedulerComponent,
+    SignalError,
+    SignalGenerator,
+    SignalSpec,
+    SourceComponent,
+    parse_table,
+    sample_signal,
+)
 
 T = np.arange(0.0, 30.0, 0.5)
 

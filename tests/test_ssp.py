@@ -14,8 +14,7 @@ from lpvest.cli import main
 from lpvest.cosim import Component, CoSimulation, CoSimulationError
 from lpvest.design import HinfDesign
 from lpvest.estimators.hinf import HinfFilter
-from lpvest.fmi.components import SchedulerComponent, SourceComponent
-from lpvest.signals import SignalSpec
+from lpvest.signals import SchedulerComponent, SignalSpec, SourceComponent
 from lpvest.ssp import read_ssp, simulate_ssp, write_ssp
 from lpvest.systems.streaming import DiscretePlant
 

@@ -9,10 +9,9 @@ import pytest
 
 from lpvest import load_system
 from lpvest.errors import NonFiniteError, SchedulingRangeError
-from lpvest.estimators.base import input_key
 from lpvest.estimators.hinf import HinfFilter
-from lpvest.fmi.components import SchedulerComponent
-from lpvest.signals import SignalSpec
+from lpvest.protocol import input_key
+from lpvest.signals import SchedulerComponent, SignalSpec
 from lpvest.systems.streaming import DiscretePlant
 from tests.fmu_driver import Driver
 

@@ -7,7 +7,7 @@ import pytest
 
 from lpvest import load_system
 from lpvest.errors import DimensionError, ExpressionError, NonFiniteError, SchedulingRangeError
-from lpvest.estimators.base import run_streaming
+from lpvest.protocol import run_streaming
 from lpvest.systems.streaming import DiscretePlant, LTVPlant, plant_supports
 from tests.conftest_fmu import AFFINE_TOML
 

@@ -26,7 +26,7 @@ from lpvest.analysis.fading_memory import (
     tau_needed,
     truncation_errors,
 )
-from lpvest.estimators import StreamingEstimator, run_streaming, truncated as truncated_module
+from lpvest.estimators import truncated as truncated_module
 from lpvest.estimators.kalman import KalmanModel, kalman_filter
 from lpvest.estimators.truncated import (
     TruncatedKalmanFilter,
@@ -36,6 +36,7 @@ from lpvest.estimators.truncated import (
     steady_state,
     theorem_start_covariance,
 )
+from lpvest.protocol import Sampled as StreamingEstimator, run_streaming
 from tests.kalman_helpers import random_schedule, random_system
 
 

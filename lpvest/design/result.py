@@ -47,6 +47,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from .._linalg import MatrixStack
 from ..errors import ArgumentError, DimensionError, ModelFileError, abbreviate
 from ..validation import as_vector, check_simplex
 
@@ -191,6 +192,7 @@ class HinfDesign:
             )
         for name, arr in arrays.items():
             object.__setattr__(self, name, arr)
+        object.__setattr__(self, "_stack", MatrixStack({n: arrays[n] for n in _FILTER_NAMES}))
         a, b = (float(v) for v in self.multiplier)
         object.__setattr__(self, "multiplier", (a, b))
         object.__setattr__(self, "gamma", float(self.gamma))
@@ -236,8 +238,9 @@ class HinfDesign:
         return self.kind == KIND_PD
 
     # -- evaluation -------------------------------------------------------------
-    def matrices_at(self, alpha: object | None = None) -> FilterMatrices:
-        """The filter matrices at ``alpha`` (shape (N,), on the simplex).
+    def matrices_at(self, alpha: object | None = None, *, check: bool = True) -> FilterMatrices:
+        """The filter matrices at ``alpha`` (shape (N,), on the simplex; ``check=False``:
+        a validated ``alpha``, not checked again).
 
         A robust design ignores ``alpha`` (it may be ``None``).
         """
@@ -245,9 +248,10 @@ class HinfDesign:
             return FilterMatrices(*(getattr(self, n)[0] for n in _FILTER_NAMES))
         if alpha is None:
             raise DimensionError(f"a {self.kind} filter needs alpha of shape ({self.n_vertices},)")
-        a = as_vector(alpha, "alpha", self.n_vertices)
-        check_simplex(a, "alpha")
-        return FilterMatrices(*(np.tensordot(a, getattr(self, n), axes=1) for n in _FILTER_NAMES))
+        if check:
+            alpha = as_vector(alpha, "alpha", self.n_vertices)
+            check_simplex(alpha, "alpha")
+        return FilterMatrices(**self._stack.at(alpha))  # type: ignore[attr-defined,arg-type]
 
     # -- JSON -------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:

@@ -40,7 +40,7 @@ from (32) (:func:`reconstruct_state`; for the realization
 ``x = (y_E, y_E' + b_1 u)``).
 
 :class:`BSplineObserver` runs the estimator on a sliding window over streaming
-samples (the step protocol of :mod:`lpvest.estimators.base`).
+samples (a streaming component, :mod:`lpvest.protocol`).
 
 Examples
 --------
@@ -72,9 +72,9 @@ from ..errors import (
     abbreviate,
     shorten,
 )
+from ..protocol import Component, Port
 from ..systems.ltv import LTVInputOutput, LTVStateSpace, TimeFunction
 from ..validation import as_vector, check_finite
-from .base import Port
 from .kernels import (
     FREE_MOMENTS,
     MOMENTS,
@@ -1360,7 +1360,7 @@ def _samples_of(duration: float, dt: float, name: str) -> int:
     return int(round(k))
 
 
-class BSplineObserver:
+class BSplineObserver(Component):
     """Sliding-window joint parameter and state estimator (the observer FMU's engine).
 
     Samples arrive at a fixed step ``dt`` (time is *not* an input: sample
@@ -1417,7 +1417,7 @@ class BSplineObserver:
     --------
     >>> import numpy as np
     >>> from lpvest import load_system
-    >>> from lpvest.estimators import run_streaming
+    >>> from lpvest.protocol import run_streaming
     >>> io = load_system("sridhar-ltv").model()
     >>> t = np.arange(0, 801) * 0.005
     >>> d = io.simulate(t)
@@ -1477,22 +1477,8 @@ class BSplineObserver:
                 f"a window of {self.length} samples is too short for {self._plan.n_unknowns} unknown coefficients"
             )
         self._instants = np.arange(self.length)
-        self._cache: tuple[int, float, float, dict[str, np.ndarray] | None, dict[str, np.ndarray]] | None = None
-        self.reset()
-
-    # -- protocol ----------------------------------------------------------------------------
-    @property
-    def delay(self) -> float:
-        """Reporting delay (s): estimates at sample ``k`` refer to ``t_k - delay``."""
-        return (self.length - 1 - self.report_index) * self.dt
-
-    @property
-    def input_ports(self) -> tuple[Port, ...]:
-        return (Port("u", (1,), "known input u_k"), Port("y", (1,), "measured output y_k"))
-
-    @property
-    def output_ports(self) -> tuple[Port, ...]:
-        return (
+        inputs = (Port("u", (1,), "known input u_k"), Port("y", (1,), "measured output y_k"))
+        outputs = (
             Port("t_est", (1,), "time the estimates refer to: t_k - delay"),
             Port("yhat", (1,), "y_E(t_est), kernel identity (9)"),
             Port("dyhat", (1,), "y_E'(t_est), derivative identity (10)"),
@@ -1503,8 +1489,15 @@ class BSplineObserver:
             Port("b1", (1,), "b_1(t_est)"),
             Port("valid", (1,), "1 when the estimates are current, 0 before the first full window"),
         )
+        super().__init__(inputs, outputs)
 
-    def reset(self) -> None:
+    # -- protocol ----------------------------------------------------------------------------
+    @property
+    def delay(self) -> float:
+        """Reporting delay (s): estimates at sample ``k`` refer to ``t_k - delay``."""
+        return (self.length - 1 - self.report_index) * self.dt
+
+    def _reset(self) -> None:
         self._k = 0
         self._stored: dict[str, np.ndarray] | None = None
         self._head = 0
@@ -1513,14 +1506,13 @@ class BSplineObserver:
         self._last_fit = -1
         self._valid = 0.0
         self._held = self._zero_outputs()
-        self._cache = None
 
     def _zero_outputs(self) -> dict[str, np.ndarray]:
         out = {p.name: np.zeros(p.shape) for p in self.output_ports}
         out["t_est"][0] = self.t0 + self._k * self.dt - self.delay
         return out
 
-    def _sample(self, inputs: Mapping[str, np.ndarray]) -> tuple[float, float]:
+    def _read(self, inputs: Mapping[str, np.ndarray]) -> tuple[float, float]:
         missing = [p.name for p in self.input_ports if p.name not in inputs]
         if missing:
             raise DimensionError(f"missing input {missing[0]!r}; the observer needs u and y")
@@ -1585,19 +1577,13 @@ class BSplineObserver:
             out[n] = np.array([arrays[n][offset]])
         return out
 
-    def outputs(self, inputs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-        u, y = self._sample(inputs)
-        if self._cache is not None and self._cache[:3] == (self._k, u, y):
-            return {k: v.copy() for k, v in self._cache[4].items()}
+    def _evaluate(self, sample: tuple[float, float]) -> tuple[dict[str, np.ndarray], Any]:
+        u, y = sample
         arrays, out = self._compute(u, y)
-        self._cache = (self._k, u, y, arrays, out)
-        return {k: v.copy() for k, v in out.items()}
+        return out, (u, y, arrays, out)
 
-    def step(self, inputs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-        out = self.outputs(inputs)
-        assert self._cache is not None
-        u, y = self._sample(inputs)
-        arrays = self._cache[3]
+    def _commit(self, pending: Any) -> None:
+        u, y, arrays, out = pending
         if arrays is not None:
             if arrays:  # a successful refit
                 self._stored = arrays
@@ -1610,8 +1596,6 @@ class BSplineObserver:
         self._ring_u[self._head] = u
         self._ring_y[self._head] = y
         self._k += 1
-        self._cache = None
-        return out
 
     # -- state ---------------------------------------------------------------------------------
     def get_state(self) -> dict[str, Any]:
@@ -1633,7 +1617,7 @@ class BSplineObserver:
             state[f"held_{n}"] = v.copy()
         return state
 
-    def set_state(self, state: Mapping[str, Any]) -> None:
+    def _set_state(self, state: Mapping[str, Any]) -> None:
         """Restore a state from :meth:`get_state` (checked for shape)."""
         try:
             ring_u = as_vector(state["ring_u"], "ring_u", self.length)
@@ -1659,4 +1643,3 @@ class BSplineObserver:
         self._ring_u, self._ring_y = ring_u.copy(), ring_y.copy()
         self._stored = stored if last_fit >= 0 else None
         self._held = held
-        self._cache = None

@@ -38,9 +38,9 @@ import numpy as np
 
 from ..design.result import HinfDesign
 from ..errors import ArgumentTypeError, DimensionError, NumericalError
+from ..protocol import Component, Port
 from ..systems.polytopic import SimplexMap
 from ..validation import as_signal, as_vector, check_simplex
-from .base import Port, input_key
 
 __all__ = ["HinfFilter", "HinfStep", "HinfRun", "hinf_step", "hinf_filter_batch"]
 
@@ -119,9 +119,9 @@ def hinf_filter_batch(
     return HinfRun(Z, X)
 
 
-class HinfFilter:
-    """Streaming H-infinity filter (2), following the step protocol of
-    :mod:`lpvest.estimators.base`.
+class HinfFilter(Component):
+    """Streaming H-infinity filter (2), a streaming component (:mod:`lpvest.protocol`)
+    over the pure step :func:`hinf_step`.
 
     Parameters
     ----------
@@ -172,34 +172,23 @@ class HinfFilter:
                 ports.append(Port("p", (simplex_map.space.dim,), "physical scheduling (" +
                                   ", ".join(simplex_map.space.names) + ")"))
         ports.append(Port("y", (design.ny,), "measured output y_k"))
-        self._inputs = tuple(ports)
-        self._outputs = (
+        outputs = (
             Port("zhat", (design.nz,), "estimate z_f,k of z_k"),
             Port("xf", (design.nx,), "filter state x_f,k", direct=False),
         )
-        self.reset()
+        super().__init__(tuple(ports), outputs)
 
-    @property
-    def input_ports(self) -> tuple[Port, ...]:
-        return self._inputs
-
-    @property
-    def output_ports(self) -> tuple[Port, ...]:
-        return self._outputs
-
-    def reset(self) -> None:
+    def _reset(self) -> None:
         """Back to the initial filter state."""
         self._xf = self._xf0.copy()
         self._k = 0
-        self._memo: tuple[Any, Any, np.ndarray | None, np.ndarray, np.ndarray] | None = None
 
-    def _parse(self, inputs: Mapping[str, Any]) -> tuple[np.ndarray | None, np.ndarray]:
-        names = {p.name for p in self._inputs}
-        unknown = sorted(set(inputs) - names)
-        missing = sorted(names - set(inputs))
-        if unknown or missing:
+    def _read(self, inputs: Mapping[str, Any]) -> tuple[np.ndarray | None, np.ndarray]:
+        missing = [n for n in self._in_names if n not in inputs]
+        if missing or len(inputs) != len(self._in_names):
+            unknown = sorted(set(inputs) - set(self._in_names))
             raise DimensionError(
-                f"HinfFilter ({self.design.kind}) inputs are {sorted(names)}; "
+                f"HinfFilter ({self.design.kind}) inputs are {sorted(self._in_names)}; "
                 f"missing {missing}, unknown {unknown}"
             )
         y = as_vector(inputs["y"], "y", self.design.ny)
@@ -207,47 +196,30 @@ class HinfFilter:
         if self.design.scheduled:
             if self.simplex_map is None:
                 alpha = as_vector(inputs["alpha"], "alpha", self.design.n_vertices)
+                check_simplex(alpha, "alpha")
             else:
                 space = self.simplex_map.space
                 p = space.check(as_vector(inputs["p"], "p", space.dim))
-                alpha = np.asarray(self.simplex_map(p), dtype=float)
-            check_simplex(alpha, "alpha")
+                alpha = np.asarray(self.simplex_map(p), dtype=float)  # on the simplex by construction
         return alpha, y
 
-    def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
-        """``zhat`` and ``xf`` at the current sample; no state change.
+    def _evaluate(self, sample: tuple[np.ndarray | None, np.ndarray]) -> tuple[dict[str, np.ndarray], Any]:
+        """``zhat`` and ``xf`` at the current sample; the matrices are kept for the step."""
+        alpha, y = sample
+        m = self.design.matrices_at(alpha, check=False)
+        zhat = m.Cf @ self._xf + m.Df @ y
+        return {"zhat": zhat, "xf": self._xf.copy()}, (m, alpha, y, zhat)
 
-        The evaluation (checked inputs, matrices at ``alpha``, ``zhat``) is kept,
-        keyed on the inputs (:func:`~lpvest.estimators.base.input_key`), for a
-        following :meth:`step` with the same inputs."""
-        key = input_key(inputs)
-        memo = self._memo
-        if key is None or memo is None or memo[0] != key:
-            alpha, y = self._parse(inputs)
-            m = self.design.matrices_at(alpha)
-            memo = (key, m, alpha, y, m.Cf @ self._xf + m.Df @ y)
-            self._memo = memo if key is not None else None
-        return {"zhat": memo[4].copy(), "xf": self._xf.copy()}
-
-    def step(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
-        """Consume sample ``k``: return :meth:`outputs` and advance to ``k + 1``."""
-        memo = self._memo
-        if memo is not None and memo[0] == input_key(inputs):
-            res = _step_with(memo[1], self._xf, memo[2], memo[3], memo[4])
-        else:
-            alpha, y = self._parse(inputs)
-            res = hinf_step(self.design, self._xf, alpha, y)
-        out = {"zhat": res.zhat, "xf": self._xf.copy()}
-        self._xf = res.xf_next
+    def _commit(self, pending: Any) -> None:
+        m, alpha, y, zhat = pending
+        self._xf = _step_with(m, self._xf, alpha, y, zhat).xf_next
         self._k += 1
-        self._memo = None
-        return out
 
     def get_state(self) -> dict[str, Any]:
         """``{"xf": x_f,k, "k": k}`` (copies)."""
         return {"xf": self._xf.copy(), "k": self._k}
 
-    def set_state(self, state: Mapping[str, Any]) -> None:
+    def _set_state(self, state: Mapping[str, Any]) -> None:
         """Restore a state from :meth:`get_state`."""
         if "xf" not in state or "k" not in state:
             raise DimensionError(f"a HinfFilter state needs 'xf' and 'k'; found {sorted(state)}")
@@ -256,4 +228,3 @@ class HinfFilter:
         if k < 0:
             raise DimensionError(f"the sample counter k of a HinfFilter state must be >= 0; found {k}")
         self._xf, self._k = xf, k
-        self._memo = None

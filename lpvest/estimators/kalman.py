@@ -61,6 +61,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..errors import ArgumentError, ArgumentTypeError, DimensionError, NonFiniteError, NumericalError, abbreviate
+from ..protocol import Port
 from ..systems.affine import AffineLPV, NoiseCovariance
 from ..validation import (
     as_matrix,
@@ -70,7 +71,6 @@ from ..validation import (
     check_finite,
     check_positive_definite,
 )
-from .base import Port
 from .kalman_scan import decorrelate_stack, scan_amplification, scan_filter
 
 __all__ = [
@@ -1103,7 +1103,7 @@ def _ports_in(km: KalmanModel) -> tuple[Port, ...]:
 class LPVKalmanFilter:
     """The exact LPV Kalman filter (4a)-(4e) as a streaming estimator.
 
-    Follows the step protocol of :mod:`lpvest.estimators.base`.
+    Follows the streaming protocol (:mod:`lpvest.protocol`).
 
     Inputs (per sample ``t``): ``p`` (n_p,), ``u`` (n_u,) only if n_u > 0,
     ``y`` (n_y,).

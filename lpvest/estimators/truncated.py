@@ -61,9 +61,9 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..errors import DimensionError, NonFiniteError, NotPositiveDefiniteError, NumericalError, abbreviate
+from ..protocol import Port
 from ..systems.affine import AffineLPV, NoiseCovariance
 from ..validation import as_matrix, as_signal, as_vector, check_positive_definite
-from .base import Port
 from .kalman import (
     _SMALL,
     KalmanMatrices,

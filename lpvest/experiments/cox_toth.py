@@ -34,7 +34,6 @@ from ..estimators.kalman import KalmanModel, kalman_filter
 from ..estimators.truncated import assumption_bounds
 from ..modelfile import load_system
 from ..plotting import save_figure
-from ..systems.innovation import _window_values
 from . import Experiment, ExperimentResult
 from .fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
 
@@ -44,21 +43,6 @@ __all__ = ["EXPERIMENTS", "run_example1", "run_truncation", "example1_cosim", "t
 # ---------------------------------------------------------------------------
 # Example 1
 # ---------------------------------------------------------------------------
-def _recover_innovations(model: Any, p: np.ndarray, u: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Invert an innovation form: ``e_t = y_t - C x^_t - D u_t``,
-    ``x^_{t+1} = A x^_t + B u_t + K_t e_t`` from ``x^_0 = x0``."""
-    back, ahead = model.window
-    T = y.shape[0]
-    m = model.dependence.evaluate_batch(p[back : back + T], check=False)
-    K = np.broadcast_to(model.K.evaluate(_window_values(model.space, p, back, T)), (T, model.nx, model.ny))
-    x = model.x0.copy()
-    e = np.empty_like(y)
-    for t in range(T):
-        e[t] = y[t] - m["C"][t] @ x - m["D"][t] @ u[t]
-        x = m["A"][t] @ x + m["B"][t] @ u[t] + K[t] @ e[t]
-    return e
-
-
 def example1_cosim(steps: int = 200, *, seed: int = 2026) -> CoSimSpec:
     """Example 1 through FMUs: the Scheduler (``p_t = 0.6 + 0.3 sin(0.25 t)``),
     the Source (``u_t`` standard normal, seed ``seed``) and the Plant, which
@@ -104,14 +88,14 @@ def run_example1(
     y_min = minimal.simulate(p, u, e=e).y
     aug = augmented.simulate(p[:steps], u, e=e)
     y_aug = aug.y
-    e_min = _recover_innovations(minimal, p, u, y_io)
-    e_aug = _recover_innovations(augmented, p[:steps], u, y_io)
+    e_min = minimal.innovations(p, u, y_io)
+    e_aug = augmented.innovations(p[:steps], u, y_io)
 
     timer = Timer()
     spec = example1_cosim(steps, seed=seed)
     res = timer.run(spec, fmus)
     y_fmu = column(res, "plant.y")
-    e_fmu = _recover_innovations(augmented, p[:steps], u, y_fmu)
+    e_fmu = augmented.innovations(p[:steps], u, y_fmu)
     agreements = (
         Agreement.of("scheduling p (Scheduler FMU)", column(res, "sched.p"), p[:steps]),
         Agreement.of("input u (Source FMU)", column(res, "source.u"), u),
@@ -369,9 +353,9 @@ def _truncation_fmu(
     fmus: ExperimentFmus, model: Any, p: np.ndarray, u: np.ndarray, data: Any, theorem: Any, seed: int, steps: int
 ) -> tuple[FmuRun, dict[int, float]]:
     """Co-simulate :func:`truncation_cosim`; compare with the library."""
-    from ..estimators.base import run_streaming
     from ..estimators.kalman import LPVKalmanFilter
     from ..estimators.truncated import TruncatedKalmanFilter
+    from ..protocol import run_streaming
 
     timer = Timer()
     spec = truncation_cosim(steps, seed=seed)

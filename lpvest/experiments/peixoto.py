@@ -155,8 +155,8 @@ def _hinf_fmus(
     FMU carries; ``designs`` (filter component -> the library's own design) are
     compared with the carried ones. ``signals=False`` leaves out the checks of
     the Scheduler and Source outputs (already made for another plant)."""
-    from ..estimators.base import run_streaming
     from ..estimators.hinf import HinfFilter
+    from ..protocol import run_streaming
 
     steps = spec.n_steps + 1
     sig = fig1_signals(steps, plant=plant)

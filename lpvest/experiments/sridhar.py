@@ -51,10 +51,10 @@ from typing import Any
 
 import numpy as np
 
-from ..estimators.base import run_streaming
 from ..estimators.bspline import BSplineObserver, KernelModel, UnknownConstant, UnknownSpline, fit_kernel_model
 from ..modelfile import load_system
 from ..plotting import save_figure
+from ..protocol import run_streaming
 from . import Experiment, ExperimentResult
 from .fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
 

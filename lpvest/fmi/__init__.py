@@ -5,9 +5,9 @@
 - :mod:`lpvest.fmi.registry`: the estimator kinds that get an FMU;
 - :mod:`lpvest.fmi.slave`: the pythonfmu base class of the slave scripts in
   ``fmus/`` (imports pythonfmu; only the FMUs and the builder import it);
-- :mod:`lpvest.fmi.components`, :mod:`lpvest.fmi.naming`,
-  :mod:`lpvest.fmi.spec`, :mod:`lpvest.fmi.state`: numpy-only pieces the
-  FMUs use at run time.
+- :mod:`lpvest.fmi.naming`, :mod:`lpvest.fmi.spec`, :mod:`lpvest.fmi.state`,
+  :mod:`lpvest.fmi.factories`: numpy-only pieces the FMUs use at run time;
+- :mod:`lpvest.fmi.bundle`: what an FMU carries and how it loads it.
 
 Importing this package imports neither fmpy nor pythonfmu.
 """

@@ -1,7 +1,7 @@
 """Estimator kinds that get an FMU: one registration line per filter.
 
 An :class:`EstimatorKind` names the FMU role (``Kalman`` -> ``PeixotoEx1Kalman.fmu``),
-the factory that builds the :class:`~lpvest.estimators.base.StreamingEstimator`
+the factory that builds the streaming component (:mod:`lpvest.protocol`)
 from a model, its FMU parameters, the model types it applies to, and
 optionally a design function run when the FMU is built (e.g. an LMI
 synthesis: the FMU then carries the design as JSON in ``resources/`` and needs
@@ -11,7 +11,7 @@ outputs (see ``fmus/lpvest_estimator.py``).
 Factories and design functions are named as ``"module:function"`` strings so
 that this module imports nothing heavy and the FMU imports only what it runs:
 
-- ``factory(model, *, design=None, **parameters) -> StreamingEstimator``
+- ``factory(model, *, design=None, **parameters) -> Sampled | Timed`` (:mod:`lpvest.protocol`)
   (``design`` is the carried design, or ``None``), in its own module so
   that an FMU carries only the estimator it runs (:mod:`lpvest.fmi.bundle`);
 - ``design(model) -> dict | str`` (numpy arrays allowed; a ``str`` is a JSON

@@ -5,7 +5,7 @@ things: its parameters (:meth:`LpvestSlave.declare`), how to build its
 streaming component from them (:meth:`LpvestSlave.make_component`), and
 optionally the declared range of an input and which inputs an output depends
 on. The component follows the step protocol of
-:mod:`lpvest.estimators.base` (ports, ``outputs(inputs)`` without state
+:mod:`lpvest.protocol` (ports, ``outputs(inputs)`` without state
 change, ``step(inputs)``, ``reset``, ``get_state``/``set_state``); components
 with ``timed = True`` take ``reset(t0)`` and ``step(inputs, dt=h, t_end=t + h)``.
 

@@ -17,6 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .._linalg import MatrixStack
 from ..errors import DimensionError, ExpressionError, abbreviate
 from ..expressions import Expression
 from ..scheduling import BasisFunction, SchedulingSpace
@@ -68,8 +69,6 @@ class AffineDependence:
         names = [b.name for b in self.basis]
         if len(set(names)) != len(names):
             raise ExpressionError(f"basis functions are not unique: {names}")
-        packed, slices = [], {}
-        col = 0
         for key, stack in self.coefficients.items():
             if stack.ndim != 3 or stack.shape[0] != n_terms:
                 raise DimensionError(
@@ -77,13 +76,8 @@ class AffineDependence:
                     f"expected ({n_terms}, rows, cols)"
                 )
             stack.setflags(write=False)
-            size = stack.shape[1] * stack.shape[2]
-            packed.append(stack.reshape(n_terms, size))
-            slices[key] = (col, col + size, stack.shape[1:])
-            col += size
-        pk = np.concatenate(packed, axis=1) if packed else np.zeros((n_terms, 0))
-        object.__setattr__(self, "_packed", pk)
-        object.__setattr__(self, "_slices", slices)
+        # every matrix at once, the same operations for one sample and a trajectory
+        object.__setattr__(self, "_stack", MatrixStack(self.coefficients))
 
     # -- construction ---------------------------------------------------------
     @classmethod
@@ -155,7 +149,7 @@ class AffineDependence:
         return (CONSTANT_TERM, *(b.name for b in self.basis))
 
     def shape(self, name: str) -> tuple[int, int]:
-        return self._slices[name][2]  # type: ignore[attr-defined,no-any-return]
+        return self._stack.shapes[name]  # type: ignore[attr-defined,no-any-return]
 
     def psi(self, p: np.ndarray, *, check: bool = True) -> np.ndarray:
         """``[1, psi_1(p), ..., psi_n(p)]`` for one scheduling vector."""
@@ -179,15 +173,17 @@ class AffineDependence:
         return out
 
     def evaluate(self, p: np.ndarray, *, check: bool = True) -> dict[str, np.ndarray]:
-        """Every matrix at one scheduling vector ``p`` (one product for all)."""
-        flat = self.psi(p, check=check) @ self._packed  # type: ignore[attr-defined]
-        return {k: flat[a:b].reshape(s) for k, (a, b, s) in self._slices.items()}  # type: ignore[attr-defined]
+        """Every matrix at one scheduling vector ``p`` (all at once, :class:`~lpvest._linalg.MatrixStack`)."""
+        return self.at_psi(self.psi(p, check=check))
+
+    def at_psi(self, psi: np.ndarray) -> dict[str, np.ndarray]:
+        """Every matrix for given basis values ``psi = [1, psi_1(p), ...]`` (:meth:`psi`)."""
+        return self._stack.at(psi)  # type: ignore[attr-defined,no-any-return]
 
     def evaluate_batch(self, p: np.ndarray, *, check: bool = True) -> dict[str, np.ndarray]:
-        """Every matrix along a trajectory ``p`` (T, n_p): arrays ``(T, rows, cols)``."""
-        flat = self.psi_batch(p, check=check) @ self._packed  # type: ignore[attr-defined]
-        T = flat.shape[0]
-        return {k: flat[:, a:b].reshape(T, *s) for k, (a, b, s) in self._slices.items()}  # type: ignore[attr-defined]
+        """Every matrix along a trajectory ``p`` (T, n_p): arrays ``(T, rows, cols)``;
+        row ``t`` is :meth:`evaluate` of ``p[t]`` to the bit."""
+        return self._stack.at_batch(self.psi_batch(p, check=check))  # type: ignore[attr-defined,no-any-return]
 
     def subset(self, names: Sequence[str]) -> AffineDependence:
         """The dependence restricted to ``names``."""
@@ -459,11 +455,23 @@ class AffineLPV:
             w = as_signal(w, "w", self.nw, T)
             v = as_signal(v, "v", self.nv, T)
         x = self.x0 if x0 is None else as_vector(x0, "x0", self.nx)
-        m = self.at_batch(p)
+        psi = self.dependence.psi_batch(p)  # range-checked
         X = np.empty((T, self.nx))
         Y = np.empty((T, self.ny))
         for t in range(T):
             X[t] = x
-            Y[t] = m.C[t] @ x + m.D[t] @ u[t] + m.H[t] @ v[t]
-            x = m.A[t] @ x + m.B[t] @ u[t] + m.G[t] @ w[t]
+            Y[t], x = self.step(x, psi[t], u[t], w[t], v[t])
         return LPVTrajectory(X, Y, np.asarray(w), np.asarray(v))
+
+    def step(
+        self, x: np.ndarray, psi: np.ndarray, u: np.ndarray, w: np.ndarray, v: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """One sample of (1)-(2), a pure function: ``(y_t, x_{t+1})`` from the
+        state ``x_t`` (n_x,), the basis values ``psi_t = [1, psi_1(p_t), ...]``
+        (:meth:`AffineDependence.psi`), the input ``u_t`` and the noise ``w_t``,
+        ``v_t``.
+
+        :meth:`simulate`, the streaming plant and the Plant FMU all call it.
+        """
+        m = self.dependence.at_psi(psi)
+        return m["C"] @ x + m["D"] @ u + m["H"] @ v, m["A"] @ x + m["B"] @ u + m["G"] @ w

@@ -18,7 +18,7 @@ shifted scheduling values, as in realization (21b) where
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -30,7 +30,14 @@ from ..scheduling import SchedulingSpace
 from ..validation import as_matrix, as_rng, as_signal, as_vector, check_positive_definite
 from .affine import AffineDependence
 
-__all__ = ["InnovationLPV", "LPVInputOutput", "InnovationTrajectory", "scheduling_window"]
+__all__ = [
+    "InnovationLPV",
+    "LPVInputOutput",
+    "InnovationTrajectory",
+    "scheduling_window",
+    "innovation_step",
+    "innovation_inverse_step",
+]
 
 
 class InnovationTrajectory(NamedTuple):
@@ -46,6 +53,31 @@ def scheduling_window(shifts: dict[str, set[int]]) -> tuple[int, int]:
     after ``t`` a set of formulas needs."""
     ks = [k for s in shifts.values() for k in s] or [0]
     return max(0, -min(ks)), max(0, max(ks))
+
+
+def innovation_step(
+    m: Mapping[str, np.ndarray], K: np.ndarray, x: np.ndarray, u: np.ndarray, e: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """One sample of the innovation form (4a)-(4b), a pure function:
+    ``(y_t, x_{t+1})`` with ``y_t = C x_t + D u_t + e_t`` and
+    ``x_{t+1} = A x_t + B u_t + K_t e_t`` (``m``: the matrices ``A, B, C, D`` at
+    ``p_t``; ``K``: the gain ``K_t``).
+
+    The one place the recursion is written: :meth:`InnovationLPV.simulate`,
+    the streaming plant, the Plant FMU and the Kalman filter's innovation-form
+    simulation call it.
+    """
+    return m["C"] @ x + m["D"] @ u + e, m["A"] @ x + m["B"] @ u + K @ e
+
+
+def innovation_inverse_step(
+    m: Mapping[str, np.ndarray], K: np.ndarray, x: np.ndarray, u: np.ndarray, y: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The innovation form run on data, a pure function: ``(e_t, x_{t+1})`` with
+    ``e_t = y_t - C x_t - D u_t`` and ``x_{t+1} = A x_t + B u_t + K_t e_t``
+    (the same recursion as :func:`innovation_step`, solved for ``e_t``)."""
+    e = y - m["C"] @ x - m["D"] @ u
+    return e, m["A"] @ x + m["B"] @ u + K @ e
 
 
 def _window_values(space: SchedulingSpace, p: np.ndarray, lookback: int, T: int) -> dict:
@@ -177,6 +209,36 @@ class InnovationLPV:
             e = as_rng(rng).standard_normal((T, self.ny)) @ L.T
         else:
             e = as_signal(e, "e", self.ny, T)
+        m, K = self._along(p, T)
+        x = self.x0 if x0 is None else as_vector(x0, "x0", self.nx)
+        X = np.empty((T, self.nx))
+        Y = np.empty((T, self.ny))
+        for t in range(T):
+            X[t] = x
+            Y[t], x = innovation_step({k: v[t] for k, v in m.items()}, K[t], x, u[t], e[t])
+        return InnovationTrajectory(X, Y, np.asarray(e))
+
+    def innovations(self, p: object, u: object | None, y: object) -> np.ndarray:
+        """The innovations ``e_t`` that give the outputs ``y`` (T, n_y) from
+        ``x_0 = x0`` (:func:`innovation_inverse_step`); ``p`` as in :meth:`simulate`."""
+        back, ahead = self.window
+        p = as_signal(p, "p", self.n_p)
+        y = np.asarray(y, dtype=float)
+        T = y.shape[0]
+        y = as_signal(y, "y", self.ny, T)
+        if p.shape[0] != back + T + ahead:
+            raise DimensionError(f"p has {p.shape[0]} samples; {T} outputs need {back + T + ahead}")
+        u = as_signal(u if u is not None else np.zeros((T, self.nu)), "u", self.nu, T)
+        m, K = self._along(p, T)
+        x = self.x0.copy()
+        e = np.empty_like(y)
+        for t in range(T):
+            e[t], x = innovation_inverse_step({k: v[t] for k, v in m.items()}, K[t], x, u[t], y[t])
+        return e
+
+    def _along(self, p: np.ndarray, T: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        """The matrices and the gain along ``t = 0..T-1`` (``p`` with its window)."""
+        back = self.window[0]
         m = self.dependence.evaluate_batch(p[back : back + T], check=False)
         K = self.K.evaluate(_window_values(self.space, p, back, T))
         K = np.broadcast_to(K, (T, self.nx, self.ny))
@@ -187,14 +249,7 @@ class InnovationLPV:
                 f"the gain K is not finite at t={t} (K[{i + 1},{j + 1}] = {abbreviate(self.K.entries[i][j].text)}, "
                 f"scheduling {shorten(at, 80)}): the realization is not defined there"
             )
-        x = self.x0 if x0 is None else as_vector(x0, "x0", self.nx)
-        X = np.empty((T, self.nx))
-        Y = np.empty((T, self.ny))
-        for t in range(T):
-            X[t] = x
-            Y[t] = m["C"][t] @ x + m["D"][t] @ u[t] + e[t]
-            x = m["A"][t] @ x + m["B"][t] @ u[t] + K[t] @ e[t]
-        return InnovationTrajectory(X, Y, np.asarray(e))
+        return m, K
 
 
 @dataclass(frozen=True, eq=False)

@@ -19,6 +19,7 @@ from typing import NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
+from .._linalg import MatrixStack
 from ..errors import DimensionError, ExpressionError, SchedulingRangeError
 from ..expressions import Expression, FormulaVector
 from ..scheduling import BasisFunction, Monomial, SchedulingSpace, box_vertices
@@ -320,6 +321,7 @@ class PolytopicLPV:
                 f"the simplex map gives {simplex_map.n_vertices} weights; the model has {N} vertices"
             )
         object.__setattr__(self, "vertices", PolytopicMatrices(**stacks))
+        object.__setattr__(self, "_stack", MatrixStack(stacks))
         object.__setattr__(self, "simplex_map", simplex_map)
         object.__setattr__(self, "affine", affine)
         object.__setattr__(self, "parameters", dict(parameters or {}))
@@ -390,21 +392,34 @@ class PolytopicLPV:
         a = as_vector(alpha, "alpha", self.n_vertices)
         if check:
             check_simplex(a, "alpha")
-        return PolytopicMatrices(*(np.tensordot(a, v, axes=1) for v in self.vertices))
+        return PolytopicMatrices(**self._stack.at(a))
 
     def at_batch(self, alpha: object, *, check: bool = True) -> PolytopicMatrices:
-        """The matrices along ``alpha`` of shape (T, N), stacked (T, rows, cols)."""
+        """The matrices along ``alpha`` of shape (T, N), stacked (T, rows, cols);
+        row ``k`` is :meth:`at` of ``alpha[k]`` to the bit."""
         a = as_signal(alpha, "alpha", self.n_vertices)
         if check:
             for t in range(a.shape[0]):
                 check_simplex(a[t], f"alpha at k={t}")
-        return PolytopicMatrices(*(np.einsum("ti,irc->trc", a, v) for v in self.vertices))
+        return PolytopicMatrices(**self._stack.at_batch(a))
+
+    def step(self, x: np.ndarray, alpha: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """One sample of (1), a pure function: ``(y_k, z_k, x_{k+1})`` from the
+        state ``x_k`` (n_x,), the weights ``alpha_k`` (N,) (unchecked: on the
+        simplex) and the disturbance ``w_k`` (n_w,).
+
+        :meth:`simulate`, the streaming plant and the Plant FMU all call it.
+        """
+        m = self._stack.at(alpha)
+        return (m["Cy"] @ x + m["Dy"] @ w, m["Cz"] @ x + m["Dz"] @ w, m["A"] @ x + m["Bw"] @ w)
 
     def simulate(self, alpha: object, w: object, *, x0: object | None = None) -> PolytopicTrajectory:
         """Simulate (1) for ``alpha`` (T, N) and disturbance ``w`` (T, n_w)
-        from ``x0`` (default zero)."""
-        m = self.at_batch(alpha)
-        T = m.A.shape[0]
+        from ``x0`` (default zero): :meth:`step` sample by sample."""
+        a = as_signal(alpha, "alpha", self.n_vertices)
+        for t in range(a.shape[0]):
+            check_simplex(a[t], f"alpha at k={t}")
+        T = a.shape[0]
         w = as_signal(w, "w", self.nw, T)
         x = np.zeros(self.nx) if x0 is None else as_vector(x0, "x0", self.nx)
         X = np.empty((T, self.nx))
@@ -412,7 +427,5 @@ class PolytopicLPV:
         Y = np.empty((T, self.ny))
         for k in range(T):
             X[k] = x
-            Z[k] = m.Cz[k] @ x + m.Dz[k] @ w[k]
-            Y[k] = m.Cy[k] @ x + m.Dy[k] @ w[k]
-            x = m.A[k] @ x + m.Bw[k] @ w[k]
+            Y[k], Z[k], x = self.step(x, a[k], w[k])
         return PolytopicTrajectory(X, Z, Y)

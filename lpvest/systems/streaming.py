@@ -1,13 +1,15 @@
 """Plants for streaming use: one sample (or one communication step) at a time.
 
-The classes here follow the step protocol of the estimators
-(:mod:`lpvest.estimators.base`): named :class:`~lpvest.estimators.base.Port`
-inputs and outputs, ``outputs(inputs)`` without state change (the values at
-the current sample, direct feedthrough included), ``step(inputs)`` that returns
-the same values and advances, ``reset()``, and ``get_state``/``set_state`` of
-the whole state (random-generator state included). The Plant FMUs are thin
-adapters over them, and a Python loop over them reproduces the batch
-``simulate`` methods of the models.
+The classes here are streaming components (:mod:`lpvest.protocol`): named
+:class:`~lpvest.protocol.Port` inputs and outputs, ``outputs(inputs)``
+without state change (the values at the current sample, direct feedthrough
+included), ``step(inputs)`` that returns the same values and advances,
+``reset()``, and ``get_state``/``set_state`` of the whole state
+(random-generator state included). The Plant FMUs are thin adapters over them.
+Each sample is the model's own pure step (:meth:`PolytopicLPV.step`,
+:meth:`AffineLPV.step`, :func:`~lpvest.systems.innovation.innovation_step`),
+the one the batch ``simulate`` methods loop over: a Python loop over a plant
+reproduces ``simulate`` to the bit (with the noise drawn one sample at a time).
 
 - :class:`DiscretePlant` wraps a discrete-time :class:`~lpvest.systems.PolytopicLPV`,
   :class:`~lpvest.systems.AffineLPV` or causal :class:`~lpvest.systems.InnovationLPV`.
@@ -43,10 +45,10 @@ from typing import Any
 import numpy as np
 
 from ..errors import DimensionError, ExpressionError
-from ..estimators.base import Port, input_key
+from ..protocol import Component, Port, TimedComponent
 from ..validation import as_matrix, as_vector, check_positive_definite, check_simplex
 from .affine import AffineLPV
-from .innovation import InnovationLPV
+from .innovation import InnovationLPV, innovation_step
 from .ltv import LTVInputOutput, LTVStateSpace, TimeFunction
 from .polytopic import PolytopicLPV
 
@@ -75,16 +77,7 @@ def plant_supports(model: object) -> str | None:
     return f"{type(model).__name__} is an input-output model with no state to stream (use a state-space realization)"
 
 
-def _check(inputs: Mapping[str, Any], ports: tuple[Port, ...]) -> dict[str, np.ndarray]:
-    out = {}
-    for port in ports:
-        if port.name not in inputs:
-            raise DimensionError(f"input {port.name!r} is missing (inputs: {', '.join(p.name for p in ports)})")
-        out[port.name] = as_vector(inputs[port.name], port.name, port.size)
-    return out
-
-
-class DiscretePlant:
+class DiscretePlant(Component):
     """A discrete-time LPV plant, one sample at a time (see the module docs).
 
     Parameters
@@ -112,8 +105,6 @@ class DiscretePlant:
     inputs ``p``, ``u``, ``e``; outputs ``y``, ``x``.
     """
 
-    timed = False
-
     def __init__(
         self,
         model: PolytopicLPV | AffineLPV | InnovationLPV,
@@ -138,17 +129,14 @@ class DiscretePlant:
                 as_matrix(P0, "P0", (nx, nx)), "P0", semidefinite=True)
         elif P0 is not None:
             raise DimensionError("P0 applies to an affine model only")
+        state = Port("x", (nx,), "state", direct=False)
         if isinstance(model, PolytopicLPV):
             if model.simplex_map is None:
                 sched = Port("alpha", (model.n_vertices,), "vertex weights")
             else:
                 sched = Port("p", (model.space.dim,), "scheduling")
-            self._inputs = (sched, Port("w", (model.nw,), "disturbance"))
-            self._outputs = (
-                Port("y", (model.ny,), "measured output"),
-                Port("z", (model.nz,), "signal to be estimated"),
-                Port("x", (nx,), "state", direct=False),
-            )
+            ins: list[Port] = [sched, Port("w", (model.nw,), "disturbance")]
+            outs = (Port("y", (model.ny,), "measured output"), Port("z", (model.nz,), "signal to be estimated"), state)
             self._chol = None
         elif isinstance(model, AffineLPV):
             ins = [Port("p", (model.n_p,), "scheduling")]
@@ -156,30 +144,21 @@ class DiscretePlant:
                 ins.append(Port("u", (model.nu,), "input"))
             ins += [Port("w", (model.nw,), "process noise added to the drawn noise"),
                     Port("v", (model.nv,), "measurement noise added to the drawn noise")]
-            self._inputs = tuple(ins)
-            self._outputs = (Port("y", (model.ny,), "measured output"), Port("x", (nx,), "state", direct=False))
+            outs = (Port("y", (model.ny,), "measured output"), state)
             self._chol = np.linalg.cholesky(model.noise.joint)
         else:
             ins = [Port("p", (model.n_p,), "scheduling")]
             if model.nu:
                 ins.append(Port("u", (model.nu,), "input"))
             ins.append(Port("e", (model.ny,), "innovation added to the drawn one"))
-            self._inputs = tuple(ins)
-            self._outputs = (Port("y", (model.ny,), "measured output"), Port("x", (nx,), "state", direct=False))
+            outs = (Port("y", (model.ny,), "measured output"), state)
             self._chol = np.linalg.cholesky(model.innovation_covariance)
-        self._input_names = tuple(p.name for p in self._inputs)
-        self.reset()
+        self._sizes = tuple((p.name, p.size) for p in ins)
+        self._no_u = np.zeros(0)
+        super().__init__(tuple(ins), outs)
 
-    # -- protocol -------------------------------------------------------------
-    @property
-    def input_ports(self) -> tuple[Port, ...]:
-        return self._inputs
-
-    @property
-    def output_ports(self) -> tuple[Port, ...]:
-        return self._outputs
-
-    def reset(self) -> None:
+    # -- the protocol -----------------------------------------------------------------
+    def _reset(self) -> None:
         """Back to sample 0: initial state, generator re-seeded, first noise drawn."""
         model = self.model
         self._rng = np.random.default_rng(self.seed)
@@ -197,7 +176,6 @@ class DiscretePlant:
             x = np.zeros(model.nx)
         self._x = np.asarray(x, dtype=float)
         self._noise = self._draw()
-        self._memo: tuple[Any, dict[str, np.ndarray], dict[str, np.ndarray]] | None = None
 
     def _draw(self) -> np.ndarray:
         """The model noise of the current sample (zeros without noise)."""
@@ -208,71 +186,46 @@ class DiscretePlant:
             return np.zeros(n)
         return (self._rng.standard_normal((1, n)) @ self._chol.T)[0]
 
-    def _evaluate(self, inputs: Mapping[str, Any]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-        """Checked inputs, the outputs at the current sample and the next state."""
+    def _read(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+        val = {}
+        for name, size in self._sizes:
+            if name not in inputs:
+                raise DimensionError(f"input {name!r} is missing (inputs: {', '.join(self._in_names)})")
+            val[name] = as_vector(inputs[name], name, size)
         model = self.model
-        val = _check(inputs, self._inputs)
-        x = self._x
         if isinstance(model, PolytopicLPV):
             if model.simplex_map is None:
-                alpha = val["alpha"]
-                check_simplex(alpha, "alpha")
+                check_simplex(val["alpha"], "alpha")
             else:
-                alpha = model.alpha(val["p"])
-            # the batch evaluation with one row: the same operations as simulate()
-            m = model.at_batch(alpha[None, :], check=False)
-            m = type(m)(*(mat[0] for mat in m))
-            w = val["w"]
-            out = {"y": m.Cy @ x + m.Dy @ w, "z": m.Cz @ x + m.Dz @ w, "x": x.copy()}
-            nxt = m.A @ x + m.Bw @ w
-        elif isinstance(model, AffineLPV):
-            p = model.space.check(val["p"])
-            m = model.at_batch(p[None, :], check=False)
-            m = type(m)(*(mat[0] for mat in m))
-            u = val.get("u", np.zeros(0))
+                val["alpha"] = model.alpha(val["p"])  # range-checked
+        else:
+            model.space.check(val["p"])
+        return val
+
+    def _evaluate(self, val: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        """The outputs at the current sample and the next state: the model's step."""
+        model = self.model
+        x = self._x
+        if isinstance(model, PolytopicLPV):
+            y, z, nxt = model.step(x, val["alpha"], val["w"])
+            return {"y": y, "z": z, "x": x.copy()}, nxt
+        u = val.get("u", self._no_u)
+        if isinstance(model, AffineLPV):
             nw = model.nw
-            w = val["w"] + self._noise[:nw]
-            v = val["v"] + self._noise[nw:]
-            out = {"y": m.C @ x + m.D @ u + m.H @ v, "x": x.copy()}
-            nxt = m.A @ x + m.B @ u + m.G @ w
-        else:
-            p = model.space.check(val["p"])
-            mats = model.dependence.evaluate(p, check=False)
-            K = model.K.evaluate(model.space.as_dict(p)).reshape(model.nx, model.ny)
-            if not np.all(np.isfinite(K)):
-                raise ExpressionError(f"the gain K is not finite at p = {p.tolist()}")
-            u = val.get("u", np.zeros(0))
-            e = val["e"] + self._noise
-            out = {"y": mats["C"] @ x + mats["D"] @ u + e, "x": x.copy()}
-            nxt = mats["A"] @ x + mats["B"] @ u + K @ e
-        return out, {"x": nxt}
+            y, nxt = model.step(x, model.dependence.psi(val["p"], check=False), u,
+                                val["w"] + self._noise[:nw], val["v"] + self._noise[nw:])
+            return {"y": y, "x": x.copy()}, nxt
+        p = val["p"]
+        K = model.K.evaluate(model.space.as_dict(p)).reshape(model.nx, model.ny)
+        if not np.all(np.isfinite(K)):
+            raise ExpressionError(f"the gain K is not finite at p = {p.tolist()}")
+        y, nxt = innovation_step(model.dependence.evaluate(p, check=False), K, x, u, val["e"] + self._noise)
+        return {"y": y, "x": x.copy()}, nxt
 
-    def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
-        """The outputs at the current sample for these inputs; no state change.
-
-        The evaluation is kept (keyed on the inputs, :func:`~lpvest.estimators.base.input_key`)
-        for a following :meth:`step` with the same inputs."""
-        key = input_key(inputs, self._input_names)
-        memo = self._memo
-        if key is None or memo is None or memo[0] != key:
-            out, nxt = self._evaluate(inputs)
-            memo = self._memo = (key, out, nxt) if key is not None else None
-            if memo is None:
-                return out
-        return {name: value.copy() for name, value in memo[1].items()}
-
-    def step(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
-        """The outputs at the current sample; then advance to the next one."""
-        memo = self._memo
-        if memo is not None and memo[0] == input_key(inputs, self._input_names):
-            out, nxt = memo[1], memo[2]
-        else:
-            out, nxt = self._evaluate(inputs)
-        self._x = nxt["x"]
+    def _commit(self, nxt: np.ndarray) -> None:
+        self._x = nxt
         self._k += 1
         self._noise = self._draw()
-        self._memo = None
-        return out
 
     @property
     def sample(self) -> int:
@@ -287,7 +240,7 @@ class DiscretePlant:
             "rng": self._rng.bit_generator.state,
         }
 
-    def set_state(self, state: Mapping[str, Any]) -> None:
+    def _set_state(self, state: Mapping[str, Any]) -> None:
         x = as_vector(state["x"], "state x", self.model.nx)
         noise = np.asarray(state["noise"], dtype=float)
         if noise.shape != self._noise.shape:
@@ -295,10 +248,9 @@ class DiscretePlant:
         rng = np.random.default_rng()
         rng.bit_generator.state = state["rng"]
         self._x, self._k, self._noise, self._rng = x.copy(), int(state["k"]), noise.copy(), rng
-        self._memo = None
 
 
-class LTVPlant:
+class LTVPlant(TimedComponent):
     """A continuous-time SISO LTV plant integrated over each communication step.
 
     The state is integrated with scipy's DOP853 (``rtol``, ``atol``) from the
@@ -313,8 +265,6 @@ class LTVPlant:
     Ports: input ``u`` (1,); outputs ``y`` (1,) = ``C(t) x``, ``x`` (n,) and
     ``u_applied`` (1,), the input at the current time.
     """
-
-    timed = True
 
     def __init__(
         self,
@@ -340,55 +290,37 @@ class LTVPlant:
             self._x0 = as_vector(x0, "x0", ss.n)
         else:
             self._x0 = ss.x0.copy() if ss.x0 is not None else np.zeros(ss.n)
-        self.t0 = float(t0)
-        self._inputs = (Port("u", (1,), "input, held over the step (use_model_input = false)"),)
-        self._outputs = (Port("y", (1,), "output C(t) x(t)", direct=False), Port("x", (ss.n,), "state", direct=False),
-                         Port("u_applied", (1,), "input applied at the current time",
-                              direct=not self.use_model_input))
-        self.reset()
-
-    @property
-    def input_ports(self) -> tuple[Port, ...]:
-        return self._inputs
-
-    @property
-    def output_ports(self) -> tuple[Port, ...]:
-        return self._outputs
+        inputs = (Port("u", (1,), "input, held over the step (use_model_input = false)"),)
+        outputs = (Port("y", (1,), "output C(t) x(t)", direct=False), Port("x", (ss.n,), "state", direct=False),
+                   Port("u_applied", (1,), "input applied at the current time", direct=not self.use_model_input))
+        super().__init__(inputs, outputs, t0)
 
     @property
     def time(self) -> float:
         return self._t
 
-    def reset(self, t0: float | None = None) -> None:
-        if t0 is not None:
-            self.t0 = float(t0)
+    def _reset(self) -> None:
         self._t = self.t0
         self._x = self._x0.copy()
 
-    def _input(self, val: dict[str, np.ndarray]) -> TimeFunction | float:
+    def _read(self, inputs: Mapping[str, Any]) -> TimeFunction | float:
+        if "u" not in inputs:
+            raise DimensionError("input 'u' is missing (inputs: u)")
+        u = float(as_vector(inputs["u"], "u", 1)[0])
         if self.use_model_input:
             assert self.model.input is not None
             return self.model.input
-        return float(val["u"][0])
+        return u
 
-    def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
-        val = _check(inputs, self._inputs)
-        u = self._input(val)
+    def _evaluate(self, u: TimeFunction | float) -> tuple[dict[str, np.ndarray], TimeFunction | float]:
         u_now = float(u(self._t)) if isinstance(u, TimeFunction) else u
         y = self.model.C(self._t) @ self._x
-        return {"y": np.asarray(y, dtype=float).reshape(1), "x": self._x.copy(), "u_applied": np.array([u_now])}
+        return {"y": np.asarray(y, dtype=float).reshape(1), "x": self._x.copy(), "u_applied": np.array([u_now])}, u
 
-    def step(self, inputs: Mapping[str, Any], *, dt: float, t_end: float | None = None) -> dict[str, np.ndarray]:
-        """The outputs at the current time; then integrate over ``dt > 0`` (to
-        ``t_end`` when given: the master's communication point, free of the
-        round-off of summed steps)."""
+    def _commit(self, u: TimeFunction | float, t_end: float = 0.0) -> None:
+        """Integrate from the current time to ``t_end`` (the master's communication point)."""
         from scipy.integrate import solve_ivp
 
-        out = self.outputs(inputs)
-        dt = float(dt)
-        if not dt > 0 or not np.isfinite(dt):
-            raise DimensionError(f"the step size must be positive and finite; found {dt}")
-        u = self._input(_check(inputs, self._inputs))
         A, B = self.model.A, self.model.B
         if isinstance(u, TimeFunction):
 
@@ -399,17 +331,15 @@ class LTVPlant:
             def rhs(t: float, x: np.ndarray) -> np.ndarray:
                 return A(t) @ x + B(t)[:, 0] * u
 
-        t1 = self._t + dt if t_end is None else float(t_end)
-        sol = solve_ivp(rhs, (self._t, t1), self._x, method="DOP853", rtol=self.rtol, atol=self.atol)
+        sol = solve_ivp(rhs, (self._t, t_end), self._x, method="DOP853", rtol=self.rtol, atol=self.atol)
         if not sol.success or not np.all(np.isfinite(sol.y[:, -1])):
-            raise ExpressionError(f"integration from t = {self._t:g} to {t1:g} failed: {sol.message}")
+            raise ExpressionError(f"integration from t = {self._t:g} to {t_end:g} failed: {sol.message}")
         self._x = sol.y[:, -1].copy()
-        self._t = t1
-        return out
+        self._t = t_end
 
     def get_state(self) -> dict[str, Any]:
         return {"t": self._t, "x": self._x.copy()}
 
-    def set_state(self, state: Mapping[str, Any]) -> None:
+    def _set_state(self, state: Mapping[str, Any]) -> None:
         self._x = as_vector(state["x"], "state x", self.model.n).copy()
         self._t = float(state["t"])

@@ -10,8 +10,8 @@ from typing import Any
 import numpy as np
 
 from ...errors import LpvestError, SamplingError
-from ...estimators.base import Port
 from ...estimators.bspline import BSplineObserver, KernelModel, UnknownConstant, UnknownSpline
+from ...protocol import TimedComponent
 
 __all__ = ["build", "SampledObserver", "coefficient"]
 
@@ -31,7 +31,7 @@ def coefficient(name: str, spec: str) -> UnknownConstant | UnknownSpline | None:
     raise LpvestError(f"{name} = {spec!r}; expected 'known', 'constant', 'spline:N' or 'spline:N:ORDER'")
 
 
-class SampledObserver:
+class SampledObserver(TimedComponent):
     """The B-spline observer inside an FMU: one fmi2DoStep is one sample, so
     the communication step must equal the observer's sample time ``dt``.
 
@@ -41,52 +41,49 @@ class SampledObserver:
     observer's next sample, ``t0 + k dt`` (to round-off); a sample the FMU
     rejects is not counted, so the clock never drifts from the host's."""
 
-    timed = True
-
     def __init__(self, build: Callable[[float], BSplineObserver], dt: float) -> None:
         self._build = build
         self.dt = float(dt)
         self._obs = build(0.0)
-
-    @property
-    def input_ports(self) -> tuple[Port, ...]:
-        return self._obs.input_ports
-
-    @property
-    def output_ports(self) -> tuple[Port, ...]:
-        return self._obs.output_ports
+        super().__init__(self._obs.input_ports, self._obs.output_ports, 0.0)
 
     @property
     def time(self) -> float:
         """The time of the next sample, ``t0 + k dt``."""
         return self._obs.t0 + self._obs.get_state()["k"] * self.dt
 
-    def reset(self, t0: float = 0.0) -> None:
-        if float(t0) != self._obs.t0:
-            self._obs = self._build(float(t0))
+    def _reset(self) -> None:
+        if self.t0 != self._obs.t0:
+            self._obs = self._build(self.t0)
         self._obs.reset()
 
-    def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
-        return self._obs.outputs(inputs)
+    def _read(self, inputs: Mapping[str, Any]) -> Mapping[str, Any]:
+        return inputs  # checked by the observer
 
-    def step(self, inputs: Mapping[str, Any], *, dt: float, t_end: float) -> dict[str, np.ndarray]:
+    def _evaluate(self, inputs: Mapping[str, Any]) -> tuple[dict[str, np.ndarray], Mapping[str, Any]]:
+        return self._obs.outputs(inputs), inputs  # the observer keeps its evaluation for the step
+
+    def _commit(self, inputs: Mapping[str, Any], t_end: float = 0.0) -> None:
+        self._obs.step(inputs)  # step() checked that this is the observer's next sample
+
+    def step(self, inputs: Mapping[str, Any], *, dt: float, t_end: float | None = None) -> dict[str, np.ndarray]:
         if abs(dt - self.dt) > 1e-9 * self.dt:
             raise SamplingError(
                 f"communication step {dt!r} s differs from the observer's sample time dt = {self.dt!r} s "
                 "(one fmi2DoStep is one sample)"
             )
-        t = t_end - dt
         expected = self.time
+        t = (expected + dt if t_end is None else float(t_end)) - dt
         if not math.isclose(t, expected, rel_tol=1e-9, abs_tol=1e-9 * self.dt):
             raise SamplingError(
                 f"the step starts at t = {t!r} s; the observer's next sample is at {expected!r} s"
             )
-        return self._obs.step(inputs)
+        return super().step(inputs, dt=dt, t_end=expected + dt if t_end is None else t_end)
 
     def get_state(self) -> dict[str, Any]:
         return self._obs.get_state()
 
-    def set_state(self, state: Mapping[str, Any]) -> None:
+    def _set_state(self, state: Mapping[str, Any]) -> None:
         self._obs.set_state(state)
 
 

@@ -1,0 +1,331 @@
+"""The streaming protocol: one sample (or one communication step) at a time.
+
+Every plant, filter, observer and signal of lpvest is a *streaming component*
+with named :class:`Port` inputs and outputs:
+
+- ``outputs(inputs)`` returns the component's outputs at the current sample
+  for these inputs, **without changing it** (an FMU reports them right after
+  its inputs are set, before ``fmi2DoStep``: direct feedthrough, no one-step
+  delay);
+- ``step(inputs)`` returns the same values and advances to the next sample
+  (``fmi2DoStep``); a *timed* component (a signal of time, a continuous-time
+  plant, an observer that keeps time) takes ``step(inputs, dt=h, t_end=t + h)``
+  and ``reset(t0)``;
+- ``reset()`` goes back to the initial state; ``get_state()``/``set_state()``
+  copy the whole state (covariances, windows, counters, random generators) as
+  a flat mapping of names to numpy arrays or Python scalars: what
+  ``fmi2GetFMUstate`` and serialization store.
+
+:class:`Sampled` and :class:`Timed` state this as typing Protocols.
+:class:`Component` and :class:`TimedComponent` implement it once over three
+methods a subclass writes: ``_read(inputs)`` (validate one sample: bad input
+raises a typed :class:`~lpvest.errors.LpvestError` before anything changes,
+so a rejected sample leaves the component as it was), ``_evaluate(sample)``
+(the outputs and whatever the step will need: no state change) and
+``_commit(pending)`` (advance).
+
+**Computing once.** A caller that asks for ``outputs`` and then calls
+``step`` with the same inputs (the FMU adapter does so at every
+communication point) does not pay for the sample twice: the evaluation is
+kept, keyed on an exact fingerprint of the inputs (:func:`input_key`: names,
+shapes and float64 bytes), and reused when the key matches and the state has
+not changed since. A plain loop that only calls ``step`` never builds a key.
+A key covers the exact values, so an input that would be rejected is never
+served from the memo, and the reused values are the very numbers a fresh
+evaluation gives.
+
+This module is the bottom of the package: it imports only numpy and
+:mod:`lpvest.errors`.
+
+Examples
+--------
+>>> class Counter(Component):
+...     def __init__(self):
+...         super().__init__((Port("u", (1,)),), (Port("total", (1,)),))
+...     def _reset(self):
+...         self.total = 0.0
+...     def _read(self, inputs):
+...         return float(inputs["u"][0])
+...     def _evaluate(self, u):
+...         return {"total": np.array([self.total + u])}, self.total + u
+...     def _commit(self, total):
+...         self.total = total
+...     def get_state(self):
+...         return {"total": self.total}
+...     def _set_state(self, state):
+...         self.total = float(state["total"])
+>>> c = Counter()
+>>> c.outputs({"u": [2.0]})["total"], c.step({"u": [2.0]})["total"], c.step({"u": [1.0]})["total"]
+(array([2.]), array([2.]), array([3.]))
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar, Protocol, runtime_checkable
+
+import numpy as np
+
+from .errors import DimensionError
+
+__all__ = [
+    "Port",
+    "Sampled",
+    "Timed",
+    "Component",
+    "TimedComponent",
+    "input_key",
+    "run_streaming",
+]
+
+
+@dataclass(frozen=True)
+class Port:
+    """A named input or output of a streaming component.
+
+    ``shape`` is ``(n,)`` for a vector (FMI variables ``name[1]..name[n]``),
+    ``(r, c)`` for a matrix (``name[1,1]..name[r,c]``) or ``()`` for a scalar.
+    ``direct`` (outputs): the value at a sample depends on that sample's inputs
+    (direct feedthrough, e.g. a filtered estimate); ``False`` for a value fixed
+    by the past alone (a state ``x_k``), which an FMU can report at ``t_k + h``
+    right after the step.
+    """
+
+    name: str
+    shape: tuple[int, ...]
+    description: str = ""
+    direct: bool = True
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.shape)) if self.shape else 1
+
+
+@runtime_checkable
+class Sampled(Protocol):
+    """A discrete-time component: one ``step`` is one sample."""
+
+    @property
+    def input_ports(self) -> tuple[Port, ...]: ...
+
+    @property
+    def output_ports(self) -> tuple[Port, ...]: ...
+
+    def reset(self) -> None:
+        """Back to the initial state."""
+
+    def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+        """Outputs at the current sample for these inputs; no state change."""
+        ...
+
+    def step(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+        """Consume the current sample: return :meth:`outputs` and advance."""
+        ...
+
+    def get_state(self) -> dict[str, Any]:
+        """A copy of the whole internal state (numpy arrays and scalars)."""
+        ...
+
+    def set_state(self, state: Mapping[str, Any]) -> None:
+        """Restore a state from :meth:`get_state`."""
+
+
+@runtime_checkable
+class Timed(Protocol):
+    """A component that keeps time: ``reset(t0)``, ``step(inputs, dt=h, t_end=t + h)``."""
+
+    timed: bool
+
+    @property
+    def input_ports(self) -> tuple[Port, ...]: ...
+
+    @property
+    def output_ports(self) -> tuple[Port, ...]: ...
+
+    def reset(self, t0: float = 0.0) -> None:
+        """Back to the initial state at time ``t0``."""
+
+    def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+        """Outputs at the current time for these inputs; no state change."""
+        ...
+
+    def step(self, inputs: Mapping[str, Any], *, dt: float, t_end: float | None = None) -> dict[str, np.ndarray]:
+        """Return :meth:`outputs` at the current time, then advance by ``dt`` (to ``t_end``)."""
+        ...
+
+    def get_state(self) -> dict[str, Any]: ...
+
+    def set_state(self, state: Mapping[str, Any]) -> None: ...
+
+
+def input_key(inputs: Mapping[str, Any], names: tuple[str, ...] | None = None) -> tuple[Any, ...] | None:
+    """An exact, hashable fingerprint of one sample's inputs: per input its
+    name, shape and the bytes of its values as float64 (``names``: only these
+    inputs, in this order; default every item of ``inputs``).
+
+    Two inputs with equal keys validate alike and evaluate to the same numbers,
+    so a component may reuse an evaluation made for an equal key. ``None`` when
+    a value is missing or not numeric (the caller then evaluates, and raises its
+    usual error).
+
+    >>> input_key({"y": [1.0]}) == input_key({"y": np.array([1.0])})
+    True
+    >>> input_key({"y": [1.0]}) == input_key({"y": [[1.0]]})
+    False
+    """
+    try:
+        items = inputs.items() if names is None else [(n, inputs[n]) for n in names]
+        key = []
+        for name, value in items:
+            a = value if type(value) is np.ndarray and value.dtype == np.float64 else np.asarray(value, dtype=float)
+            key.append((name, a.shape, a.tobytes()))
+        return tuple(key)
+    except (KeyError, TypeError, ValueError, OverflowError):
+        return None
+
+
+class Component(ABC):
+    """The base of every sampled streaming component (see the module documentation).
+
+    A subclass passes its ports to ``__init__``, then writes ``_reset``,
+    ``_read``, ``_evaluate``, ``_commit``, ``get_state`` and ``_set_state``.
+    ``__init__`` calls :meth:`reset` last, so a subclass sets what ``_reset``
+    needs before calling it.
+    """
+
+    timed: ClassVar[bool] = False
+
+    def __init__(self, inputs: tuple[Port, ...], outputs: tuple[Port, ...]) -> None:
+        self._in = tuple(inputs)
+        self._out = tuple(outputs)
+        self._in_names = tuple(p.name for p in self._in)
+        self._memo: tuple[Any, dict[str, np.ndarray], Any] | None = None
+        self.reset()
+
+    # -- ports ------------------------------------------------------------------------
+    @property
+    def input_ports(self) -> tuple[Port, ...]:
+        return self._in
+
+    @property
+    def output_ports(self) -> tuple[Port, ...]:
+        return self._out
+
+    # -- what a subclass writes ----------------------------------------------------------
+    @abstractmethod
+    def _reset(self) -> None:
+        """Set the initial state."""
+
+    @abstractmethod
+    def _read(self, inputs: Mapping[str, Any]) -> Any:
+        """One sample's inputs, checked (raise a typed error, change nothing)."""
+
+    @abstractmethod
+    def _evaluate(self, sample: Any) -> tuple[dict[str, np.ndarray], Any]:
+        """``(outputs, pending)`` for a checked sample; no state change."""
+
+    @abstractmethod
+    def _commit(self, pending: Any) -> None:
+        """Advance to the next sample with what :meth:`_evaluate` prepared."""
+
+    @abstractmethod
+    def get_state(self) -> dict[str, Any]:
+        """A copy of the whole internal state."""
+
+    @abstractmethod
+    def _set_state(self, state: Mapping[str, Any]) -> None:
+        """Restore a state from :meth:`get_state` (checked)."""
+
+    # -- the protocol --------------------------------------------------------------------
+    def reset(self) -> None:
+        """Back to the initial state."""
+        self._memo = None
+        self._reset()
+
+    def set_state(self, state: Mapping[str, Any]) -> None:
+        """Restore a state from :meth:`get_state`."""
+        self._set_state(state)
+        self._memo = None
+
+    def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+        """The outputs at the current sample for these inputs; no state change
+        (the evaluation is kept for a following :meth:`step` with the same inputs)."""
+        key = input_key(inputs, self._in_names)
+        memo = self._memo
+        if key is None or memo is None or memo[0] != key:
+            out, pending = self._evaluate(self._read(inputs))
+            self._memo = None if key is None else (key, out, pending)
+        else:
+            out = memo[1]
+        return {name: value.copy() for name, value in out.items()}
+
+    def _take(self, inputs: Mapping[str, Any]) -> tuple[dict[str, np.ndarray], Any]:
+        memo = self._memo
+        if memo is not None:
+            self._memo = None
+            if memo[0] == input_key(inputs, self._in_names):
+                return memo[1], memo[2]
+        return self._evaluate(self._read(inputs))
+
+    def step(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+        """The outputs at the current sample; then advance to the next one."""
+        out, pending = self._take(inputs)
+        self._commit(pending)
+        return out
+
+
+class TimedComponent(Component):
+    """The base of every streaming component that keeps time: ``reset(t0)``,
+    ``step(inputs, dt=h, t_end=t + h)`` (``t_end``: the master's communication
+    point, free of the round-off of summed steps). ``_commit`` receives
+    ``(pending, t_end)``."""
+
+    timed: ClassVar[bool] = True
+
+    def __init__(self, inputs: tuple[Port, ...], outputs: tuple[Port, ...], t0: float = 0.0) -> None:
+        self.t0 = float(t0)
+        super().__init__(inputs, outputs)
+
+    def reset(self, t0: float | None = None) -> None:  # type: ignore[override]
+        """Back to the initial state at time ``t0`` (default: the last start time)."""
+        if t0 is not None:
+            self.t0 = float(t0)
+        self._memo = None
+        self._reset()
+
+    @abstractmethod
+    def _commit(self, pending: Any, t_end: float = 0.0) -> None:  # type: ignore[override]
+        """Advance to ``t_end`` with what :meth:`_evaluate` prepared."""
+
+    @property
+    @abstractmethod
+    def time(self) -> float:
+        """The current time."""
+
+    def step(  # type: ignore[override]
+        self, inputs: Mapping[str, Any], *, dt: float, t_end: float | None = None
+    ) -> dict[str, np.ndarray]:
+        """The outputs at the current time; then advance by ``dt`` (to ``t_end`` when given)."""
+        dt = float(dt)
+        if not dt > 0 or not np.isfinite(dt):
+            raise DimensionError(f"the step size must be positive and finite; found {dt!r}")
+        out, pending = self._take(inputs)
+        self._commit(pending, self.time + dt if t_end is None else float(t_end))
+        return out
+
+
+def run_streaming(estimator: Sampled, inputs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Run a sampled component over whole input sequences (row ``k`` = sample ``k``)
+    and stack its outputs, each of shape ``(T, *port.shape)``."""
+    lengths = {name: np.shape(v)[0] for name, v in inputs.items()}
+    if len(set(lengths.values())) != 1:
+        raise DimensionError(f"input sequences have different lengths: {lengths}")
+    T = next(iter(lengths.values()))
+    out = {p.name: np.empty((T, *p.shape)) for p in estimator.output_ports}
+    for k in range(T):
+        res = estimator.step({name: np.asarray(v[k]) for name, v in inputs.items()})
+        for name, arr in out.items():
+            arr[k] = res[name]
+    return out
