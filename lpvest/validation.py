@@ -63,11 +63,22 @@ def _check_shape(arr: np.ndarray, name: str, expected: Shape | None) -> None:
         )
 
 
+#: Arrays up to this size are checked element by element in Python floats
+#: (faster than numpy's ufunc machinery for the few numbers of one sample).
+_SMALL = 8
+
+
+def _all_finite(arr: np.ndarray) -> bool:
+    if arr.size <= _SMALL and arr.dtype.kind == "f":
+        return all(map(math.isfinite, arr.ravel().tolist()))
+    return bool(np.isfinite(arr).all())
+
+
 def check_finite(arr: np.ndarray, name: str) -> np.ndarray:
     """Raise :class:`NonFiniteError` naming ``name`` (and the first bad index) if
     ``arr`` holds NaN or inf."""
     arr = np.asarray(arr)
-    if arr.dtype.kind in "fc" and not np.all(np.isfinite(arr)):
+    if arr.dtype.kind in "fc" and not _all_finite(arr):
         bad = np.argwhere(~np.isfinite(arr))[0]
         where = "" if arr.ndim == 0 else f" at index {tuple(int(i) for i in bad)}"
         value = arr[tuple(bad)] if arr.ndim else arr
@@ -107,7 +118,10 @@ def as_matrix(value: object, name: str, shape: Shape | None = None) -> np.ndarra
 
 
 def as_vector(value: object, name: str, length: int | None = None) -> np.ndarray:
-    """Return ``value`` as a finite 1-D float array (a scalar becomes length 1)."""
+    """Return ``value`` as a finite 1-D float array (a scalar becomes length 1); always a copy."""
+    if type(value) is np.ndarray and value.dtype == np.float64 and value.ndim == 1 and (
+            length is None or value.shape[0] == length):
+        return check_finite(value.copy(), name)  # the common case of one sample, without np.array's parsing
     arr = _as_float_array(value, name)
     if arr.ndim == 0:
         arr = arr.reshape(1)
@@ -201,6 +215,10 @@ def check_box(
 ) -> None:
     """Raise :class:`SchedulingRangeError` if a component of ``p`` lies outside
     ``[lower, upper]`` (with a tolerance relative to the box size)."""
+    if p.size <= _SMALL:  # one sample: Python floats (NaN compares False: it falls to the full check)
+        if all(lo - rtol * max(1.0, abs(lo), abs(hi)) <= v <= hi + rtol * max(1.0, abs(lo), abs(hi))
+               for v, lo, hi in zip(p.tolist(), lower.tolist(), upper.tolist(), strict=True)):
+            return
     tol = rtol * np.maximum(1.0, np.maximum(np.abs(lower), np.abs(upper)))
     bad = (p < lower - tol) | (p > upper + tol)
     if np.any(bad):
@@ -218,6 +236,10 @@ def check_simplex(alpha: np.ndarray, name: str = "alpha", *, atol: float = SIMPL
     """Raise :class:`SchedulingRangeError` unless ``alpha`` lies on the unit
     simplex (``alpha >= 0``, ``sum(alpha) == 1``, within ``atol``)."""
     check_finite(alpha, name)
+    if alpha.size <= _SMALL:
+        values = alpha.tolist()
+        if min(values) >= -atol and abs(math.fsum(values) - 1.0) <= atol:
+            return
     if np.any(alpha < -atol):
         i = int(np.argmin(alpha))
         raise SchedulingRangeError(

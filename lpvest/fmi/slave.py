@@ -383,15 +383,15 @@ class LpvestSlave(Fmi2Slave):
         :attr:`_nonfinite`): reading it is an error, and so is consuming the sample."""
         outputs = {}
         flat: list[float] = []
-        bad = []
         for p in self._output_ports:
             a = np.array(values[p.name], dtype=float).reshape(p.shape)  # a copy
-            if check and not np.all(np.isfinite(a)):
-                names = element_names(p.name, tuple(p.shape))
-                bad += [names[i] for i in np.flatnonzero(~np.isfinite(a.ravel()))]
             outputs[p.name] = a
             flat += a.ravel().tolist()
         self._outputs, self._output_values = outputs, flat
+        bad = []
+        if check and not all(map(math.isfinite, flat)):  # Python floats: cheaper than numpy for a few values
+            names = [n for p in self._output_ports for n in element_names(p.name, tuple(p.shape))]
+            bad = [n for n, v in zip(names, flat, strict=True) if not math.isfinite(v)]
         self._nonfinite = (f"output {', '.join(bad[:5])}{' ...' if len(bad) > 5 else ''} is not finite "
                            f"(NaN or inf) at t = {_num(self._time)}") if bad else None
 
@@ -404,6 +404,8 @@ class LpvestSlave(Fmi2Slave):
             return fn()
 
     def _refresh(self) -> None:
+        """Compute the outputs when inputs, parameters or the state changed
+        (call it under :meth:`_compute`)."""
         if not self._dirty or self._invalid:
             return
         component = self._preview_component()
@@ -411,14 +413,14 @@ class LpvestSlave(Fmi2Slave):
         if held is None:
             # the same copy of the inputs is handed to step() when nothing is set in between
             inputs = self._input_dict()
-            values: Mapping[str, Any] = self._compute(lambda: component.outputs(inputs))
+            values: Mapping[str, Any] = component.outputs(inputs)
             self._step_inputs = inputs
         elif len(held) == len(self._output_ports):
             values = held  # every output holds its value until inputs are set: nothing to compute
         else:
             # outputs with no feedthrough at the new time; the others hold
             stale = self._input_dict()
-            values = {**self._compute(lambda: component.outputs(stale)), **held}
+            values = {**component.outputs(stale), **held}
         self._dirty = False
         self._store_outputs(values)
 
@@ -515,34 +517,37 @@ class LpvestSlave(Fmi2Slave):
 
     def do_step(self, current_time: float, step_size: float) -> bool:
         try:
-            t, h = float(current_time), float(step_size)
-            problem = self._step_problem(t, h)
-            if problem is None:
-                if self._held is not None:
-                    # no input was set since the last step: this sample has the same inputs
-                    self._held = None
-                    self._dirty = True
-                # the outputs of this sample (and the inputs step() reuses): refused when not finite
-                self._refresh()
-                problem = self._nonfinite
-            if problem is not None:
-                self._log(Fmi2Status.error, f"fmi2DoStep refused at t = {_num(t)} (h = {_num(h)}): {problem}")
-                return False
-            component = self._component
-            inputs = self._step_inputs if self._step_inputs is not None else self._input_dict()
-            current = self._outputs
-            self._step_inputs = None
-            if self._timed:
-                self._compute(lambda: component.step(inputs, dt=h, t_end=t + h))
-            else:
-                self._compute(lambda: component.step(inputs))
-            self._time = t + h
-            self._held = {name: current[name] for name in self._feedthrough}
-            self._dirty = True
-            return True
+            return bool(self._compute(lambda: self._do_step(float(current_time), float(step_size))))
         except Exception as exc:  # noqa: BLE001
             self._fail(f"fmi2DoStep at t = {_num(current_time)}", exc)
             return False
+
+    def _do_step(self, t: float, h: float) -> bool:
+        problem = self._step_problem(t, h)
+        if problem is None:
+            if self._held is not None:
+                # no input was set since the last step: this sample has the same inputs
+                self._held = None
+                self._dirty = True
+            # the outputs of this sample (and the inputs step() reuses): refused when not finite
+            self._refresh()
+            problem = self._nonfinite
+        if problem is not None:
+            self._log(Fmi2Status.error, f"fmi2DoStep refused at t = {_num(t)} (h = {_num(h)}): {problem}")
+            return False
+        component = self._component
+        inputs = self._step_inputs if self._step_inputs is not None else self._input_dict()
+        current = self._outputs
+        self._step_inputs = None
+        if self._timed:
+            component.step(inputs, dt=h, t_end=t + h)
+        else:
+            component.step(inputs)
+        self._time = t + h
+        # feedthrough outputs hold the value of the sample just consumed; with none, nothing holds
+        self._held = {name: current[name] for name in self._feedthrough} if self._feedthrough else None
+        self._dirty = True
+        return True
 
     def _get(self, vrs: list[int], fmi_type: str, nan: Any) -> list[Any]:
         elements = [self._elements.get(vr) for vr in vrs]
@@ -551,7 +556,7 @@ class LpvestSlave(Fmi2Slave):
                 self._log(Fmi2Status.error, f"fmi2Get{fmi_type}: value reference {vr} is not a {fmi_type} variable")
                 return [nan] * len(vrs)
         if any(e.kind == "output" for e in elements):
-            self._guard(f"fmi2Get{fmi_type} (computing the outputs)", self._refresh, None)
+            self._guard(f"fmi2Get{fmi_type} (computing the outputs)", lambda: self._compute(self._refresh), None)
             if self._nonfinite is not None:
                 self._log(Fmi2Status.error, f"fmi2Get{fmi_type}: {self._nonfinite}")
         return [self._get_element(e) for e in elements]
@@ -569,7 +574,7 @@ class LpvestSlave(Fmi2Slave):
             positions = self._output_reads[key] = [e.position for e in elements]  # type: ignore[union-attr]
         if self._dirty:
             try:
-                self._refresh()
+                self._compute(self._refresh)
             except Exception as exc:  # noqa: BLE001 - nothing may reach pythonfmu (fmi2Fatal)
                 self._fail("fmi2GetReal (computing the outputs)", exc)
         values = self._output_values
