@@ -80,6 +80,10 @@ class SampledObserver(TimedComponent):
             )
         return super().step(inputs, dt=dt, t_end=expected + dt if t_end is None else t_end)
 
+    def advance(self, *, dt: float = 0.0, t_end: float | None = None) -> dict[str, np.ndarray] | None:  # type: ignore[override]
+        """The FMU's fast path: not taken (the sample-time checks live in :meth:`step`)."""
+        return None
+
     def get_state(self) -> dict[str, Any]:
         return self._obs.get_state()
 
