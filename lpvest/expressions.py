@@ -259,6 +259,16 @@ def _has_complex(result: Any) -> bool:
 
 
 def _evaluate(code: Any, values: Mapping[str, Any]) -> Any:
+    if all(type(v) is float for v in values.values()):
+        # one sample (the per-step path): plain Python floats need no numpy error state
+        # unless something goes wrong, and then the general path below gives the IEEE result
+        try:
+            result = eval(code, _GLOBALS, values)  # noqa: S307 (whitelisted AST)
+        except (ZeroDivisionError, OverflowError, ValueError):
+            result = None
+        if result is not None and not _has_complex(result) and all(
+                math.isfinite(r) for r in (result if isinstance(result, tuple) else (result,))):
+            return result
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         try:
             result = eval(code, _GLOBALS, values)  # noqa: S307 (whitelisted AST)

@@ -275,6 +275,15 @@ class Component(ABC):
         self._commit(pending)
         return out
 
+    def prepare(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+        """Evaluate the current sample for a following :meth:`advance`, for a
+        caller that guarantees these inputs stay unchanged (the FMU adapter):
+        like :meth:`outputs`, without fingerprinting the inputs and without
+        copying the outputs (the component's own arrays: do not modify them)."""
+        out, pending = self._evaluate(self._read(inputs))
+        self._memo = (None, out, pending)  # only advance() takes it: step() compares keys, and None != a key
+        return out
+
     def _kept(self) -> tuple[dict[str, np.ndarray], Any] | None:
         memo = self._memo
         self._memo = None
