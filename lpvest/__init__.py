@@ -10,8 +10,7 @@ carry this package run where only numpy is installed.
 2
 """
 
-__version__ = "0.1.0"
-
+from ._version import __version__ as __version__
 from .catalog import example_systems as example_systems
 from .errors import (
     ArgumentError as ArgumentError,

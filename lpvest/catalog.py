@@ -31,7 +31,7 @@ class ExampleEntry:
 
 def example_systems() -> list[ExampleEntry]:
     """Every example system, sorted by name."""
-    from .modelfile import read_toml
+    from .tomlfiles import read_toml
 
     out = []
     for path in sorted(models_dir().glob("*.toml")):

@@ -52,8 +52,8 @@ import numpy as np
 
 from .cosim import Component, Connection, CoSimulation, CoSimulationError
 from .errors import ModelFileError, abbreviate, shorten
-from .modelfile import read_toml
 from .plotting import save_figure
+from .tomlfiles import read_toml
 
 __all__ = ["CoSimFile", "CoSimResult", "load_cosim", "DEFAULT_FMU_DIR"]
 

@@ -38,7 +38,6 @@ from __future__ import annotations
 import datetime
 import math
 import re
-import tomllib
 from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -66,6 +65,7 @@ from .systems.polytopic import (
     PolytopicLPV,
     SimplexMap,
 )
+from .tomlfiles import parse_toml, read_toml
 
 __all__ = [
     "SystemFile",
@@ -563,43 +563,6 @@ def load_system(
 
     path = find_system(source)
     return _build(read_toml(path), str(path), parameters, path)
-
-
-def parse_toml(text: str, origin: str) -> dict[str, Any]:
-    """The parsed TOML ``text``; malformed text is a one-line
-    :class:`ModelFileError` naming ``origin``."""
-    try:
-        return tomllib.loads(text)
-    except RecursionError:
-        raise ModelFileError(f"{origin}: not valid TOML: arrays or tables nested too deeply") from None
-    except ValueError as exc:  # TOMLDecodeError, or an integer of more than 4300 digits
-        raise ModelFileError(f"{origin}: not valid TOML: {_one_line(str(exc), 160)}") from None
-
-
-def read_toml(path: str | Path) -> dict[str, Any]:
-    """The parsed TOML file ``path``; an unreadable or malformed file is a
-    one-line :class:`ModelFileError` naming it (shared by every file lpvest reads)."""
-    path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise ModelFileError(f"{path}: cannot be read: {exc.strerror or type(exc).__name__}") from None
-    except ValueError as exc:  # e.g. a NUL character in the path
-        raise ModelFileError(f"{abbreviate(str(path))}: cannot be read: {_one_line(str(exc), 80)}") from None
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise ModelFileError(
-            f"{path}: not a TOML text file: byte {exc.start + 1} ({raw[exc.start:exc.start + 1]!r}) is not UTF-8"
-            + (" (the file is UTF-16; save it as UTF-8)" if raw[:2] in (b"\xff\xfe", b"\xfe\xff") else "")
-        ) from None
-    return parse_toml(text, str(path))
-
-
-def _one_line(text: str, limit: int) -> str:
-    """``text`` on one line, at most about ``limit`` characters."""
-    flat = " ".join(text.split())
-    return flat if len(flat) <= limit else flat[: limit - 3] + "..."
 
 
 #: Names a parameter may not have: the time variable of LTV formulas and the

@@ -25,6 +25,7 @@ from .errors import (
 )
 
 __all__ = [
+    "as_float_array",
     "as_matrix",
     "as_vector",
     "as_signal",
@@ -86,7 +87,9 @@ def check_finite(arr: np.ndarray, name: str) -> np.ndarray:
     return arr
 
 
-def _as_float_array(value: object, name: str) -> np.ndarray:
+def as_float_array(value: object, name: str) -> np.ndarray:
+    """``value`` as a float array (a copy), or a :class:`DimensionError` naming ``name``
+    when it is not numeric."""
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError, OverflowError) as exc:  # (OverflowError: an int beyond float)
@@ -107,7 +110,7 @@ def as_matrix(value: object, name: str, shape: Shape | None = None) -> np.ndarra
     shape : sequence of int or None, optional
         Expected shape; ``None`` entries match any size.
     """
-    arr = _as_float_array(value, name)
+    arr = as_float_array(value, name)
     if arr.ndim == 0 and shape is not None and tuple(shape) == (1, 1):
         arr = arr.reshape(1, 1)
     if arr.ndim != 2:
@@ -122,7 +125,7 @@ def as_vector(value: object, name: str, length: int | None = None) -> np.ndarray
     if type(value) is np.ndarray and value.dtype == np.float64 and value.ndim == 1 and (
             length is None or value.shape[0] == length):
         return check_finite(value.copy(), name)  # the common case of one sample, without np.array's parsing
-    arr = _as_float_array(value, name)
+    arr = as_float_array(value, name)
     if arr.ndim == 0:
         arr = arr.reshape(1)
     _check_shape(arr, name, (length,))
@@ -141,7 +144,7 @@ def as_signal(
         if width == 0 and length is not None:
             return np.zeros((length, 0))
         raise DimensionError(f"{name} is missing; expected shape {_shape_text((length, width))}")
-    arr = _as_float_array(value, name)
+    arr = as_float_array(value, name)
     if arr.ndim == 1 and width == 1:
         arr = arr[:, None]
     _check_shape(arr, name, (length, width))

@@ -145,9 +145,7 @@ REFERENCES: tuple[Reference, ...] = (
 
 def reference_dir() -> Path:
     """``tests/data/reference`` of the source checkout lpvest runs from."""
-    import lpvest
-
-    path = Path(lpvest.__file__).resolve().parent.parent / "tests" / "data" / "reference"
+    path = Path(__file__).resolve().parent.parent.parent / "tests" / "data" / "reference"
     if not path.parent.is_dir():
         raise LpvestError(f"no source checkout around lpvest ({path.parent} does not exist): give --dir")
     return path
@@ -184,7 +182,7 @@ def _csv_row(fields: Sequence[str]) -> str:
 def write_reference(ref: Reference, data: np.ndarray, designs: dict[str, str], directory: str | Path) -> Path:
     """Write ``directory/<name>.csv``: comment lines (what, tolerance, reason,
     carried designs, how to regenerate), the column names, then the rows (12 significant digits)."""
-    from .. import __version__
+    from .._version import __version__
 
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)

@@ -50,7 +50,7 @@ def render_report(
     reduced: bool = False,
 ) -> str:
     """The Markdown text of the report (see :func:`write_report`)."""
-    from .. import __version__
+    from .._version import __version__
 
     ok = all(r.ok for r in runs)
     lines = [

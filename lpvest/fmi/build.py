@@ -59,6 +59,7 @@ from typing import Any
 from xml.dom.minidom import parseString
 from xml.etree.ElementTree import Element, SubElement, tostring
 
+from .._version import __version__
 from ..errors import LpvestError
 from .bundle import Bundle, SourceRoot, make_bundle
 from .naming import fmu_name
@@ -89,6 +90,8 @@ DEFAULT_OUT = "fmu-build"
 MANIFEST_FILE = "manifest.json"
 
 _INNER_LIBRARY = "lpvest-pythonfmu-export.so"
+#: The lpvest package an FMU carries modules of (this one).
+_PACKAGE_DIR = Path(__file__).resolve().parent.parent
 _MANIFEST_FORMAT = "lpvest-fmu-manifest-1"
 #: Time stamp of every zip entry (the zip format's earliest date): builds do not depend on the clock.
 _ZIP_TIME = (1980, 1, 1, 0, 0, 0)
@@ -311,10 +314,8 @@ def _compiler_version() -> str:
 def _roots(plan: FmuPlan) -> list[SourceRoot]:
     import pythonfmu
 
-    import lpvest
-
     roots = [
-        SourceRoot("lpvest", Path(lpvest.__file__).resolve().parent, "", skip=("_models",)),
+        SourceRoot("lpvest", _PACKAGE_DIR, "", skip=("_models",)),
         SourceRoot("lpvest._fmus", scripts_dir(), "_fmus"),
         SourceRoot("pythonfmu", Path(pythonfmu.__file__).resolve().parent, "_pythonfmu"),
     ]
@@ -339,15 +340,13 @@ def _slave_class_name(script: Path) -> str:
 
 
 def _bundle(plan: FmuPlan) -> Bundle:
-    import lpvest
-
     script = scripts_dir() / plan.script
     start = [f"lpvest._fmus.{Path(plan.script).stem}"]
     if plan.estimator is not None:
         start.append(plan.estimator.factory.partition(":")[0])
     return make_bundle(identifier=plan.identifier, script=Path(plan.script).stem,
                        slave_class=_slave_class_name(script), start=start, roots=_roots(plan),
-                       version=lpvest.__version__, declared=plan.requirements)
+                       version=__version__, declared=plan.requirements)
 
 
 def _design_text(plan: FmuPlan, progress: Callable[[str], None] | None) -> tuple[str | bytes, str]:
@@ -376,9 +375,7 @@ def _design_text(plan: FmuPlan, progress: Callable[[str], None] | None) -> tuple
 
 def manifest_inputs_version() -> str:
     """The version of the lpvest an FMU carries (this one)."""
-    import lpvest
-
-    return lpvest.__version__
+    return __version__
 
 
 def _sha(data: bytes) -> str:
@@ -391,8 +388,6 @@ def manifest_inputs(plan: FmuPlan, bundle: Bundle | None = None, design: str | b
     carried code (the bundle digest), the design when one is carried, and the
     versions of pythonfmu and the C compiler. No path, no time."""
     import pythonfmu
-
-    import lpvest
 
     bundle = bundle or _bundle(plan)
     est = None
@@ -410,7 +405,7 @@ def manifest_inputs(plan: FmuPlan, bundle: Bundle | None = None, design: str | b
         "step_size": plan.step_size,
         "stop_time": plan.stop_time,
         "estimator": est,
-        "lpvest_version": lpvest.__version__,
+        "lpvest_version": __version__,
         "model_file_sha256": _sha(Path(plan.system_path).read_bytes()),
         "design_sha256": None if design is None else _sha(design.encode() if isinstance(design, str) else design),
         "design_file_sha256": None if plan.design is None else _sha(plan.design.read_bytes()),

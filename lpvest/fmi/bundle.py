@@ -16,8 +16,8 @@ carries:
   estimator modules as ``_ext.<name>``. Absolute imports of ``lpvest``,
   ``pythonfmu`` and the extra modules are rewritten to the private names (on
   the same lines, so tracebacks point at the right line); package
-  ``__init__`` files are replaced by empty ones (only ``__version__`` at the
-  top), so importing one module does not import its siblings. ``<digest>`` is
+  ``__init__`` files are replaced by empty ones, so importing one module does
+  not import its siblings (the version is in ``_version``). ``<digest>`` is
   a SHA-256 of the carried sources: two FMUs share the name only when they
   carry the same code, and then sharing their modules is harmless;
 - an **entry module** ``lpvest_<digest>_entry.py`` (named in
@@ -256,8 +256,7 @@ def _scan(start: Sequence[str], roots: Sequence[SourceRoot]) -> _Scan:
                     sub = _locate(f"{target}.{n}", roots)
                     if sub is not None:
                         todo.append(sub.name)
-                    elif found.is_package and not (n == "__version__" and _root_of(target, roots).target == ""
-                                                    and target == _root_of(target, roots).name):
+                    elif found.is_package:
                         raise BundleError(
                             f"{module.path}:{node.lineno}: 'from {target} import {n}' takes {n} from a package "
                             f"__init__, which an FMU carries empty; import it from the module that defines it"
@@ -415,7 +414,7 @@ def _digest(modules: Mapping[str, _Module], roots: Sequence[SourceRoot]) -> str:
 def _init_text(module: _Module, root: SourceRoot, version: str) -> str:
     if module.name == root.name and root.target == "":
         return (f'"""lpvest {version}, as carried by an lpvest FMU: only the modules its component imports;\n'
-                f'package __init__ files are empty (see lpvest.fmi.bundle)."""\n\n__version__ = {version!r}\n')
+                f'package __init__ files are empty (see lpvest.fmi.bundle)."""\n')
     return f'"""{module.name}, as carried by an lpvest FMU (empty: see lpvest.fmi.bundle)."""\n'
 
 
@@ -445,7 +444,7 @@ def make_bundle(
     roots : sequence of SourceRoot
         Where carried names come from (``lpvest``, ``pythonfmu``, extra modules).
     version : str
-        The lpvest version (``__version__`` of the private package).
+        The lpvest version (named in the private package's docstring).
     declared : iterable of str
         Third-party packages the role needs beyond its module-level imports.
     """

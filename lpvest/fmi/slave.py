@@ -59,7 +59,7 @@ from pythonfmu.enums import Fmi2Causality, Fmi2Status, Fmi2Variability
 from pythonfmu.fmi2slave import Fmi2Slave
 from pythonfmu.variables import Boolean, Integer, Real, String
 
-from .. import __version__
+from .._version import __version__
 from ..errors import ArgumentError
 from ..protocol import Component
 from .naming import element_names

@@ -23,7 +23,7 @@ from .._linalg import MatrixStack
 from ..errors import DimensionError, ExpressionError, SchedulingRangeError
 from ..expressions import Expression, FormulaVector
 from ..scheduling import BasisFunction, Monomial, SchedulingSpace, box_vertices
-from ..validation import _as_float_array, as_matrix, as_signal, as_vector, check_simplex
+from ..validation import as_float_array, as_matrix, as_signal, as_vector, check_simplex
 from .affine import AffineDependence
 
 __all__ = [
@@ -303,7 +303,7 @@ class PolytopicLPV:
             )
         stacks = {}
         for n in POLYTOPIC_MATRICES:
-            arr = np.array(_as_float_array(vmap[n], f"{n} vertices"))
+            arr = np.array(as_float_array(vmap[n], f"{n} vertices"))
             if arr.ndim != 3:
                 raise DimensionError(f"{n} vertices have shape {arr.shape}; expected (N, rows, cols)")
             stacks[n] = arr

@@ -1,0 +1,5 @@
+"""The version of lpvest (one place; ``lpvest.__version__`` re-exports it)."""
+
+__all__ = ["__version__"]
+
+__version__ = "0.1.0"

@@ -1,0 +1,129 @@
+"""The package's shape, checked on its sources: imports run downwards through
+the layers, there is no import cycle, and no private name crosses a module
+boundary. (Static: every ``import`` statement counts, inside functions too.)"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent / "lpvest"
+
+#: Layers from the bottom; a module may import only from its own layer or below.
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("lpvest._version", "lpvest.errors"),
+    ("lpvest.protocol", "lpvest._linalg", "lpvest.validation", "lpvest.tomlfiles"),
+    ("lpvest.expressions", "lpvest.scheduling", "lpvest.signals"),
+    ("lpvest.systems",),
+    ("lpvest.catalog", "lpvest.modelfile"),
+    ("lpvest.estimators", "lpvest.analysis", "lpvest.design.result"),
+    ("lpvest.design",),
+    ("lpvest.plotting",),
+    ("lpvest.fmi",),
+    ("lpvest.cosim", "lpvest.cosimfile", "lpvest.ssp"),
+    ("lpvest.experiments", "lpvest.sweep"),
+    ("lpvest.cli", "lpvest"),
+)
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT.parent).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def _layer(name: str) -> int:
+    best, level = -1, -1
+    for i, prefixes in enumerate(LAYERS):
+        for prefix in prefixes:
+            if (name == prefix or name.startswith(prefix + ".")) and len(prefix) > best:
+                best, level = len(prefix), i
+    return level
+
+
+def _imports() -> dict[str, list[tuple[str, int, list[str]]]]:
+    """module -> [(imported lpvest module, line, names taken from it)]."""
+    modules = {_module_name(p): p for p in ROOT.rglob("*.py") if "_fmus" not in p.parts and "_models" not in p.parts}
+    out: dict[str, list[tuple[str, int, list[str]]]] = {}
+    for name, path in modules.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        found = []
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        typing_only = {id(n) for block in ast.walk(tree) if isinstance(block, ast.If)
+                       and "TYPE_CHECKING" in ast.unparse(block.test) for b in block.body for n in ast.walk(b)}
+        for node in ast.walk(tree):
+            if id(node) in typing_only:  # annotations only: never imported at run time
+                continue
+            if isinstance(node, ast.Import):
+                found += [(a.name, node.lineno, []) for a in node.names if a.name.split(".")[0] == "lpvest"]
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = package.split(".")
+                    base = base[: len(base) - (node.level - 1)]
+                    target = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    target = node.module or ""
+                if target.split(".")[0] != "lpvest":
+                    continue
+                names = [a.name for a in node.names]
+                submodules = [f"{target}.{n}" for n in names if f"{target}.{n}" in modules]
+                found += [(s, node.lineno, []) for s in submodules]
+                found.append((target, node.lineno, [n for n in names if f"{target}.{n}" not in modules]))
+        out[name] = found
+    return out
+
+
+IMPORTS = _imports()
+
+
+def test_every_module_has_a_layer():
+    assert [m for m in IMPORTS if _layer(m) < 0] == []
+
+
+def test_imports_run_downwards():
+    upward = [f"{m} (layer {_layer(m)}) imports {t} (layer {_layer(t)}) at line {line}"
+              for m, found in IMPORTS.items() if m != "lpvest" for t, line, _ in found
+              if _layer(t) > _layer(m)]
+    assert upward == []
+
+
+def test_no_import_cycle():
+    graph = {m: {t for t, _, _ in found if t in IMPORTS and t != m and not m.startswith(t + ".")}
+             for m, found in IMPORTS.items() if m != "lpvest"}
+    # a package's __init__ re-exports its modules: an edge to the package is to what it holds
+    state: dict[str, int] = {}
+    cycles: list[list[str]] = []
+
+    def visit(node: str, path: list[str]) -> None:
+        state[node] = 1
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 1:
+                cycles.append(path[path.index(nxt):] + [nxt] if nxt in path else [node, nxt])
+            elif nxt not in state:
+                visit(nxt, [*path, nxt])
+        state[node] = 2
+
+    for node in sorted(graph):
+        if node not in state:
+            visit(node, [node])
+    assert cycles == []
+
+
+def test_no_private_name_crosses_a_module_boundary():
+    crossing = [f"{m} takes {', '.join(n for n in names if n.startswith('_'))} from {t} (line {line})"
+                for m, found in IMPORTS.items() for t, line, names in found
+                if any(n.startswith("_") and not n.startswith("__") for n in names)]
+    assert crossing == []
+
+
+@pytest.mark.parametrize("module", sorted(m for m in IMPORTS if m != "lpvest"))
+def test_every_module_declares_its_public_names(module):
+    path = ROOT.parent.joinpath(*module.split("."))
+    path = path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    assert any(isinstance(n, ast.Assign | ast.AnnAssign) and any(
+        isinstance(t, ast.Name) and t.id == "__all__" for t in (n.targets if isinstance(n, ast.Assign) else [n.target]))
+        for n in tree.body), f"{module} has no __all__"
