@@ -8,7 +8,57 @@ from typing import NamedTuple
 import numpy as np
 
 from lpvest import AffineLPV, Monomial, SchedulingSpace
+from lpvest.estimators.kalman import KalmanModel
+from lpvest.estimators.kalman_scan import MIN_BLOCK, decorrelate_stack, scan_amplification, scan_error_bound
 from lpvest.scheduling import parse_basis
+
+EPS = float(np.finfo(float).eps)
+
+
+def amplification(model: AffineLPV, p: np.ndarray, u: np.ndarray | None, y: np.ndarray) -> float:
+    """The scan's error amplification ``max_t ||J_t||_F ||C_t||_F`` on these data."""
+    mats = KalmanModel(model).matrices_batch(p)
+    u = np.zeros((p.shape[0], 0)) if u is None or not model.nu else u
+    return scan_amplification(decorrelate_stack(*mats, u, y), mats.C)
+
+
+def scan_rtol(amp: float, block: int | None = None) -> float:
+    """How far the scan may be from the sequential recursion, relative to each
+    output's largest entry (both are the same exact filter, rounded
+    differently).
+
+    Default blocks (``>= MIN_BLOCK`` samples, or the whole run): the library's
+    documented bound ``30 eps (1 + amp)^2`` (kalman_scan, "Accuracy"; measured
+    worst constant 3.1 over T = 64 .. 1e5, amp up to 3e3, by
+    benchmarks/bench_scan_accuracy.py). Shorter blocks (1 = the plain scan):
+    the general combinations work on single-sample elements and the error
+    grows like ``eps amp^4`` (measured constant <= 8 for blocks 1 and 2, T =
+    64 and 1024, amp 10 to 1e3): ``100 eps (1 + amp)^4``, plus the default
+    bound.
+    """
+    bound = scan_error_bound(amp)
+    if block is not None and block < MIN_BLOCK:
+        bound += 100 * EPS * (1.0 + amp) ** 4
+    return bound
+
+
+def oracle_rtol(kappa: float, amp: float = 0.0, block: int | None = None) -> float:
+    """How far a filter output may be from the Gaussian-conditioning oracle,
+    relative to ``max(1, max |oracle value|)``.
+
+    The oracle solves with the joint output covariance ``S_yy`` (``T n_y``
+    square): its forward error is about ``eps cond(S_yy)`` (``kappa``) times
+    the size of the result. The sequential filter's own error is of the
+    order of eps for these short stable runs (measured: <= 1.6 eps
+    (kappa + 1) on the 14 cases of test_kalman's oracle test); the scan
+    adds its amplified error (:func:`scan_rtol`). First-order model
+    ``eps (kappa + (1 + amp)^2)`` with constant 50 (measured <= 1.6), plus
+    the short-block term of :func:`scan_rtol`.
+    """
+    tol = 50 * EPS * (kappa + (1.0 + amp) ** 2)
+    if block is not None and block < MIN_BLOCK:
+        tol += scan_rtol(amp, block)
+    return tol
 
 
 def random_system(
@@ -107,6 +157,13 @@ class Oracle(NamedTuple):
         _, S = self._cond(rows, mean, y, t)
         nx = self.Mx[0].shape[0]
         return np.linalg.solve(S[nx:, nx:], S[nx:, :nx]).T
+
+    def condition(self) -> float:
+        """2-norm condition number of the joint output covariance ``S_yy``
+        (every conditioning set of the oracle is a leading block of it, whose
+        condition number is no larger: eigenvalue interlacing)."""
+        Ny = np.vstack(self.Ny)
+        return float(np.linalg.cond(Ny @ self.Sz @ Ny.T))
 
     def log_density(self, y: np.ndarray) -> float:
         Ny = np.vstack(self.Ny)

@@ -54,6 +54,7 @@ Runtime code: imports only numpy.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -71,7 +72,13 @@ from ..validation import (
     check_positive_definite,
 )
 from .base import Port
-from .kalman_scan import decorrelate_stack, scan_amplification, scan_filter
+from .kalman_scan import (
+    ScanAccuracyWarning,
+    decorrelate_stack,
+    scan_amplification,
+    scan_error_bound,
+    scan_filter,
+)
 
 __all__ = [
     "KalmanModel",
@@ -87,6 +94,9 @@ __all__ = [
     "kalman_filter",
     "simulate_innovation_form",
     "LPVKalmanFilter",
+    "SCAN_MIN_SAMPLES",
+    "SCAN_MAX_AMPLIFICATION",
+    "ScanAccuracyWarning",
 ]
 
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -768,11 +778,16 @@ def _riccati_sweep(
 SCAN_MIN_SAMPLES = 64
 
 #: ``kalman_filter(method="auto")`` runs the sequential recursion when
-#: ``max_t ||J_t||_F ||C_t||_F`` (a bound of ``||J_t C_t||_F``) exceeds this,
-#: ``J_t = G S H^T (H R H^T)^-1``: the decorrelated form amplifies rounding
-#: errors by about its square (a nearly singular ``H R H^T`` next to a strong
-#: cross-covariance), see :mod:`lpvest.estimators.kalman_scan`.
-SCAN_MAX_AMPLIFICATION = 100.0
+#: ``amp = max_t ||J_t||_F ||C_t||_F`` (a bound of ``||J_t C_t||_F``) exceeds
+#: this, ``J_t = G S H^T (H R H^T)^-1``: the decorrelated form amplifies
+#: rounding errors by about ``amp^2`` (a nearly singular ``H R H^T`` next to
+#: a strong cross-covariance), see :mod:`lpvest.estimators.kalman_scan`,
+#: "Accuracy". Up to this gate the scan's documented accuracy
+#: (:func:`~lpvest.estimators.kalman_scan.scan_error_bound`) is
+#: ``30 eps 31^2 = 6.4e-12`` relative to each output's size (measured
+#: worst case at ``amp <= 30``, ``T`` = 64 to 1e5: 5e-13); beyond it,
+#: ``method="scan"`` runs but warns (:class:`ScanAccuracyWarning`).
+SCAN_MAX_AMPLIFICATION = 30.0
 
 _METHODS = ("auto", "scan", "sequential")
 
@@ -791,8 +806,12 @@ def kalman_filter(
     """Run the exact filter (4a)-(4e) over a whole trajectory.
 
     The matrices for every sample are evaluated at once. Two algorithms give
-    the same numbers (to rounding; the tests hold them to 1e-10 of each
-    other and of a Gaussian-conditioning oracle):
+    the same numbers to rounding: the scan's outputs are within
+    :func:`~lpvest.estimators.kalman_scan.scan_error_bound` of the
+    sequential recursion's (``30 eps (1 + amp)^2`` relative to each output's
+    largest entry; at most 6.4e-12 where ``"auto"`` takes the scan), and the
+    tests hold both to a Gaussian-conditioning oracle within
+    ``50 eps (cond + (1 + amp)^2)`` (``cond`` the oracle's):
 
     - ``"sequential"``: the covariance recursion (:func:`covariance_step`,
       the streaming filter's kernel) runs sample by sample; means, filtered
@@ -802,12 +821,15 @@ def kalman_filter(
       batched small-matrix operations
       (:mod:`lpvest.estimators.kalman_scan`). It needs ``H R H^T`` positive
       definite at every sample (raises :class:`~lpvest.errors.NumericalError`
-      naming the first ``t`` where it is not).
+      naming the first ``t`` where it is not). Where the error
+      amplification ``amp = max_t ||J_t||_F ||C_t||_F`` is above
+      :data:`SCAN_MAX_AMPLIFICATION` it still runs, but warns
+      (:class:`ScanAccuracyWarning`, with the error bound).
     - ``"auto"`` (default): the scan, except when it does not apply or does
       not pay: ``H R H^T`` singular at some sample, fewer than
-      :data:`SCAN_MIN_SAMPLES` samples, or an error amplification
-      ``max_t ||J_t||_F ||C_t||_F`` above :data:`SCAN_MAX_AMPLIFICATION` (module
-      notes of :mod:`~lpvest.estimators.kalman_scan`); then the sequential
+      :data:`SCAN_MIN_SAMPLES` samples, or ``amp`` above
+      :data:`SCAN_MAX_AMPLIFICATION` (module notes of
+      :mod:`~lpvest.estimators.kalman_scan`); then the sequential
       recursion. (An empty trajectory has nothing to scan: every method
       returns the initial prediction.)
 
@@ -839,6 +861,11 @@ def kalman_filter(
         message names ``t``.
     ValueError, TypeError
         ``method`` is not one of the three names.
+
+    Warns
+    -----
+    ScanAccuracyWarning
+        ``method="scan"`` where ``amp > SCAN_MAX_AMPLIFICATION``.
 
     Examples
     --------
@@ -911,7 +938,9 @@ def _kalman_filter_scan(
 ) -> KalmanResult | None:
     """The scan (:mod:`.kalman_scan`); ``None`` when ``strict`` is false and
     the scan does not apply (``H R H^T`` singular somewhere, or the error
-    amplification is above :data:`SCAN_MAX_AMPLIFICATION`)."""
+    amplification is above :data:`SCAN_MAX_AMPLIFICATION`). With ``strict``
+    (``method="scan"``) an amplification above the gate warns
+    (:class:`ScanAccuracyWarning`) and the scan runs."""
     T = y.shape[0]
     if T == 0:
         return None
@@ -923,8 +952,19 @@ def _kalman_filter_scan(
             f"method='scan' needs H(p) R H(p)^T positive definite (the decorrelation "
             f"J = G S H^T (H R H^T)^-1); it is not at t={dec}: use method='sequential' or 'auto'"
         )
-    if not strict and scan_amplification(dec, mats.C) > SCAN_MAX_AMPLIFICATION:
-        return None
+    amp = scan_amplification(dec, mats.C)
+    if amp > SCAN_MAX_AMPLIFICATION:
+        if not strict:
+            return None
+        warnings.warn(
+            f"method='scan': the decorrelation amplifies rounding errors by about amp^2 with "
+            f"amp = max_t ||J_t|| ||C_t|| = {amp:.3g} > {SCAN_MAX_AMPLIFICATION:g} (SCAN_MAX_AMPLIFICATION; "
+            f"H R H^T is small next to the cross-covariance G S H^T): the results may differ from the "
+            f"sequential recursion by up to ~{scan_error_bound(amp):.1g} relative; method='auto' or "
+            f"'sequential' runs the sequential recursion",
+            ScanAccuracyWarning,
+            stacklevel=3,
+        )
     s = scan_filter(dec, mats.C, mats.HRH, x, P)
     return KalmanResult(
         predicted_means=s.xp,

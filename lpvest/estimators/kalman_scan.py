@@ -132,12 +132,44 @@ from ..errors import NumericalError
 
 __all__ = [
     "Decorrelation",
+    "MIN_BLOCK",
+    "SCAN_ERROR_CONSTANT",
+    "ScanAccuracyWarning",
     "ScanMoments",
     "block_length",
     "decorrelate_stack",
     "scan_amplification",
+    "scan_error_bound",
     "scan_filter",
 ]
+
+_EPS = float(np.finfo(float).eps)
+
+#: The constant of the scan's documented accuracy (module notes, "Accuracy"):
+#: every output of :func:`scan_filter` (default blocks) is within
+#: ``SCAN_ERROR_CONSTANT * eps * (1 + amp)^2`` of the sequential recursion,
+#: relative to the largest entry of that output, ``amp`` from
+#: :func:`scan_amplification`. Measured worst case 3.1 (module notes); the
+#: margin covers other BLAS kernels, systems and schedules.
+SCAN_ERROR_CONSTANT = 30.0
+
+
+class ScanAccuracyWarning(UserWarning):
+    """``kalman_filter(method="scan")`` was asked for where the scan's error
+    amplification is above the gate of ``method="auto"``: the results may
+    differ from the sequential recursion by more than its documented
+    accuracy (the message gives the bound)."""
+
+
+def scan_error_bound(amp: float) -> float:
+    """The scan's documented accuracy at amplification ``amp``: the largest
+    difference to the sequential recursion, relative to each output's
+    largest entry, ``SCAN_ERROR_CONSTANT * eps * (1 + amp)^2``.
+
+    >>> f"{scan_error_bound(0.0):.1e}", f"{scan_error_bound(30.0):.1e}"
+    ('6.7e-15', '6.4e-12')
+    """
+    return SCAN_ERROR_CONSTANT * _EPS * (1.0 + float(amp)) ** 2
 
 
 def _mT(x: np.ndarray) -> np.ndarray:
@@ -335,6 +367,14 @@ class ScanMoments(NamedTuple):
     log_likelihood_terms: np.ndarray  #: (T,) ``log N(xi_t; 0, Omega_t)``
 
 
+#: The shortest block of :func:`block_length` (when ``T`` allows): blocks of
+#: one or two samples leave the general combinations of step 2 working on
+#: single-sample elements, whose ``A`` and ``J`` are of the size of ``Abar``
+#: and ``Abar^T C^T R^-1 C Abar``; the scan's error then grows like
+#: ``eps amp^4`` instead of ``eps amp^2`` (module notes, "Accuracy").
+MIN_BLOCK = 8
+
+
 def block_length(T: int, nx: int) -> int:
     """Samples per block of the blocked scan (module notes).
 
@@ -342,10 +382,12 @@ def block_length(T: int, nx: int) -> int:
     ``T / ell`` general combinations (a batched LAPACK solve each, whose cost
     grows like ``n_x^2`` to ``n_x^3`` for small ``n_x``) and ``2 log2(T / ell)``
     rounds of calls. Balancing the two gives ``ell ~ sqrt(T * w(n_x))``; the
-    constants were measured with ``benchmarks/bench_kalman.py``.
+    constants were measured with ``benchmarks/bench_kalman.py``. Never
+    shorter than :data:`MIN_BLOCK` (accuracy; it costs at most ~0.4 ms at
+    ``T = 64``, measured with the same benchmark).
     """
     w = 0.02 + 0.001 * nx * nx  # relative cost of a general combination
-    return max(1, min(T, round(math.sqrt(T * w))))
+    return max(1, min(T, max(MIN_BLOCK, round(math.sqrt(T * w)))))
 
 
 # ---------------------------------------------------------------------------
