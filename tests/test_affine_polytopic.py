@@ -20,6 +20,8 @@ from lpvest import (
 from lpvest.scheduling import parse_basis
 from lpvest.validation import check_simplex
 
+pytestmark = pytest.mark.blas_sensitive  # numerical agreement: ./dev test runs it under a second BLAS kernel
+
 SPACE2 = SchedulingSpace(["p1", "p2"], [-1.0, 0.5], [2.0, 3.0])
 
 
