@@ -41,6 +41,19 @@ def scan_rtol(amp: float, block: int | None = None) -> float:
     return bound
 
 
+def memory_steps(model: AffineLPV, p: np.ndarray, gains: np.ndarray, *, power: int = 2) -> float:
+    """How many steps' worth of rounding a covariance (``power=2``) or mean
+    (``power=1``) recursion along these gains accumulates: with
+    ``q = max_t ||A_t - K_t C_t||_2 < 1`` an error made at one step shrinks by
+    ``q^power`` per step afterwards, so all of them add up to at most
+    ``1 / (1 - q^power)`` of one step's; without such a contraction the
+    ``T`` steps (no growth assumed, the recursions are stable)."""
+    mats = KalmanModel(model).matrices_batch(p)
+    q = float(np.max(np.linalg.norm(mats.A - gains @ mats.C, ord=2, axis=(1, 2))))
+    T = p.shape[0]
+    return T if q >= 1.0 else min(T, 1.0 / (1.0 - q**power))
+
+
 def oracle_rtol(kappa: float, amp: float | None = None, block: int | None = None) -> float:
     """How far a filter output may be from the Gaussian-conditioning oracle,
     relative to ``max(1, max |oracle value|)``.
