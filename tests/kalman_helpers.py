@@ -54,6 +54,23 @@ def memory_steps(model: AffineLPV, p: np.ndarray, gains: np.ndarray, *, power: i
     return T if q >= 1.0 else min(T, 1.0 / (1.0 - q**power))
 
 
+def kalman_fmu_tolerance(model: AffineLPV, p: np.ndarray, u: np.ndarray | None, y: np.ndarray, res) -> float:
+    """How far a Kalman FMU's (streaming) filtered means may be from
+    ``kalman_filter`` on the same data (``res``): the streaming kernel and the
+    batch loop round differently (a few stages of n = 2 n_x + n_y products per
+    step, amplified by cond(Omega), accumulated over :func:`memory_steps` of
+    the closed loop), and the batch filter may run the scan
+    (:func:`scan_rtol` at these data's amp); relative to the size of the
+    means plus |K| |y| (what each step adds)."""
+    from tests.tolerances import roundoff
+
+    kap = float(np.max(np.linalg.cond(res.innovation_covariances)))
+    size = float(np.max(np.abs(res.filtered_means))) + float(np.max(np.abs(res.gains))) * float(np.max(np.abs(y)))
+    steps = memory_steps(model, p, res.gains, power=1)
+    n = 2 * model.nx + model.ny
+    return roundoff(size, 5 * steps, n=n, amp=kap) + scan_rtol(amplification(model, p, u, y)) * size
+
+
 def oracle_rtol(kappa: float, amp: float | None = None, block: int | None = None) -> float:
     """How far a filter output may be from the Gaussian-conditioning oracle,
     relative to ``max(1, max |oracle value|)``.
