@@ -17,7 +17,9 @@ rounding errors are amplified by about ``amp^2`` (the covariance goes through
   ``method="sequential"`` over every output field (means, covariances,
   outputs, innovations, gains, log-likelihood terms), each relative to that
   field's largest entry;
-- ``err / (eps (1 + amp)^2)``: the constant of the error model.
+- ``err / (eps (kappa + (1 + amp)^2))``: the constant of the error model,
+  ``kappa = max_t cond(Omega_t)`` (two backward-stable computations of the
+  gains differ by about ``eps kappa`` even without amplification).
 
 Cases: ``T`` = 64 ... 1e5 samples; amplifications from 0.3 to 3000, made by
 scaling the measurement noise ``v -> r v`` (``R -> r^2 R``, ``S -> r S``) of
@@ -97,9 +99,10 @@ def scaled(model: AffineLPV, r: float) -> AffineLPV:
     return dataclasses.replace(model, noise=NoiseCovariance(n.Q, r * r * n.R, r * n.S))
 
 
-def measure(model: AffineLPV, schedule: str, T: int, seed: int, max_amp: float) -> tuple[float, float]:
-    """``(amp, err)`` of one case; ``err`` is NaN when ``amp > max_amp`` (not run) and
-    inf when the scan broke down (NumericalError)."""
+def measure(model: AffineLPV, schedule: str, T: int, seed: int, max_amp: float) -> tuple[float, float, float]:
+    """``(amp, kappa, err)`` of one case, ``kappa = max_t cond(Omega_t)``; ``err`` is
+    NaN when ``amp > max_amp`` (not run) and inf when the scan broke down
+    (NumericalError)."""
     rng = np.random.default_rng(seed)
     p = np.sin(0.25 * np.arange(T))[:, None] if schedule == "sin" else random_schedule(model, rng, T)
     u = rng.standard_normal((T, model.nu)) if model.nu else None
@@ -107,15 +110,16 @@ def measure(model: AffineLPV, schedule: str, T: int, seed: int, max_amp: float) 
     mats = KalmanModel(model).matrices_batch(p)
     amp = scan_amplification(decorrelate_stack(*mats, np.zeros((T, 0)) if u is None else u, y), mats.C)
     if amp > max_amp:
-        return amp, math.nan
+        return amp, math.nan, math.nan
     seq = kalman_filter(model, p, u, y, method="sequential")
+    kappa = float(np.max(np.linalg.cond(seq.innovation_covariances)))
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # beyond the gate method="scan" warns
             scan = kalman_filter(model, p, u, y, method="scan")
     except NumericalError:  # far beyond the gate the scan can break down
-        return amp, math.inf
-    return amp, max_rel(scan, seq)
+        return amp, kappa, math.inf
+    return amp, kappa, max_rel(scan, seq)
 
 
 def main() -> None:
@@ -138,7 +142,7 @@ def main() -> None:
     print(f"BLAS kernel(s): {', '.join(kernels)}; eps = {EPS:.3g}")
     print("each cell: err @ amp (worst over the seeds); '-': amp above --max-amp, not run; inf: NumericalError")
     print(f"{'family':14s} {'r':>7s} " + " ".join(f"{'T=' + str(T):>17s}" for T in lengths))
-    cases = []  # (amp, err)
+    cases = []  # (amp, kappa, err)
     for name, (base, schedule) in families().items():
         for r in args.scales:
             model = scaled(base, r)
@@ -146,18 +150,18 @@ def main() -> None:
             for T in lengths:
                 amp, err = 0.0, 0.0
                 for s in range(seeds):
-                    a, e = measure(model, schedule, T, 10 * T + s, args.max_amp)
-                    cases.append((a, e))
+                    a, k, e = measure(model, schedule, T, 10 * T + s, args.max_amp)
+                    cases.append((a, k, e))
                     amp, err = max(amp, a), (e if math.isnan(e) else max(err, e))
                 cells.append("-" if math.isnan(err) else f"{err:7.1e} @ {amp:7.2g}")
             print(f"{name:14s} {r:7.0e} " + " ".join(f"{c:>17s}" for c in cells), flush=True)
-    print("\nworst err and err / (eps (1 + amp)^2) by amplification (cases run):")
+    print("\nworst err and err / (eps (kappa + (1 + amp)^2)) by amplification (cases run; kappa = max cond(Omega_t)):")
     for lo, hi in ((0, 3), (3, 10), (10, 30), (30, 100), (100, 300), (300, 1000), (1000, math.inf)):
-        sel = [(a, e) for a, e in cases if lo <= a < hi and not math.isnan(e)]
+        sel = [(a, k, e) for a, k, e in cases if lo <= a < hi and not math.isnan(e)]
         if sel:
-            worst = max(e for _, e in sel)
-            c = max(e / (EPS * (1 + a) ** 2) for a, e in sel)
-            print(f"  amp in [{lo:g}, {hi:g}): worst err {worst:.2g}, err / (eps (1 + amp)^2) <= {c:.3g}"
+            worst = max(e for _, _, e in sel)
+            c = max(e / (EPS * (k + (1 + a) ** 2)) for a, k, e in sel)
+            print(f"  amp in [{lo:g}, {hi:g}): worst err {worst:.2g}, err / (eps (kappa + (1 + amp)^2)) <= {c:.3g}"
                   f"  ({len(sel)} cases)")
 
 

@@ -21,21 +21,28 @@ def amplification(model: AffineLPV, p: np.ndarray, u: np.ndarray | None, y: np.n
     return scan_amplification(decorrelate_stack(*mats, u, y), mats.C)
 
 
-def scan_rtol(amp: float, block: int | None = None) -> float:
+def kappa_omega(res) -> float:
+    """``max_t cond(Omega_t)`` of a KalmanResult: the conditioning of the filter
+    problem (the gains are ``P C^T Omega^-1``)."""
+    return float(np.max(np.linalg.cond(res.innovation_covariances))) if len(res.innovation_covariances) else 1.0
+
+
+def scan_rtol(amp: float, block: int | None = None, kappa: float = 1.0) -> float:
     """How far the scan may be from the sequential recursion, relative to each
     output's largest entry (both are the same exact filter, rounded
     differently).
 
     Default blocks (``>= MIN_BLOCK`` samples, or the whole run): the library's
-    documented bound ``100 eps (1 + amp)^2`` (kalman_scan, "Accuracy"; measured
-    worst constant 13 over T = 64 .. 1e5, amp up to 3e3, by
-    benchmarks/bench_scan_accuracy.py). Shorter blocks (1 = the plain scan):
-    the general combinations work on single-sample elements and the error
-    grows like ``eps amp^4`` (measured constant <= 8 for blocks 1 and 2, T =
-    64 and 1024, amp 10 to 1e3): ``100 eps (1 + amp)^4``, plus the default
-    bound.
+    documented bound ``100 eps (kappa + (1 + amp)^2)``, ``kappa`` =
+    :func:`kappa_omega` (kalman_scan, "Accuracy"; measured worst constant 13
+    over T = 64 .. 1e5, amp up to 1e4, OpenBLAS Haswell, Sandybridge and
+    Nehalem, by benchmarks/bench_scan_accuracy.py). Shorter blocks (1 = the
+    plain scan): the general combinations work on single-sample elements and
+    the error grows like ``eps amp^4`` (measured constant <= 8 for blocks 1
+    and 2, T = 64 and 1024, amp 10 to 1e3): ``100 eps (1 + amp)^4``, plus the
+    default bound.
     """
-    bound = scan_error_bound(amp)
+    bound = scan_error_bound(amp, kappa)
     if block is not None and block < MIN_BLOCK:
         bound += 100 * EPS * (1.0 + amp) ** 4
     return bound
@@ -68,7 +75,7 @@ def kalman_fmu_tolerance(model: AffineLPV, p: np.ndarray, u: np.ndarray | None, 
     size = float(np.max(np.abs(res.filtered_means))) + float(np.max(np.abs(res.gains))) * float(np.max(np.abs(y)))
     steps = memory_steps(model, p, res.gains, power=1)
     n = 2 * model.nx + model.ny
-    return roundoff(size, 5 * steps, n=n, amp=kap) + scan_rtol(amplification(model, p, u, y)) * size
+    return roundoff(size, 5 * steps, n=n, amp=kap) + scan_rtol(amplification(model, p, u, y), kappa=kap) * size
 
 
 def oracle_rtol(kappa: float, amp: float | None = None, block: int | None = None) -> float:
@@ -81,11 +88,13 @@ def oracle_rtol(kappa: float, amp: float | None = None, block: int | None = None
     is of the order of eps for these short stable runs. Together
     ``50 eps (kappa + 1)`` (measured: <= 1.6 eps (kappa + 1) on the 14 cases
     of test_kalman's oracle test). The scan (``amp`` given) adds its own
-    bound against the sequential recursion, :func:`scan_rtol`.
+    bound against the sequential recursion, :func:`scan_rtol`, with
+    ``kappa``: every ``Omega_t`` is a Schur complement of a leading block of
+    ``S_yy``, so ``cond(Omega_t) <= cond(S_yy)``.
     """
     tol = 50 * EPS * (kappa + 1.0)
     if amp is not None:
-        tol += scan_rtol(amp, block)
+        tol += scan_rtol(amp, block, kappa)
     return tol
 
 

@@ -32,6 +32,7 @@ from lpvest.estimators.kalman import (
 from tests.kalman_helpers import (
     EPS,
     amplification,
+    kappa_omega,
     oracle,
     oracle_rtol,
     random_schedule,
@@ -115,7 +116,8 @@ def test_filter_matches_gaussian_conditioning(dims, seed, method):
     # of the terms' size (Higham, Accuracy and Stability, 3.1), accumulated
     # over T steps of a stable loop: 20 n T eps. The scan is another
     # algorithm: its own bound on top.
-    tol = 20 * (model.nx + model.nu + model.ny) * T * EPS + (scan_rtol(amp) if amp is not None else 0.0)
+    tol = 20 * (model.nx + model.nu + model.ny) * T * EPS
+    tol += scan_rtol(amp, kappa=kappa_omega(res)) if amp is not None else 0.0
     kf = LPVKalmanFilter(model)
     inputs = {"p": p, "y": y} | ({"u": u} if model.nu else {})
     out = run_streaming(kf, inputs)
@@ -161,7 +163,7 @@ def test_filtered_state_uses_the_filter_gain(truncation_model, rng, method):
         # a few stages of n = 2 products, amplified by cond(Omega); the scan's
         # L and P_{t|t} come from its own P (its bound on top, amp = 0.06 here)
         kap = np.linalg.cond(Om)
-        scan = scan_rtol(amplification(model, p, u, y)) if method == "scan" else 0.0
+        scan = scan_rtol(amplification(model, p, u, y), kappa=kappa_omega(res)) if method == "scan" else 0.0
         size_l = np.max(np.abs(P) @ np.abs(C.T) @ np.abs(np.linalg.inv(Om)))
         np.testing.assert_allclose(res.filter_gains[t], L, rtol=0,
                                    atol=roundoff(size_l, 4, n=2, amp=kap) + scan * np.max(np.abs(L)))
@@ -260,7 +262,7 @@ def test_constant_scheduling_converges_to_the_dare_gain(rng, method):
     rho = max(abs(np.linalg.eigvals(A - K @ C)))
     assert rho ** (2 * T) < EPS
     amp = np.linalg.cond(Om) / (1 - rho**2)
-    scan = scan_rtol(amplification(model, p, np.zeros((T, 1)), y)) if method == "scan" else 0.0
+    scan = scan_rtol(amplification(model, p, np.zeros((T, 1)), y), kappa=kappa_omega(res)) if method == "scan" else 0.0
     for got, want in ((res.predicted_covariances[-1], P), (res.gains[-1], K)):
         size = np.max(np.abs(want))
         np.testing.assert_allclose(got, want, rtol=0, atol=roundoff(size, 5, n=8, amp=amp) + scan * size)
@@ -282,7 +284,7 @@ def test_innovation_simulator_is_inverted_by_the_filter(truncation_model, method
         np.testing.assert_array_equal(res.gains, sim.gains)
         scan = 0.0
     else:
-        scan = scan_rtol(amplification(model, p, u, sim.y))
+        scan = scan_rtol(amplification(model, p, u, sim.y), kappa=kappa_omega(res))
         np.testing.assert_allclose(res.gains, sim.gains, rtol=0, atol=scan * np.max(np.abs(sim.gains)))
     # means: (4a) run forward by the simulator and by the filter from y, the same
     # sums in another order per step (|A||x| + |B||u| + |K||xi|, n = 4 products),

@@ -782,11 +782,12 @@ SCAN_MIN_SAMPLES = 64
 #: this, ``J_t = G S H^T (H R H^T)^-1``: the decorrelated form amplifies
 #: rounding errors by about ``amp^2`` (a nearly singular ``H R H^T`` next to
 #: a strong cross-covariance), see :mod:`lpvest.estimators.kalman_scan`,
-#: "Accuracy". Up to this gate the scan's documented accuracy
-#: (:func:`~lpvest.estimators.kalman_scan.scan_error_bound`) is
-#: ``100 eps 31^2 = 2.1e-11`` relative to each output's size (measured
-#: worst case at ``amp <= 30``, ``T`` = 64 to 1e5: 4.2e-13); beyond it,
-#: ``method="scan"`` runs but warns (:class:`ScanAccuracyWarning`).
+#: "Accuracy". Up to this gate the scan's own part of its documented accuracy
+#: (:func:`~lpvest.estimators.kalman_scan.scan_error_bound`,
+#: ``100 eps (kappa + (1 + amp)^2)`` with ``kappa = max_t cond(Omega_t)``
+#: the part any algorithm shares) is at most ``100 eps 31^2 = 2.1e-11``
+#: relative to each output's size; beyond it, ``method="scan"`` runs but
+#: warns (:class:`ScanAccuracyWarning`).
 SCAN_MAX_AMPLIFICATION = 30.0
 
 _METHODS = ("auto", "scan", "sequential")
@@ -808,10 +809,11 @@ def kalman_filter(
     The matrices for every sample are evaluated at once. Two algorithms give
     the same numbers to rounding: the scan's outputs are within
     :func:`~lpvest.estimators.kalman_scan.scan_error_bound` of the
-    sequential recursion's (``100 eps (1 + amp)^2`` relative to each output's
-    largest entry; at most 2.1e-11 where ``"auto"`` takes the scan), and the
-    tests hold both to a Gaussian-conditioning oracle within
-    ``50 eps (cond + (1 + amp)^2)`` (``cond`` the oracle's):
+    sequential recursion's (``100 eps (kappa + (1 + amp)^2)`` relative to
+    each output's largest entry, ``kappa = max_t cond(Omega_t)``; the scan's
+    own part is at most 2.1e-11 where ``"auto"`` takes it), and the tests
+    hold both to a Gaussian-conditioning oracle within about
+    ``50 eps cond(S_yy)`` plus that bound:
 
     - ``"sequential"``: the covariance recursion (:func:`covariance_step`,
       the streaming filter's kernel) runs sample by sample; means, filtered

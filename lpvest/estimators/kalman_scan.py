@@ -169,10 +169,11 @@ _EPS = float(np.finfo(float).eps)
 
 #: The constant of the scan's documented accuracy (module notes, "Accuracy"):
 #: every output of :func:`scan_filter` (default blocks) is within
-#: ``SCAN_ERROR_CONSTANT * eps * (1 + amp)^2`` of the sequential recursion,
-#: relative to the largest entry of that output, ``amp`` from
-#: :func:`scan_amplification`. Measured worst case 13 (module notes); the
-#: margin covers other BLAS kernels, systems and schedules.
+#: ``SCAN_ERROR_CONSTANT * eps * (kappa + (1 + amp)^2)`` of the sequential
+#: recursion, relative to the largest entry of that output, ``amp`` from
+#: :func:`scan_amplification`, ``kappa = max_t cond(Omega_t)``. Measured
+#: worst case 13 (module notes); the margin covers other BLAS kernels,
+#: systems and schedules.
 SCAN_ERROR_CONSTANT = 100.0
 
 
@@ -183,15 +184,20 @@ class ScanAccuracyWarning(UserWarning):
     accuracy (the message gives the bound)."""
 
 
-def scan_error_bound(amp: float) -> float:
-    """The scan's documented accuracy at amplification ``amp``: the largest
-    difference to the sequential recursion, relative to each output's
-    largest entry, ``SCAN_ERROR_CONSTANT * eps * (1 + amp)^2``.
+def scan_error_bound(amp: float, kappa: float = 1.0) -> float:
+    """The scan's documented accuracy: the largest difference to the
+    sequential recursion, relative to each output's largest entry,
+    ``SCAN_ERROR_CONSTANT * eps * (kappa + (1 + amp)^2)``.
 
-    >>> f"{scan_error_bound(0.0):.1e}", f"{scan_error_bound(30.0):.1e}"
-    ('2.2e-14', '2.1e-11')
+    ``amp``: :func:`scan_amplification`, the scan's own amplification;
+    ``kappa``: ``max_t cond(Omega_t)``, the conditioning of the filter
+    problem itself (two backward-stable computations of the gains
+    ``P C^T Omega^-1`` differ by about ``eps kappa``, whatever the algorithm).
+
+    >>> f"{scan_error_bound(0.0):.1e}", f"{scan_error_bound(30.0):.1e}", f"{scan_error_bound(30.0, 1e3):.1e}"
+    ('4.4e-14', '2.1e-11', '4.4e-11')
     """
-    return SCAN_ERROR_CONSTANT * _EPS * (1.0 + float(amp)) ** 2
+    return SCAN_ERROR_CONSTANT * _EPS * (float(kappa) + (1.0 + float(amp)) ** 2)
 
 
 def _mT(x: np.ndarray) -> np.ndarray:
