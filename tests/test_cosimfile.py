@@ -66,6 +66,7 @@ def test_peixoto_example_file_runs_from_the_command_line_and_matches_the_library
     np.testing.assert_allclose(data[:, 8:10], zhat, rtol=0, atol=roundoff(np.max(np.abs(zhat)), 2 * n, n=4))
 
 
+@pytest.mark.blas_sensitive
 def test_kalman_example_file_matches_the_library_filters_on_the_recorded_data(fmus):
     spec = load_cosim(EXAMPLES / "cox_toth_kalman.toml", fmu_dir=fmus.out)
     assert spec.n_steps == 300 and spec.stop_time == 300.0

@@ -107,6 +107,7 @@ def test_polytopic_plant_is_bit_for_bit_the_library(fmus, name, system, rho):
     assert np.array_equal(got["y"], ref.y) and np.array_equal(got["z"], ref.z) and np.array_equal(got["x"], ref.x)
 
 
+@pytest.mark.blas_sensitive
 def test_affine_plant_with_drawn_noise_matches_simulate(fmus):
     model = load_system(fmus.affine_model).model()
     T = 150
@@ -124,6 +125,7 @@ def test_affine_plant_with_drawn_noise_matches_simulate(fmus):
     _assert_same_recursion(got, ref, T)
 
 
+@pytest.mark.blas_sensitive
 def test_affine_plant_with_external_noise_matches_simulate(fmus, rng):
     model = load_system(fmus.affine_model).model()
     T = 100
@@ -148,6 +150,7 @@ def _assert_same_recursion(got, ref, T):
         np.testing.assert_allclose(got[name], want, rtol=0, atol=roundoff(np.max(np.abs(want)), 2 * T, n=6))
 
 
+@pytest.mark.blas_sensitive
 def test_cox_toth_plant_equals_the_input_output_realization(fmus, rng):
     """The plant realizes (21c); (21a) with the same u, p, e gives the same y
     (Cox & Toth: the three realizations agree to machine precision)."""

@@ -110,6 +110,7 @@ def _block_tol(plant, var, mult, blocks=1):
     return roundoff(size, 4 * blocks, n=n)
 
 
+@pytest.mark.blas_sensitive
 @pytest.mark.parametrize("robust", [False, True])
 def test_lmis_are_q_plus_he_xg_on_random_data(rng, robust):
     """Every assembled LMI equals Q + He{X G} built from the proof (Finsler form)."""
@@ -137,6 +138,7 @@ def test_lmis_are_q_plus_he_xg_on_random_data(rng, robust):
         np.testing.assert_array_equal(blk.matrix, blk.matrix.T)  # symmetric by construction
 
 
+@pytest.mark.blas_sensitive
 def test_printed_blocks_agree_except_phi21(rng):
     """At (a, b) = (epsilon, 1) our blocks are the printed ones with Phi_21 using
     P_{3,l} (alpha_{k+1}); the printed P_{3,j} is what the misprint option builds."""
@@ -168,6 +170,7 @@ def test_printed_blocks_agree_except_phi21(rng):
     assert [d > 0 for d in diffs] == [g.l != g.i or g.l != g.j for g in good]
 
 
+@pytest.mark.blas_sensitive
 def test_lemma1_combinations_reproduce_phi_of_alpha(rng):
     """sum_l a+_l [sum_i a_i^2 Phi_iil + sum_{i<j} a_i a_j (Phi_ijl + Phi_jil)]
     equals Q(alpha, alpha+) + He{X(alpha) G(alpha)} with interpolated data (4)."""
@@ -194,6 +197,7 @@ def test_lemma1_combinations_reproduce_phi_of_alpha(rng):
         np.testing.assert_allclose(total, want, rtol=0, atol=_block_tol(plant, var, (a, b), blocks=N**3 + 3 * N))
 
 
+@pytest.mark.blas_sensitive
 def test_rescaling_is_exact():
     """The rescaled LMIs at (a, b) and the paper's at epsilon = a/b are the same
     up to the congruence T = diag(I, sI, I, sI, I, I), s = 1/b, and the two
