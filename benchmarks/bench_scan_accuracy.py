@@ -28,11 +28,14 @@ stays the same; four model families (a scalar-output model with correlation
 0.9, and three random systems of ``tests/kalman_helpers.py`` with two to five
 outputs and a random schedule).
 
-Run (about 10 minutes on one core; ``--quick`` about one)::
+Run (``--seeds 1``: about 30 minutes on one core of a loaded machine;
+``--quick``, ``T <= 4096``: about 3)::
 
-    .venv/bin/python benchmarks/bench_scan_accuracy.py [--quick] [--lengths 64 1024 100000]
+    .venv/bin/python benchmarks/bench_scan_accuracy.py [--quick] [--seeds 1] [--lengths 64 1024 100000]
 
-and under another BLAS kernel, e.g. ``OPENBLAS_CORETYPE=Sandybridge``.
+and under another BLAS kernel, e.g. ``OPENBLAS_CORETYPE=Sandybridge``. The
+figures in the module notes of :mod:`lpvest.estimators.kalman_scan` come
+from ``--seeds 1`` (Haswell) and ``--quick`` (Sandybridge, Nehalem).
 """
 
 from __future__ import annotations

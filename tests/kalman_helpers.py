@@ -34,7 +34,7 @@ def scan_rtol(amp: float, block: int | None = None, kappa: float = 1.0) -> float
 
     Default blocks (``>= MIN_BLOCK`` samples, or the whole run): the library's
     documented bound ``100 eps (kappa + (1 + amp)^2)``, ``kappa`` =
-    :func:`kappa_omega` (kalman_scan, "Accuracy"; measured worst constant 13
+    :func:`kappa_omega` (kalman_scan, "Accuracy"; measured worst constant 15
     over T = 64 .. 1e5, amp up to 1e4, OpenBLAS Haswell, Sandybridge and
     Nehalem, by benchmarks/bench_scan_accuracy.py). Shorter blocks (1 = the
     plain scan): the general combinations work on single-sample elements and
