@@ -21,6 +21,7 @@ from lpvest import (
 from lpvest.estimators import StreamingEstimator, kalman as kalman_module, run_streaming
 from lpvest.estimators.kalman import (
     SCAN_MAX_AMPLIFICATION,
+    SCAN_MIN_SAMPLES,
     KalmanModel,
     KalmanState,
     LPVKalmanFilter,
@@ -487,9 +488,10 @@ def test_singular_innovation_covariance_names_t(ny):
     with pytest.raises(NumericalError, match="Omega_t is not positive definite at t=2"):
         kf.step({"p": [0.0], "y": np.ones(ny)})
     _assert_same_state(kf.get_state(), before)
-    p = np.full((70, 1), 0.5)  # long enough for method="auto" to consider the scan
+    T = SCAN_MIN_SAMPLES + 10  # long enough for method="auto" to consider the scan
+    p = np.full((T, 1), 0.5)
     p[3] = 0.0
-    y = np.ones((70, ny))
+    y = np.ones((T, ny))
     for method in ("sequential", "auto"):  # auto: H R H^T is singular, the scan does not apply
         with pytest.raises(NumericalError, match="Omega_t is not positive definite at t=3"):
             kalman_filter(model, p, None, y, method=method)

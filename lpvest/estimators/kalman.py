@@ -771,11 +771,13 @@ def _riccati_sweep(
 
 #: ``kalman_filter(method="auto")`` runs the sequential recursion for fewer
 #: samples than this: the scan's fixed cost of a few hundred numpy calls is
-#: then not recovered (measured with ``benchmarks/bench_kalman.py``: the
-#: two break even at 32-48 samples for n_x = 2 and 48-64 for n_x = 10).
+#: then not recovered (measured with ``benchmarks/bench_kalman.py``: with
+#: blocks of at least :data:`~lpvest.estimators.kalman_scan.MIN_BLOCK`
+#: samples, for accuracy, the two break even between 64 and 96 samples for
+#: n_x = 2 and 10: 1.5 / 1.7 ms at 64, 2.0 / 1.7 ms at 96).
 #: There is no rule on n_x: per sample the scan does fewer flops than the
 #: sequential kernel, and it was faster at every n_x measured (2 to 100).
-SCAN_MIN_SAMPLES = 64
+SCAN_MIN_SAMPLES = 80
 
 #: ``kalman_filter(method="auto")`` runs the sequential recursion when
 #: ``amp = max_t ||J_t||_F ||C_t||_F`` (a bound of ``||J_t C_t||_F``) exceeds
