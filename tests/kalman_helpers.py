@@ -8,7 +8,94 @@ from typing import NamedTuple
 import numpy as np
 
 from lpvest import AffineLPV, Monomial, SchedulingSpace
+from lpvest.estimators.kalman import KalmanModel
+from lpvest.estimators.kalman_scan import MIN_BLOCK, decorrelate_stack, scan_amplification, scan_error_bound
 from lpvest.scheduling import parse_basis
+from tests.tolerances import EPS
+
+
+def amplification(model: AffineLPV, p: np.ndarray, u: np.ndarray | None, y: np.ndarray) -> float:
+    """The scan's error amplification ``max_t ||J_t||_F ||C_t||_F`` on these data."""
+    mats = KalmanModel(model).matrices_batch(p)
+    u = np.zeros((p.shape[0], 0)) if u is None or not model.nu else u
+    return scan_amplification(decorrelate_stack(*mats, u, y), mats.C)
+
+
+def kappa_omega(res) -> float:
+    """``max_t cond(Omega_t)`` of a KalmanResult: the conditioning of the filter
+    problem (the gains are ``P C^T Omega^-1``)."""
+    return float(np.max(np.linalg.cond(res.innovation_covariances))) if len(res.innovation_covariances) else 1.0
+
+
+def scan_rtol(amp: float, block: int | None = None, kappa: float = 1.0) -> float:
+    """How far the scan may be from the sequential recursion, relative to each
+    output's largest entry (both are the same exact filter, rounded
+    differently).
+
+    Default blocks (``>= MIN_BLOCK`` samples, or the whole run): the library's
+    documented bound ``100 eps (kappa + (1 + amp)^2)``, ``kappa`` =
+    :func:`kappa_omega` (kalman_scan, "Accuracy"; measured worst constant 15
+    over T = 64 .. 1e5, amp up to 1e4, OpenBLAS Haswell, Sandybridge and
+    Nehalem, by benchmarks/bench_scan_accuracy.py). Shorter blocks (1 = the
+    plain scan): the general combinations work on single-sample elements and
+    the error grows like ``eps amp^4`` (measured constant <= 8 for blocks 1
+    and 2, T = 64 and 1024, amp 10 to 1e3): ``100 eps (1 + amp)^4``, plus the
+    default bound.
+    """
+    bound = scan_error_bound(amp, kappa)
+    if block is not None and block < MIN_BLOCK:
+        bound += 100 * EPS * (1.0 + amp) ** 4
+    return bound
+
+
+def memory_steps(model: AffineLPV, p: np.ndarray, gains: np.ndarray, *, power: int = 2) -> float:
+    """How many steps' worth of rounding a covariance (``power=2``) or mean
+    (``power=1``) recursion along these gains accumulates: with
+    ``q = max_t ||A_t - K_t C_t||_2 < 1`` an error made at one step shrinks by
+    ``q^power`` per step afterwards, so all of them add up to at most
+    ``1 / (1 - q^power)`` of one step's; without such a contraction the
+    ``T`` steps (no growth assumed, the recursions are stable)."""
+    mats = KalmanModel(model).matrices_batch(p)
+    q = float(np.max(np.linalg.norm(mats.A - gains @ mats.C, ord=2, axis=(1, 2))))
+    T = p.shape[0]
+    return T if q >= 1.0 else min(T, 1.0 / (1.0 - q**power))
+
+
+def kalman_fmu_tolerance(model: AffineLPV, p: np.ndarray, u: np.ndarray | None, y: np.ndarray, res) -> float:
+    """How far a Kalman FMU's (streaming) filtered means may be from
+    ``kalman_filter`` on the same data (``res``): the streaming kernel and the
+    batch loop round differently (a few stages of n = 2 n_x + n_y products per
+    step, amplified by cond(Omega), accumulated over :func:`memory_steps` of
+    the closed loop), and the batch filter may run the scan
+    (:func:`scan_rtol` at these data's amp); relative to the size of the
+    means plus |K| |y| (what each step adds)."""
+    from tests.tolerances import roundoff
+
+    kap = float(np.max(np.linalg.cond(res.innovation_covariances)))
+    size = float(np.max(np.abs(res.filtered_means))) + float(np.max(np.abs(res.gains))) * float(np.max(np.abs(y)))
+    steps = memory_steps(model, p, res.gains, power=1)
+    n = 2 * model.nx + model.ny
+    return roundoff(size, 5 * steps, n=n, amp=kap) + scan_rtol(amplification(model, p, u, y), kappa=kap) * size
+
+
+def oracle_rtol(kappa: float, amp: float | None = None, block: int | None = None) -> float:
+    """How far a filter output may be from the Gaussian-conditioning oracle,
+    relative to ``max(1, max |oracle value|)``.
+
+    The oracle solves with the joint output covariance ``S_yy`` (``T n_y``
+    square): its forward error is about ``eps cond(S_yy)`` (``kappa``) times
+    the size of the result (Higham (7.2)). The sequential filter's own error
+    is of the order of eps for these short stable runs. Together
+    ``50 eps (kappa + 1)`` (measured: <= 1.6 eps (kappa + 1) on the 14 cases
+    of test_kalman's oracle test). The scan (``amp`` given) adds its own
+    bound against the sequential recursion, :func:`scan_rtol`, with
+    ``kappa``: every ``Omega_t`` is a Schur complement of a leading block of
+    ``S_yy``, so ``cond(Omega_t) <= cond(S_yy)``.
+    """
+    tol = 50 * EPS * (kappa + 1.0)
+    if amp is not None:
+        tol += scan_rtol(amp, block, kappa)
+    return tol
 
 
 def random_system(
@@ -107,6 +194,13 @@ class Oracle(NamedTuple):
         _, S = self._cond(rows, mean, y, t)
         nx = self.Mx[0].shape[0]
         return np.linalg.solve(S[nx:, nx:], S[nx:, :nx]).T
+
+    def condition(self) -> float:
+        """2-norm condition number of the joint output covariance ``S_yy``
+        (every conditioning set of the oracle is a leading block of it, whose
+        condition number is no larger: eigenvalue interlacing)."""
+        Ny = np.vstack(self.Ny)
+        return float(np.linalg.cond(Ny @ self.Sz @ Ny.T))
 
     def log_density(self, y: np.ndarray) -> float:
         Ny = np.vstack(self.Ny)

@@ -28,6 +28,25 @@ from lpvest import (
 )
 from lpvest.estimators import bspline as bs, kernels
 from lpvest.protocol import Sampled as StreamingEstimator, run_streaming
+from tests.tolerances import EPS, lstsq_rtol, roundoff
+
+pytestmark = pytest.mark.blas_sensitive  # numerical agreement: ./dev test runs it under a second BLAS kernel
+
+
+def _assert_lstsq_close(beta, beta_ref, P, q):
+    """Two least-squares solutions of min |q - P b| (lpvest's segment-wise QR,
+    numpy's lstsq) agree within Wedin's bound (tests/tolerances.lstsq_rtol)
+    in column-scaled coordinates: both are Householder-based, so their
+    backward errors are small column by column (Higham, Thm 19.4) and the
+    scaled condition number applies. Returns the bound."""
+    d = np.linalg.norm(P, axis=0)
+    Ps = P / d
+    cond = np.linalg.cond(Ps)
+    r = q - P @ beta_ref
+    ratio = np.linalg.norm(r) / (np.linalg.norm(Ps, 2) * np.linalg.norm(d * beta_ref))
+    rel = lstsq_rtol(cond, ratio, P.shape[1])
+    assert np.linalg.norm(d * (beta - beta_ref)) <= rel * np.linalg.norm(d * beta_ref)
+    return rel
 
 # -- shared data -------------------------------------------------------------------------------
 
@@ -131,22 +150,31 @@ def test_bspline_basis_matches_scipy(order, kind):
     for r in range(order):
         dense[rows, first + r] = vals[:, r]
         ddense[rows, dfirst + r] = dvals[:, r]
+    # Cox-de Boor: `order` stages of convex combinations with weights
+    # (x - t_i) / (t_{i+k} - t_i), whose rounding is relative to |x| / h
+    # (h the smallest positive knot spacing); the derivative divides by
+    # spacings once more: (order - 1) / h
+    gaps = np.diff(knots)
+    h = float(np.min(gaps[gaps > 0]))
+    amp = float(np.max(np.abs(knots))) / h
+    tol = roundoff(1.0, order, n=2, amp=amp)
     for i in range(spec.n_basis):
         c = np.zeros(spec.n_basis)
         c[i] = 1.0
         ref = BSpline(knots, c, order - 1, extrapolate=True)
-        np.testing.assert_allclose(dense[:, i], ref(x), atol=1e-13)
+        np.testing.assert_allclose(dense[:, i], ref(x), rtol=0, atol=tol)
         if order > 1:
-            np.testing.assert_allclose(ddense[:, i], ref.derivative()(x), atol=1e-11)
-    np.testing.assert_allclose(dense.sum(axis=1), 1.0, atol=1e-13)  # partition of unity on the window
+            np.testing.assert_allclose(ddense[:, i], ref.derivative()(x), rtol=0, atol=tol * (order - 1) / h)
+    np.testing.assert_allclose(dense.sum(axis=1), 1.0, rtol=0, atol=order * tol)  # partition of unity on the window
 
 
 def test_uniform_knots_cover_the_window_as_the_paper_says():
     # n = 86 quadratic B-splines on [0, 20]: 84 knot intervals of 20/84 across the window
     knots = bs.spline_knots(UnknownSpline(86, 3), 20.0)
     assert knots.size == 89
-    assert knots[2] == 0.0 and knots[86] == pytest.approx(20.0, abs=1e-12)
-    np.testing.assert_allclose(np.diff(knots), 20.0 / 84, rtol=1e-12)
+    # each knot a + k h rounded once or twice (size 20), a difference of two: 4 eps 20
+    assert knots[2] == 0.0 and knots[86] == pytest.approx(20.0, abs=roundoff(20.0, 1))
+    np.testing.assert_allclose(np.diff(knots), 20.0 / 84, rtol=0, atol=roundoff(20.0, 2))
 
 
 # -- quadrature --------------------------------------------------------------------------------
@@ -180,8 +208,11 @@ def test_cumulative_quadrature_order(points):
         q = kernels.product_quadrature(0.0, t[1] - t[0], m, breakpoints=knots, points=points)
         F, B = q.cumulative(weight(q.x) * q.interpolate(f(t)))
         errors.append(max(np.max(np.abs(F[:, -1] - exact_F)), np.max(np.abs(B[:, 0] - exact_B))))
-        # forward and backward moments over the whole window agree at the ends
-        np.testing.assert_allclose(F[0, -1], B[0, 0], atol=1e-14)
+        # forward and backward moments over the whole window agree at the ends:
+        # the same q.x.size weighted terms summed in two orders (their absolute sum
+        # is at most the integral of |B_2 f| <= b max |f|)
+        size = b * float(np.max(np.abs(f(q.x))))
+        np.testing.assert_allclose(F[0, -1], B[0, 0], rtol=0, atol=roundoff(size, 2, n=q.x.size))
     rates = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
     # observed order of convergence: the rule is of order `points`
     assert np.all(rates > points - 0.6), (errors, rates)
@@ -192,9 +223,14 @@ def test_quadrature_is_exact_for_polynomial_data():
     # 5 integrand) the 3-point Gauss rule is exact too
     t = np.linspace(-1.0, 1.5, 26)
     q = kernels.product_quadrature(-1.0, t[1] - t[0], t.size, breakpoints=[0.123, 0.77], points=6)
-    F, _ = q.cumulative(q.interpolate(t**5 - 2 * t**2))
+    data = t**5 - 2 * t**2
+    F, _ = q.cumulative(q.interpolate(data))
     exact = (t**6 - 1.0) / 6 - 2 * (t**3 + 1.0) / 3
-    np.testing.assert_allclose(F[0], exact, atol=1e-13)
+    # exact rule: rounding only, of the interpolation (6-point Lagrange weights,
+    # Lebesgue constant < 4 on the interior nodes) and of the cumulative sum of
+    # q.x.size terms of size <= h max |data|
+    size = (t[-1] - t[0]) * float(np.max(np.abs(data)))
+    np.testing.assert_allclose(F[0], exact, rtol=0, atol=roundoff(size, 3, n=q.x.size, amp=4.0))
 
 
 def test_quadrature_moments_with_several_breakpoints_in_one_interval():
@@ -210,11 +246,15 @@ def test_quadrature_moments_with_several_breakpoints_in_one_interval():
     assert q.x.size == 3 * (t.size - 1 + 3)
     f = [2.0, -1.0, 0.5]
     F, B = q.cumulative(q.interpolate(pn.polyval(t, f)))
+    # exact rule: rounding only, of cumulative sums of q.x.size terms of size
+    # <= h (b - a)^k max |f| (3-point interpolation, Lebesgue constant < 2)
+    fmax = float(np.max(np.abs(pn.polyval(q.x, f))))
     for k in range(4):
         forward = pn.polyint(pn.polymul(pn.polypow([-a, 1.0], k), f))  # of (x - a)^k f
         backward = pn.polyint(pn.polymul(pn.polypow([b, -1.0], k), f))  # of (b - x)^k f
-        np.testing.assert_allclose(F[k], pn.polyval(t, forward) - pn.polyval(a, forward), rtol=0, atol=1e-13)
-        np.testing.assert_allclose(B[k], pn.polyval(b, backward) - pn.polyval(t, backward), rtol=0, atol=1e-13)
+        tol = roundoff((b - a) ** (k + 1) * fmax, 3, n=q.x.size, amp=2.0)
+        np.testing.assert_allclose(F[k], pn.polyval(t, forward) - pn.polyval(a, forward), rtol=0, atol=tol)
+        np.testing.assert_allclose(B[k], pn.polyval(b, backward) - pn.polyval(t, backward), rtol=0, atol=tol)
 
 
 # -- the kernel identities (9), (10) --------------------------------------------------------------
@@ -234,13 +274,17 @@ def test_printed_kernels_reproduce_y_and_derived_derivative_kernels_reproduce_dy
         pts = [t0] if a < t0 < b else None
         iy = quad(lambda s: ky(s).Ky * _y(s), a, b, points=pts, epsabs=1e-13, limit=200)[0]
         iu = quad(lambda s: ky(s).Ku * _u(s), a, b, points=pts, epsabs=1e-13, limit=200)[0]
-        assert iy + iu == pytest.approx(_y(t0), abs=1e-11)  # (9)
+        # (9); method bound: two quad integrals with error estimates <= epsabs
+        # 1e-13 each (scipy's estimate, for smooth integrands split at t0), a
+        # hundredfold margin since quad's estimate is not a bound
+        assert iy + iu == pytest.approx(_y(t0), abs=1e-11)
         C = (t0 - a) ** 2 + (b - t0) ** 2
         diy = quad(lambda s: ky(s).dKy * _y(s), a, b, points=pts, epsabs=1e-13, limit=200)[0]
         diu = quad(lambda s: ky(s).dKu * _u(s), a, b, points=pts, epsabs=1e-13, limit=200)[0]
         f_y = (2 * (t0 - a) - 2 * (b - t0)) / C - _a1(t0)
         f_u = -_b1(t0)
-        assert f_y * _y(t0) + f_u * _u(t0) + diy + diu == pytest.approx(_dy(t0), abs=1e-10)  # (10)
+        # (10); the same method bound, with the derivative kernels (larger by 1 / C)
+        assert f_y * _y(t0) + f_u * _u(t0) + diy + diu == pytest.approx(_dy(t0), abs=1e-10)
 
 
 def test_kernel_identity_manufactured_solution():
@@ -248,6 +292,9 @@ def test_kernel_identity_manufactured_solution():
     a = [_a0, Known(lambda s: 1.0 + 0.2 * np.sin(s)).function]
     b1 = lpvest_tf(_b1, _db1)
     out = kernel_identity(t, _u(t), _y(t), a=a, b=[_b0, b1])
+    # method bound: the product quadrature of order 6 at h = 2 ms on smooth
+    # data (error ~ h^6 times the data's 6th derivative, ~1e-13 here; rounding
+    # of the moment sums over 3000 samples, ~n eps |y|, is of the same order)
     np.testing.assert_allclose(out.y, _y(t), rtol=0, atol=1e-11)
     np.testing.assert_allclose(out.dy, _dy(t), rtol=0, atol=1e-10)
 
@@ -262,11 +309,22 @@ def test_kernel_identity_with_true_coefficients_reproduces_sridhar_output(sridha
     # issue 5: (9) with the true coefficients reproduces y to 1e-10, and the
     # derivative identity reproduces y' = x_2
     out = kernel_identity(traj20.t, traj20.u, traj20.y, a=sridhar.a, b=sridhar.b)
+    # method bound: the data come from DOP853 (rtol 1e-12), the quadrature is of
+    # order `points` at h = 1 ms; rounding (~n eps |y| ~ 1e-12 over 20000 samples) is far below
     assert np.max(np.abs(out.y - traj20.y)) < 1e-10
     assert np.max(np.abs(out.dy - traj20.x[:, 1])) < 1e-9
 
 
 # -- estimation: exact recovery ------------------------------------------------------------------
+#
+# The tolerances of the recovery tests are method bounds, not rounding: the
+# data are exact (closed forms, or DOP853 at rtol 1e-12), the kernel
+# integrals are exact only up to the quadrature (order `points` in h), and
+# the least-squares fit amplifies that by its condition number
+# (fit.condition, 1e2 to 2e4 here); the values were measured, and each
+# tolerance is about ten times the measured error. Rounding moves the
+# coefficients by eps times the condition number, < 4e-12 relative, which
+# the noiseless-recovery test checks is far inside its tolerances.
 
 
 def test_noiseless_recovery_sridhar(traj20, noiseless_fit):
@@ -276,6 +334,8 @@ def test_noiseless_recovery_sridhar(traj20, noiseless_fit):
     t = traj20.t
     inner = (t >= 5.0) & (t <= 15.0)
     assert abs(fit.constants["a1"] - 1.0) < 1e-6
+    # rounding moves the coefficients by ~eps cond (Higham (20.1)): four orders inside 1e-6
+    assert 100 * EPS * fit.condition < 1e-8
     rel = np.abs(fit.values["a0"][inner] - (t[inner] ** 2 + 1)) / (t[inner] ** 2 + 1)
     assert np.max(rel) < 1e-6
     # the state: (9) and (10) with the estimated coefficients, x = (y, y') since b1 = 0
@@ -284,7 +344,12 @@ def test_noiseless_recovery_sridhar(traj20, noiseless_fit):
     np.testing.assert_allclose(fit.x[inner], traj20.x[inner], rtol=0, atol=1e-9)
     # the estimated spline object agrees with the values and differentiates exactly
     spline = fit.coefficients["a0"]
-    np.testing.assert_allclose(spline(t[inner]), fit.values["a0"][inner], rtol=1e-12)
+    # the same spline through scipy's de Boor and lpvest's basis: the basis
+    # values' rounding is relative to |t| / h (h = 20 / 84; see the basis test),
+    # three non-negative terms of one sign (a0 > 0): no cancellation
+    h = 20.0 / 84
+    np.testing.assert_allclose(spline(t[inner]), fit.values["a0"][inner], rtol=roundoff(1.0, 3, n=3, amp=20.0 / h))
+    # method bound: the fit's 1e-6 relative error, differentiated (divided by ~h)
     np.testing.assert_allclose(spline.derivative()(t[inner]), 2 * t[inner], rtol=1e-5)
     assert fit.edf == 87 and fit.penalty == 0.0
     assert fit.labels[:2] == ("a0[0]", "a0[1]") and fit.labels[-1] == "a1"
@@ -369,16 +434,22 @@ def test_solve_matches_dense_least_squares_oracle(sridhar, traj9):
     assert reg.P.shape == (9001, 17) and reg.labels[-1] == "a1"
     beta_ref = np.linalg.lstsq(reg.P, reg.q, rcond=None)[0]
     fit = fit_kernel_model(model, traj9.t, traj9.u, y)
-    np.testing.assert_allclose(fit.beta, beta_ref, rtol=1e-9, atol=1e-9 * np.max(np.abs(beta_ref)))
+    rel = _assert_lstsq_close(fit.beta, beta_ref, reg.P, reg.q)
     resid = reg.q - reg.P @ beta_ref
-    assert fit.residual_rms == pytest.approx(np.sqrt(np.mean(resid**2)), rel=1e-9)
+    # the residual moves by |P| |d beta| (the scaled solution's bound times its
+    # size, through rows of P D^-1 of norm <= ||P D^-1||), plus the rounding
+    # of q - P beta (n + 1 terms of size |q| + |P| |beta|)
+    d = np.linalg.norm(reg.P, axis=0)
+    dr = rel * np.linalg.norm(reg.P / d, 2) * np.linalg.norm(d * beta_ref)
+    dr += roundoff(np.max(np.abs(reg.q) + np.abs(reg.P) @ np.abs(beta_ref)), 1, n=reg.P.shape[1] + 1)
+    assert fit.residual_rms == pytest.approx(np.sqrt(np.mean(resid**2)), abs=dr)
     # y_E is (9) with the estimated coefficients: y - (q - P beta)
-    np.testing.assert_allclose(fit.y, y - resid, atol=1e-12)
+    np.testing.assert_allclose(fit.y, y - resid, rtol=0, atol=dr + roundoff(np.max(np.abs(y)), 1))
     # a subset of instants: the same as lstsq on those rows
     rows = np.arange(0, 9001, 5)
     fit5 = fit_kernel_model(model, traj9.t, traj9.u, y, instants=5)
     beta5 = np.linalg.lstsq(reg.P[rows], reg.q[rows], rcond=None)[0]
-    np.testing.assert_allclose(fit5.beta, beta5, rtol=1e-9, atol=1e-9 * np.max(np.abs(beta5)))
+    _assert_lstsq_close(fit5.beta, beta5, reg.P[rows], reg.q[rows])
     np.testing.assert_array_equal(fit5.instants, rows)
 
 
@@ -396,7 +467,7 @@ def test_solve_with_clustered_knots_and_two_spline_blocks(sridhar, traj9):
     reg = kernel_regression(model, traj9.t, traj9.u, y)
     beta_ref = np.linalg.lstsq(reg.P, reg.q, rcond=None)[0]
     fit = fit_kernel_model(model, traj9.t, traj9.u, y)
-    np.testing.assert_allclose(fit.beta, beta_ref, rtol=1e-8, atol=1e-8 * np.max(np.abs(beta_ref)))
+    _assert_lstsq_close(fit.beta, beta_ref, reg.P, reg.q)
 
 
 def test_regression_columns_against_the_printed_kernels_with_split_intervals():
@@ -424,6 +495,8 @@ def test_regression_columns_against_the_printed_kernels_with_split_intervals():
         for j in (0, 120, 121, 300, 451, 600):
             pts = sorted({*inside, *([t[j]] if a < t[j] < b else [])})
             ref = quad(a0_part, a, b, args=(t[j],), points=pts, epsabs=1e-15, epsrel=1e-13, limit=400)[0]
+            # quad's error estimate <= epsabs 1e-15 / epsrel 1e-13 against the
+            # 6-point product rule exact for these piecewise polynomials (rounding)
             assert reg.P[j, i] == pytest.approx(ref, abs=1e-13), (i, j)
     # and the segment-wise solve agrees with lstsq on this P
     rng = np.random.default_rng(2)
@@ -431,7 +504,7 @@ def test_regression_columns_against_the_printed_kernels_with_split_intervals():
     reg = kernel_regression(model, t, _u(t), y)
     beta_ref = np.linalg.lstsq(reg.P, reg.q, rcond=None)[0]
     fit = fit_kernel_model(model, t, _u(t), y)
-    np.testing.assert_allclose(fit.beta, beta_ref, rtol=1e-8, atol=1e-8 * np.max(np.abs(beta_ref)))
+    _assert_lstsq_close(fit.beta, beta_ref, reg.P, reg.q)
 
 
 def test_penalty_matches_augmented_least_squares_and_gcv(sridhar, traj9):
@@ -443,9 +516,10 @@ def test_penalty_matches_augmented_least_squares_and_gcv(sridhar, traj9):
     D[:, :16] = np.diff(np.eye(16), 2, axis=0)
     lam = 1e-5
     # oracle: min |q - P b|^2 + lam |D b|^2 as one stacked lstsq
-    ref = np.linalg.lstsq(np.vstack([reg.P, np.sqrt(lam) * D]), np.concatenate([reg.q, np.zeros(14)]), rcond=None)[0]
+    Pa, qa = np.vstack([reg.P, np.sqrt(lam) * D]), np.concatenate([reg.q, np.zeros(14)])
+    ref = np.linalg.lstsq(Pa, qa, rcond=None)[0]
     fit = fit_kernel_model(model, traj9.t, traj9.u, y, penalty=lam)
-    np.testing.assert_allclose(fit.beta, ref, rtol=1e-8, atol=1e-8 * np.max(np.abs(ref)))
+    _assert_lstsq_close(fit.beta, ref, Pa, qa)
     assert fit.penalty == lam and 2 < fit.edf < 17
     # a huge penalty forces second differences to zero: a0 becomes linear in t
     stiff = fit_kernel_model(model, traj9.t, traj9.u, y, penalty=1e12)
@@ -593,7 +667,8 @@ def test_reconstruct_state_printed_and_time_varying_output_map(sridhar, traj9):
     # the printed state space of Section V: x = (y, y')
     ss = load_system("sridhar-ltv").model("state_space")
     x = reconstruct_state(ss, traj9.t[::500], traj9.y[::500], traj9.x[::500, 1], traj9.u[::500])
-    np.testing.assert_allclose(x, traj9.x[::500], atol=1e-15)
+    # x = (y, y' + b1 u), b1 = 0: a couple of roundings of terms of size |x|
+    np.testing.assert_allclose(x, traj9.x[::500], rtol=0, atol=roundoff(np.max(np.abs(traj9.x)), 1, n=2))
     # a realization with a time-varying C: z = T(t) x with T = [[1, 0], [t, 1]]
     # (so C_z = [1, 0], A_z = T A T^-1 + T' T^-1, B_z = T B); oracle: z = T x
     def A(t):
@@ -609,7 +684,9 @@ def test_reconstruct_state_printed_and_time_varying_output_map(sridhar, traj9):
     k = slice(None, None, 700)
     z = reconstruct_state(zs, traj9.t[k], traj9.y[k], traj9.x[k, 1], traj9.u[k])
     z_ref = np.column_stack([traj9.x[k, 0], traj9.t[k] * traj9.x[k, 0] + traj9.x[k, 1]])
-    np.testing.assert_allclose(z, z_ref, atol=1e-14)
+    # a few stages of 2-term products of size |t| |x| + |x| (T(t), its inverse, C')
+    size = float(np.max(np.abs(traj9.t[k, None]) * np.abs(traj9.x[k]) + np.abs(traj9.x[k])))
+    np.testing.assert_allclose(z, z_ref, rtol=0, atol=roundoff(size, 3, n=2))
 
 
 # -- the streaming observer ----------------------------------------------------------------------
@@ -644,12 +721,16 @@ def test_observer_protocol_ports_and_delay(stream):
     assert np.all(out["a1"][:400] == 0)
     k = np.arange(400, t.size)
     j = k - 200  # delay 1 s = 200 samples
-    np.testing.assert_allclose(out["t_est"][k, 0], t[j], atol=1e-12)
+    # t_est = t_k - delay: two roundings of times <= 6 s
+    np.testing.assert_allclose(out["t_est"][k, 0], t[j], rtol=0, atol=roundoff(6.0, 2))
+    # method bounds (dt = 5 ms quadrature, fit conditioning), as in the recovery tests above
     np.testing.assert_allclose(out["a1"][k, 0], 1.0, atol=1e-7)
     np.testing.assert_allclose(out["a0"][k, 0], t[j] ** 2 + 1, rtol=1e-7)
+    # method bounds, as in the kernel-identity tests (dt = 5 ms, smooth data)
     np.testing.assert_allclose(out["yhat"][k, 0], d.y[j], atol=1e-11)
     np.testing.assert_allclose(out["xhat"][k], d.x[j], atol=1e-10)
-    np.testing.assert_allclose(out["b0"][k, 0], -1.0 / (t[j] + 1000), rtol=1e-14)
+    # a known coefficient's formula at t_est: a sum and a division (and t_est's rounding, relative 1e-3 of it)
+    np.testing.assert_allclose(out["b0"][k, 0], -1.0 / (t[j] + 1000), rtol=roundoff(1.0, 3))
 
 
 def test_observer_equals_batch_estimator_on_the_same_window(stream):

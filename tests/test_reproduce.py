@@ -20,6 +20,7 @@ from lpvest.experiments.fmus import (
     fingerprint,
 )
 from lpvest.experiments.reproduce import reproduce_all
+from tests.tolerances import roundoff
 
 # -- agreement records ------------------------------------------------------------------------------
 
@@ -139,7 +140,13 @@ def test_reproduce_all_reduced_writes_everything(tmp_path, experiment_fmus):
     for r in runs:
         assert r.ok and r.result.fmu is not None and r.result.paper, r.name
         data = json.loads(r.results_path.read_text())
-        assert data["fmu_cosimulation"]["ok"] and data["fmu_cosimulation"]["max_abs_difference"] < 1e-13
+        assert data["fmu_cosimulation"]["ok"]
+        # FMU against library: the same stable recursions (the FMUs carry
+        # lpvest), at most rounded in another order: per step sums of <= 6
+        # products of the quantity's size, over 200 steps (the Cox-Toth
+        # filters, the only quantities that are not bit for bit)
+        for a in data["fmu_cosimulation"]["agreements"]:
+            assert a["max_abs_difference"] <= roundoff(max(1.0, a["scale"]), 200, n=6), (r.name, a["what"])
         assert all(f.is_file() for f in r.result.figures) and r.result.figures, r.name
     assert runs[4].options == {"rhos": (1.0, 11.0, 21.0)}
     report = (tmp_path / "report.md").read_text()

@@ -17,6 +17,7 @@ from lpvest.experiments.sridhar import (
     run_noisy,
     run_sliding,
 )
+from tests.tolerances import roundoff
 
 
 def test_registered():
@@ -32,7 +33,9 @@ def test_paper_numbers_are_the_printed_ones():
 def test_noise_has_the_stated_snr(rng):
     y = np.sin(np.linspace(0, 30, 200_000))
     noisy, sigma = noisy_output(y, 30.0, rng)
-    assert sigma == pytest.approx(np.sqrt(np.mean(y**2) / 1000.0), rel=1e-12)  # 30 dB: power ratio 1000
+    # 30 dB: power ratio 1000; the same mean of y.size squares, summed in any
+    # order (gamma_n relative to the sum of the positive terms), then sqrt
+    assert sigma == pytest.approx(np.sqrt(np.mean(y**2) / 1000.0), rel=roundoff(1.0, 2, n=y.size))
     snr = 10 * np.log10(np.mean(y**2) / np.mean((noisy - y) ** 2))
     assert snr == pytest.approx(30.0, abs=0.05)  # 200k samples: sample variance within ~0.3 %
 
@@ -58,7 +61,10 @@ def test_noiseless_headless(experiment_fmus):
     assert r["samples"] == 20001 and r["n_basis"] == 86 and r["inner_window"] == [5.0, 15.0]
     assert "0.9617" in res.table
     _plant_checks(res.fmu)
-    # one batch integration instead of the FMU's per-step restarts: a1 moves by round-off only
+    # one batch integration instead of the FMU's per-step restarts: the data
+    # differ by the integrator's local errors (DOP853, rtol 1e-12: ~1e-12 of
+    # scale), the fit amplifies them by its condition number; a method bound
+    # (measured ~1e-11), not rounding, which moves a1 by ~eps cond ~ 4e-12
     assert r["a1_difference_fmu_vs_batch"] < 1e-9
 
 
@@ -79,7 +85,7 @@ def test_noisy_headless(experiment_fmus):
     assert "0.8321" in res.table
     _plant_checks(res.fmu)
     assert r["samples"] == 9001  # the plant FMU's first 9 s
-    assert r["a1_difference_fmu_vs_batch"] < 1e-9
+    assert r["a1_difference_fmu_vs_batch"] < 1e-9  # method bound, as in the noiseless case
 
 
 def test_sliding_headless(experiment_fmus):
@@ -89,9 +95,10 @@ def test_sliding_headless(experiment_fmus):
     _plant_checks(res.fmu)
     assert len(res.fmu.agreements) == 3 + 7
     assert r["delay_s"] == 2.0 and r["first_valid_time"] == 4.0
-    assert r["t_est_error"] < 1e-12
+    assert r["t_est_error"] < roundoff(10.0, 2)  # t_k - delay against t_j: two roundings of times <= 10 s
     assert r["a1_max_error"] < 1e-6
     assert r["a0_max_rel_error"] < 1e-6
+    # method bounds (quadrature and fit conditioning, as in tests/test_bspline.py)
     assert r["y_max_error"] < 1e-10 and r["dy_max_error"] < 1e-9
 
 

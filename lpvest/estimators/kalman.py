@@ -54,6 +54,7 @@ Runtime code: imports only numpy.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -71,7 +72,13 @@ from ..validation import (
     check_finite,
     check_positive_definite,
 )
-from .kalman_scan import decorrelate_stack, scan_amplification, scan_filter
+from .kalman_scan import (
+    ScanAccuracyWarning,
+    decorrelate_stack,
+    scan_amplification,
+    scan_error_bound,
+    scan_filter,
+)
 
 __all__ = [
     "KalmanModel",
@@ -87,6 +94,9 @@ __all__ = [
     "kalman_filter",
     "simulate_innovation_form",
     "LPVKalmanFilter",
+    "SCAN_MIN_SAMPLES",
+    "SCAN_MAX_AMPLIFICATION",
+    "ScanAccuracyWarning",
 ]
 
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -761,18 +771,26 @@ def _riccati_sweep(
 
 #: ``kalman_filter(method="auto")`` runs the sequential recursion for fewer
 #: samples than this: the scan's fixed cost of a few hundred numpy calls is
-#: then not recovered (measured with ``benchmarks/bench_kalman.py``: the
-#: two break even at 32-48 samples for n_x = 2 and 48-64 for n_x = 10).
+#: then not recovered (measured with ``benchmarks/bench_kalman.py``: with
+#: blocks of at least :data:`~lpvest.estimators.kalman_scan.MIN_BLOCK`
+#: samples, for accuracy, the two break even between 64 and 96 samples for
+#: n_x = 2 and 10: 1.5 / 1.7 ms at 64, 2.0 / 1.7 ms at 96).
 #: There is no rule on n_x: per sample the scan does fewer flops than the
 #: sequential kernel, and it was faster at every n_x measured (2 to 100).
-SCAN_MIN_SAMPLES = 64
+SCAN_MIN_SAMPLES = 80
 
 #: ``kalman_filter(method="auto")`` runs the sequential recursion when
-#: ``max_t ||J_t||_F ||C_t||_F`` (a bound of ``||J_t C_t||_F``) exceeds this,
-#: ``J_t = G S H^T (H R H^T)^-1``: the decorrelated form amplifies rounding
-#: errors by about its square (a nearly singular ``H R H^T`` next to a strong
-#: cross-covariance), see :mod:`lpvest.estimators.kalman_scan`.
-SCAN_MAX_AMPLIFICATION = 100.0
+#: ``amp = max_t ||J_t||_F ||C_t||_F`` (a bound of ``||J_t C_t||_F``) exceeds
+#: this, ``J_t = G S H^T (H R H^T)^-1``: the decorrelated form amplifies
+#: rounding errors by about ``amp^2`` (a nearly singular ``H R H^T`` next to
+#: a strong cross-covariance), see :mod:`lpvest.estimators.kalman_scan`,
+#: "Accuracy". Up to this gate the scan's own part of its documented accuracy
+#: (:func:`~lpvest.estimators.kalman_scan.scan_error_bound`,
+#: ``100 eps (kappa + (1 + amp)^2)`` with ``kappa = max_t cond(Omega_t)``
+#: the part any algorithm shares) is at most ``100 eps 31^2 = 2.1e-11``
+#: relative to each output's size; beyond it, ``method="scan"`` runs but
+#: warns (:class:`ScanAccuracyWarning`).
+SCAN_MAX_AMPLIFICATION = 30.0
 
 _METHODS = ("auto", "scan", "sequential")
 
@@ -791,8 +809,13 @@ def kalman_filter(
     """Run the exact filter (4a)-(4e) over a whole trajectory.
 
     The matrices for every sample are evaluated at once. Two algorithms give
-    the same numbers (to rounding; the tests hold them to 1e-10 of each
-    other and of a Gaussian-conditioning oracle):
+    the same numbers to rounding: the scan's outputs are within
+    :func:`~lpvest.estimators.kalman_scan.scan_error_bound` of the
+    sequential recursion's (``100 eps (kappa + (1 + amp)^2)`` relative to
+    each output's largest entry, ``kappa = max_t cond(Omega_t)``; the scan's
+    own part is at most 2.1e-11 where ``"auto"`` takes it), and the tests
+    hold both to a Gaussian-conditioning oracle within about
+    ``50 eps cond(S_yy)`` plus that bound:
 
     - ``"sequential"``: the covariance recursion (:func:`covariance_step`,
       the streaming filter's kernel) runs sample by sample; means, filtered
@@ -802,12 +825,15 @@ def kalman_filter(
       batched small-matrix operations
       (:mod:`lpvest.estimators.kalman_scan`). It needs ``H R H^T`` positive
       definite at every sample (raises :class:`~lpvest.errors.NumericalError`
-      naming the first ``t`` where it is not).
+      naming the first ``t`` where it is not). Where the error
+      amplification ``amp = max_t ||J_t||_F ||C_t||_F`` is above
+      :data:`SCAN_MAX_AMPLIFICATION` it still runs, but warns
+      (:class:`ScanAccuracyWarning`, with the error bound).
     - ``"auto"`` (default): the scan, except when it does not apply or does
       not pay: ``H R H^T`` singular at some sample, fewer than
-      :data:`SCAN_MIN_SAMPLES` samples, or an error amplification
-      ``max_t ||J_t||_F ||C_t||_F`` above :data:`SCAN_MAX_AMPLIFICATION` (module
-      notes of :mod:`~lpvest.estimators.kalman_scan`); then the sequential
+      :data:`SCAN_MIN_SAMPLES` samples, or ``amp`` above
+      :data:`SCAN_MAX_AMPLIFICATION` (module notes of
+      :mod:`~lpvest.estimators.kalman_scan`); then the sequential
       recursion. (An empty trajectory has nothing to scan: every method
       returns the initial prediction.)
 
@@ -840,6 +866,11 @@ def kalman_filter(
     ArgumentError, ArgumentTypeError
         ``method`` is not one of the three names (they derive from
         ``ValueError`` and ``TypeError``).
+
+    Warns
+    -----
+    ScanAccuracyWarning
+        ``method="scan"`` where ``amp > SCAN_MAX_AMPLIFICATION``.
 
     Examples
     --------
@@ -913,7 +944,9 @@ def _kalman_filter_scan(
 ) -> KalmanResult | None:
     """The scan (:mod:`.kalman_scan`); ``None`` when ``strict`` is false and
     the scan does not apply (``H R H^T`` singular somewhere, or the error
-    amplification is above :data:`SCAN_MAX_AMPLIFICATION`)."""
+    amplification is above :data:`SCAN_MAX_AMPLIFICATION`). With ``strict``
+    (``method="scan"``) an amplification above the gate warns
+    (:class:`ScanAccuracyWarning`) and the scan runs."""
     T = y.shape[0]
     if T == 0:
         return None
@@ -925,8 +958,19 @@ def _kalman_filter_scan(
             f"method='scan' needs H(p) R H(p)^T positive definite (the decorrelation "
             f"J = G S H^T (H R H^T)^-1); it is not at t={dec}: use method='sequential' or 'auto'"
         )
-    if not strict and scan_amplification(dec, mats.C) > SCAN_MAX_AMPLIFICATION:
-        return None
+    amp = scan_amplification(dec, mats.C)
+    if amp > SCAN_MAX_AMPLIFICATION:
+        if not strict:
+            return None
+        warnings.warn(
+            f"method='scan': the decorrelation amplifies rounding errors by about amp^2 with "
+            f"amp = max_t ||J_t|| ||C_t|| = {amp:.3g} > {SCAN_MAX_AMPLIFICATION:g} (SCAN_MAX_AMPLIFICATION; "
+            f"H R H^T is small next to the cross-covariance G S H^T): the results may differ from the "
+            f"sequential recursion by up to ~{scan_error_bound(amp):.1g} relative; method='auto' or "
+            f"'sequential' runs the sequential recursion",
+            ScanAccuracyWarning,
+            stacklevel=3,
+        )
     s = scan_filter(dec, mats.C, mats.HRH, x, P)
     return KalmanResult(
         predicted_means=s.xp,

@@ -51,13 +51,15 @@ __all__ = [
 #: The command that regenerates the references (written into every file).
 UPDATE_COMMAND = "lpvest regress --update"
 
-_NUMERIC = ("numpy-only, stable discrete-time recursions with seeded noise: across platforms only the last bits "
-            "of sin/exp and of BLAS sums change (~1e-15 relative), and the file keeps 12 significant digits "
-            "(5e-13); 1e-10 leaves a wide margin and still catches any change of model, signal, noise convention "
-            "or filter")
+_NUMERIC = ("numpy-only, stable discrete-time recursions with seeded noise: another BLAS kernel or platform rounds "
+            "each step's sums of <= 6 products differently (<= 12 eps of their size), amplified by cond(Omega_t) "
+            "<= 2.6 in the filters over their memory (the closed loop contracts: ~8 steps) and accumulated over at "
+            "most the 200 steps in the plant: <= 4e-12 of scale (tests/tolerances.py); the file keeps 12 "
+            "significant digits (<= 5e-12 of scale); 1e-10 is ten times both and still catches any change of "
+            "model, signal, noise convention or filter")
 _DESIGN = ("the filter FMUs carry the LMI designs stored in models/designs (data: the same matrices on every "
            "machine, never solved again), so the filter is a stable numpy recursion like the others: "
-           + _NUMERIC[_NUMERIC.index("across platforms"):]
+           + _NUMERIC[_NUMERIC.index("another BLAS"):]
            + "; the SHA-256 of each carried design is stored too")
 _LTV = ("the plant integrates with scipy's DOP853 (rtol 1e-12) per 1 ms step and the observer solves least-squares "
         "problems whose estimates move by ~1e-7 relative for a 1e-13 relative change of y (measured): another scipy, "
@@ -252,6 +254,8 @@ def check_reference(ref: Reference, data: np.ndarray, designs: dict[str, str],
         ref_col = stored[:, j]
         diff = np.abs(data[:, j] - ref_col)
         worst = float(np.max(diff)) if np.all(np.isfinite(diff)) else float("inf")
+        # times k h with a short decimal h: printed exactly by %.12g, off by the
+        # rounding of k h (~eps of the largest time) only
         tol = 1e-12 if name == "time" else ref.tolerance
         checks.append(ColumnCheck(name, worst, float(np.max(np.abs(ref_col))), tol))
     for name, digest in designs.items():
