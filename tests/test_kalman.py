@@ -18,7 +18,7 @@ from lpvest import (
     SchedulingSpace,
     load_system,
 )
-from lpvest.estimators import kalman as kalman_module
+from lpvest.estimators import kalman as kalman_package
 from lpvest.estimators.kalman import (
     SCAN_MAX_AMPLIFICATION,
     SCAN_MIN_SAMPLES,
@@ -29,9 +29,9 @@ from lpvest.estimators.kalman import (
     kalman_filter,
     kalman_step,
     simulate_innovation_form,
+    streaming as streaming_module,
 )
 from lpvest.protocol import Sampled as StreamingEstimator, run_streaming
-from tests.kalman_helpers import oracle, random_schedule, random_system
 from tests.kalman_helpers import (
     EPS,
     amplification,
@@ -339,8 +339,8 @@ def test_ports(truncation_model):
 
 def test_outputs_do_not_change_the_state(truncation_model, monkeypatch):
     calls = []
-    original = kalman_module.kalman_step
-    monkeypatch.setattr(kalman_module, "kalman_step", lambda *a, **k: calls.append(1) or original(*a, **k))
+    original = streaming_module.kalman_step
+    monkeypatch.setattr(streaming_module, "kalman_step", lambda *a, **k: calls.append(1) or original(*a, **k))
     kf = LPVKalmanFilter(truncation_model)
     sample = {"p": [0.3], "u": [1.0], "y": [0.2, -0.1]}
     before = kf.get_state()
@@ -557,6 +557,7 @@ def test_kalman_step_is_pure(truncation_model):
     np.testing.assert_array_equal(s0.P, truncation_model.P0)
 
 
-def test_docstring_examples_run():
-    failures, tried = doctest.testmod(kalman_module, optionflags=doctest.ELLIPSIS)
+@pytest.mark.parametrize("module", ["model", "recursion", "batch", "streaming"])
+def test_docstring_examples_run(module):
+    failures, tried = doctest.testmod(getattr(kalman_package, module), optionflags=doctest.ELLIPSIS)
     assert tried > 0 and failures == 0

@@ -12,15 +12,16 @@ import numpy as np
 import pytest
 
 from lpvest import AffineLPV, Monomial, NumericalError, SchedulingSpace, load_system
-from lpvest.estimators import kalman as kalman_module, kalman_scan as scan_module
 from lpvest.estimators.kalman import (
     SCAN_MAX_AMPLIFICATION,
     SCAN_MIN_SAMPLES,
     KalmanModel,
     ScanAccuracyWarning,
+    batch as batch_module,
     kalman_filter,
+    scan as scan_module,
 )
-from lpvest.estimators.kalman_scan import (
+from lpvest.estimators.kalman.scan import (
     MIN_BLOCK,
     block_length,
     decorrelate_stack,
@@ -231,8 +232,8 @@ def test_long_trajectory_scan_equals_sequential(case):
 @pytest.fixture
 def spy(monkeypatch):
     calls = []
-    original = kalman_module.scan_filter
-    monkeypatch.setattr(kalman_module, "scan_filter", lambda *a, **k: calls.append(1) or original(*a, **k))
+    original = batch_module.scan_filter
+    monkeypatch.setattr(batch_module, "scan_filter", lambda *a, **k: calls.append(1) or original(*a, **k))
     return calls
 
 

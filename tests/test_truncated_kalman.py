@@ -37,7 +37,6 @@ from lpvest.estimators.truncated import (
     theorem_start_covariance,
 )
 from lpvest.protocol import Sampled as StreamingEstimator, run_streaming
-from tests.kalman_helpers import random_schedule, random_system
 from tests.kalman_helpers import memory_steps, random_schedule, random_system
 from tests.tolerances import roundoff
 

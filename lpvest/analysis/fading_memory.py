@@ -27,7 +27,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import DimensionError, NumericalError, abbreviate
-from ..estimators.kalman import KalmanModel, _initial, _riccati_sweep, covariance_step
+from ..estimators.kalman.model import KalmanModel
+from ..estimators.kalman.recursion import covariance_step, initial_moments, riccati_sweep
 from ..estimators.truncated import restart_covariance, start_covariance
 from ..systems.affine import AffineLPV
 from ..validation import as_rng, as_signal
@@ -119,9 +120,9 @@ def truncation_errors(
     if not tau_list or tau_list[0] < 0:
         raise DimensionError(f"taus must be non-negative integers; found {list(taus)}")
     n, m = km.nx, km.ny
-    _, P_init = _initial(km, None, P0)
+    _, P_init = initial_moments(km, None, P0)
     sms = km.step_matrices_batch(p)
-    Pp, _, _, Gm = _riccati_sweep(km, sms, P_init)
+    Pp, _, _, Gm = riccati_sweep(km, sms, P_init)
     K_exact = Gm[:, :n]
     P_exact = Pp[:T]
     P_start = start_covariance(km, start, start_p=start_p, start_fraction=start_fraction)
@@ -315,7 +316,7 @@ def prediction_error_covariance(
     gains = np.asarray(gains, dtype=float)
     if gains.shape != (T, n, m):
         raise DimensionError(f"gains has shape {gains.shape}; expected ({T}, {n}, {m})")
-    _, P = _initial(km, None, P0)
+    _, P = initial_moments(km, None, P0)
     sms = km.step_matrices_batch(p)
     out = np.empty((T, m, m))
     st = np.empty((T + 1, n, n))

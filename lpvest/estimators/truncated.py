@@ -60,24 +60,22 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from .._linalg import mT
 from ..errors import DimensionError, NonFiniteError, NotPositiveDefiniteError, NumericalError, abbreviate
 from ..protocol import Port
 from ..systems.affine import AffineLPV, NoiseCovariance
 from ..validation import as_matrix, as_signal, as_vector, check_positive_definite
-from .kalman import (
-    _SMALL,
-    KalmanMatrices,
-    KalmanModel,
+from .kalman.model import KalmanMatrices, KalmanModel, StepMatrices
+from .kalman.recursion import (
+    SMALL_NY,
     KalmanState,
     KalmanStep,
-    StepMatrices,
-    _initial,
-    _ports_in,
-    _Reader,
-    _small_chol_inverse,
     covariance_step,
+    initial_moments,
     kalman_step,
+    small_chol_inverse,
 )
+from .kalman.streaming import InputReader, input_ports
 
 __all__ = [
     "Decorrelated",
@@ -92,10 +90,6 @@ __all__ = [
     "truncated_prior",
     "TruncatedKalmanFilter",
 ]
-
-
-def _mT(x: np.ndarray) -> np.ndarray:
-    return np.swapaxes(x, -1, -2)
 
 
 class Decorrelated(NamedTuple):
@@ -127,9 +121,9 @@ def decorrelate(m: KalmanMatrices, *, where: str = "") -> Decorrelated:
         f"H(p) R H(p)^T is singular{where}: the decorrelated form (5c)/(5e) needs it "
         "invertible (H of full row rank)"
     )
-    if m.HRH.ndim == 2 and m.HRH.shape[0] <= _SMALL:
+    if m.HRH.ndim == 2 and m.HRH.shape[0] <= SMALL_NY:
         try:
-            Ci, _ = _small_chol_inverse(m.HRH, None)
+            Ci, _ = small_chol_inverse(m.HRH, None)
         except NumericalError as exc:
             raise NotPositiveDefiniteError(msg) from exc
         J = (Ci @ m.GSH.T).T @ Ci  # G S H^T chol^-T chol^-1
@@ -139,10 +133,10 @@ def decorrelate(m: KalmanMatrices, *, where: str = "") -> Decorrelated:
         except np.linalg.LinAlgError as exc:
             raise NotPositiveDefiniteError(msg) from exc
         # J^T = (H R H^T)^-1 (G S H^T)^T by two triangular solves with the factor
-        J = _mT(np.linalg.solve(_mT(L), np.linalg.solve(L, _mT(m.GSH))))
+        J = mT(np.linalg.solve(mT(L), np.linalg.solve(L, mT(m.GSH))))
     Abar = m.A - J @ m.C
-    GQG = m.GQG - J @ _mT(m.GSH)
-    return Decorrelated(Abar, 0.5 * (GQG + _mT(GQG)), J)
+    GQG = m.GQG - J @ mT(m.GSH)
+    return Decorrelated(Abar, 0.5 * (GQG + mT(GQG)), J)
 
 
 class AssumptionBounds(NamedTuple):
@@ -199,8 +193,8 @@ def assumption_bounds(
     a = np.linalg.eigvalsh(d.GQbarG)
     L = np.linalg.cholesky(m.HRH)
     LiC = np.linalg.solve(L, m.C)  # C^T (HRH)^-1 C = (L^-1 C)^T (L^-1 C)
-    b = np.linalg.eigvalsh(_mT(LiC) @ LiC)
-    dl = np.linalg.eigvalsh(_mT(d.Abar) @ d.Abar)
+    b = np.linalg.eigvalsh(mT(LiC) @ LiC)
+    dl = np.linalg.eigvalsh(mT(d.Abar) @ d.Abar)
     return AssumptionBounds(
         alpha1=float(a[:, -1].max()),
         alpha2=float(a[:, 0].min()),
@@ -330,8 +324,8 @@ def restart_covariance(m: KalmanMatrices, P_start: np.ndarray, *, where: str = "
     (2, 2)
     """
     d = decorrelate(m, where=where)
-    P = d.Abar @ P_start @ _mT(d.Abar) + d.GQbarG
-    return 0.5 * (P + _mT(P))
+    P = d.Abar @ P_start @ mT(d.Abar) + d.GQbarG
+    return 0.5 * (P + mT(P))
 
 
 def truncated_prior(
@@ -438,15 +432,15 @@ class TruncatedKalmanFilter:
             raise DimensionError(f"tau must be a non-negative integer; found {abbreviate(tau, 30)}")
         self._tau = int(tau)
         self._km = KalmanModel(model, noise=noise)
-        self._x0, self._P0 = _initial(self._km, x0, P0)
+        self._x0, self._P0 = initial_moments(self._km, x0, P0)
         self._start = start_covariance(
             self._km, start, start_p=start_p, start_fraction=start_fraction, start_grid=start_grid
         )
         for arr in (self._x0, self._P0, self._start):
             arr.setflags(write=False)
-        self._reader = _Reader(self._km)
+        self._reader = InputReader(self._km)
         n, m = self._km.nx, self._km.ny
-        self._in = _ports_in(self._km)
+        self._in = input_ports(self._km)
         self._out = (
             Port("xhat", (n,), "filtered state x_{t|t} with the truncated gain"),
             Port("P", (n, n), "truncated recursion's covariance P^(tau)_{t|t}"),

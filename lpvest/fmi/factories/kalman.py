@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from ...estimators.kalman import LPVKalmanFilter
+from ...estimators.kalman.streaming import LPVKalmanFilter
 
 __all__ = ["build"]
 

@@ -159,7 +159,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..errors import NumericalError
+from ..._linalg import mT, sym
+from ...errors import NumericalError
 
 __all__ = [
     "Decorrelation",
@@ -209,19 +210,9 @@ def scan_error_bound(amp: float, kappa: float = 1.0) -> float:
     return SCAN_ERROR_CONSTANT * _EPS * (float(kappa) + (1.0 + float(amp)) ** 2)
 
 
-def _mT(x: np.ndarray) -> np.ndarray:
-    return np.swapaxes(x, -1, -2)
-
-
-def _sym(x: np.ndarray) -> np.ndarray:
-    x = x + _mT(x)
-    x *= 0.5
-    return x
-
-
 def _sym_into(x: np.ndarray, out: np.ndarray) -> None:
     """``out = (x + x^T) / 2`` (``out`` may be a strided view)."""
-    np.add(x, _mT(x), out=out)
+    np.add(x, mT(x), out=out)
     out *= 0.5
 
 
@@ -311,12 +302,12 @@ def _usolve(L: np.ndarray, B: np.ndarray) -> np.ndarray:
     if m == 1:
         return B / L
     if m > _SMALL_M:
-        return np.linalg.solve(_mT(L), B)
+        return np.linalg.solve(mT(L), B)
     X = np.empty(B.shape)
     for i in range(m - 1, -1, -1):
         v = B[..., i, :]
         if i < m - 1:
-            v = v - (_mT(L[..., i + 1 :, i : i + 1]) @ X[..., i + 1 :, :])[..., 0, :]
+            v = v - (mT(L[..., i + 1 :, i : i + 1]) @ X[..., i + 1 :, :])[..., 0, :]
         X[..., i, :] = v / L[..., i, i, None]
     return X
 
@@ -359,20 +350,20 @@ def decorrelate_stack(
     if Lh is None:
         return _first_not_pd(HRH)
     if AT is None:
-        AT = np.ascontiguousarray(_mT(A))
+        AT = np.ascontiguousarray(mT(A))
     yd = y - _mv(D, u) if u.shape[1] else y
     if not np.any(GSH):
         c = _mv(B, u) if u.shape[1] else np.zeros((A.shape[0], A.shape[1]))
         return Decorrelation(AT, GQG, np.zeros(GSH.shape), c, yd)
-    Y = _lsolve(Lh, _mT(GSH))  # chol^-1 (G S H^T)^T
+    Y = _lsolve(Lh, mT(GSH))  # chol^-1 (G S H^T)^T
     JT = _usolve(Lh, Y)  # J^T = (H R H^T)^-1 (G S H^T)^T
-    J = _mT(JT)
+    J = mT(JT)
     # in place where possible: every (T, n, n) pass counts
-    AbarT = _mT(C) @ JT
+    AbarT = mT(C) @ JT
     np.subtract(AT, AbarT, out=AbarT)
-    GQbarG = _mT(Y) @ Y  # G S H^T (H R H^T)^-1 H S^T G^T
+    GQbarG = mT(Y) @ Y  # G S H^T (H R H^T)^-1 H S^T G^T
     np.subtract(GQG, GQbarG, out=GQbarG)
-    GQbarG = _sym(GQbarG)
+    GQbarG = sym(GQbarG)
     c = _mv(J, yd)
     if u.shape[1]:
         c += _mv(B, u)
@@ -459,7 +450,7 @@ def _fold(
     Products are arranged so that no right operand is a transposed view
     (numpy's batched ``X @ Y^T`` is twice as slow as ``X^T @ Y``)."""
     n = Ft.shape[-1]
-    F = _mT(Ft)
+    F = mT(Ft)
     if acc is None:
         Ap, bp, Cp = F, mvec, Qe
         J = np.zeros(Ft.shape)
@@ -470,7 +461,7 @@ def _fold(
         Cp = F @ (acc.C @ Ft) + Qe
         J, eta = acc.J, acc.eta
     HC = H @ Cp
-    S = _sym(HC @ _mT(H) + R)
+    S = sym(HC @ mT(H) + R)
     Ls = _chol(S)
     if Ls is None:
         k = _first_not_pd(S)
@@ -482,11 +473,11 @@ def _fold(
     V = X[..., :n]  # chol^-1 H A~
     v = X[..., n]  # chol^-1 (y' - H b~)
     GT = X[..., n + 1 :]  # chol^-1 H C~
-    Vt = _mT(V)
-    A2 = Ap - _mT(GT) @ V  # (I - K H) A~
-    b2 = bp + _mv(_mT(GT), v)  # b~ + K (y' - H b~)
-    C2 = Cp - _mT(GT) @ GT  # C~ - K S K^T
-    return _General(A2, b2, _sym(C2), J + Vt @ V, eta + _mv(Vt, v), last)
+    Vt = mT(V)
+    A2 = Ap - mT(GT) @ V  # (I - K H) A~
+    b2 = bp + _mv(mT(GT), v)  # b~ + K (y' - H b~)
+    C2 = Cp - mT(GT) @ GT  # C~ - K S K^T
+    return _General(A2, b2, sym(C2), J + Vt @ V, eta + _mv(Vt, v), last)
 
 
 def _combine(i: _General, j: _General) -> _General:
@@ -507,12 +498,12 @@ def _combine(i: _General, j: _General) -> _General:
     Wb = X[..., n]
     WC = X[..., n + 1 :]
     Aj = j.A
-    WAt = _mT(WA)
+    WAt = mT(WA)
     return _General(
         A=Aj @ WA,
         b=_mv(Aj, Wb) + j.b,
-        C=_sym(Aj @ WC @ _mT(Aj) + j.C),
-        J=_sym(WAt @ j.J @ i.A + i.J),
+        C=sym(Aj @ WC @ mT(Aj) + j.C),
+        J=sym(WAt @ j.J @ i.A + i.J),
         eta=_mv(WAt, j.eta - _mv(j.J, i.b)) + i.eta,
         last=j.last,
     )
@@ -546,7 +537,7 @@ def _combine_prefix(b: np.ndarray, C: np.ndarray, j: _General) -> tuple[np.ndarr
             f"t={int(j.last[k])} to their prefix (non-finite or overflowing values)"
         ) from None
     Aj = j.A
-    return _mv(Aj, X[..., 0]) + j.b, _sym(Aj @ X[..., 1:] @ _mT(Aj) + j.C)
+    return _mv(Aj, X[..., 0]) + j.b, sym(Aj @ X[..., 1:] @ mT(Aj) + j.C)
 
 
 def _prefix_scan(el: _General) -> tuple[np.ndarray, np.ndarray]:
@@ -647,13 +638,13 @@ def scan_filter(
             prev = slice(j - 1, full, ell)
             cur = slice(j, full, ell)
             acc = _fold(acc, AbarT[prev], GQbarG[prev], c[prev], C[cur], HRH[cur], yd[cur], acc.last + 1)
-        acc = acc._replace(J=_sym(acc.J))  # J + V^T V: symmetric up to rounding
+        acc = acc._replace(J=sym(acc.J))  # J + V^T V: symmetric up to rounding
         # step 2: scan across blocks; prefix k = filtered moments at the end of block k
         pb, pC = _prefix_scan(acc)
         s = np.arange(1, nb) * ell  # block starts
         AT = AbarT[s - 1]
-        starts_x[1:] = _mv(_mT(AT), pb) + c[s - 1]
-        starts_P[1:] = _sym(_mT(AT) @ (pC @ AT) + GQbarG[s - 1])
+        starts_x[1:] = _mv(mT(AT), pb) + c[s - 1]
+        starts_P[1:] = sym(mT(AT) @ (pC @ AT) + GQbarG[s - 1])
 
     # step 3: the filter within every block, all blocks at once; results are
     # written straight into the outputs (strided views, no copies)
@@ -674,10 +665,10 @@ def scan_filter(
         Cj, Rj, AjT = C[sl], HRH[sl], AbarT[sl]
         x, P = xp[sl], Pp[sl]
         CP = Cj @ P
-        Om = CP @ _mT(Cj)
+        Om = CP @ mT(Cj)
         Om += Rj
         if m > 1:
-            Om = _sym(Om)
+            Om = sym(Om)
         Om_[sl] = Om
         if m == 1:  # a positive finite scalar; no factor needed
             ok = bool(np.all(Om > 0.0) and np.all(np.isfinite(Om)))
@@ -694,12 +685,12 @@ def scan_filter(
         LT = CP / Om if m == 1 else _usolve(Lo, _lsolve(Lo, CP))  # Omega^-1 C P = L^T
         LT_[sl] = LT
         KT_[sl] = LT @ AjT  # K^T = (Abar L + J)^T; J added below
-        x_f = x + _mv(_mT(LT), xi)
+        x_f = x + _mv(mT(LT), xi)
         xf[sl] = x_f
-        ILt = _mT(Cj) @ LT
+        ILt = mT(Cj) @ LT
         np.subtract(eye, ILt, out=ILt)  # (I - L C)^T
-        P_f = _mT(ILt) @ (P @ ILt)  # Joseph form
-        P_f += _mT(LT) @ (Rj @ LT)
+        P_f = mT(ILt) @ (P @ ILt)  # Joseph form
+        P_f += mT(LT) @ (Rj @ LT)
         _sym_into(P_f, Pf[sl])
         # prediction to sample j + 1 of every block; for j = ell - 1 that is
         # the next block's start (known from step 2) except after the last block
@@ -710,11 +701,11 @@ def scan_filter(
             AjT, x_f, sl = AjT[-1:], x_f[-1:], slice(T - 1, T)
         else:
             break
-        xp[nxt] = _mv(_mT(AjT), x_f) + c[sl]
-        Pn = _mT(AjT) @ (Pf[sl] @ AjT)
+        xp[nxt] = _mv(mT(AjT), x_f) + c[sl]
+        Pn = mT(AjT) @ (Pf[sl] @ AjT)
         Pn += GQbarG[sl]
         _sym_into(Pn, Pp[nxt])
-    KT_ += _mT(Jd)
+    KT_ += mT(Jd)
     if not np.all(np.isfinite(Pp[T])):  # every other P_{t|t-1} went through a factorisation
         raise NumericalError(f"the predicted covariance P_{{t|t-1}} is not finite at t={T}")
     # log N(xi_t; 0, Omega_t) for all t at once (each Omega_t was factored above)
@@ -725,6 +716,6 @@ def scan_filter(
     logdet = 2.0 * np.sum(np.log(np.diagonal(Lo, axis1=-2, axis2=-1)), axis=-1)
     ll = -0.5 * (m * math.log(2.0 * math.pi) + logdet + np.sum(z * z, axis=-1))
     out = ScanMoments(
-        xp=xp, Pp=Pp, xf=xf, Pf=Pf, xi=xi_, Omega=Om_, K=_mT(KT_), L=_mT(LT_), log_likelihood_terms=ll
+        xp=xp, Pp=Pp, xf=xf, Pf=Pf, xi=xi_, Omega=Om_, K=mT(KT_), L=mT(LT_), log_likelihood_terms=ll
     )
     return out

@@ -1,0 +1,251 @@
+"""The exact filter as a streaming component (:class:`LPVKalmanFilter`), and the
+fast reading of one sample's inputs it shares with the truncated filter."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from ...errors import DimensionError, NonFiniteError, abbreviate
+from ...protocol import Port
+from ...systems.affine import AffineLPV, NoiseCovariance
+from ...validation import as_matrix, as_vector, check_finite, check_positive_definite
+from .model import KalmanModel
+from .recursion import KalmanState, KalmanStep, initial_moments, kalman_step
+
+__all__ = ["LPVKalmanFilter", "InputReader", "input_ports"]
+
+# ---------------------------------------------------------------------------
+# streaming
+# ---------------------------------------------------------------------------
+class InputReader:
+    """Fast validation of one sample's inputs (p, u, y) for a streaming filter."""
+
+    def __init__(self, km: KalmanModel) -> None:
+        self.km = km
+        self.names = ("p", "u", "y") if km.nu else ("p", "y")
+        self.sizes = {"p": km.n_p, "u": km.nu, "y": km.ny}
+        self._nu = km.nu
+        self._keys = frozenset(self.names)
+
+    def _vec(self, inputs: Mapping[str, Any], name: str) -> np.ndarray:
+        try:
+            value = inputs[name]
+        except KeyError:
+            raise DimensionError(
+                f"input {name!r} is missing; the inputs are {', '.join(self.names)}"
+            ) from None
+        try:
+            a = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            a = None
+        n = self.sizes[name]
+        if a is None or a.shape != (n,):
+            a = as_vector(value, name, n)
+        return a
+
+    def read(self, inputs: Mapping[str, Any], t: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if len(inputs) != len(self.names) or not self._keys.issuperset(inputs):
+            extra = sorted(set(inputs) - self._keys)
+            if extra:
+                raise DimensionError(f"unknown input {abbreviate(extra[0], 30)}; the inputs are "
+                                     f"{', '.join(self.names)}")
+        p = self._vec(inputs, "p")
+        y = self._vec(inputs, "y")
+        u = self._vec(inputs, "u") if self._nu else _EMPTY
+        total = sum(p.tolist()) + sum(y.tolist()) + (sum(u.tolist()) if self._nu else 0.0)
+        if not math.isfinite(total):  # NaN/inf somewhere (or an overflowing sum)
+            for name, arr in (("p", p), ("u", u), ("y", y)):
+                check_finite(arr, f"{name} at t={t}")
+        self.km.check_p(p, t)
+        return p, u, y
+
+
+_EMPTY = np.zeros(0)
+_EMPTY.setflags(write=False)
+
+
+def input_ports(km: KalmanModel) -> tuple[Port, ...]:
+    ports = [Port("p", (km.n_p,), "scheduling p_t")]
+    if km.nu:
+        ports.append(Port("u", (km.nu,), "input u_t"))
+    ports.append(Port("y", (km.ny,), "measurement y_t"))
+    return tuple(ports)
+
+
+class LPVKalmanFilter:
+    """The exact LPV Kalman filter (4a)-(4e) as a streaming estimator.
+
+    Follows the streaming protocol (:mod:`lpvest.protocol`).
+
+    Inputs (per sample ``t``): ``p`` (n_p,), ``u`` (n_u,) only if n_u > 0,
+    ``y`` (n_y,).
+
+    Outputs: ``xhat`` (n_x,) filtered ``x^_{t|t}``; ``P`` (n_x, n_x) its
+    covariance ``P_{t|t}``; ``xpred`` (n_x,) ``x^_{t+1|t}``; ``Ppred``
+    (n_x, n_x) ``P_{t+1|t}``; ``yhat`` (n_y,) ``C x^_{t|t-1} + D u_t``;
+    ``innovation`` (n_y,) ``xi_t``; ``K`` (n_x, n_y) ``K_t``; ``Omega``
+    (n_y, n_y) ``Omega_t``; ``loglik`` (scalar) ``log p(y_0, ..., y_t)``, the
+    log-likelihood of the samples up to and including this one.
+
+    Parameters
+    ----------
+    model : AffineLPV
+    x0, P0 : array_like, optional
+        Initial mean and covariance of ``x_0`` (default: the model's ``x0``,
+        ``P0``).
+    noise : NoiseCovariance or array_like, optional
+        The noise covariance the filter assumes (default: the model's).
+
+    Examples
+    --------
+    >>> from lpvest import load_system
+    >>> kf = LPVKalmanFilter(load_system("cox-toth-truncation").model())
+    >>> out = kf.step({"p": [0.0], "u": [1.0], "y": [0.1, -0.2]})
+    >>> out["xhat"].shape, kf.t
+    ((2,), 1)
+    """
+
+    def __init__(
+        self,
+        model: AffineLPV,
+        *,
+        x0: object | None = None,
+        P0: object | None = None,
+        noise: NoiseCovariance | object | None = None,
+    ) -> None:
+        self._km = KalmanModel(model, noise=noise)
+        self._x0, self._P0 = initial_moments(self._km, x0, P0)
+        self._x0.setflags(write=False)
+        self._P0.setflags(write=False)
+        self._reader = InputReader(self._km)
+        n, m = self._km.nx, self._km.ny
+        self._in = input_ports(self._km)
+        self._out = (
+            Port("xhat", (n,), "filtered state x_{t|t}"),
+            Port("P", (n, n), "covariance P_{t|t} of xhat"),
+            Port("xpred", (n,), "predicted state x_{t+1|t}"),
+            Port("Ppred", (n, n), "covariance P_{t+1|t} of xpred"),
+            Port("yhat", (m,), "one-step output prediction C x_{t|t-1} + D u_t"),
+            Port("innovation", (m,), "innovation xi_t = y_t - yhat"),
+            Port("K", (n, m), "predictor gain K_t (4c)"),
+            Port("Omega", (m, m), "innovation covariance Omega_t (4e)"),
+            Port("loglik", (), "log-likelihood log p(y_0..y_t) of the samples up to this one"),
+        )
+        self.reset()
+
+    # -- protocol ---------------------------------------------------------------
+    @property
+    def input_ports(self) -> tuple[Port, ...]:
+        return self._in
+
+    @property
+    def output_ports(self) -> tuple[Port, ...]:
+        return self._out
+
+    @property
+    def kalman_model(self) -> KalmanModel:
+        return self._km
+
+    def reset(self) -> None:
+        """Back to ``x^_{0|-1} = x0``, ``P_{0|-1} = P0``, ``t = 0``."""
+        self._state = KalmanState(self._x0, self._P0, 0)
+        self._loglik = 0.0
+        self._pending: tuple[bytes, KalmanStep] | None = None
+
+    @property
+    def state(self) -> KalmanState:
+        """``x^_{t|t-1}``, ``P_{t|t-1}`` and ``t`` of the next sample."""
+        return self._state
+
+    @property
+    def t(self) -> int:
+        return self._state.t
+
+    @property
+    def log_likelihood(self) -> float:
+        """``log p(y_0, ..., y_{t-1})`` of the samples consumed so far."""
+        return self._loglik
+
+    def _compute(self, inputs: Mapping[str, Any], keep: bool = False) -> tuple[bytes, KalmanStep]:
+        st = self._state
+        p, u, y = self._reader.read(inputs, st.t)
+        pend = self._pending
+        key = b""
+        if keep or pend is not None:  # outputs() then step() on the same sample: compute once
+            key = p.tobytes() + u.tobytes() + y.tobytes()
+            if pend is not None and pend[0] == key and pend[1].t == st.t:
+                return pend
+        return key, kalman_step(st, self._km._step_matrices(p), u, y)
+
+    def process(self, p: object, u: object | None, y: object) -> KalmanStep:
+        """Consume sample ``t`` and advance; returns every quantity of the step
+        (``K_t``, ``Omega_t``, ``L_t``, ...)."""
+        inputs = {"p": p, "y": y} if not self._km.nu else {"p": p, "u": u, "y": y}
+        return self._advance(self._compute(inputs)[1])
+
+    def peek(self, p: object, u: object | None, y: object) -> KalmanStep:
+        """Like :meth:`process` without changing the filter."""
+        inputs = {"p": p, "y": y} if not self._km.nu else {"p": p, "u": u, "y": y}
+        return self._compute(inputs)[1]
+
+    def _advance(self, res: KalmanStep) -> KalmanStep:
+        nxt = res.next
+        nxt.x.setflags(write=False)
+        nxt.P.setflags(write=False)
+        self._state = nxt
+        self._loglik += res.log_likelihood
+        self._pending = None
+        return res
+
+    @staticmethod
+    def _as_dict(r: KalmanStep, loglik: float) -> dict[str, np.ndarray]:
+        return {
+            "xhat": r.x_filt,
+            "P": r.P_filt,
+            "xpred": r.next.x,
+            "Ppred": r.next.P,
+            "yhat": r.y_pred,
+            "innovation": r.innovation,
+            "K": r.K,
+            "Omega": r.Omega,
+            "loglik": np.array(loglik + r.log_likelihood),
+        }
+
+    def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+        """Estimates at the current sample; no state change."""
+        key, res = self._compute(inputs, keep=True)
+        self._pending = (key, res)
+        return self._as_dict(res, self._loglik)
+
+    def step(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+        """Consume the current sample, return :meth:`outputs`, advance."""
+        loglik = self._loglik
+        return self._as_dict(self._advance(self._compute(inputs)[1]), loglik)
+
+    def get_state(self) -> dict[str, Any]:
+        st = self._state
+        return {"x": st.x.copy(), "P": st.P.copy(), "t": int(st.t), "log_likelihood": float(self._loglik)}
+
+    def set_state(self, state: Mapping[str, Any]) -> None:
+        n = self._km.nx
+        try:
+            x = as_vector(state["x"], "state x", n)
+            P = as_matrix(state["P"], "state P", (n, n))
+            t = int(state["t"])
+            ll = float(state["log_likelihood"])
+        except KeyError as exc:
+            raise DimensionError(f"state is missing {exc.args[0]!r}") from None
+        P = check_positive_definite(P, "state P", semidefinite=True)
+        if t < 0:
+            raise DimensionError(f"state t = {t} is negative")
+        if not math.isfinite(ll):
+            raise NonFiniteError(f"state log_likelihood is {ll}")
+        x.setflags(write=False)
+        P.setflags(write=False)
+        self._state = KalmanState(x, P, t)
+        self._loglik = ll
+        self._pending = None
