@@ -219,7 +219,9 @@ def cmd_systems(args: argparse.Namespace) -> int:
         for line in system.description.strip().splitlines():
             print(f"  {line}")
     if system.parameters:
-        print("  parameters: " + ", ".join(f"{k} = {v:g}" for k, v in system.parameters.items()))
+        ranges = system.parameter_ranges
+        print("  parameters: " + ", ".join(f"{k} = {v:g}" + (f" in {ranges[k].text()}" if k in ranges else "")
+                                           for k, v in system.parameters.items()))
     if system.scheduling is not None:
         s = system.scheduling
         box = ", ".join(f"{n} in [{lo:g}, {hi:g}]" for n, lo, hi in zip(s.names, s.lower, s.upper, strict=True))

@@ -14,7 +14,8 @@ The format, by example (see ``models/*.toml`` for complete files)::
     default = "plant"                 # the model used when none is named
 
     [parameters]                      # optional named numbers, usable in formulas
-    rho = 1.0
+    gain = 1.0
+    rho = { value = 1.0, lower = 1.0, upper = 21.0, description = "stiffness" }  # with a range
 
     [scheduling]                      # the scheduling box (LPV models)
     names = ["theta"]
@@ -31,6 +32,10 @@ The format, by example (see ``models/*.toml`` for complete files)::
 Matrix entries may be formulas of the parameters (``"-0.05*rho"``); LTV
 coefficients are formulas of ``t``. See :mod:`lpvest.expressions` for what a
 formula may contain.
+
+A parameter with ``lower``/``upper`` keeps them: an override outside is an
+error naming the parameter, and an FMU built from the file declares them as
+the FMI parameter's ``min``/``max`` (so a host refuses such a value too).
 """
 
 from __future__ import annotations
@@ -69,6 +74,7 @@ from .tomlfiles import parse_toml, read_toml
 
 __all__ = [
     "SystemFile",
+    "ParameterRange",
     "Model",
     "load_system",
     "loads_system",
@@ -91,6 +97,26 @@ MODEL_TYPES: dict[str, type] = {
 }
 
 
+@dataclass(frozen=True)
+class ParameterRange:
+    """The declared range and description of a model parameter (either
+    bound may be absent)."""
+
+    lower: float | None = None
+    upper: float | None = None
+    description: str = ""
+
+    def contains(self, value: float) -> bool:
+        """Whether ``value`` lies within the declared bounds."""
+        return (self.lower is None or value >= self.lower) and (self.upper is None or value <= self.upper)
+
+    def text(self) -> str:
+        """``[lower, upper]`` with ``-inf``/``inf`` for a missing bound."""
+        lo = "-inf" if self.lower is None else f"{self.lower:.15g}"
+        hi = "inf" if self.upper is None else f"{self.upper:.15g}"
+        return f"[{lo}, {hi}]"
+
+
 @dataclass(frozen=True, eq=False)
 class SystemFile:
     """A loaded model file: metadata, scheduling box and the models."""
@@ -104,6 +130,8 @@ class SystemFile:
     source: str = ""
     description: str = ""
     path: Path | None = None
+    #: declared ranges of the parameters that have one (``[parameters]`` tables)
+    parameter_ranges: Mapping[str, ParameterRange] = field(default_factory=dict)
 
     def model(self, key: str | None = None) -> Model:
         """The model named ``key`` (default: the file's default model)."""
@@ -213,6 +241,20 @@ class _Reader:
             raise self.error(where, f"{number:.6g} is too large: numbers in a model file are at most "
                                     f"{MAX_MAGNITUDE:g} in magnitude")
         return number
+
+    def ranged_parameter(self, spec: dict, where: str) -> tuple[float, ParameterRange]:
+        """``{ value = V, lower = L, upper = U, description = "..." }`` (the
+        bounds and the description optional): the value and its range."""
+        self.keys(spec, where, {"value", "lower", "upper", "description"}, {"value"})
+        value = self.number(spec["value"], f"{where}.value")
+        lower = self.number(spec["lower"], f"{where}.lower") if "lower" in spec else None
+        upper = self.number(spec["upper"], f"{where}.upper") if "upper" in spec else None
+        if lower is not None and upper is not None and not lower <= upper:
+            raise self.error(where, f"lower {lower:.15g} is above upper {upper:.15g}")
+        rng = ParameterRange(lower, upper, self.string(spec, "description", where, ""))
+        if not rng.contains(value):
+            raise self.error(f"{where}.value", f"{value:.15g} is outside its declared range {rng.text()}")
+        return value, rng
 
     def numbers(self, value: Any, where: str) -> list[float]:
         if not isinstance(value, list):
@@ -589,19 +631,26 @@ def _build(
     r.system_name = name
     params_tab = r.table(data, "parameters", "parameters", required=False)
     params: dict[str, float] = {}
+    ranges: dict[str, ParameterRange] = {}
     for k, v in params_tab.items():
         if not k.isidentifier() or k.startswith("__"):
             raise r.error(f"parameters.{_key(k)}", "is not a valid name (expected a letter, then letters, digits, _)")
         if k in _RESERVED:
             raise r.error(f"parameters.{k}", f"{k!r} is a name formulas reserve (t, shift, the functions and "
                                              "constants); choose another")
-        params[k] = r.number(v, f"parameters.{k}")
+        if isinstance(v, dict):
+            params[k], ranges[k] = r.ranged_parameter(v, f"parameters.{k}")
+        else:
+            params[k] = r.number(v, f"parameters.{k}")
     for k, v in (overrides or {}).items():
         if k not in params:
             raise r.error("parameters", f"no parameter {abbreviate(k, 30)} to override (known: {_names(params)})")
         if isinstance(v, bool) or not isinstance(v, int | float | np.integer | np.floating):
             raise r.error(f"parameters.{k}", f"override: expected a number, found {_kind(v)}")
         params[k] = r.number(float(v), f"parameters.{k} (override)")
+        if k in ranges and not ranges[k].contains(params[k]):
+            raise r.error(f"parameters.{k}", f"override {params[k]:.15g} is outside its declared range "
+                                             f"{ranges[k].text()}")
     r.parameters = params
     space = r.scheduling(data)
     models_tab = r.table(data, "models", "models")
@@ -621,6 +670,7 @@ def _build(
         source=r.string(sysmeta, "source", "system", ""),
         description=r.string(sysmeta, "description", "system", ""),
         path=path,
+        parameter_ranges=ranges,
     )
 
 
@@ -655,6 +705,8 @@ def _dependence_out(dep: AffineDependence, out: dict) -> None:
     if bounds:
         out["bounds"] = bounds
     for key, stack in dep.coefficients.items():
+        if 0 in stack.shape[1:]:  # no known input: B and D have no columns, the file leaves them out
+            continue
         nonzero = [i for i in range(stack.shape[0]) if i == 0 or np.any(stack[i])]
         if nonzero == [0]:
             out[key] = _matrix_out(stack[0])
@@ -746,6 +798,19 @@ def _model_out(model: Model) -> dict:
     raise ModelFileError(f"{type(model).__name__} cannot be written to a model file")
 
 
+def _parameter_out(value: float, rng: ParameterRange | None) -> Any:
+    if rng is None:
+        return _num(value)
+    out: dict[str, Any] = {"value": _num(value)}
+    if rng.lower is not None:
+        out["lower"] = _num(rng.lower)
+    if rng.upper is not None:
+        out["upper"] = _num(rng.upper)
+    if rng.description:
+        out["description"] = rng.description
+    return out
+
+
 def dump_system(system: SystemFile) -> str:
     """The system as TOML text. Matrices are written with their values (model
     parameters already applied); loading the text gives the same models."""
@@ -758,7 +823,8 @@ def dump_system(system: SystemFile) -> str:
         meta["description"] = system.description
     data: dict[str, Any] = {"system": meta}
     if system.parameters:
-        data["parameters"] = dict(system.parameters)
+        data["parameters"] = {k: _parameter_out(v, system.parameter_ranges.get(k))
+                              for k, v in system.parameters.items()}
     if system.scheduling is not None:
         s = system.scheduling
         data["scheduling"] = {

@@ -29,7 +29,7 @@ def test_systems_show(name, capsys):
 def test_systems_show_peixoto_details(capsys):
     main(["systems", "show", "peixoto-ex2", "--param", "rho=3"])
     out = capsys.readouterr().out
-    assert "parameters: rho = 3" in out
+    assert "parameters: rho = 3 in [1, 21]" in out
     assert "-0.15" in out  # -0.05 * rho
     assert "alpha_1 = (1 - theta)/2" in out
 

@@ -90,6 +90,12 @@ def test_model_description_declares_ranges_dependencies_and_capabilities(fmus):
     initial = {u.get("index") for u in root.find("ModelStructure/InitialUnknowns")}
     assert initial == set(deps)
     # the FMU's own copy of lpvest, under a build-unique name (lpvest.fmi.bundle), never the plain name
+    # a model parameter with a declared range (models/peixoto_ex2.toml) declares it
+    ex2 = ET.fromstring(z_read(fmus["PeixotoEx2Plant"], "modelDescription.xml"))
+    (rho,) = [sv for sv in ex2.iter("ScalarVariable") if sv.get("name") == "rho"]
+    assert (rho.get("causality"), float(rho.find("Real").get("min")), float(rho.find("Real").get("max"))) == (
+        "parameter", 1.0, 21.0)
+    assert "the paper's range" in rho.get("description")
     package = json.loads(z_read(fmus["PeixotoEx1Plant"], "resources/lpvest_fmu.json"))["package"]
     assert package.startswith("lpvest_") and f"resources/{package}/__init__.py" in names
     assert not any(n.startswith(("resources/lpvest/", "resources/pythonfmu/")) for n in names)
@@ -471,6 +477,7 @@ def test_bad_input_is_fmi2error_naming_the_variable_and_the_state_is_kept(fmus, 
     ("CoxTothEx1Plant", {"seed": -1}, "parameter seed = -1 is outside its declared range [0, 2147483647]"),
     ("PeixotoEx1Plant", {"x0[2]": math.nan}, "parameter x0[2] = nan is not finite"),
     ("SridharLtvPlant", {"rtol": 0.0}, "parameter rtol = 0 is outside its declared range"),
+    ("PeixotoEx2Plant", {"rho": 25.0}, "parameter rho = 25 is outside its declared range [1, 21]"),
     ("PeixotoEx1MovingAverage", {"window": 2000}, "window = 2000 must lie in [1, 1000]"),
 ])
 def test_invalid_parameter_is_fmi2error_naming_it_and_the_instance_can_be_freed(fmus, name, params, expected):

@@ -83,6 +83,55 @@ def test_parameter_override():
     assert at5.model().vertices.A[0, 1, 1] == pytest.approx(-0.25)
     with pytest.raises(ModelFileError, match="no parameter 'gamma' to override \\(known: rho\\)"):
         load_system("peixoto-ex2", parameters={"gamma": 1.0})
+    # rho carries the paper's range [1, 21]: an override outside is refused, naming it
+    assert (base.parameter_ranges["rho"].lower, base.parameter_ranges["rho"].upper) == (1.0, 21.0)
+    assert load_system("peixoto-ex2", parameters={"rho": 21.0}).parameters == {"rho": 21.0}
+    with pytest.raises(ModelFileError, match=r"parameters\.rho: override 21\.5 is outside its declared range \[1, 21\]"):
+        load_system("peixoto-ex2", parameters={"rho": 21.5})
+
+
+RANGED = """
+[system]
+name = "ranged"
+title = "parameters with ranges"
+
+[parameters]
+k = { value = 0.5, lower = 0.0, description = "a gain" }
+m = 2.0
+
+[scheduling]
+names = ["p"]
+lower = [-1.0]
+upper = [1.0]
+
+[models.m]
+type = "affine"
+A = [["0.5*k"]]
+C = [[1.0]]
+Q = [[0.1]]
+R = [["0.01*m"]]
+"""
+
+
+@pytest.mark.parametrize(("old", "new", "message"), [
+    ("value = 0.5, ", "", r"parameters\.k: missing required key 'value'"),
+    ("value = 0.5", "value = -1", r"parameters\.k\.value: -1 is outside its declared range \[0, inf\]"),
+    ("lower = 0.0", "lower = 1.0, upper = 0.0", r"parameters\.k: lower 1 is above upper 0"),
+    ("lower = 0.0", "lower = 0.0, step = 1", r"parameters\.k: unknown key 'step'"),
+    ("lower = 0.0", 'lower = "x"', r"parameters\.k\.lower: "),
+])
+def test_ranged_parameters_are_checked(tmp_path, old, new, message):
+    path = _write(tmp_path, RANGED.replace(old, new, 1))
+    with pytest.raises(ModelFileError, match=f"^{path}: {message}"):
+        load_system(path)
+
+
+def test_ranged_parameters_survive_a_round_trip(tmp_path):
+    system = load_system(_write(tmp_path, RANGED))
+    assert system.parameters == {"k": 0.5, "m": 2.0}
+    assert system.parameter_ranges["k"].lower == 0.0 and system.parameter_ranges["k"].upper is None
+    again = loads_system(dump_system(system))
+    assert again.parameter_ranges == system.parameter_ranges and again.parameters == system.parameters
 
 
 GOOD = """
@@ -275,8 +324,9 @@ TRUNC = (Path(__file__).resolve().parent.parent / "models" / "cox_toth_truncatio
          r"models\.plant\.Q\[1,1\]: -1e\+308 is too large: numbers in a model file are at most 1e\+100 in magnitude$"),
         (EX2.replace('"-0.05*rho"', "1e308"), r"models\.plant\.vertex\[1\]\.A\[2,2\]: 1e\+308 is too large"),
         (EX2.replace('"-0.05*rho"', "nan"), rf"{A22}: expected a finite number, found nan$"),
-        (EX2.replace("rho = 1.0", "rho = inf"), r"parameters\.rho: expected a finite number, found inf$"),
-        (EX2.replace("rho = 1.0", "t = 1.0"), r"parameters\.t: 't' is a name formulas reserve"),
+        (EX2.replace("rho = { value = 1.0,", "rho = { value = inf,"),
+         r"parameters\.rho\.value: expected a finite number, found inf$"),
+        (EX2.replace("\nrho = {", "\nt = {"), r"parameters\.t: 't' is a name formulas reserve"),
         # was RecursionError inside the TOML parser
         (EX2.replace('"-0.05*rho"', "[" * 500 + "1" + "]" * 500),
          r"not valid TOML: arrays or tables nested too deeply$"),

@@ -160,8 +160,15 @@ class LpvestSlave(Fmi2Slave):
     def model_parameters(self) -> list[Parameter]:
         """The model file's ``[parameters]`` as FMU parameters."""
         system = self.system()
-        return [Parameter(n, float(v), f"model parameter {n} of {system.name}")
-                for n, v in system.parameters.items() if n in self.spec.get("model_parameters", [])]
+        out = []
+        for n, v in system.parameters.items():
+            if n not in self.spec.get("model_parameters", []):
+                continue
+            rng = system.parameter_ranges.get(n)
+            what = f"model parameter {n} of {system.name}" + (f": {rng.description}" if rng and rng.description else "")
+            out.append(Parameter(n, float(v), what, minimum=rng.lower if rng else None,
+                                 maximum=rng.upper if rng else None))
+        return out
 
     def scheduling_range(self, port: Any, index: int) -> tuple[float | None, float | None, str]:
         """The declared range of ``p[j]`` (the model's scheduling box) and of
