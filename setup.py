@@ -8,6 +8,7 @@ installed as the data package ``lpvest._models``; the FMU slave scripts in
 from setuptools import find_packages, setup
 
 setup(
-    packages=[*find_packages(include=["lpvest", "lpvest.*"]), "lpvest._models", "lpvest._fmus"],
-    package_dir={"lpvest._models": "models", "lpvest._fmus": "fmus"},
+    packages=[*find_packages(include=["lpvest", "lpvest.*"]), "lpvest._models", "lpvest._models.designs",
+              "lpvest._fmus"],
+    package_dir={"lpvest._models": "models", "lpvest._models.designs": "models/designs", "lpvest._fmus": "fmus"},
 )

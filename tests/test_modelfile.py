@@ -86,7 +86,8 @@ def test_parameter_override():
     # rho carries the paper's range [1, 21]: an override outside is refused, naming it
     assert (base.parameter_ranges["rho"].lower, base.parameter_ranges["rho"].upper) == (1.0, 21.0)
     assert load_system("peixoto-ex2", parameters={"rho": 21.0}).parameters == {"rho": 21.0}
-    with pytest.raises(ModelFileError, match=r"parameters\.rho: override 21\.5 is outside its declared range \[1, 21\]"):
+    with pytest.raises(ModelFileError, match=r"parameters\.rho: override 21\.5 is outside its declared range "
+                                             r"\[1, 21\]"):
         load_system("peixoto-ex2", parameters={"rho": 21.5})
 
 
