@@ -66,7 +66,8 @@ from scipy.linalg import qr  # noqa: E402
 
 from lpvest import load_system  # noqa: E402
 from lpvest.estimators import bspline as bs  # noqa: E402
-from lpvest.estimators.kernels import product_quadrature  # noqa: E402
+from lpvest.estimators.bspline import fit as bfit, regression as breg  # noqa: E402
+from lpvest.estimators.bspline.kernels import product_quadrature  # noqa: E402
 
 
 def _median_ms(fn, repeat: int) -> tuple[float, float]:
@@ -90,50 +91,50 @@ def main() -> None:
     u, y = data.u, data.y
     m, h = t.size, t[1] - t[0]
     idx = np.arange(m)
-    plan = bs._build_plan(model, m, h, points=6, difference_order=2)
+    plan = breg.build_plan(model, m, h, points=6, difference_order=2)
     s = plan.n_unknowns
     spline = plan.blocks[0]
     knots = spline.knots
 
     def warm_fit(penalty=None):
-        return bs._fit(plan, 0.0, u, y, penalty=penalty, instants=idx, rank_rtol=1e-9)
+        return bfit.fit_window(plan, 0.0, u, y, penalty=penalty, instants=idx, rank_rtol=1e-9)
 
-    parts = bs._parts(plan, 0.0, u, y)
-    K = bs._compressed_system(plan, parts, None)
+    parts = breg.kernel_parts(plan, 0.0, u, y)
+    K = breg.compressed_system(plan, parts, None)
 
     def final_solve() -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
         A = K.copy()
         scale = np.sqrt(np.einsum("ij,ij->j", A[:, :s], A[:, :s]))
         A[:, :s] /= scale
         (_, _), Raug = qr(A, mode="raw", overwrite_a=True, check_finite=False)
-        bs._rank_check(plan, Raug[:s, :s], 1e-9)
-        bs._penalized_solve(Raug[:s, :s], Raug[:s, s], plan.penalty_matrix / scale, 0.0)
+        bfit._rank_check(plan, Raug[:s, :s], 1e-9)
+        bfit._penalized_solve(Raug[:s, :s], Raug[:s, s], plan.penalty_matrix / scale, 0.0)
         return Raug[:s, :s], Raug[:s, s], float(Raug[s, s] ** 2), plan.penalty_matrix / scale
 
     R, z, rho2, D = final_solve()
     beta = warm_fit().beta
-    dense = bs._dense_system(plan, parts)
+    dense = breg.dense_system(plan, parts)
     few = max(3, repeat // 3)
     rows = [
         ("cold fit (fit_kernel_model)", _median_ms(lambda: bs.fit_kernel_model(model, t, u, y), repeat),
          "target <= 50 ms"),
         ("  window geometry (_build_plan)", _median_ms(
-            lambda: bs._build_plan(model, m, h, points=6, difference_order=2), repeat), ""),
+            lambda: breg.build_plan(model, m, h, points=6, difference_order=2), repeat), ""),
         ("    quadrature: pieces, nodes, weights", _median_ms(
             lambda: product_quadrature(0.0, h, m, breakpoints=knots, points=6), repeat), ""),
         ("    B-spline basis at nodes/samples, bands", _median_ms(
-            lambda: bs._spline_block("a0", 0, spline.spline, plan.quad, t[-1] - t[0]), repeat), ""),
+            lambda: breg._spline_block("a0", 0, spline.spline, plan.quad, t[-1] - t[0]), repeat), ""),
         ("warm fit (geometry prepared once)", _median_ms(warm_fit, repeat), ""),
-        ("  quadrature: interpolation, moments", _median_ms(lambda: bs._parts(plan, 0.0, u, y), repeat), ""),
+        ("  quadrature: interpolation, moments", _median_ms(lambda: breg.kernel_parts(plan, 0.0, u, y), repeat), ""),
         ("    of which the a_0 band moments", _median_ms(
-            lambda: bs._band(spline, parts.quad, parts.y_nodes), repeat), ""),
+            lambda: breg._band(spline, parts.quad, parts.y_nodes), repeat), ""),
         (f"  segment-wise QR of [P, q] -> {K.shape[0]} rows", _median_ms(
-            lambda: bs._compressed_system(plan, parts, None), repeat), ""),
+            lambda: breg.compressed_system(plan, parts, None), repeat), ""),
         ("  final QR + rank check (SVD) + solve", _median_ms(final_solve, repeat), ""),
-        ("  state: coefficients, y_E, y_E'", _median_ms(lambda: bs._fitted(plan, parts, beta, u), repeat), ""),
+        ("  state: coefficients, y_E, y_E'", _median_ms(lambda: bfit._fitted(plan, parts, beta, u), repeat), ""),
         ("warm fit with GCV-chosen penalty", _median_ms(lambda: warm_fit("gcv"), repeat), ""),
-        ("  of which the lambda search", _median_ms(lambda: bs._choose_penalty(R, z, rho2, D, m), repeat), ""),
-        ("for comparison: dense P formed", _median_ms(lambda: bs._dense_system(plan, parts), few), ""),
+        ("  of which the lambda search", _median_ms(lambda: bfit._choose_penalty(R, z, rho2, D, m), repeat), ""),
+        ("for comparison: dense P formed", _median_ms(lambda: breg.dense_system(plan, parts), few), ""),
         ("  LAPACK QR of the dense [P, q]", _median_ms(
             lambda: qr(dense.copy(order="F"), mode="raw", overwrite_a=True, check_finite=False), few), ""),
     ]

@@ -79,7 +79,7 @@ from .estimators.bspline import (
     kernel_regression as kernel_regression,
     reconstruct_state as reconstruct_state,
 )
-from .estimators.kernels import KernelIdentity as KernelIdentity, kernel_identity as kernel_identity
+from .estimators.bspline.kernels import KernelIdentity as KernelIdentity, kernel_identity as kernel_identity
 
 # FMU area: streaming plants
 from .systems.streaming import DiscretePlant as DiscretePlant, LTVPlant as LTVPlant

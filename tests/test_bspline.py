@@ -26,7 +26,8 @@ from lpvest import (
     load_system,
     reconstruct_state,
 )
-from lpvest.estimators import bspline as bs, kernels
+from lpvest.estimators import bspline as bs
+from lpvest.estimators.bspline import basis, fit, kernels, model, observer, regression, state
 from lpvest.protocol import Sampled as StreamingEstimator, run_streaming
 from tests.tolerances import EPS, lstsq_rtol, roundoff
 
@@ -818,7 +819,8 @@ def test_observer_configuration_errors(stream):
 # -- runnable docstring examples -----------------------------------------------------------------
 
 
-@pytest.mark.parametrize("module", [bs, kernels])
+@pytest.mark.parametrize("module", [bs, kernels, model, basis, regression, fit, state, observer],
+                         ids=lambda m: m.__name__)
 def test_docstring_examples(module):
     result = doctest.testmod(module, optionflags=doctest.NORMALIZE_WHITESPACE)
     assert result.attempted > 0 and result.failed == 0

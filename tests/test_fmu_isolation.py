@@ -53,7 +53,7 @@ def _run(code: str, *, cwd: Path | None = None, timeout: int = 900) -> dict:
      ["numpy>=1.26"]),
     ("PeixotoEx1HinfPD", ["lpvest.estimators.hinf", "lpvest.design.result"],
      ["lpvest.design.hinf", "lpvest.fmi.designs", "lpvest.estimators.kalman"], ["numpy>=1.26"]),
-    ("SridharLtvBSplineObserver", ["lpvest.estimators.bspline", "lpvest.estimators.kernels"],
+    ("SridharLtvBSplineObserver", ["lpvest.estimators.bspline", "lpvest.estimators.bspline.kernels"],
      ["lpvest.estimators.kalman", "lpvest.cli"], ["numpy>=1.26", "scipy>=1.11"]),
 ])
 def test_an_fmu_carries_what_its_component_imports_and_says_what_it_needs(fmus, name, present, absent,

@@ -5,7 +5,7 @@ FMU adapter serves them all:
   streaming and batch (:mod:`~lpvest.estimators.kalman.scan`: its parallel-in-time form);
 - :mod:`~lpvest.estimators.truncated`: the truncated-memory filter (Theorem 1);
 - :mod:`~lpvest.estimators.hinf`: the H-infinity filter (2) of Peixoto et al. for a design;
-- :mod:`~lpvest.estimators.bspline` and :mod:`~lpvest.estimators.kernels`: the B-spline
+- :mod:`~lpvest.estimators.bspline` and :mod:`~lpvest.estimators.bspline.kernels`: the B-spline
   joint parameter and state estimator of Sridhar et al.
 """
 

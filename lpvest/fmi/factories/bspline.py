@@ -10,7 +10,8 @@ from typing import Any
 import numpy as np
 
 from ...errors import LpvestError, SamplingError
-from ...estimators.bspline import BSplineObserver, KernelModel, UnknownConstant, UnknownSpline
+from ...estimators.bspline.model import KernelModel, UnknownConstant, UnknownSpline
+from ...estimators.bspline.observer import BSplineObserver
 from ...protocol import TimedComponent
 
 __all__ = ["build", "SampledObserver", "coefficient"]

@@ -69,8 +69,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError, SamplingError, abbreviate
-from ..validation import as_vector
+from ...errors import DimensionError, SamplingError, abbreviate
+from ...validation import as_vector
 
 __all__ = [
     "ProductQuadrature",
@@ -555,7 +555,7 @@ def kernel_identity(
     >>> bool(np.max(np.abs(out.y - y)) < 1e-12)
     True
     """
-    from ..systems.ltv import TimeFunction
+    from ...systems.ltv import TimeFunction
 
     times, h = check_uniform_samples(t, "t")
     uu = as_vector(u, "u", times.size)
