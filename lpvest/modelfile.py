@@ -582,7 +582,7 @@ def loads_system(
 
 
 def load_system(
-    source: str | Path, *, parameters: Mapping[str, float] | None = None
+    source: str | Path, *, parameters: Mapping[str, float] | None = None, allow_outside_range: bool = False
 ) -> SystemFile:
     """Load a model file, or an example system by name.
 
@@ -593,6 +593,10 @@ def load_system(
         (``lpvest systems`` lists them).
     parameters : mapping, optional
         Values overriding the file's ``[parameters]`` (e.g. ``{"rho": 5.0}``).
+    allow_outside_range : bool, default False
+        Accept overrides outside a parameter's declared range (a study of what
+        happens beyond it, such as where the plant loses stability); by default
+        such an override is an error naming the parameter.
 
     Examples
     --------
@@ -604,7 +608,7 @@ def load_system(
     from .catalog import find_system
 
     path = find_system(source)
-    return _build(read_toml(path), str(path), parameters, path)
+    return _build(read_toml(path), str(path), parameters, path, allow_outside_range)
 
 
 #: Names a parameter may not have: the time variable of LTV formulas and the
@@ -618,7 +622,8 @@ def _names(keys: Iterable[str]) -> str:
 
 
 def _build(
-    data: dict, origin: str, overrides: Mapping[str, float] | None, path: Path | None
+    data: dict, origin: str, overrides: Mapping[str, float] | None, path: Path | None,
+    allow_outside_range: bool = False,
 ) -> SystemFile:
     r = _Reader(origin, {})
     r.keys(data, "file", {"system", "parameters", "scheduling", "models"}, {"system", "models"})
@@ -648,7 +653,7 @@ def _build(
         if isinstance(v, bool) or not isinstance(v, int | float | np.integer | np.floating):
             raise r.error(f"parameters.{k}", f"override: expected a number, found {_kind(v)}")
         params[k] = r.number(float(v), f"parameters.{k} (override)")
-        if k in ranges and not ranges[k].contains(params[k]):
+        if k in ranges and not ranges[k].contains(params[k]) and not allow_outside_range:
             raise r.error(f"parameters.{k}", f"override {params[k]:.15g} is outside its declared range "
                                              f"{ranges[k].text()}")
     r.parameters = params

@@ -89,6 +89,9 @@ def test_parameter_override():
     with pytest.raises(ModelFileError, match=r"parameters\.rho: override 21\.5 is outside its declared range "
                                              r"\[1, 21\]"):
         load_system("peixoto-ex2", parameters={"rho": 21.5})
+    # a study beyond the range says so
+    beyond = load_system("peixoto-ex2", parameters={"rho": 30.0}, allow_outside_range=True)
+    assert beyond.model().vertices.A[0, 1, 1] == pytest.approx(-1.5)
 
 
 RANGED = """
