@@ -17,9 +17,9 @@ from lpvest.experiments.fmus import (
     Agreement,
     ExperimentFmus,
     FmuRun,
-    fingerprint,
 )
 from lpvest.experiments.reproduce import reproduce_all
+from lpvest.fmi.cache import fingerprint
 from tests.tolerances import roundoff
 
 # -- agreement records ------------------------------------------------------------------------------

@@ -5,15 +5,10 @@ Every experiment of ``lpvest reproduce`` runs its plant and its filters as FMUs
 under :mod:`lpvest.cosim` and repeats the computation with the library alone
 as the cross-check. This module holds what they share:
 
-- :class:`ExperimentFmus`, the FMUs the experiments need, built on demand into
-  a cache folder and reused while they are up to date. An FMU is up to date
-  when its *fingerprint* is the one recorded in ``manifest.json`` at build
-  time and the file's SHA-256 is unchanged. The fingerprint hashes everything
-  the FMU is made from, as its manifest records it (the code it carries, the
-  model file, the build plan, the design file, pythonfmu and the compiler),
-  plus the solver versions when a design is solved at build time (the
-  example systems' designs are stored files: ``models/designs/``). Any
-  change rebuilds; nothing is guessed from time stamps.
+- :class:`ExperimentFmus`, the FMUs the experiments need (:data:`CATALOG`),
+  built on demand into a cache folder and reused while they are up to date
+  (the build cache of :mod:`lpvest.fmi.cache`; the example systems' designs
+  are stored files: ``models/designs/``).
 - :data:`PAPER_KINDS`: the H-infinity filter FMUs with the paper's
   ``epsilon = 150`` design (Peixoto et al., Table 1 and Fig. 1); the shipped
   ``HinfPD``/``HinfRobust`` FMUs carry the best-epsilon design.
@@ -33,22 +28,17 @@ PosixPath('out/fmu-cache/PeixotoEx1Plant.fmu')
 
 from __future__ import annotations
 
-import hashlib
-import json
-import os
 import re
-import shutil
-import threading
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from functools import cache
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..errors import ArgumentError, LpvestError, abbreviate
+from ..fmi.cache import FmuCache, FmuCacheError, default_cache_dir
 from ..fmi.registry import EstimatorKind, estimator_kinds
 
 __all__ = [
@@ -58,14 +48,11 @@ __all__ = [
     "FmuEntry",
     "CATALOG",
     "ExperimentFmus",
-    "FmuCacheError",
     "CoSimSpec",
     "Agreement",
     "FmuRun",
     "Timer",
     "column",
-    "default_cache_dir",
-    "fingerprint",
     "as_experiment_fmus",
     "hinf_pd_eps150",
     "hinf_robust_eps150",
@@ -78,13 +65,6 @@ PAPER_EPSILON = 150.0
 
 #: FMU against library: largest difference allowed, relative to ``max(1, scale)``.
 AGREEMENT_TOLERANCE = 1e-12
-
-_CACHE_FORMAT = "lpvest-fmu-cache/2"
-
-
-class FmuCacheError(LpvestError, RuntimeError):
-    """An FMU of the experiments could not be built or is unknown."""
-
 
 # ---------------------------------------------------------------------------
 # the paper's epsilon = 150 designs, as estimator kinds
@@ -167,100 +147,21 @@ def _kinds(role: str) -> list[EstimatorKind]:
 
 
 # ---------------------------------------------------------------------------
-# fingerprints
-# ---------------------------------------------------------------------------
-@cache
-def _solver_versions() -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
-    out = []
-    for name in ("numpy", "scipy", "cvxpy", "clarabel"):
-        try:
-            out.append(f"{name}={version(name)}")
-        except PackageNotFoundError:
-            out.append(f"{name}=none")
-    return ";".join(out)
-
-
-def fingerprint(plan: Any) -> str:
-    """SHA-256 of everything an FMU of ``plan`` (a :class:`~lpvest.fmi.build.FmuPlan`)
-    is made from: the inputs its manifest records (:func:`lpvest.fmi.build.manifest_inputs`:
-    plan, model file, carried code, design file, pythonfmu, compiler), and for a
-    design solved at build time the versions of the solver stack."""
-    from ..fmi.build import manifest_inputs
-
-    inputs = manifest_inputs(plan)
-    if plan.estimator is not None and plan.estimator.design and plan.design is None:
-        inputs["solvers"] = _solver_versions()
-    return hashlib.sha256((_CACHE_FORMAT + json.dumps(inputs, sort_keys=True)).encode()).hexdigest()
-
-
-def _file_digest(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
-def default_cache_dir() -> Path:
-    """``$LPVEST_FMU_CACHE``, else ``$XDG_CACHE_HOME/lpvest/fmus`` (``~/.cache/lpvest/fmus``)."""
-    env = os.environ.get("LPVEST_FMU_CACHE")
-    if env:
-        return Path(env)
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "lpvest" / "fmus"
-
-
-# ---------------------------------------------------------------------------
 # the cache
 # ---------------------------------------------------------------------------
-class ExperimentFmus:
-    """The experiments' FMUs in a cache folder, built when missing or stale.
+class ExperimentFmus(FmuCache):
+    """The experiments' FMUs (:data:`CATALOG`) in a cache folder, built when
+    missing or stale (:class:`~lpvest.fmi.cache.FmuCache`); variant model
+    files (other parameter values) are written to ``models/`` in the folder.
 
-    Parameters
-    ----------
-    directory : str or Path
-        The cache folder (created when needed): ``<identifier>.fmu`` files,
-        ``manifest.json`` and ``models/`` (the variant model files).
-    progress : callable, optional
-        Called with a message before each build (the CLI prints it).
-
-    ``fmus["PeixotoEx1Plant"]`` (or :meth:`path`) returns the FMU's path,
-    building and validating it first when it is missing or out of date.
-    :attr:`built` and :attr:`reused` list what happened.
+    >>> fmus = ExperimentFmus("out/fmu-cache")                    # doctest: +SKIP
+    >>> fmus["PeixotoEx1Plant"]                                    # doctest: +SKIP
+    PosixPath('out/fmu-cache/PeixotoEx1Plant.fmu')
     """
 
-    def __init__(self, directory: str | Path, *, progress: Callable[[str], None] | None = None) -> None:
-        self.directory = Path(directory)
-        self.progress = progress
-        self.built: list[str] = []
-        self.reused: list[str] = []
-        self.build_time = 0.0
-        self._checked: dict[str, Path] = {}
-        self._lock = threading.Lock()
+    def known(self, identifier: str) -> bool:
+        return identifier in CATALOG
 
-    # -- manifest -------------------------------------------------------------
-    @property
-    def manifest_path(self) -> Path:
-        return self.directory / "manifest.json"
-
-    def _manifest(self) -> dict[str, Any]:
-        try:
-            data = json.loads(self.manifest_path.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError):
-            return {}
-        if not isinstance(data, dict) or data.get("format") != _CACHE_FORMAT:
-            return {}
-        fmus = data.get("fmus", {})
-        return fmus if isinstance(fmus, dict) else {}
-
-    def _record(self, identifier: str, entry: dict[str, Any]) -> None:
-        fmus = self._manifest()
-        fmus[identifier] = entry
-        self.directory.mkdir(parents=True, exist_ok=True)
-        tmp = self.manifest_path.with_suffix(f".json.{os.getpid()}.tmp")
-        tmp.write_text(json.dumps({"format": _CACHE_FORMAT, "fmus": fmus}, indent=1, sort_keys=True) + "\n",
-                       encoding="utf-8")
-        tmp.replace(self.manifest_path)
-
-    # -- planning -------------------------------------------------------------
     def _source(self, entry: FmuEntry) -> str | Path:
         """The model file of ``entry``: the example's, or a generated variant."""
         if not entry.parameters:
@@ -272,7 +173,9 @@ class ExperimentFmus:
         if n != 1:
             raise FmuCacheError(f"{entry.system}: no 'name = ...' line to change for the variant")
         for key, value in entry.parameters:
-            text, n = re.subn(rf"(?m)^{re.escape(key)} = .*$", f"{key} = {value!r}", text, count=1)
+            # `key = number` or `key = { value = number, lower = ..., ... }` (a declared range stays)
+            text, n = re.subn(rf"(?m)^({re.escape(key)} = \{{ *value = )[^,}}]*|^({re.escape(key)} = )[^{{\n]*$",
+                              lambda m, value=value: (m.group(1) or m.group(2)) + repr(value), text, count=1)
             if n != 1:
                 raise FmuCacheError(f"{entry.system}: no parameter line '{key} = ...' to change for the variant")
         header = (f"# Generated by lpvest.experiments.fmus from the example {entry.system!r} with "
@@ -301,69 +204,6 @@ class ExperimentFmus:
             if plan.identifier == identifier:
                 return plan
         raise FmuCacheError(f"{identifier}: the builder plans no such FMU for {entry.system_name}")  # pragma: no cover
-
-    # -- access ---------------------------------------------------------------
-    def path(self, identifier: str) -> Path:
-        """The FMU's path; built (and validated) first when missing or stale."""
-        with self._lock:
-            if identifier in self._checked:
-                return self._checked[identifier]
-            plan = self.plan(identifier)
-            want = fingerprint(plan)
-            target = self.directory / f"{identifier}.fmu"
-            known = self._manifest().get(identifier, {})
-            if (target.is_file() and known.get("fingerprint") == want
-                    and known.get("sha256") == _file_digest(target)):
-                self.reused.append(identifier)
-            else:
-                self._build(plan, want, target)
-            self._checked[identifier] = target
-            return target
-
-    __getitem__ = path
-
-    def paths(self, identifiers: Iterable[str]) -> dict[str, Path]:
-        return {i: self.path(i) for i in identifiers}
-
-    def _build(self, plan: Any, want: str, target: Path) -> None:
-        from ..fmi.build import build_fmu, validate_fmus
-
-        if self.progress is not None:
-            self.progress(f"building {plan.identifier} into {self.directory}")
-        t = time.perf_counter()
-        path = build_fmu(plan, self.directory)
-        (check,) = validate_fmus([path])
-        if not check.ok:
-            raise FmuCacheError(f"{plan.identifier}: the built FMU fails validation: " + "; ".join(check.problems))
-        self.build_time += time.perf_counter() - t
-        self._record(plan.identifier, {"fingerprint": want, "sha256": _file_digest(path),
-                                       "built": time.strftime("%Y-%m-%dT%H:%M:%S")})
-        assert path == target
-        self.built.append(plan.identifier)
-
-    def adopt(self, paths: Mapping[str, str | Path]) -> None:
-        """Take FMUs built from the current code elsewhere (e.g. a test
-        session's FMU set) into the cache: copied and recorded as up to date.
-        Identifiers not in the catalog are ignored."""
-        with self._lock:
-            for identifier, src in paths.items():
-                if identifier not in CATALOG or identifier in self._checked:
-                    continue
-                plan = self.plan(identifier)
-                target = self.directory / f"{identifier}.fmu"
-                target.parent.mkdir(parents=True, exist_ok=True)
-                shutil.copy2(src, target)
-                self._record(identifier, {"fingerprint": fingerprint(plan), "sha256": _file_digest(target),
-                                          "built": "adopted from " + str(src)})
-
-    def summary(self) -> str:
-        """One line: how many FMUs were built and reused, and where."""
-        parts = []
-        if self.built:
-            parts.append(f"built {len(self.built)} ({self.build_time:.1f} s)")
-        if self.reused:
-            parts.append(f"reused {len(self.reused)} up-to-date")
-        return f"FMU cache {self.directory}: " + (", ".join(parts) if parts else "nothing used yet")
 
 
 def as_experiment_fmus(fmus: ExperimentFmus | str | Path | None) -> ExperimentFmus:
