@@ -62,7 +62,7 @@ import numpy as np
 
 from .._linalg import mT
 from ..errors import DimensionError, NonFiniteError, NotPositiveDefiniteError, NumericalError, abbreviate
-from ..protocol import Port
+from ..protocol import Component, Port
 from ..systems.affine import AffineLPV, NoiseCovariance
 from ..validation import as_matrix, as_signal, as_vector, check_positive_definite
 from .kalman.model import KalmanMatrices, KalmanModel, StepMatrices
@@ -373,7 +373,7 @@ def truncated_prior(
     return P
 
 
-class TruncatedKalmanFilter:
+class TruncatedKalmanFilter(Component):
     """The Kalman filter with the truncated-memory gain ``K^(tau)_t``
     (Theorem 1, (6a) as corrected in ERRATA.md), streaming.
 
@@ -440,8 +440,7 @@ class TruncatedKalmanFilter:
             arr.setflags(write=False)
         self._reader = InputReader(self._km)
         n, m = self._km.nx, self._km.ny
-        self._in = input_ports(self._km)
-        self._out = (
+        super().__init__(input_ports(self._km), (
             Port("xhat", (n,), "filtered state x_{t|t} with the truncated gain"),
             Port("P", (n, n), "truncated recursion's covariance P^(tau)_{t|t}"),
             Port("xpred", (n,), "predicted state x_{t+1|t} with K^(tau)_t"),
@@ -449,17 +448,7 @@ class TruncatedKalmanFilter:
             Port("innovation", (m,), "y_t - yhat"),
             Port("K", (n, m), "truncated predictor gain K^(tau)_t"),
             Port("Omega", (m, m), "Omega^(tau)_t from the truncated recursion"),
-        )
-        self.reset()
-
-    # -- protocol ---------------------------------------------------------------
-    @property
-    def input_ports(self) -> tuple[Port, ...]:
-        return self._in
-
-    @property
-    def output_ports(self) -> tuple[Port, ...]:
-        return self._out
+        ))
 
     @property
     def tau(self) -> int:
@@ -480,12 +469,12 @@ class TruncatedKalmanFilter:
         ``Omega^(tau)`` is the truncated recursion's, not the true one)."""
         return self._loglik
 
-    def reset(self) -> None:
+    # -- the component (lpvest.protocol) ------------------------------------------------
+    def _reset(self) -> None:
         self._x = self._x0
         self._t = 0
         self._loglik = 0.0
         self._window: deque[tuple[np.ndarray, StepMatrices]] = deque(maxlen=self._tau + 1)
-        self._pending: tuple[bytes, KalmanStep, StepMatrices, np.ndarray] | None = None
 
     def _prior(self) -> np.ndarray:
         win = [w[1] for w in self._window]
@@ -493,44 +482,15 @@ class TruncatedKalmanFilter:
             return truncated_prior(win, self._start, P0=self._P0, t=self._t)
         return truncated_prior(win, self._start, t=self._t)
 
-    def _compute(
-        self, inputs: Mapping[str, Any], keep: bool = False
-    ) -> tuple[bytes, KalmanStep, StepMatrices, np.ndarray]:
-        p, u, y = self._reader.read(inputs, self._t)
-        pend = self._pending
-        key = b""
-        if keep or pend is not None:  # outputs() then step() on the same sample: compute once
-            key = p.tobytes() + u.tobytes() + y.tobytes()
-            if pend is not None and pend[0] == key and pend[1].t == self._t:
-                return pend
-        sm = self._km._step_matrices(p)
-        res = kalman_step(KalmanState(self._x, self._prior(), self._t), sm, u, y)
-        return key, res, sm, p
+    def _read(self, inputs: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self._reader.read(inputs, self._t)
 
-    def process(self, p: object, u: object | None, y: object) -> KalmanStep:
-        """Consume sample ``t`` and advance; the full step (``K^(tau)_t``, ...)."""
-        inputs = {"p": p, "y": y} if not self._km.nu else {"p": p, "u": u, "y": y}
-        return self._advance(self._compute(inputs))
-
-    def peek(self, p: object, u: object | None, y: object) -> KalmanStep:
-        """Like :meth:`process` without changing the filter."""
-        inputs = {"p": p, "y": y} if not self._km.nu else {"p": p, "u": u, "y": y}
-        return self._compute(inputs)[1]
-
-    def _advance(self, item: tuple[bytes, KalmanStep, StepMatrices, np.ndarray]) -> KalmanStep:
-        _, res, sm, p = item
-        x = res.next.x
-        x.setflags(write=False)
-        self._x = x
-        self._window.append((p.copy(), sm))
-        self._t += 1
-        self._loglik += res.log_likelihood
-        self._pending = None
-        return res
-
-    @staticmethod
-    def _as_dict(r: KalmanStep) -> dict[str, np.ndarray]:
-        return {
+    def _evaluate(self, sample: tuple[np.ndarray, np.ndarray, np.ndarray]) -> tuple[
+            dict[str, np.ndarray], tuple[KalmanStep, StepMatrices, np.ndarray]]:
+        p, u, y = sample
+        sm = self._km.step_matrices_unchecked(p)
+        r = kalman_step(KalmanState(self._x, self._prior(), self._t), sm, u, y)
+        out = {
             "xhat": r.x_filt,
             "P": r.P_filt,
             "xpred": r.next.x,
@@ -539,14 +499,30 @@ class TruncatedKalmanFilter:
             "K": r.K,
             "Omega": r.Omega,
         }
+        return out, (r, sm, p)
 
-    def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
-        item = self._compute(inputs, keep=True)
-        self._pending = item
-        return self._as_dict(item[1])
+    def _commit(self, pending: tuple[KalmanStep, StepMatrices, np.ndarray]) -> None:
+        res, sm, p = pending
+        x = res.next.x
+        x.setflags(write=False)
+        self._x = x
+        self._window.append((p.copy(), sm))
+        self._t += 1
+        self._loglik += res.log_likelihood
 
-    def step(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
-        return self._as_dict(self._advance(self._compute(inputs)))
+    # -- the whole step --------------------------------------------------------------
+    def _inputs(self, p: object, u: object | None, y: object) -> dict[str, object]:
+        return {"p": p, "y": y} if not self._km.nu else {"p": p, "u": u, "y": y}
+
+    def process(self, p: object, u: object | None, y: object) -> KalmanStep:
+        """Consume sample ``t`` and advance; the full step (``K^(tau)_t``, ...)."""
+        _, pending = self._take(self._inputs(p, u, y))
+        self._commit(pending)
+        return pending[0]
+
+    def peek(self, p: object, u: object | None, y: object) -> KalmanStep:
+        """Like :meth:`process` without changing the filter."""
+        return self._evaluate(self._read(self._inputs(p, u, y)))[1][0]
 
     def get_state(self) -> dict[str, Any]:
         """``x``, ``t``, ``log_likelihood`` and the window of the last
@@ -563,7 +539,7 @@ class TruncatedKalmanFilter:
             "window_length": len(self._window),
         }
 
-    def set_state(self, state: Mapping[str, Any]) -> None:
+    def _set_state(self, state: Mapping[str, Any]) -> None:
         km = self._km
         try:
             x = as_vector(state["x"], "state x", km.nx)
@@ -582,4 +558,3 @@ class TruncatedKalmanFilter:
             window.append((wp[i].copy(), km.step_matrices(wp[i])))
         x.setflags(write=False)
         self._x, self._t, self._loglik, self._window = x, t, ll, window
-        self._pending = None

@@ -277,9 +277,10 @@ class KalmanModel:
         pv = as_vector(p, "p", self.n_p)
         if check:
             self.check_p(pv)
-        return self._step_matrices(pv)
+        return self.step_matrices_unchecked(pv)
 
-    def _step_matrices(self, p: np.ndarray) -> StepMatrices:
+    def step_matrices_unchecked(self, p: np.ndarray) -> StepMatrices:
+        """:class:`StepMatrices` at a ``p`` (n_p,) float array already checked (the streaming filters)."""
         c = self._c  # type: ignore[attr-defined]
         return StepMatrices(np.dot(self.z(p), c["packed"]).reshape(c["shape"]), self.nx, self.nu, self.ny)
 

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import DimensionError, NonFiniteError, abbreviate
-from ...protocol import Port
+from ...protocol import Component, Port
 from ...systems.affine import AffineLPV, NoiseCovariance
 from ...validation import as_matrix, as_vector, check_finite, check_positive_definite
 from .model import KalmanModel
@@ -76,7 +76,7 @@ def input_ports(km: KalmanModel) -> tuple[Port, ...]:
     return tuple(ports)
 
 
-class LPVKalmanFilter:
+class LPVKalmanFilter(Component):
     """The exact LPV Kalman filter (4a)-(4e) as a streaming estimator.
 
     Follows the streaming protocol (:mod:`lpvest.protocol`).
@@ -123,8 +123,7 @@ class LPVKalmanFilter:
         self._P0.setflags(write=False)
         self._reader = InputReader(self._km)
         n, m = self._km.nx, self._km.ny
-        self._in = input_ports(self._km)
-        self._out = (
+        super().__init__(input_ports(self._km), (
             Port("xhat", (n,), "filtered state x_{t|t}"),
             Port("P", (n, n), "covariance P_{t|t} of xhat"),
             Port("xpred", (n,), "predicted state x_{t+1|t}"),
@@ -134,27 +133,11 @@ class LPVKalmanFilter:
             Port("K", (n, m), "predictor gain K_t (4c)"),
             Port("Omega", (m, m), "innovation covariance Omega_t (4e)"),
             Port("loglik", (), "log-likelihood log p(y_0..y_t) of the samples up to this one"),
-        )
-        self.reset()
-
-    # -- protocol ---------------------------------------------------------------
-    @property
-    def input_ports(self) -> tuple[Port, ...]:
-        return self._in
-
-    @property
-    def output_ports(self) -> tuple[Port, ...]:
-        return self._out
+        ))
 
     @property
     def kalman_model(self) -> KalmanModel:
         return self._km
-
-    def reset(self) -> None:
-        """Back to ``x^_{0|-1} = x0``, ``P_{0|-1} = P0``, ``t = 0``."""
-        self._state = KalmanState(self._x0, self._P0, 0)
-        self._loglik = 0.0
-        self._pending: tuple[bytes, KalmanStep] | None = None
 
     @property
     def state(self) -> KalmanState:
@@ -170,39 +153,19 @@ class LPVKalmanFilter:
         """``log p(y_0, ..., y_{t-1})`` of the samples consumed so far."""
         return self._loglik
 
-    def _compute(self, inputs: Mapping[str, Any], keep: bool = False) -> tuple[bytes, KalmanStep]:
-        st = self._state
-        p, u, y = self._reader.read(inputs, st.t)
-        pend = self._pending
-        key = b""
-        if keep or pend is not None:  # outputs() then step() on the same sample: compute once
-            key = p.tobytes() + u.tobytes() + y.tobytes()
-            if pend is not None and pend[0] == key and pend[1].t == st.t:
-                return pend
-        return key, kalman_step(st, self._km._step_matrices(p), u, y)
+    # -- the component (lpvest.protocol) ------------------------------------------------
+    def _reset(self) -> None:
+        """Back to ``x^_{0|-1} = x0``, ``P_{0|-1} = P0``, ``t = 0``."""
+        self._state = KalmanState(self._x0, self._P0, 0)
+        self._loglik = 0.0
 
-    def process(self, p: object, u: object | None, y: object) -> KalmanStep:
-        """Consume sample ``t`` and advance; returns every quantity of the step
-        (``K_t``, ``Omega_t``, ``L_t``, ...)."""
-        inputs = {"p": p, "y": y} if not self._km.nu else {"p": p, "u": u, "y": y}
-        return self._advance(self._compute(inputs)[1])
+    def _read(self, inputs: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self._reader.read(inputs, self._state.t)
 
-    def peek(self, p: object, u: object | None, y: object) -> KalmanStep:
-        """Like :meth:`process` without changing the filter."""
-        inputs = {"p": p, "y": y} if not self._km.nu else {"p": p, "u": u, "y": y}
-        return self._compute(inputs)[1]
-
-    def _advance(self, res: KalmanStep) -> KalmanStep:
-        nxt = res.next
-        nxt.x.setflags(write=False)
-        nxt.P.setflags(write=False)
-        self._state = nxt
-        self._loglik += res.log_likelihood
-        self._pending = None
-        return res
-
-    @staticmethod
-    def _as_dict(r: KalmanStep, loglik: float) -> dict[str, np.ndarray]:
+    def _evaluate(self, sample: tuple[np.ndarray, np.ndarray, np.ndarray]) -> tuple[dict[str, np.ndarray],
+                                                                                  KalmanStep]:
+        p, u, y = sample
+        r = kalman_step(self._state, self._km.step_matrices_unchecked(p), u, y)
         return {
             "xhat": r.x_filt,
             "P": r.P_filt,
@@ -212,25 +175,37 @@ class LPVKalmanFilter:
             "innovation": r.innovation,
             "K": r.K,
             "Omega": r.Omega,
-            "loglik": np.array(loglik + r.log_likelihood),
-        }
+            "loglik": np.array(self._loglik + r.log_likelihood),
+        }, r
 
-    def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
-        """Estimates at the current sample; no state change."""
-        key, res = self._compute(inputs, keep=True)
-        self._pending = (key, res)
-        return self._as_dict(res, self._loglik)
+    def _commit(self, res: KalmanStep) -> None:
+        nxt = res.next
+        nxt.x.setflags(write=False)
+        nxt.P.setflags(write=False)
+        self._state = nxt
+        self._loglik += res.log_likelihood
 
-    def step(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
-        """Consume the current sample, return :meth:`outputs`, advance."""
-        loglik = self._loglik
-        return self._as_dict(self._advance(self._compute(inputs)[1]), loglik)
+    # -- the whole step --------------------------------------------------------------
+    def _inputs(self, p: object, u: object | None, y: object) -> dict[str, object]:
+        return {"p": p, "y": y} if not self._km.nu else {"p": p, "u": u, "y": y}
 
+    def process(self, p: object, u: object | None, y: object) -> KalmanStep:
+        """Consume sample ``t`` and advance; returns every quantity of the step
+        (``K_t``, ``Omega_t``, ``L_t``, ...)."""
+        _, res = self._take(self._inputs(p, u, y))
+        self._commit(res)
+        return res
+
+    def peek(self, p: object, u: object | None, y: object) -> KalmanStep:
+        """Like :meth:`process` without changing the filter."""
+        return self._evaluate(self._read(self._inputs(p, u, y)))[1]
+
+    # -- state -----------------------------------------------------------------------
     def get_state(self) -> dict[str, Any]:
         st = self._state
         return {"x": st.x.copy(), "P": st.P.copy(), "t": int(st.t), "log_likelihood": float(self._loglik)}
 
-    def set_state(self, state: Mapping[str, Any]) -> None:
+    def _set_state(self, state: Mapping[str, Any]) -> None:
         n = self._km.nx
         try:
             x = as_vector(state["x"], "state x", n)
@@ -248,4 +223,3 @@ class LPVKalmanFilter:
         P.setflags(write=False)
         self._state = KalmanState(x, P, t)
         self._loglik = ll
-        self._pending = None
