@@ -1,4 +1,12 @@
-"""The example systems shipped with lpvest (the ``models/`` folder)."""
+"""The example systems shipped with lpvest (the ``models/`` folder).
+
+Examples
+--------
+>>> [e.name for e in example_systems()][:3]
+['cox-toth-ex1', 'cox-toth-truncation', 'peixoto-ex1']
+>>> find_system("peixoto-ex1").name
+'peixoto_ex1.toml'
+"""
 
 from __future__ import annotations
 

@@ -89,97 +89,13 @@ def _steps(text: str) -> int:
 MAX_STEPS = 1_000_000
 
 
-def _fmt(m: np.ndarray, indent: str = "      ") -> str:
-    text = np.array2string(np.asarray(m), precision=6, suppress_small=True, max_line_width=100)
-    return "\n".join(indent + line for line in text.splitlines())
-
-
 def describe_model(key: str, model: object) -> str:
-    """A human-readable description: type, dimensions, matrices, maps."""
-    from .systems import (
-        AffineLPV,
-        InnovationLPV,
-        LPVInputOutput,
-        LTVInputOutput,
-        LTVStateSpace,
-        PolytopicLPV,
-    )
-
-    lines: list[str] = []
-    add = lines.append
-
-    def dependence(dep) -> None:  # type: ignore[no-untyped-def]
-        add(f"    basis: {', '.join(dep.term_names)}")
-        for name, stack in dep.coefficients.items():
-            for i, term in enumerate(dep.term_names):
-                if i == 0 or np.any(stack[i]):
-                    add(f"    {name} [{term}]  {stack.shape[1]}x{stack.shape[2]}")
-                    add(_fmt(stack[i]))
-
-    if isinstance(model, AffineLPV):
-        add(f"  model {key}: affine LPV with general noise (Cox & Toth (1)-(3))")
-        add(f"    n_x={model.nx} n_u={model.nu} n_y={model.ny} n_w={model.nw} n_v={model.nv} n_p={model.n_p}")
-        dependence(model.dependence)
-        for name in ("Q", "S", "R"):
-            add(f"    {name}")
-            add(_fmt(getattr(model.noise, name)))
-    elif isinstance(model, PolytopicLPV):
-        add(f"  model {key}: polytopic LPV (Peixoto et al. (1)), N={model.n_vertices} vertices")
-        add(f"    n_x={model.nx} n_w={model.nw} n_z={model.nz} n_y={model.ny}")
-        if model.parameters:
-            add("    parameters: " + ", ".join(f"{k} = {v:g}" for k, v in model.parameters.items()))
-        m = model.simplex_map
-        if m is None:
-            add("    scheduling: alpha itself (no physical scheduling map)")
-        elif hasattr(m, "formulas"):
-            for i, f in enumerate(m.formulas):  # type: ignore[attr-defined]
-                add(f"    alpha_{i + 1} = {f.text}")
-        else:
-            coords = ", ".join(c.name for c in m.coordinates)  # type: ignore[attr-defined]
-            add(f"    alpha: multilinear weights over ({coords})")
-        for i in range(model.n_vertices):
-            add(f"    vertex {i + 1}:")
-            for name, stack in model.vertices._asdict().items():
-                add(f"      {name}  {stack.shape[1]}x{stack.shape[2]}")
-                add(_fmt(stack[i], "        "))
-        if model.affine is not None:
-            add("    affine form:")
-            dependence(model.affine)
-    elif isinstance(model, InnovationLPV):
-        back, ahead = model.window
-        add(f"  model {key}: LPV innovation form with given gain")
-        add(f"    n_x={model.nx} n_u={model.nu} n_y={model.ny}; gain uses p_(t-{back})..p_(t+{ahead})")
-        dependence(model.dependence)
-        add("    K = " + str(model.K.to_list()))
-        add("    innovation covariance")
-        add(_fmt(model.innovation_covariance))
-    elif isinstance(model, LPVInputOutput):
-        add(f"  model {key}: LPV input-output (SISO)")
-        terms = [f"({c.text}) y[t-{i + 1}]" for i, c in enumerate(model.y_coefficients)]
-        terms += [f"({c.text}) u[t-{i}]" for i, c in enumerate(model.u_coefficients)]
-        terms += ["e[t]"] + [f"({c.text}) e[t-{i + 1}]" for i, c in enumerate(model.e_coefficients)]
-        add("    y[t] = " + " + ".join(terms))
-        add(f"    noise variance {model.noise_variance:g}")
-    elif isinstance(model, LTVInputOutput):
-        n = model.order
-        add(f"  model {key}: continuous-time LTV input-output, order {n}")
-        add("    y^(" + str(n) + ") + " + " + ".join(f"({f.text}) y^({i})" for i, f in enumerate(model.a))
-            + " + " + " + ".join(f"({f.text}) u^({i})" for i, f in enumerate(model.b)) + " = 0")
-        if model.input is not None:
-            add(f"    input u(t) = {model.input.text}")
-        if model.x0 is not None:
-            add(f"    x(0) = {model.x0.tolist()}")
-    elif isinstance(model, LTVStateSpace):
-        add(f"  model {key}: continuous-time LTV state space, n = {model.n}")
-        for name, fm in model.formulas.items():
-            add(f"    {name}(t) = {fm.to_list() if fm is not None else '<callable>'}")
-        if model.input is not None:
-            add(f"    input u(t) = {model.input.text}")
-        if model.x0 is not None:
-            add(f"    x(0) = {model.x0.tolist()}")
-    else:  # pragma: no cover
-        add(f"  model {key}: {type(model).__name__}")
-    return "\n".join(lines)
+    """A human-readable description: type, dimensions, matrices, maps (the
+    model's own ``describe``)."""
+    describe = getattr(model, "describe", None)
+    if describe is None:  # pragma: no cover - every model class has one
+        return f"  model {key}: {type(model).__name__}"
+    return "\n".join(describe(key))
 
 
 def _model_summary(model: object) -> str:

@@ -55,14 +55,12 @@ from .errors import LpvestError, ModelFileError, abbreviate, shorten
 from .expressions import CONSTANTS, FUNCTIONS, Expression, FormulaMatrix
 from .scheduling import (
     BasisFunction,
-    CallableBasis,
-    FormulaBasis,
     SchedulingSpace,
     parse_basis,
 )
 from .systems.affine import CONSTANT_TERM, AffineDependence, AffineLPV
 from .systems.innovation import InnovationLPV, LPVInputOutput
-from .systems.ltv import LTVInputOutput, LTVStateSpace, TimeFunction
+from .systems.ltv import LTVInputOutput, LTVStateSpace
 from .systems.polytopic import (
     POLYTOPIC_MATRICES,
     FormulaSimplexMap,
@@ -686,121 +684,11 @@ def _num(x: float) -> float | int:
     return float(x)
 
 
-def _matrix_out(m: np.ndarray) -> list[list[float]]:
-    return [[_num(v) for v in row] for row in np.asarray(m)]
-
-
-def _basis_name(b: BasisFunction) -> str:
-    if isinstance(b, CallableBasis):
-        raise ModelFileError(
-            f"basis function {b.name!r} is a Python callable and cannot be written to a model file"
-        )
-    return b.name
-
-
-def _dependence_out(dep: AffineDependence, out: dict) -> None:
-    names = [_basis_name(b) for b in dep.basis]
-    if names:
-        out["basis"] = names
-    bounds = {
-        b.name: [_num(v) for v in b.declared_bounds]
-        for b in dep.basis
-        if isinstance(b, FormulaBasis) and b.declared_bounds is not None
-    }
-    if bounds:
-        out["bounds"] = bounds
-    for key, stack in dep.coefficients.items():
-        if 0 in stack.shape[1:]:  # no known input: B and D have no columns, the file leaves them out
-            continue
-        nonzero = [i for i in range(stack.shape[0]) if i == 0 or np.any(stack[i])]
-        if nonzero == [0]:
-            out[key] = _matrix_out(stack[0])
-        else:
-            out[key] = {dep.term_names[i]: _matrix_out(stack[i]) for i in nonzero}
-
-
-def _formula_out(e: Expression) -> float | str:
-    return e.value() if e.is_constant else e.source
-
-
-def _time_out(f: TimeFunction, what: str) -> float | str:
-    if f.expression is None:
-        raise ModelFileError(f"{what} is a Python callable and cannot be written to a model file")
-    return _formula_out(f.expression)
-
-
-def _map_out(m: SimplexMap) -> dict:
-    if isinstance(m, FormulaSimplexMap):
-        return {"kind": "formulas", "alpha": [_formula_out(f) for f in m.formulas]}
-    if isinstance(m, MultilinearSimplexMap):
-        return {
-            "kind": "multilinear",
-            "over": [_basis_name(c) for c in m.coordinates],
-            "lower": [_num(v) for v in m.lower],
-            "upper": [_num(v) for v in m.upper],
-        }
-    raise ModelFileError(f"simplex map {type(m).__name__} cannot be written to a model file")
-
-
 def _model_out(model: Model) -> dict:
-    if isinstance(model, AffineLPV):
-        out: dict[str, Any] = {"type": "affine"}
-        _dependence_out(model.dependence, out)
-        out.update(Q=_matrix_out(model.noise.Q), R=_matrix_out(model.noise.R), S=_matrix_out(model.noise.S))
-        out.update(x0=[_num(v) for v in model.x0], P0=_matrix_out(model.P0))
-        return out
-    if isinstance(model, PolytopicLPV):
-        out = {"type": "polytopic"}
-        if model.simplex_map is not None:
-            out["map"] = _map_out(model.simplex_map)
-        out["vertex"] = [
-            {n: _matrix_out(getattr(model.vertices, n)[i]) for n in POLYTOPIC_MATRICES}
-            for i in range(model.n_vertices)
-        ]
-        if model.affine is not None:
-            aff: dict[str, Any] = {}
-            _dependence_out(model.affine, aff)
-            out["affine"] = aff
-        return out
-    if isinstance(model, InnovationLPV):
-        out = {"type": "innovation"}
-        _dependence_out(model.dependence, out)
-        out["K"] = model.K.to_list()
-        out["innovation_covariance"] = _matrix_out(model.innovation_covariance)
-        out["x0"] = [_num(v) for v in model.x0]
-        return out
-    if isinstance(model, LPVInputOutput):
-        return {
-            "type": "lpv-io",
-            "y": [_formula_out(c) for c in model.y_coefficients],
-            "u": [_formula_out(c) for c in model.u_coefficients],
-            "e": [_formula_out(c) for c in model.e_coefficients],
-            "noise_variance": model.noise_variance,
-        }
-    if isinstance(model, LTVInputOutput):
-        out = {
-            "type": "ltv-io",
-            "a": [_time_out(f, f"a[{i}]") for i, f in enumerate(model.a)],
-            "b": [_time_out(f, f"b[{i}]") for i, f in enumerate(model.b)],
-        }
-        if model.input is not None:
-            out["input"] = _time_out(model.input, "input")
-        if model.x0 is not None:
-            out["x0"] = [_num(v) for v in model.x0]
-        return out
-    if isinstance(model, LTVStateSpace):
-        out = {"type": "ltv-ss"}
-        for n in ("A", "B", "C"):
-            fm = model.formulas[n]
-            if fm is None:
-                raise ModelFileError(f"{n}(t) is a Python callable and cannot be written to a model file")
-            out[n] = fm.to_list()
-        if model.input is not None:
-            out["input"] = _time_out(model.input, "input")
-        if model.x0 is not None:
-            out["x0"] = [_num(v) for v in model.x0]
-        return out
-    raise ModelFileError(f"{type(model).__name__} cannot be written to a model file")
+    to_toml = getattr(model, "to_toml", None)
+    if to_toml is None:
+        raise ModelFileError(f"{type(model).__name__} cannot be written to a model file")
+    return to_toml()
 
 
 def _parameter_out(value: float, rng: ParameterRange | None) -> Any:

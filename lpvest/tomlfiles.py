@@ -3,6 +3,15 @@
 Every reader shares the same one-line errors: a file that cannot be read, is
 not UTF-8 text, or is not valid TOML is a :class:`~lpvest.errors.ModelFileError`
 naming it. Only the standard library and :mod:`lpvest.errors` are imported.
+
+Examples
+--------
+>>> parse_toml('a = 1\\n[b]\\nc = "x"', "<text>")
+{'a': 1, 'b': {'c': 'x'}}
+>>> parse_toml("a = ", "my.toml")
+Traceback (most recent call last):
+...
+lpvest.errors.ModelFileError: my.toml: not valid TOML: Invalid value (at end of document)
 """
 
 from __future__ import annotations

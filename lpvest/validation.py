@@ -4,6 +4,15 @@ Each check names the user's parameter and, for shapes, both the found and the
 expected shape, e.g. ``"Q has shape (3, 2); expected (3, 3)"``. Symmetry and
 definiteness are judged with tolerances relative to the matrix's own scale
 (an absolute epsilon rejects valid, badly scaled input).
+
+Examples
+--------
+>>> as_vector([1, 2], "x0", 2)
+array([1., 2.])
+>>> as_vector([1, 2, 3], "x0", 2)
+Traceback (most recent call last):
+...
+lpvest.errors.DimensionError: x0 has shape (3,); expected (2,)
 """
 
 from __future__ import annotations

@@ -1,4 +1,15 @@
-"""Analyses built on the estimators (no streaming state, no FMU)."""
+"""Analyses built on the estimators (no streaming state, no FMU).
+
+Examples
+--------
+The frozen (steady-state) gain of the truncation example at ``p = 0.5``:
+
+>>> import numpy as np
+>>> from lpvest import load_system
+>>> np.round(frozen_gains(load_system("cox-toth-truncation").model(), [[0.5]]), 4)
+array([[[ 0.1098, -0.0124],
+        [-0.0124,  0.0648]]])
+"""
 
 from .fading_memory import (
     FilterComparison as FilterComparison,

@@ -1,5 +1,16 @@
 """Filter design (at build time; cvxpy is imported inside the functions that
-need it, so importing this package needs only numpy)."""
+need it, so importing this package needs only numpy).
+
+Examples
+--------
+Theorem 1 for Peixoto et al.'s Example 1 at the paper's ``epsilon = 150``
+(Table 1 prints gamma = 1.2138):
+
+>>> from lpvest import load_system
+>>> design = design_hinf(load_system("peixoto-ex1").model(), epsilon=150.0)
+>>> design.kind, round(design.gamma, 3)
+('parameter-dependent', 1.214)
+"""
 
 from .hinf import (
     DEFAULT_MARGIN as DEFAULT_MARGIN,

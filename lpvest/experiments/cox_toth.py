@@ -12,6 +12,16 @@
   the decrease is monotone in ``tau`` (Conjecture 1), and the one-step
   prediction-error variance of the exact, truncated and frozen-gain filters
   (exact second moments, checked by Monte Carlo).
+
+Examples
+--------
+The co-simulation of Example 1 (the FMUs are built on first use, so it is
+not run here):
+
+>>> spec = example1_cosim(20)
+>>> spec.describe()
+'sched = CoxTothEx1Scheduler, source = CoxTothEx1Source, plant = CoxTothEx1Plant; 19 steps of 1'
+>>> result = spec.run(ExperimentFmus("out/fmu-cache"))         # doctest: +SKIP
 """
 
 from __future__ import annotations

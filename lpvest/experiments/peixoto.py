@@ -13,6 +13,12 @@
 
 In ``results.json`` an ``epsilon`` of ``null`` means ``epsilon = infinity``
 (the limit of the rescaled LMIs; see :mod:`lpvest.design.hinf`).
+
+Examples
+--------
+>>> lim = stability_limits()
+>>> f"{lim.frozen:.4f}"        # the paper: "for rho > 21.4, the system is unstable"
+'21.4000'
 """
 
 from __future__ import annotations

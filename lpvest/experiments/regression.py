@@ -17,6 +17,12 @@ Regenerate the references (after a deliberate change) with::
     lpvest regress --update                     # or: python -m lpvest.experiments.regression --update
 
 and compare without writing with ``lpvest regress``.
+
+Examples
+--------
+>>> [r.name for r in REFERENCES]
+['cox-toth-example1', 'cox-toth-truncation', 'peixoto-table1', 'peixoto-fig1', 'peixoto-example2', 'sridhar-ltv']
+>>> checks = regress(["peixoto-table1"], fmus="out/fmu-cache")  # doctest: +SKIP
 """
 
 from __future__ import annotations

@@ -4,6 +4,16 @@ Used by ``lpvest simulate``: a scheduling signal given as a formula of the
 step ``k`` (default: a sinusoid spanning 90 % of the box), the model's own
 noise (seeded) or input, and the Peixoto et al. disturbance
 ``w_k = sin(0.5 k) exp(-0.1 k)`` from ``k = 10`` for polytopic plants.
+
+Examples
+--------
+>>> from lpvest import load_system
+>>> sim = simulate_system(load_system("peixoto-ex1"), steps=50, seed=1)
+>>> list(sim.groups)
+['scheduling', 'alpha', 'disturbance', 'output', 'to estimate', 'state']
+>>> sim.columns["y"].shape
+(50,)
+>>> sim.write_csv("peixoto-ex1.csv")                         # doctest: +SKIP
 """
 
 from __future__ import annotations

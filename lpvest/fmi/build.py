@@ -37,6 +37,14 @@ Reproducible: the same inputs (model file, design, lpvest code, options,
 pythonfmu, compiler) give a byte-identical ``.fmu``: zip entries in sorted
 order with a fixed time stamp and permissions, no absolute path, no host name,
 no time.
+
+Examples
+--------
+>>> plans, skipped = plan_system("peixoto-ex1")
+>>> [p.identifier for p in plans], skipped
+(['PeixotoEx1Plant', 'PeixotoEx1Scheduler', 'PeixotoEx1Source', 'PeixotoEx1HinfPD', 'PeixotoEx1HinfRobust'], [])
+>>> build_fmu(plans[0], "out")                                  # doctest: +SKIP
+PosixPath('out/PeixotoEx1Plant.fmu')
 """
 
 from __future__ import annotations

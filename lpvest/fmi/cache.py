@@ -10,6 +10,14 @@ at build time. Any change rebuilds; nothing is guessed from time stamps.
 
 :class:`FmuCache` holds the mechanism; a subclass says which FMUs exist
 (:class:`~lpvest.experiments.fmus.ExperimentFmus`: the paper experiments').
+
+Examples
+--------
+>>> from lpvest.fmi.build import plan_system
+>>> plans, _ = plan_system("sridhar-ltv")
+>>> digest = fingerprint(plans[0])          # what the FMU is made from
+>>> len(digest), digest == fingerprint(plan_system("sridhar-ltv")[0][0])
+(64, True)
 """
 
 from __future__ import annotations

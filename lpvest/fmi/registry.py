@@ -23,6 +23,11 @@ Adding a filter FMU is one line in :data:`ESTIMATOR_KINDS` below, e.g.::
 
     EstimatorKind("Kalman", "lpvest.fmi.factories.kalman:build", models=("affine",),
                   parameters=(Parameter("x0", MODEL_X0, "mean of the initial state x_0"),)),
+
+Examples
+--------
+>>> [k.role for k in estimator_kinds()]
+['Kalman', 'TruncatedKalman', 'BSplineObserver', 'HinfPD', 'HinfRobust']
 """
 
 from __future__ import annotations

@@ -1,5 +1,16 @@
 """Model types: affine and polytopic LPV, innovation-form and input-output LPV,
-continuous-time LTV."""
+continuous-time LTV.
+
+Examples
+--------
+>>> import numpy as np
+>>> from lpvest import load_system
+>>> plant = load_system("peixoto-ex1").model()              # a PolytopicLPV
+>>> k = np.arange(20)
+>>> traj = plant.simulate(plant.alpha_batch(np.sin(0.25 * k)[:, None]), np.zeros((20, 1)), x0=[1.0, 0.0])
+>>> traj.x.shape, traj.y.shape
+((20, 2), (20, 1))
+"""
 
 from .affine import (
     CONSTANT_TERM as CONSTANT_TERM,

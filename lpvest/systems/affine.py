@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -22,6 +22,7 @@ from ..errors import DimensionError, ExpressionError, abbreviate
 from ..expressions import Expression
 from ..scheduling import BasisFunction, SchedulingSpace
 from ..validation import as_matrix, as_rng, as_signal, as_vector, check_positive_definite
+from .text import dependence_table, describe_dependence, format_matrix, matrix_table, number
 
 __all__ = [
     "AffineDependence",
@@ -475,3 +476,21 @@ class AffineLPV:
         """
         m = self.dependence.at_psi(psi)
         return m["C"] @ x + m["D"] @ u + m["H"] @ v, m["A"] @ x + m["B"] @ u + m["G"] @ w
+
+
+    # -- text forms ---------------------------------------------------------------------
+    def to_toml(self) -> dict[str, Any]:
+        """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.modelfile`)."""
+        out: dict[str, Any] = {"type": "affine", **dependence_table(self.dependence)}
+        out.update(Q=matrix_table(self.noise.Q), R=matrix_table(self.noise.R), S=matrix_table(self.noise.S))
+        out.update(x0=[number(v) for v in self.x0], P0=matrix_table(self.P0))
+        return out
+
+    def describe(self, key: str) -> list[str]:
+        """Lines for a person (``lpvest systems show``): type, dimensions, matrices."""
+        lines = [f"  model {key}: affine LPV with general noise (Cox & Toth (1)-(3))",
+                 f"    n_x={self.nx} n_u={self.nu} n_y={self.ny} n_w={self.nw} n_v={self.nv} n_p={self.n_p}"]
+        lines += describe_dependence(self.dependence)
+        for name in ("Q", "S", "R"):
+            lines += [f"    {name}", format_matrix(getattr(self.noise, name))]
+        return lines

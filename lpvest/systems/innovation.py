@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -29,6 +29,7 @@ from ..expressions import Expression, FormulaMatrix, shift_name
 from ..scheduling import SchedulingSpace
 from ..validation import as_matrix, as_rng, as_signal, as_vector, check_positive_definite
 from .affine import AffineDependence
+from .text import dependence_table, describe_dependence, format_matrix, formula_value, matrix_table, number
 
 __all__ = [
     "InnovationLPV",
@@ -252,6 +253,26 @@ class InnovationLPV:
         return m, K
 
 
+    # -- text forms ---------------------------------------------------------------------
+    def to_toml(self) -> dict[str, Any]:
+        """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.modelfile`)."""
+        out: dict[str, Any] = {"type": "innovation", **dependence_table(self.dependence)}
+        out["K"] = self.K.to_list()
+        out["innovation_covariance"] = matrix_table(self.innovation_covariance)
+        out["x0"] = [number(v) for v in self.x0]
+        return out
+
+    def describe(self, key: str) -> list[str]:
+        """Lines for a person (``lpvest systems show``)."""
+        back, ahead = self.window
+        lines = [f"  model {key}: LPV innovation form with given gain",
+                 f"    n_x={self.nx} n_u={self.nu} n_y={self.ny}; gain uses p_(t-{back})..p_(t+{ahead})"]
+        lines += describe_dependence(self.dependence)
+        lines += ["    K = " + str(self.K.to_list()), "    innovation covariance",
+                  format_matrix(self.innovation_covariance)]
+        return lines
+
+
 @dataclass(frozen=True, eq=False)
 class LPVInputOutput:
     """SISO LPV input-output (ARMAX-type) model with scheduling-dependent
@@ -347,3 +368,23 @@ class LPVInputOutput:
                     acc += c[i, t] * e[t - 1 - i]
             y[t] = acc
         return InnovationTrajectory(np.zeros((T, 0)), y[:, None], e[:, None])
+
+
+    # -- text forms ---------------------------------------------------------------------
+    def to_toml(self) -> dict[str, Any]:
+        """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.modelfile`)."""
+        return {
+            "type": "lpv-io",
+            "y": [formula_value(c) for c in self.y_coefficients],
+            "u": [formula_value(c) for c in self.u_coefficients],
+            "e": [formula_value(c) for c in self.e_coefficients],
+            "noise_variance": self.noise_variance,
+        }
+
+    def describe(self, key: str) -> list[str]:
+        """Lines for a person (``lpvest systems show``): the difference equation."""
+        terms = [f"({c.text}) y[t-{i + 1}]" for i, c in enumerate(self.y_coefficients)]
+        terms += [f"({c.text}) u[t-{i}]" for i, c in enumerate(self.u_coefficients)]
+        terms += ["e[t]"] + [f"({c.text}) e[t-{i + 1}]" for i, c in enumerate(self.e_coefficients)]
+        return [f"  model {key}: LPV input-output (SISO)", "    y[t] = " + " + ".join(terms),
+                f"    noise variance {self.noise_variance:g}"]

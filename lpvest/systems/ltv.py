@@ -20,13 +20,14 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError, ExpressionError, abbreviate
+from ..errors import DimensionError, ExpressionError, ModelFileError, abbreviate
 from ..expressions import Expression, FormulaMatrix
 from ..validation import as_vector, check_finite
+from .text import number, time_value
 
 __all__ = ["TimeFunction", "LTVStateSpace", "LTVInputOutput", "LTVTrajectory"]
 
@@ -212,6 +213,33 @@ class LTVStateSpace:
         return LTVTrajectory(times, X, Y, U)
 
 
+    # -- text forms ---------------------------------------------------------------------
+    def to_toml(self) -> dict[str, Any]:
+        """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.modelfile`)."""
+        out: dict[str, Any] = {"type": "ltv-ss"}
+        for n in ("A", "B", "C"):
+            fm = self.formulas[n]
+            if fm is None:
+                raise ModelFileError(f"{n}(t) is a Python callable and cannot be written to a model file")
+            out[n] = fm.to_list()
+        if self.input is not None:
+            out["input"] = time_value(self.input, "input")
+        if self.x0 is not None:
+            out["x0"] = [number(v) for v in self.x0]
+        return out
+
+    def describe(self, key: str) -> list[str]:
+        """Lines for a person (``lpvest systems show``)."""
+        lines = [f"  model {key}: continuous-time LTV state space, n = {self.n}"]
+        for name, fm in self.formulas.items():
+            lines.append(f"    {name}(t) = {fm.to_list() if fm is not None else '<callable>'}")
+        if self.input is not None:
+            lines.append(f"    input u(t) = {self.input.text}")
+        if self.x0 is not None:
+            lines.append(f"    x(0) = {self.x0.tolist()}")
+        return lines
+
+
 @dataclass(frozen=True, eq=False)
 class LTVInputOutput:
     """The input-output equation (3) with ``a_n = 1``.
@@ -312,3 +340,30 @@ class LTVInputOutput:
         """Simulate through :meth:`to_state_space` (same arguments as
         :meth:`LTVStateSpace.simulate`)."""
         return self.to_state_space().simulate(t, **kwargs)  # type: ignore[arg-type]
+
+
+    # -- text forms ---------------------------------------------------------------------
+    def to_toml(self) -> dict[str, Any]:
+        """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.modelfile`)."""
+        out: dict[str, Any] = {
+            "type": "ltv-io",
+            "a": [time_value(f, f"a[{i}]") for i, f in enumerate(self.a)],
+            "b": [time_value(f, f"b[{i}]") for i, f in enumerate(self.b)],
+        }
+        if self.input is not None:
+            out["input"] = time_value(self.input, "input")
+        if self.x0 is not None:
+            out["x0"] = [number(v) for v in self.x0]
+        return out
+
+    def describe(self, key: str) -> list[str]:
+        """Lines for a person (``lpvest systems show``): the differential equation."""
+        n = self.order
+        lines = [f"  model {key}: continuous-time LTV input-output, order {n}",
+                 "    y^(" + str(n) + ") + " + " + ".join(f"({f.text}) y^({i})" for i, f in enumerate(self.a))
+                 + " + " + " + ".join(f"({f.text}) u^({i})" for i, f in enumerate(self.b)) + " = 0"]
+        if self.input is not None:
+            lines.append(f"    input u(t) = {self.input.text}")
+        if self.x0 is not None:
+            lines.append(f"    x(0) = {self.x0.tolist()}")
+        return lines

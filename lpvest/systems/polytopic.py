@@ -15,16 +15,25 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import NamedTuple, Protocol, runtime_checkable
+from typing import Any, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
 from .._linalg import MatrixStack
-from ..errors import DimensionError, ExpressionError, SchedulingRangeError
+from ..errors import DimensionError, ExpressionError, ModelFileError, SchedulingRangeError
 from ..expressions import Expression, FormulaVector
 from ..scheduling import BasisFunction, Monomial, SchedulingSpace, box_vertices
 from ..validation import as_float_array, as_matrix, as_signal, as_vector, check_simplex
 from .affine import AffineDependence
+from .text import (
+    basis_name,
+    dependence_table,
+    describe_dependence,
+    format_matrix,
+    formula_value,
+    matrix_table,
+    number,
+)
 
 __all__ = [
     "PolytopicLPV",
@@ -144,6 +153,15 @@ class FormulaSimplexMap:
         return np.broadcast_to(out, (*p.shape[:-1], self.n_vertices)).astype(float)
 
 
+    def to_toml(self) -> dict[str, Any]:
+        """The ``map`` table of a model file."""
+        return {"kind": "formulas", "alpha": [formula_value(f) for f in self.formulas]}
+
+    def describe(self) -> list[str]:
+        """Lines for a person: one formula per weight."""
+        return [f"    alpha_{i + 1} = {f.text}" for i, f in enumerate(self.formulas)]
+
+
 @dataclass(frozen=True, eq=False)
 class MultilinearSimplexMap:
     """Multilinear interpolation weights on a box of coordinates ``c(p)``.
@@ -202,6 +220,20 @@ class MultilinearSimplexMap:
             for j in range(n):
                 alpha[..., v] *= lam[..., j] if (v >> j) & 1 else 1.0 - lam[..., j]
         return alpha
+
+
+    def to_toml(self) -> dict[str, Any]:
+        """The ``map`` table of a model file."""
+        return {
+            "kind": "multilinear",
+            "over": [basis_name(c) for c in self.coordinates],
+            "lower": [number(v) for v in self.lower],
+            "upper": [number(v) for v in self.upper],
+        }
+
+    def describe(self) -> list[str]:
+        """Lines for a person: the coordinates the weights are multilinear in."""
+        return [f"    alpha: multilinear weights over ({', '.join(c.name for c in self.coordinates)})"]
 
 
 def affine_to_polytopic(
@@ -438,3 +470,42 @@ class PolytopicLPV:
             X[k] = x
             Y[k], Z[k], x = self.step(x, a[k], w[k])
         return PolytopicTrajectory(X, Z, Y)
+
+
+    # -- text forms ---------------------------------------------------------------------
+    def to_toml(self) -> dict[str, Any]:
+        """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.modelfile`)."""
+        out: dict[str, Any] = {"type": "polytopic"}
+        if self.simplex_map is not None:
+            to_toml = getattr(self.simplex_map, "to_toml", None)
+            if to_toml is None:
+                raise ModelFileError(f"simplex map {type(self.simplex_map).__name__} cannot be written to a "
+                                     "model file")
+            out["map"] = to_toml()
+        out["vertex"] = [{n: matrix_table(getattr(self.vertices, n)[i]) for n in POLYTOPIC_MATRICES}
+                         for i in range(self.n_vertices)]
+        if self.affine is not None:
+            out["affine"] = dependence_table(self.affine)
+        return out
+
+    def describe(self, key: str) -> list[str]:
+        """Lines for a person (``lpvest systems show``): vertices, map, affine form."""
+        lines = [f"  model {key}: polytopic LPV (Peixoto et al. (1)), N={self.n_vertices} vertices",
+                 f"    n_x={self.nx} n_w={self.nw} n_z={self.nz} n_y={self.ny}"]
+        if self.parameters:
+            lines.append("    parameters: " + ", ".join(f"{k} = {v:g}" for k, v in self.parameters.items()))
+        m = self.simplex_map
+        if m is None:
+            lines.append("    scheduling: alpha itself (no physical scheduling map)")
+        elif hasattr(m, "describe"):
+            lines += m.describe()
+        else:
+            lines.append(f"    alpha: {type(m).__name__}")
+        for i in range(self.n_vertices):
+            lines.append(f"    vertex {i + 1}:")
+            for name, stack in self.vertices._asdict().items():
+                lines += [f"      {name}  {stack.shape[1]}x{stack.shape[2]}", format_matrix(stack[i], "        ")]
+        if self.affine is not None:
+            lines.append("    affine form:")
+            lines += describe_dependence(self.affine)
+        return lines

@@ -56,6 +56,18 @@ Modules: :mod:`~lpvest.estimators.kalman.model` (the p-dependent matrices),
 innovation-form simulator), :mod:`~lpvest.estimators.kalman.scan` (the
 parallel-in-time form), :mod:`~lpvest.estimators.kalman.streaming` (the
 streaming component).
+
+Examples
+--------
+>>> import numpy as np
+>>> from lpvest import load_system
+>>> model = load_system("cox-toth-truncation").model()
+>>> k = np.arange(50)
+>>> p, u = np.sin(0.25 * k)[:, None], np.sin(0.1 * k)[:, None]
+>>> y = model.simulate(p, u, rng=0).y
+>>> res = kalman_filter(model, p, u, y)
+>>> res.filtered_means.shape, round(res.log_likelihood, 4)
+((50, 2), -94.4371)
 """
 
 from __future__ import annotations

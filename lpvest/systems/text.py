@@ -1,0 +1,116 @@
+"""What the model classes share to write themselves: the tables of a model
+file (``to_toml``, read back by :mod:`lpvest.modelfile`) and the text of
+``lpvest systems show`` (``describe``).
+
+Each model class owns its ``to_toml()`` and ``describe(key)``; these are the
+pieces they are made of (numbers, matrices, affine dependences, formulas).
+A part that has no text form (a Python callable) raises
+:class:`~lpvest.errors.ModelFileError` naming it.
+
+Examples
+--------
+>>> import numpy as np
+>>> matrix_table(np.array([[1, 0.5]]))
+[[1.0, 0.5]]
+>>> print(format_matrix(np.eye(2), indent="  "))
+  [[1. 0.]
+   [0. 1.]]
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..errors import ModelFileError
+from ..expressions import Expression
+from ..scheduling import BasisFunction, CallableBasis, FormulaBasis
+
+if TYPE_CHECKING:
+    from .affine import AffineDependence
+    from .ltv import TimeFunction
+
+__all__ = [
+    "number",
+    "matrix_table",
+    "basis_name",
+    "dependence_table",
+    "formula_value",
+    "time_value",
+    "format_matrix",
+    "describe_dependence",
+]
+
+
+def number(x: float) -> float:
+    """A number as a model file writes it (a Python float)."""
+    return float(x)
+
+
+def matrix_table(m: np.ndarray) -> list[list[float]]:
+    """A matrix as a list of rows of floats."""
+    return [[number(v) for v in row] for row in np.asarray(m)]
+
+
+def basis_name(b: BasisFunction) -> str:
+    """The name (a formula) of a basis function; a Python callable has none."""
+    if isinstance(b, CallableBasis):
+        raise ModelFileError(
+            f"basis function {b.name!r} is a Python callable and cannot be written to a model file"
+        )
+    return b.name
+
+
+def dependence_table(dep: AffineDependence) -> dict[str, Any]:
+    """``basis``, ``bounds`` and one entry per matrix (a plain matrix when only
+    the constant term is nonzero, else a table by basis function)."""
+    out: dict[str, Any] = {}
+    names = [basis_name(b) for b in dep.basis]
+    if names:
+        out["basis"] = names
+    bounds = {
+        b.name: [number(v) for v in b.declared_bounds]
+        for b in dep.basis
+        if isinstance(b, FormulaBasis) and b.declared_bounds is not None
+    }
+    if bounds:
+        out["bounds"] = bounds
+    for key, stack in dep.coefficients.items():
+        if 0 in stack.shape[1:]:  # no known input: B and D have no columns, the file leaves them out
+            continue
+        nonzero = [i for i in range(stack.shape[0]) if i == 0 or np.any(stack[i])]
+        if nonzero == [0]:
+            out[key] = matrix_table(stack[0])
+        else:
+            out[key] = {dep.term_names[i]: matrix_table(stack[i]) for i in nonzero}
+    return out
+
+
+def formula_value(e: Expression) -> float | str:
+    """A constant formula as its value, any other as its source text."""
+    return e.value() if e.is_constant else e.source
+
+
+def time_value(f: TimeFunction, what: str) -> float | str:
+    """A function of time as a formula; a Python callable has none."""
+    if f.expression is None:
+        raise ModelFileError(f"{what} is a Python callable and cannot be written to a model file")
+    return formula_value(f.expression)
+
+
+def format_matrix(m: np.ndarray, indent: str = "      ") -> str:
+    """A matrix printed for a person, indented."""
+    text = np.array2string(np.asarray(m), precision=6, suppress_small=True, max_line_width=100)
+    return "\n".join(indent + line for line in text.splitlines())
+
+
+def describe_dependence(dep: AffineDependence) -> list[str]:
+    """The basis and each nonzero coefficient matrix, for ``describe``."""
+    lines = [f"    basis: {', '.join(dep.term_names)}"]
+    for name, stack in dep.coefficients.items():
+        for i, term in enumerate(dep.term_names):
+            if i == 0 or np.any(stack[i]):
+                lines.append(f"    {name} [{term}]  {stack.shape[1]}x{stack.shape[2]}")
+                lines.append(format_matrix(stack[i]))
+    return lines
