@@ -18,6 +18,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -143,6 +144,18 @@ def simulate_system(
     return sim
 
 
+@dataclass(frozen=True)
+class _Run:
+    """What a default simulation of one model needs besides the model."""
+
+    system: SystemFile
+    key: str
+    steps: int
+    schedule: list[str] | None
+    seed: int
+    t_end: float
+
+
 def _simulate(
     system: SystemFile,
     model_key: str | None,
@@ -153,63 +166,94 @@ def _simulate(
     t_end: float,
 ) -> Simulation:
     key = model_key or system.default
-    model = system.model(key)
+    return _simulate_model(system.model(key), _Run(system, key, steps, schedule, seed, t_end))
+
+
+@functools.singledispatch
+def _simulate_model(model: object, run: _Run) -> Simulation:
+    raise ArgumentTypeError(f"cannot simulate a {type(model).__name__}")  # pragma: no cover
+
+
+@_simulate_model.register(LTVInputOutput)
+@_simulate_model.register(LTVStateSpace)
+def _(model: LTVInputOutput | LTVStateSpace, run: _Run) -> Simulation:
     columns: dict[str, np.ndarray] = {}
     groups: dict[str, list[str]] = {}
-    if isinstance(model, LTVInputOutput | LTVStateSpace):
-        t = np.linspace(0.0, t_end, steps)
-        traj = model.simulate(t)
-        columns["t"] = t
-        _add(columns, groups, "input", "u", traj.u)
-        _add(columns, groups, "output", "y", traj.y)
-        _add(columns, groups, "state", "x", traj.x)
-        return Simulation(system.name, key, "t", columns, groups)
-    k = np.arange(steps, dtype=float)
-    columns["k"] = k
-    if isinstance(model, PolytopicLPV):
-        if model.simplex_map is not None:
-            p = _schedule(model.simplex_map.space, schedule, k)
-            alpha = model.alpha_batch(p)
-            _add(columns, groups, "scheduling", model.simplex_map.space.names[0] if p.shape[1] == 1 else "p", p)
-        else:
-            raw = _schedule(SchedulingSpace(["s"], [0.0], [1.0]), schedule, k)[:, 0]
-            alpha = np.column_stack([1.0 - raw, raw])
-        _add(columns, groups, "alpha", "alpha", alpha)
-        w = np.tile(peixoto_disturbance(k)[:, None], (1, model.nw))
-        traj = model.simulate(alpha, w)
-        _add(columns, groups, "disturbance", "w", w)
-        _add(columns, groups, "output", "y", traj.y)
-        _add(columns, groups, "to estimate", "z", traj.z)
-        _add(columns, groups, "state", "x", traj.x)
-        return Simulation(system.name, key, "k", columns, groups)
-    assert system.scheduling is not None
-    space = system.scheduling
-    if isinstance(model, AffineLPV):
-        p = _schedule(space, schedule, k)
-        u = np.sin(0.1 * k)[:, None] * np.ones((1, model.nu))
-        traj = model.simulate(p, u, rng=seed)
-        _add(columns, groups, "scheduling", "p", p)
-        if model.nu:
-            _add(columns, groups, "input", "u", u)
-        _add(columns, groups, "output", "y", traj.y)
-        _add(columns, groups, "state", "x", traj.x)
-        return Simulation(system.name, key, "k", columns, groups)
-    if isinstance(model, InnovationLPV | LPVInputOutput):
-        back, ahead = (model.window if isinstance(model, InnovationLPV) else (0, 0))
-        kk = np.arange(-back, steps + ahead, dtype=float)
-        p = _schedule(space, schedule, kk)
-        u = np.sin(0.1 * k)[:, None]
-        rng = np.random.default_rng(seed)
-        e = rng.standard_normal((steps, 1))
-        if isinstance(model, InnovationLPV):
-            traj = model.simulate(p, u[:, : model.nu], e=e)
-            _add(columns, groups, "state", "x", traj.x)
-        else:
-            traj = model.simulate(p, u, e=e)
-        _add(columns, groups, "scheduling", "p", p[back : back + steps])
+    t = np.linspace(0.0, run.t_end, run.steps)
+    traj = model.simulate(t)
+    columns["t"] = t
+    _add(columns, groups, "input", "u", traj.u)
+    _add(columns, groups, "output", "y", traj.y)
+    _add(columns, groups, "state", "x", traj.x)
+    return Simulation(run.system.name, run.key, "t", columns, groups)
+
+
+@_simulate_model.register
+def _(model: PolytopicLPV, run: _Run) -> Simulation:
+    k = np.arange(run.steps, dtype=float)
+    columns: dict[str, np.ndarray] = {"k": k}
+    groups: dict[str, list[str]] = {}
+    if model.simplex_map is not None:
+        p = _schedule(model.simplex_map.space, run.schedule, k)
+        alpha = model.alpha_batch(p)
+        _add(columns, groups, "scheduling", model.simplex_map.space.names[0] if p.shape[1] == 1 else "p", p)
+    else:
+        raw = _schedule(SchedulingSpace(["s"], [0.0], [1.0]), run.schedule, k)[:, 0]
+        alpha = np.column_stack([1.0 - raw, raw])
+    _add(columns, groups, "alpha", "alpha", alpha)
+    w = np.tile(peixoto_disturbance(k)[:, None], (1, model.nw))
+    traj = model.simulate(alpha, w)
+    _add(columns, groups, "disturbance", "w", w)
+    _add(columns, groups, "output", "y", traj.y)
+    _add(columns, groups, "to estimate", "z", traj.z)
+    _add(columns, groups, "state", "x", traj.x)
+    return Simulation(run.system.name, run.key, "k", columns, groups)
+
+
+@_simulate_model.register
+def _(model: AffineLPV, run: _Run) -> Simulation:
+    assert run.system.scheduling is not None
+    k = np.arange(run.steps, dtype=float)
+    columns: dict[str, np.ndarray] = {"k": k}
+    groups: dict[str, list[str]] = {}
+    p = _schedule(run.system.scheduling, run.schedule, k)
+    u = np.sin(0.1 * k)[:, None] * np.ones((1, model.nu))
+    traj = model.simulate(p, u, rng=run.seed)
+    _add(columns, groups, "scheduling", "p", p)
+    if model.nu:
         _add(columns, groups, "input", "u", u)
-        _add(columns, groups, "noise", "e", e)
-        _add(columns, groups, "output", "y", traj.y)
-        return Simulation(system.name, key, "k", columns, groups)
-    raise ArgumentTypeError(f"cannot simulate a {type(model).__name__}")  # pragma: no cover
+    _add(columns, groups, "output", "y", traj.y)
+    _add(columns, groups, "state", "x", traj.x)
+    return Simulation(run.system.name, run.key, "k", columns, groups)
+
+
+def _simulate_io(model: InnovationLPV | LPVInputOutput, run: _Run, window: tuple[int, int], nu: int,
+                 state: bool) -> Simulation:
+    assert run.system.scheduling is not None
+    steps = run.steps
+    k = np.arange(steps, dtype=float)
+    columns: dict[str, np.ndarray] = {"k": k}
+    groups: dict[str, list[str]] = {}
+    back, ahead = window
+    p = _schedule(run.system.scheduling, run.schedule, np.arange(-back, steps + ahead, dtype=float))
+    u = np.sin(0.1 * k)[:, None]
+    e = np.random.default_rng(run.seed).standard_normal((steps, 1))
+    traj = model.simulate(p, u[:, :nu], e=e)
+    if state:
+        _add(columns, groups, "state", "x", traj.x)
+    _add(columns, groups, "scheduling", "p", p[back : back + steps])
+    _add(columns, groups, "input", "u", u)
+    _add(columns, groups, "noise", "e", e)
+    _add(columns, groups, "output", "y", traj.y)
+    return Simulation(run.system.name, run.key, "k", columns, groups)
+
+
+@_simulate_model.register
+def _(model: InnovationLPV, run: _Run) -> Simulation:
+    return _simulate_io(model, run, model.window, model.nu, state=True)
+
+
+@_simulate_model.register
+def _(model: LPVInputOutput, run: _Run) -> Simulation:
+    return _simulate_io(model, run, (0, 0), 1, state=False)
 

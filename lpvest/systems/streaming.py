@@ -55,24 +55,163 @@ from .polytopic import PolytopicLPV
 __all__ = ["DiscretePlant", "LTVPlant", "plant_supports"]
 
 
-def plant_supports(model: object) -> str | None:
-    """``None`` when :class:`DiscretePlant` or :class:`LTVPlant` can run ``model``,
-    else the reason why not."""
-    if isinstance(model, PolytopicLPV | AffineLPV | LTVStateSpace | LTVInputOutput):
-        if isinstance(model, LTVInputOutput):
-            try:
-                model.to_state_space()
-            except DimensionError as exc:
-                return str(exc)
+class _Rules:
+    """How :class:`DiscretePlant` streams one kind of discrete-time model: its
+    ports, its noise, its initial state and one sample (the model's own step)."""
+
+    takes_P0 = False  #: the initial state is drawn from N(x0, P0)
+
+    def __init__(self, model: Any) -> None:
+        self.model = model
+
+    def unsupported(self) -> str | None:
+        """Why the model cannot be streamed, or ``None``."""
         return None
-    if isinstance(model, InnovationLPV):
-        back, ahead = model.window
+
+    def ports(self) -> tuple[list[Port], list[Port]]:
+        raise NotImplementedError
+
+    def noise_factor(self) -> np.ndarray | None:
+        """``L`` with ``L L^T`` the covariance of the noise drawn per sample."""
+        return None
+
+    def initial_state(self, x0: np.ndarray | None, P0: np.ndarray | None, noise: bool,
+                      rng: np.random.Generator) -> np.ndarray:
+        return np.zeros(self.model.nx) if x0 is None else x0.copy()
+
+    def check(self, val: dict[str, np.ndarray]) -> None:
+        """Range checks of a sample (``val`` gains derived values)."""
+        self.model.space.check(val["p"])
+
+    def evaluate(self, x: np.ndarray, val: dict[str, np.ndarray], noise: np.ndarray,
+                 no_u: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        raise NotImplementedError
+
+
+def _scheduling_and_input(model: Any) -> list[Port]:
+    ins = [Port("p", (model.n_p,), "scheduling")]
+    if model.nu:
+        ins.append(Port("u", (model.nu,), "input"))
+    return ins
+
+
+class _PolytopicRules(_Rules):
+    model: PolytopicLPV
+
+    def ports(self) -> tuple[list[Port], list[Port]]:
+        m = self.model
+        if m.simplex_map is None:
+            sched = Port("alpha", (m.n_vertices,), "vertex weights")
+        else:
+            sched = Port("p", (m.space.dim,), "scheduling")
+        return ([sched, Port("w", (m.nw,), "disturbance")],
+                [Port("y", (m.ny,), "measured output"), Port("z", (m.nz,), "signal to be estimated")])
+
+    def check(self, val: dict[str, np.ndarray]) -> None:
+        if self.model.simplex_map is None:
+            check_simplex(val["alpha"], "alpha")
+        else:
+            val["alpha"] = self.model.alpha(val["p"])  # range-checked
+
+    def evaluate(self, x: np.ndarray, val: dict[str, np.ndarray], noise: np.ndarray,
+                 no_u: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        y, z, nxt = self.model.step(x, val["alpha"], val["w"])
+        return {"y": y, "z": z, "x": x.copy()}, nxt
+
+
+class _AffineRules(_Rules):
+    model: AffineLPV
+    takes_P0 = True
+
+    def ports(self) -> tuple[list[Port], list[Port]]:
+        m = self.model
+        ins = _scheduling_and_input(m) + [Port("w", (m.nw,), "process noise added to the drawn noise"),
+                                          Port("v", (m.nv,), "measurement noise added to the drawn noise")]
+        return ins, [Port("y", (m.ny,), "measured output")]
+
+    def noise_factor(self) -> np.ndarray:
+        return np.linalg.cholesky(self.model.noise.joint)
+
+    def initial_state(self, x0: np.ndarray | None, P0: np.ndarray | None, noise: bool,
+                      rng: np.random.Generator) -> np.ndarray:
+        mean = self.model.x0 if x0 is None else x0
+        if noise and P0 is not None and np.any(P0):
+            return np.asarray(rng.multivariate_normal(mean, P0), dtype=float)
+        return mean.copy()
+
+    def evaluate(self, x: np.ndarray, val: dict[str, np.ndarray], noise: np.ndarray,
+                 no_u: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        m = self.model
+        nw = m.nw
+        y, nxt = m.step(x, m.dependence.psi(val["p"], check=False), val.get("u", no_u),
+                        val["w"] + noise[:nw], val["v"] + noise[nw:])
+        return {"y": y, "x": x.copy()}, nxt
+
+
+class _InnovationRules(_Rules):
+    model: InnovationLPV
+
+    def unsupported(self) -> str | None:
+        back, ahead = self.model.window
         if back or ahead:
             used = ", ".join([f"p_(t-{back})"] * bool(back) + [f"p_(t+{ahead})"] * bool(ahead))
             return (
                 f"its gain uses {used}; a streaming plant knows only p_t at sample t "
                 "(use a realization with a gain of p_t, e.g. (21c))"
             )
+        return None
+
+    def ports(self) -> tuple[list[Port], list[Port]]:
+        m = self.model
+        ins = _scheduling_and_input(m) + [Port("e", (m.ny,), "innovation added to the drawn one")]
+        return ins, [Port("y", (m.ny,), "measured output")]
+
+    def noise_factor(self) -> np.ndarray:
+        return np.linalg.cholesky(self.model.innovation_covariance)
+
+    def initial_state(self, x0: np.ndarray | None, P0: np.ndarray | None, noise: bool,
+                      rng: np.random.Generator) -> np.ndarray:
+        return (self.model.x0 if x0 is None else x0).copy()
+
+    def evaluate(self, x: np.ndarray, val: dict[str, np.ndarray], noise: np.ndarray,
+                 no_u: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        m = self.model
+        p = val["p"]
+        K = m.K.evaluate(m.space.as_dict(p)).reshape(m.nx, m.ny)
+        if not np.all(np.isfinite(K)):
+            raise ExpressionError(f"the gain K is not finite at p = {p.tolist()}")
+        y, nxt = innovation_step(m.dependence.evaluate(p, check=False), K, x, val.get("u", no_u), val["e"] + noise)
+        return {"y": y, "x": x.copy()}, nxt
+
+
+#: The discrete-time model classes a DiscretePlant streams, and how.
+_RULES: dict[type, type[_Rules]] = {
+    PolytopicLPV: _PolytopicRules,
+    AffineLPV: _AffineRules,
+    InnovationLPV: _InnovationRules,
+}
+
+
+def _rules_for(model: object) -> _Rules | None:
+    for cls in type(model).__mro__:
+        if cls in _RULES:
+            return _RULES[cls](model)
+    return None
+
+
+def plant_supports(model: object) -> str | None:
+    """``None`` when :class:`DiscretePlant` or :class:`LTVPlant` can run ``model``,
+    else the reason why not."""
+    rules = _rules_for(model)
+    if rules is not None:
+        return rules.unsupported()
+    to_state_space = getattr(model, "to_state_space", None)
+    if isinstance(model, LTVStateSpace) or to_state_space is not None:
+        try:
+            if to_state_space is not None:
+                to_state_space()
+        except DimensionError as exc:
+            return str(exc)
         return None
     return f"{type(model).__name__} is an input-output model with no state to stream (use a state-space realization)"
 
@@ -114,67 +253,35 @@ class DiscretePlant(Component):
         x0: object | None = None,
         P0: object | None = None,
     ) -> None:
-        reason = plant_supports(model)
-        if reason is not None or isinstance(model, LTVStateSpace | LTVInputOutput):
+        rules = _rules_for(model)
+        reason = plant_supports(model) if rules is None else rules.unsupported()
+        if rules is None or reason is not None:
             why = reason or "it is continuous-time"
             raise ExpressionError(f"cannot stream this model as a discrete-time plant: {why}")
         self.model = model
+        self._rules = rules
         self.noise = bool(noise)
         self.seed = int(seed)
         nx = model.nx
         self._x0 = None if x0 is None else as_vector(x0, "x0", nx)
         self._P0 = None
-        if isinstance(model, AffineLPV):
+        if rules.takes_P0:
             self._P0 = model.P0 if P0 is None else check_positive_definite(
                 as_matrix(P0, "P0", (nx, nx)), "P0", semidefinite=True)
         elif P0 is not None:
             raise DimensionError("P0 applies to an affine model only")
-        state = Port("x", (nx,), "state", direct=False)
-        if isinstance(model, PolytopicLPV):
-            if model.simplex_map is None:
-                sched = Port("alpha", (model.n_vertices,), "vertex weights")
-            else:
-                sched = Port("p", (model.space.dim,), "scheduling")
-            ins: list[Port] = [sched, Port("w", (model.nw,), "disturbance")]
-            outs = (Port("y", (model.ny,), "measured output"), Port("z", (model.nz,), "signal to be estimated"), state)
-            self._chol = None
-        elif isinstance(model, AffineLPV):
-            ins = [Port("p", (model.n_p,), "scheduling")]
-            if model.nu:
-                ins.append(Port("u", (model.nu,), "input"))
-            ins += [Port("w", (model.nw,), "process noise added to the drawn noise"),
-                    Port("v", (model.nv,), "measurement noise added to the drawn noise")]
-            outs = (Port("y", (model.ny,), "measured output"), state)
-            self._chol = np.linalg.cholesky(model.noise.joint)
-        else:
-            ins = [Port("p", (model.n_p,), "scheduling")]
-            if model.nu:
-                ins.append(Port("u", (model.nu,), "input"))
-            ins.append(Port("e", (model.ny,), "innovation added to the drawn one"))
-            outs = (Port("y", (model.ny,), "measured output"), state)
-            self._chol = np.linalg.cholesky(model.innovation_covariance)
+        ins, outs = rules.ports()
+        self._chol = rules.noise_factor()
         self._sizes = tuple((p.name, p.size) for p in ins)
         self._no_u = np.zeros(0)
-        super().__init__(tuple(ins), outs)
+        super().__init__(tuple(ins), (*outs, Port("x", (nx,), "state", direct=False)))
 
     # -- the protocol -----------------------------------------------------------------
     def _reset(self) -> None:
         """Back to sample 0: initial state, generator re-seeded, first noise drawn."""
-        model = self.model
         self._rng = np.random.default_rng(self.seed)
         self._k = 0
-        if isinstance(model, AffineLPV):
-            mean = model.x0 if self._x0 is None else self._x0
-            x = mean.copy()
-            if self.noise and self._P0 is not None and np.any(self._P0):
-                x = self._rng.multivariate_normal(mean, self._P0)
-        elif self._x0 is not None:
-            x = self._x0.copy()
-        elif isinstance(model, InnovationLPV):
-            x = model.x0.copy()
-        else:
-            x = np.zeros(model.nx)
-        self._x = np.asarray(x, dtype=float)
+        self._x = np.asarray(self._rules.initial_state(self._x0, self._P0, self.noise, self._rng), dtype=float)
         self._noise = self._draw()
 
     def _draw(self) -> np.ndarray:
@@ -192,35 +299,12 @@ class DiscretePlant(Component):
             if name not in inputs:
                 raise DimensionError(f"input {name!r} is missing (inputs: {', '.join(self._in_names)})")
             val[name] = as_vector(inputs[name], name, size)
-        model = self.model
-        if isinstance(model, PolytopicLPV):
-            if model.simplex_map is None:
-                check_simplex(val["alpha"], "alpha")
-            else:
-                val["alpha"] = model.alpha(val["p"])  # range-checked
-        else:
-            model.space.check(val["p"])
+        self._rules.check(val)
         return val
 
     def _evaluate(self, val: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], np.ndarray]:
         """The outputs at the current sample and the next state: the model's step."""
-        model = self.model
-        x = self._x
-        if isinstance(model, PolytopicLPV):
-            y, z, nxt = model.step(x, val["alpha"], val["w"])
-            return {"y": y, "z": z, "x": x.copy()}, nxt
-        u = val.get("u", self._no_u)
-        if isinstance(model, AffineLPV):
-            nw = model.nw
-            y, nxt = model.step(x, model.dependence.psi(val["p"], check=False), u,
-                                val["w"] + self._noise[:nw], val["v"] + self._noise[nw:])
-            return {"y": y, "x": x.copy()}, nxt
-        p = val["p"]
-        K = model.K.evaluate(model.space.as_dict(p)).reshape(model.nx, model.ny)
-        if not np.all(np.isfinite(K)):
-            raise ExpressionError(f"the gain K is not finite at p = {p.tolist()}")
-        y, nxt = innovation_step(model.dependence.evaluate(p, check=False), K, x, u, val["e"] + self._noise)
-        return {"y": y, "x": x.copy()}, nxt
+        return self._rules.evaluate(self._x, val, self._noise, self._no_u)
 
     def _commit(self, nxt: np.ndarray) -> None:
         self._x = nxt
