@@ -4,6 +4,12 @@ The numerics import only numpy at import time (scipy, cvxpy, matplotlib and
 fmpy are imported inside the functions that need them), so the FMUs that
 carry this package run where only numpy is installed.
 
+The public names, by concept: errors; model files, systems and
+scheduling; signals and streaming plants; the exact and truncated Kalman
+filters and their analyses; the H-infinity designs and filters; the B-spline
+estimator of LTV systems; co-simulation files and SSP. The streaming protocol
+is :mod:`lpvest.protocol`, FMUs are built by :mod:`lpvest.fmi`.
+
 >>> import lpvest
 >>> plant = lpvest.load_system("peixoto-ex1").model()
 >>> plant.n_vertices
@@ -11,7 +17,8 @@ carry this package run where only numpy is installed.
 """
 
 from ._version import __version__ as __version__
-from .catalog import example_systems as example_systems
+
+# -- errors (every deliberate error derives from LpvestError) ------------------------
 from .errors import (
     ArgumentError as ArgumentError,
     ArgumentTypeError as ArgumentTypeError,
@@ -26,8 +33,13 @@ from .errors import (
     NotPositiveDefiniteError as NotPositiveDefiniteError,
     NumericalError as NumericalError,
     OutputError as OutputError,
+    SamplingError as SamplingError,
     SchedulingRangeError as SchedulingRangeError,
 )
+
+# -- model files, systems, scheduling and formulas -----------------------------------
+# isort: split
+from .catalog import example_systems as example_systems
 from .expressions import Expression as Expression, FormulaMatrix as FormulaMatrix
 from .modelfile import (
     SystemFile as SystemFile,
@@ -41,13 +53,6 @@ from .scheduling import (
     FormulaBasis as FormulaBasis,
     Monomial as Monomial,
     SchedulingSpace as SchedulingSpace,
-)
-
-# FMU area (isort places its two imports): test signals
-from .signals import (
-    SignalGenerator as SignalGenerator,
-    SignalSpec as SignalSpec,
-    sample_signal as sample_signal,
 )
 from .systems import (
     AffineDependence as AffineDependence,
@@ -64,27 +69,12 @@ from .systems import (
     affine_to_polytopic as affine_to_polytopic,
 )
 
-# B-spline (issue 5)
+# -- signals and streaming plants ----------------------------------------------------
 # isort: split
-from .errors import SamplingError as SamplingError
-from .estimators.bspline import (
-    BSplineObserver as BSplineObserver,
-    KernelFit as KernelFit,
-    KernelModel as KernelModel,
-    KernelRegression as KernelRegression,
-    Known as Known,
-    UnknownConstant as UnknownConstant,
-    UnknownSpline as UnknownSpline,
-    fit_kernel_model as fit_kernel_model,
-    kernel_regression as kernel_regression,
-    reconstruct_state as reconstruct_state,
-)
-from .estimators.bspline.kernels import KernelIdentity as KernelIdentity, kernel_identity as kernel_identity
-
-# FMU area: streaming plants
+from .signals import SignalGenerator as SignalGenerator, SignalSpec as SignalSpec, sample_signal as sample_signal
 from .systems.streaming import DiscretePlant as DiscretePlant, LTVPlant as LTVPlant
 
-# Kalman (issue 3)
+# -- Kalman filtering (Cox & Toth): exact, truncated memory, analyses ----------------
 # isort: split
 from .analysis.fading_memory import (
     FilterComparison as FilterComparison,
@@ -118,95 +108,8 @@ from .estimators.truncated import (
     theorem_start_covariance as theorem_start_covariance,
 )
 
-__all__ = [
-    "__version__",
-    "example_systems",
-    "ArgumentError",
-    "ArgumentTypeError",
-    "InternalError",
-    "OutputError",
-    "DimensionError",
-    "ExpressionError",
-    "IdentifiabilityError",
-    "LMIInfeasibleError",
-    "LpvestError",
-    "ModelFileError",
-    "NonFiniteError",
-    "NotPositiveDefiniteError",
-    "NumericalError",
-    "SchedulingRangeError",
-    "Expression",
-    "FormulaMatrix",
-    "SystemFile",
-    "dump_system",
-    "load_system",
-    "loads_system",
-    "save_system",
-    "CallableBasis",
-    "FormulaBasis",
-    "Monomial",
-    "SchedulingSpace",
-    "AffineDependence",
-    "AffineLPV",
-    "FormulaSimplexMap",
-    "InnovationLPV",
-    "LPVInputOutput",
-    "LTVInputOutput",
-    "LTVStateSpace",
-    "MultilinearSimplexMap",
-    "NoiseCovariance",
-    "PolytopicLPV",
-    "TimeFunction",
-    "affine_to_polytopic",
-    # B-spline (issue 5)
-    "SamplingError",
-    "BSplineObserver",
-    "KernelFit",
-    "KernelModel",
-    "KernelRegression",
-    "Known",
-    "UnknownConstant",
-    "UnknownSpline",
-    "fit_kernel_model",
-    "kernel_regression",
-    "reconstruct_state",
-    "KernelIdentity",
-    "kernel_identity",
-    # FMU area
-    "SignalGenerator",
-    "SignalSpec",
-    "sample_signal",
-    "DiscretePlant",
-    "LTVPlant",
-    # Kalman (issue 3)
-    "FilterComparison",
-    "PredictionError",
-    "TruncationErrors",
-    "compare_filters",
-    "decay_rate",
-    "frozen_gains",
-    "monotonicity",
-    "prediction_error_covariance",
-    "tau_needed",
-    "truncation_errors",
-    "InnovationFormData",
-    "KalmanModel",
-    "KalmanResult",
-    "KalmanState",
-    "KalmanStep",
-    "LPVKalmanFilter",
-    "kalman_filter",
-    "kalman_step",
-    "simulate_innovation_form",
-    "AssumptionBounds",
-    "SteadyState",
-    "TruncatedKalmanFilter",
-    "assumption_bounds",
-    "steady_state",
-    "theorem_start_covariance",
-]
-
-# H-infinity (issue 4)
+# -- H-infinity filtering (Peixoto et al.): LMI designs and the filters --------------
+# isort: split
 from .design import (
     EpsilonCurve as EpsilonCurve,
     EpsilonSearch as EpsilonSearch,
@@ -218,27 +121,55 @@ from .design import (
 )
 from .estimators.hinf import HinfFilter as HinfFilter, hinf_filter_batch as hinf_filter_batch
 
-__all__ += [
-    "EpsilonCurve",
-    "EpsilonSearch",
-    "HinfDesign",
-    "HinfProgram",
-    "design_hinf",
-    "epsilon_curve",
-    "search_epsilon",
-    "HinfFilter",
-    "hinf_filter_batch",
-]
+# -- LTV estimation with B-splines (Sridhar et al.) ----------------------------------
+# isort: split
+from .estimators.bspline import (
+    BSplineObserver as BSplineObserver,
+    KernelFit as KernelFit,
+    KernelIdentity as KernelIdentity,
+    KernelModel as KernelModel,
+    KernelRegression as KernelRegression,
+    Known as Known,
+    UnknownConstant as UnknownConstant,
+    UnknownSpline as UnknownSpline,
+    fit_kernel_model as fit_kernel_model,
+    kernel_identity as kernel_identity,
+    kernel_regression as kernel_regression,
+    reconstruct_state as reconstruct_state,
+)
 
-# Co-simulation files and the SSP export (issue 7: lpvest cosim, SSP)
-from .cosimfile import CoSimFile as CoSimFile, CoSimResult as CoSimResult, load_cosim as load_cosim  # noqa: E402
-from .ssp import read_ssp as read_ssp, simulate_ssp as simulate_ssp, write_ssp as write_ssp  # noqa: E402
+# -- co-simulation files and SSP -----------------------------------------------------
+# isort: split
+from .cosimfile import CoSimFile as CoSimFile, CoSimResult as CoSimResult, load_cosim as load_cosim
+from .ssp import read_ssp as read_ssp, simulate_ssp as simulate_ssp, write_ssp as write_ssp
 
-__all__ += [
-    "CoSimFile",
-    "CoSimResult",
-    "load_cosim",
-    "read_ssp",
-    "simulate_ssp",
-    "write_ssp",
+__all__ = [
+    "__version__",
+    # errors
+    "LpvestError", "ArgumentError", "ArgumentTypeError", "DimensionError", "ExpressionError",
+    "IdentifiabilityError", "InternalError", "LMIInfeasibleError", "ModelFileError", "NonFiniteError",
+    "NotPositiveDefiniteError", "NumericalError", "OutputError", "SamplingError", "SchedulingRangeError",
+    # model files, systems, scheduling, formulas
+    "example_systems", "load_system", "loads_system", "dump_system", "save_system", "SystemFile",
+    "AffineLPV", "AffineDependence", "NoiseCovariance", "PolytopicLPV", "FormulaSimplexMap",
+    "MultilinearSimplexMap", "affine_to_polytopic", "InnovationLPV", "LPVInputOutput", "LTVStateSpace",
+    "LTVInputOutput", "TimeFunction", "SchedulingSpace", "FormulaBasis", "CallableBasis", "Monomial",
+    "Expression", "FormulaMatrix",
+    # signals and streaming plants
+    "SignalGenerator", "SignalSpec", "sample_signal", "DiscretePlant", "LTVPlant",
+    # Kalman filtering
+    "kalman_filter", "KalmanResult", "LPVKalmanFilter", "KalmanModel", "KalmanState", "KalmanStep",
+    "kalman_step", "simulate_innovation_form", "InnovationFormData", "TruncatedKalmanFilter",
+    "theorem_start_covariance", "steady_state", "SteadyState", "assumption_bounds", "AssumptionBounds",
+    "truncation_errors", "TruncationErrors", "decay_rate", "tau_needed", "frozen_gains", "monotonicity",
+    "prediction_error_covariance", "PredictionError", "compare_filters", "FilterComparison",
+    # H-infinity filtering
+    "design_hinf", "HinfDesign", "search_epsilon", "EpsilonSearch", "epsilon_curve", "EpsilonCurve",
+    "HinfProgram", "HinfFilter", "hinf_filter_batch",
+    # LTV estimation with B-splines
+    "fit_kernel_model", "KernelFit", "KernelModel", "Known", "UnknownConstant", "UnknownSpline",
+    "kernel_regression", "KernelRegression", "reconstruct_state", "BSplineObserver", "kernel_identity",
+    "KernelIdentity",
+    # co-simulation files and SSP
+    "load_cosim", "CoSimFile", "CoSimResult", "read_ssp", "write_ssp", "simulate_ssp",
 ]
