@@ -297,7 +297,7 @@ def cmd_design(args: argparse.Namespace) -> int:
 
 
 def cmd_cosim(args: argparse.Namespace) -> int:
-    from .cosimfile import load_cosim
+    from .cosim.files import load_cosim
 
     spec = load_cosim(args.file, fmu_dir=args.fmus)
     if args.ssp:
@@ -305,7 +305,7 @@ def cmd_cosim(args: argparse.Namespace) -> int:
         print(f"wrote {path}: {len(spec.components)} components, {len(spec.connections)} connections, "
               f"step {spec.step_size:g}, t = {spec.start_time:g} .. {spec.stop_time:g}")
         print("note: fmpy's simulate_ssp and libcosim step all components in parallel (Jacobi): each connection "
-              "adds a one-step delay where an output feeds through from an input (see lpvest.ssp)")
+              "adds a one-step delay where an output feeds through from an input (see lpvest.cosim.ssp)")
         return 0
     out = _out_dir(args.out)
     result = spec.run(progress=None)

@@ -22,7 +22,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("lpvest.design",),
     ("lpvest.plotting",),
     ("lpvest.fmi",),
-    ("lpvest.cosim", "lpvest.cosimfile", "lpvest.ssp"),
+    ("lpvest.cosim",),
     ("lpvest.experiments", "lpvest.sweep"),
     ("lpvest.cli", "lpvest"),
 )

@@ -13,7 +13,7 @@ import pytest
 
 from lpvest import load_system
 from lpvest.cli import main
-from lpvest.cosimfile import load_cosim
+from lpvest.cosim.files import load_cosim
 from lpvest.errors import ModelFileError
 from tests.kalman_helpers import kalman_fmu_tolerance
 from tests.test_fmu import paper_w, theta

@@ -47,7 +47,7 @@ def _run(code: str, *, cwd: Path | None = None, timeout: int = 900) -> dict:
 @pytest.mark.parametrize(("name", "present", "absent", "requirements"), [
     ("PeixotoEx1Plant", ["lpvest.systems.streaming", "lpvest.fmi.slave", "pythonfmu.fmi2slave"],
      ["lpvest.cli", "lpvest.cosim", "lpvest.experiments.fmus", "lpvest.design.hinf", "lpvest.estimators.kalman",
-      "lpvest.fmi.build", "lpvest.ssp"], ["numpy>=1.26"]),
+      "lpvest.fmi.build", "lpvest.cosim.ssp"], ["numpy>=1.26"]),
     ("CoxTothTruncationKalman", ["lpvest.estimators.kalman", "lpvest.fmi.factories.kalman"],
      ["lpvest.estimators.bspline", "lpvest.estimators.truncated", "lpvest.design.hinf", "lpvest.cli"],
      ["numpy>=1.26"]),

@@ -33,11 +33,11 @@ from hypothesis import given, settings, strategies as st
 
 from lpvest.cli import describe_model, main
 from lpvest.cosim import CoSimulationError
-from lpvest.cosimfile import load_cosim
+from lpvest.cosim.files import load_cosim
+from lpvest.cosim.ssp import read_ssp
 from lpvest.errors import ExpressionError, ModelFileError
 from lpvest.expressions import FUNCTIONS, Expression, shift_name
 from lpvest.modelfile import load_system
-from lpvest.ssp import read_ssp
 
 from .contract import within_contract
 

@@ -1,6 +1,6 @@
 """The SSP export: the file fmpy and libcosim load and run, what each honours,
 and how their Jacobi stepping changes the results compared with our master,
-checked against the exact relation (lpvest/ssp.py, module documentation)."""
+checked against the exact relation (lpvest/cosim/ssp.py, module documentation)."""
 
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ import pytest
 from lpvest import load_system
 from lpvest.cli import main
 from lpvest.cosim import Component, CoSimulation, CoSimulationError
+from lpvest.cosim.ssp import read_ssp, simulate_ssp, write_ssp
 from lpvest.design import HinfDesign
 from lpvest.estimators.hinf import HinfFilter
 from lpvest.signals import SchedulerComponent, SignalSpec, SourceComponent
-from lpvest.ssp import read_ssp, simulate_ssp, write_ssp
 from lpvest.systems.streaming import DiscretePlant
 from tests.tolerances import roundoff
 
@@ -239,7 +239,7 @@ def test_the_readme_numbers_for_the_example_file(fmus, tmp_path):
     stepping (certified gamma = 1.21)."""
     from pathlib import Path
 
-    from lpvest.cosimfile import load_cosim
+    from lpvest.cosim.files import load_cosim
 
     spec = load_cosim(Path(__file__).resolve().parent.parent / "examples" / "peixoto_ex1_hinf.toml",
                       fmu_dir=fmus.out)

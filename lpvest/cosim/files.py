@@ -50,10 +50,10 @@ from typing import Any
 
 import numpy as np
 
-from .cosim import Component, Connection, CoSimulation, CoSimulationError
-from .errors import ModelFileError, abbreviate, shorten
-from .plotting import save_figure
-from .tomlfiles import read_toml
+from ..errors import ModelFileError, abbreviate, shorten
+from ..plotting import save_figure
+from ..tomlfiles import read_toml
+from .master import Component, Connection, CoSimulation, CoSimulationError
 
 __all__ = ["CoSimFile", "CoSimResult", "load_cosim", "DEFAULT_FMU_DIR"]
 
@@ -185,7 +185,7 @@ class CoSimFile:
         return CoSimResult(self, data, elapsed, order)
 
     def to_ssp(self, path: str | Path) -> Path:
-        """Write this system as an SSP file (:func:`lpvest.ssp.write_ssp`)."""
+        """Write this system as an SSP file (:func:`lpvest.cosim.ssp.write_ssp`)."""
         from .ssp import write_ssp
 
         try:

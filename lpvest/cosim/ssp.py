@@ -77,8 +77,8 @@ from typing import Any
 
 import numpy as np
 
-from .cosim import Component, Connection, CoSimulation, CoSimulationError
-from .errors import abbreviate, shorten
+from ..errors import abbreviate, shorten
+from .master import Component, Connection, CoSimulation, CoSimulationError
 
 __all__ = ["write_ssp", "read_ssp", "SspSystem", "simulate_ssp", "IMPORTERS"]
 
@@ -123,7 +123,7 @@ def write_ssp(
     its FMU as a connector; the communication step is declared as
     libcosim's ``FixedStepAlgorithm`` annotation of the default experiment.
     """
-    from ._version import __version__
+    from .._version import __version__
 
     if not step_size > 0 or not math.isfinite(step_size):
         raise CoSimulationError(f"step_size must be positive and finite; found {step_size}", where="step_size")

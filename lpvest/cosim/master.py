@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import LpvestError, abbreviate, shorten
+from ..errors import LpvestError, abbreviate, shorten
 
 __all__ = [
     "Component",
@@ -61,7 +61,7 @@ class CoSimulationError(LpvestError, RuntimeError):
     ----------
     where : str
         What in the set-up the error is about, in the terms of a co-simulation
-        file (:mod:`lpvest.cosimfile`): ``"connections[2]"`` (1-based),
+        file (:mod:`lpvest.cosim.files`): ``"connections[2]"`` (1-based),
         ``"components.plant"``, ``"components.plant.parameters.x0"``,
         ``"record[1]"``, ``"step_size"``; ``""`` when it is about no one field.
     """
