@@ -1,0 +1,1 @@
+"""Sweeps and Monte Carlo over co-simulations, on Dask."""
