@@ -590,7 +590,7 @@ def example2_task(_shared: Any, task: Task) -> TaskResult:
     """Theorem 1 on Example 2 at ``task.point["rho"]``: the best epsilon
     (:func:`~lpvest.design.search_epsilon`), or the design at
     ``task.point["epsilon"]`` when the point gives one. Metrics ``gamma``,
-    ``epsilon`` (``inf`` for the limit) and ``n_evaluations``; the value is
+    ``design_epsilon`` (``inf`` for the limit) and ``n_evaluations``; the value is
     the :class:`~lpvest.design.HinfDesign`."""
     from ..design import KIND_PD, design_hinf, search_epsilon
     from ..modelfile import load_system
@@ -602,8 +602,8 @@ def example2_task(_shared: Any, task: Task) -> TaskResult:
     else:
         s = search_epsilon(plant, kind=KIND_PD, program=_example2_program())
         design, n = s.design, s.n_evaluations
-    return TaskResult({"gamma": float(design.gamma), "epsilon": float(design.epsilon), "n_evaluations": float(n)},
-                      value=design)
+    return TaskResult({"gamma": float(design.gamma), "design_epsilon": float(design.epsilon),
+                       "n_evaluations": float(n)}, value=design)
 
 
 def run_example2(

@@ -129,7 +129,7 @@ class Engine:
                 n = self.workers or os.cpu_count() or 1
                 # the workers ignore SIGINT: Ctrl-C is the client's to handle (lpvest.sweep._worker)
                 self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                             dashboard_address=None, preload=["lpvest.sweep._worker"],
+                                             dashboard_address=":0", preload=["lpvest.sweep._worker"],
                                              silence_logs=logging.ERROR if self.quiet else logging.WARNING)
                 self._client = Client(self._cluster, timeout=self.start_timeout)
             else:

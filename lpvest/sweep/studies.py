@@ -362,7 +362,7 @@ def _experiment_task(fn: Callable[[Any, Task], TaskResult], spec: SweepSpec) -> 
 
 
 _COX_METRICS = ("mean_trace", "monte_carlo_mean_trace", "relative_difference")
-_PEIXOTO_METRICS = ("gamma", "epsilon", "n_evaluations")
+_PEIXOTO_METRICS = ("gamma", "design_epsilon", "n_evaluations")
 STUDIES_OPTIONS: dict[str, dict[str, Any]] = {
     "cox-toth-truncation": {"steps": 300, "runs": 2000, "burn_in": 50, "seed": 7},
 }
