@@ -52,7 +52,7 @@ from .spec import Axis, Seeds, SweepSpec
 from .tasks import Task, TaskResult
 
 __all__ = ["Prepared", "ExperimentStudy", "experiment_studies", "study", "prepare", "with_defaults",
-           "CosimPayload", "run_cosim_task"]
+           "CosimPayload", "run_cosim_task", "release_simulation"]
 
 
 @dataclass(frozen=True)
@@ -125,7 +125,7 @@ def _simulation(payload: CosimPayload) -> Any:
 
     if _WORKER.get("digest") == payload.digest and _WORKER.get("sim") is not None:
         return _WORKER["sim"]
-    _drop_simulation()
+    release_simulation()
     comps = [Component(name, _fmu_path(payload, sha), dict(params), feed)
              for name, sha, params, feed in payload.components]
     sim = CoSimulation(comps, payload.connections, step_size=payload.step_size, start_time=payload.start_time,
@@ -134,7 +134,8 @@ def _simulation(payload: CosimPayload) -> Any:
     return sim
 
 
-def _drop_simulation() -> None:
+def release_simulation() -> None:
+    """Close this process's cached simulation (the next task loads the FMUs anew)."""
     sim = _WORKER.pop("sim", None)
     _WORKER.pop("digest", None)
     if sim is not None:
@@ -157,7 +158,7 @@ def run_cosim_task(payload: CosimPayload, task: Task) -> TaskResult:
         sim.reset(_task_parameters(task))
         data = sim.run(payload.n_steps)
     except BaseException:
-        _drop_simulation()  # the next task starts from fresh instances
+        release_simulation()  # the next task starts from fresh instances
         raise
     metrics = {m.name: compute_metric(m, data) for m in payload.metrics}
     return TaskResult(metrics, {name: select(data, name) for name in payload.keep})
