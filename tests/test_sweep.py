@@ -427,7 +427,7 @@ def test_a_folder_holding_another_sweep_is_refused(fmus, tmp_path):
     spec = _write(tmp_path, fmus, n=2)
     run_sweep(spec, tmp_path / "out", workers=0, progress=False, plot=False)
     other = _write(tmp_path, fmus, n=3, name="other.toml")
-    with pytest.raises(SweepError, match="holds the results of another sweep .*sweep.toml"):
+    with pytest.raises(SweepError, match=r"holds the results of a different sweep \(.*sweep.toml, digest .*overwrite"):
         run_sweep(other, tmp_path / "out", workers=0, progress=False)
     res = run_sweep(other, tmp_path / "out", workers=0, progress=False, plot=False, overwrite=True)
     assert res.ran == 3 and res.resumed == 0

@@ -82,7 +82,7 @@ class SweepResult:
         shape = f"{n_points} point(s) x {n_seeds} seed(s)" if spec.seeds else f"{n_points} point(s)"
         lines = [f"sweep {spec.origin}: {self.description}; {self.n_tasks} tasks ({shape})"]
         if self.ran:
-            lines.append(f"ran {self.ran} task(s) on {self.engine} in {self.seconds:.1f} s; {self.resumed} "
+            lines.append(f"ran {self.ran} task(s) in {self.seconds:.1f} s ({self.engine}); {self.resumed} "
                          f"finished earlier (resumed); {len(self.failures)} failed")
         else:
             lines.append(f"nothing to run: every task finished earlier ({len(self.failures)} failed; "
@@ -96,8 +96,14 @@ class SweepResult:
                     label_w = max(label_w, len(point))
                     table.append((m, point, st))
             mw = max(len(m) for m in self.metrics)
-            lines.append(f"{'metric':<{mw}}  {'point':<{label_w}}  {'ok':>5}  {'mean':>11}  {'std':>10}  "
-                         f"{'min':>11}  {'max':>11}")
+            if spec.seeds is None:  # one task per point: its value
+                lines.append(f"{'metric':<{mw}}  {'point':<{label_w}}  {'value':>13}")
+                lines += [f"{m:<{mw}}  {point:<{label_w}}  " + (f"{st['mean']:>13.7g}" if st["ok"] else
+                                                                 f"{'failed':>13}") for m, point, st in table]
+                table = []
+            else:
+                lines.append(f"{'metric':<{mw}}  {'point':<{label_w}}  {'ok':>5}  {'mean':>11}  {'std':>10}  "
+                             f"{'min':>11}  {'max':>11}")
             for m, point, st in table:
                 if st["ok"]:
                     lines.append(f"{m:<{mw}}  {point:<{label_w}}  {st['ok']:>5}  {st['mean']:>11.5g}  "
@@ -200,7 +206,11 @@ def run_sweep(
         raise SweepError("workers = 0 runs in this process; it takes no scheduler or engine")
     prepared = prepare(spec, fmus=fmus if spec.experiment is not None else None, ship_fmus=ship_fmus)
     tasks = spec.tasks()
-    key = digest({"format": FORMAT, "spec": spec.identity(), "study": prepared.identity})
+    from .. import __version__
+
+    key = digest({"format": FORMAT, "lpvest": __version__, "spec": spec.identity(), "study": prepared.identity,
+                  "metrics": list(prepared.metrics),
+                  "signals": {k: [list(shape), list(labels)] for k, (shape, labels) in prepared.signals.items()}})
     store = SweepStore(out, spec, prepared, tasks, key, overwrite=overwrite, retry_failed=retry_failed,
                        flush_every=flush_every, flush_seconds=flush_seconds)
     pending = store.pending()
@@ -213,7 +223,7 @@ def run_sweep(
             on_outcome(outcome)
 
     own = None
-    label = "this process (workers = 0)"
+    label = "in this process, no Dask"
     try:
         if pending and workers == 0:
             from tqdm import tqdm

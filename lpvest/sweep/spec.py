@@ -86,24 +86,6 @@ class Axis:
     name: str
     values: tuple[Any, ...]
 
-    @property
-    def kind(self) -> str:
-        """``"int"``, ``"float"``, ``"bool"``, ``"str"`` or ``"vector"``."""
-        return _value_kind(self.values[0]) if all(_value_kind(v) == _value_kind(self.values[0])
-                                                  for v in self.values) else "float"
-
-
-def _value_kind(v: Any) -> str:
-    if isinstance(v, bool):
-        return "bool"
-    if isinstance(v, int):
-        return "int"
-    if isinstance(v, float):
-        return "float"
-    if isinstance(v, str):
-        return "str"
-    return "vector"
-
 
 @dataclass(frozen=True)
 class Seeds:

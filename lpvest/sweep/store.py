@@ -8,12 +8,18 @@
     OUT/summary.parquet      every finished task in task order: task, axes, seed, metrics, status, error
     OUT/timing.parquet       task, seconds, worker (not part of the summary: it varies from run to run)
 
+The digest covers the spec (axes, seeds, metrics, kept signals, options), what
+the study reads (a co-simulation's FMUs by SHA-256, its connections and steps;
+an experiment's options and data), the metric and signal names, and lpvest's
+version (not its code: after changing it, use a new folder or ``overwrite``).
+
 A batch of outcomes is committed by writing its trajectories first and its
 part file last (written to a temporary name, then renamed): a task is
 finished when a part holds it. A rerun of the same spec (same digest) reads
 the parts and runs only the tasks none of them holds; a different spec in the
 same folder is refused unless ``overwrite`` (which removes the files above,
-nothing else). Failed tasks are finished too: ``retry_failed`` runs them again.
+nothing else). Failed tasks are finished too: ``retry_failed`` runs them again
+(the later part holding a task is the one that counts).
 
 ``summary.parquet`` is rebuilt from the parts at the end of every run, sorted
 by task, with no column that depends on timing or workers: the same spec gives
@@ -149,10 +155,10 @@ class SweepStore:
                 old = {}
             if old.get("format") != FORMAT or old.get("digest") != self.digest:
                 if not overwrite:
-                    what = f"sweep {old.get('spec', '?')} (digest {str(old.get('digest', '?'))[:12]})" if old \
-                        else "unreadable sweep files"
-                    raise SweepError(f"{self.out} holds the results of another {what}, not of this spec (digest "
-                                     f"{self.digest[:12]}); choose another output folder or overwrite")
+                    what = f"a different sweep ({old.get('spec', '?')}, digest {str(old.get('digest', '?'))[:12]}" \
+                        if old else "unreadable sweep files ("
+                    raise SweepError(f"{self.out} holds the results of {what}; this one: {self.digest[:12]}): "
+                                     "choose another output folder, or overwrite them")
                 self._clear()
         self.out.mkdir(parents=True, exist_ok=True)
         (self.out / "parts").mkdir(exist_ok=True)
@@ -162,9 +168,8 @@ class SweepStore:
         for part in sorted((self.out / "parts").glob("part-*.parquet")):
             self._seq = max(self._seq, int(part.stem.split("-")[1]))
             for row in pq.read_table(part).to_pylist():
-                i = row["task"]
-                if i in known and i not in self.rows:
-                    self.rows[i] = row
+                if row["task"] in known:  # a later part (a retried task) replaces an earlier one
+                    self.rows[row["task"]] = row
         if retry_failed:
             self.rows = {i: r for i, r in self.rows.items() if r["status"] == "ok"}
         self.resumed = len(self.rows)

@@ -303,6 +303,11 @@ def _cox_toth_prepare(spec: SweepSpec, fmus: Any) -> Prepared:
     from ..experiments.cox_toth import prediction_error_setup, prediction_error_task
 
     opts = {**STUDIES_OPTIONS["cox-toth-truncation"], **spec.options}
+    for key, low in (("steps", 2), ("runs", 1), ("burn_in", 0), ("seed", 0)):
+        if opts[key] < low:
+            raise spec.error(f"options.{key}", f"expected an integer >= {low}, found {opts[key]!r}")
+    if opts["burn_in"] >= opts["steps"]:
+        raise spec.error("options.burn_in", f"expected fewer than steps = {opts['steps']}, found {opts['burn_in']}")
     setup = prediction_error_setup(steps=opts["steps"], runs=opts["runs"], burn_in=opts["burn_in"],
                                    seed=opts["seed"])
     for a in spec.axes:
