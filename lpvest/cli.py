@@ -13,6 +13,8 @@
                                             design an H-infinity filter, write it as JSON
     lpvest cosim FILE.toml [--out DIR] [--fmus DIR]    co-simulate FMUs described in a file: CSV, plot, summary
     lpvest cosim FILE.toml --ssp OUT.ssp               write that system as an SSP file instead
+    lpvest sweep SPEC.toml [--out DIR] [--workers N | --scheduler ADDRESS] [--fmus DIR]
+                                            a co-simulation (or experiment) over seeds and parameters, on Dask
     lpvest validate FMU...                  validate FMUs (fmpy.validation)
 
 Errors in the user's input print one line (``lpvest: error: ...``) and exit
@@ -333,6 +335,30 @@ def _check_fmu_file(path: Path) -> None:
         raise ArgumentError(f"{shown}: cannot be read ({exc.strerror or exc})") from None
 
 
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from .sweep import SweepInterrupted, experiment_studies, run_sweep
+
+    if args.list:
+        for st in experiment_studies().values():
+            axes = ", ".join([*st.axes, *(["seeds"] if st.seeded else [])])
+            print(f"{st.name:<22} {st.title}\n{'':<22} axes: {axes or '-'}; metrics: {', '.join(st.metrics)}")
+        return 0
+    if args.spec is None:
+        raise LpvestError("give a sweep file (SPEC.toml; see examples/sweep_kalman.toml), or --list")
+    if args.scheduler is not None and args.workers is not None:
+        raise LpvestError("--workers starts a local cluster; --scheduler uses an existing one: give one of them")
+    out = Path(args.out) if args.out else Path("out") / f"sweep-{Path(args.spec).stem}"
+    try:
+        res = run_sweep(args.spec, out, scheduler=args.scheduler, workers=args.workers, fmus=args.fmus,
+                        ship_fmus=not args.shared_fmus, overwrite=args.overwrite, retry_failed=args.retry_failed,
+                        progress=False if args.no_progress else None, plot=not args.no_plot)
+    except SweepInterrupted as exc:
+        print(f"lpvest: {exc}", file=sys.stderr)
+        return 130
+    print(res.report())
+    return 1 if res.failures else 0
+
+
 def cmd_validate(args: argparse.Namespace) -> int:
     from .fmi.build import format_table, validate_fmus
 
@@ -485,6 +511,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--ssp", metavar="OUT.ssp", help="write the system as an SSP file (FMUs included) and stop")
     p.add_argument("--no-plot", action="store_true", help="write the CSV only")
     p.set_defaults(func=cmd_cosim)
+
+    p = sub.add_parser("sweep", help="run a co-simulation (or an experiment's Monte Carlo) over seeds and parameters "
+                                     "on Dask: Parquet summary, Zarr trajectories, a figure per metric; resumable")
+    p.add_argument("spec", nargs="?", metavar="SPEC.toml", help="sweep file (see examples/sweep_kalman.toml)")
+    p.add_argument("--out", help="output folder (default out/sweep-<SPEC>); a rerun of the same spec resumes there")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="worker processes of the local Dask cluster (default: one per core; 0: run in this process)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run on an existing Dask cluster (e.g. tcp://10.0.0.5:8786; its workers need lpvest)")
+    p.add_argument("--fmus", metavar="DIR", help="folder of the co-simulation's FMUs (default: the files' fmu_dir), "
+                                                 "or the FMU cache of an experiment")
+    p.add_argument("--shared-fmus", action="store_true",
+                   help="workers read the FMUs from their paths (a shared file system) instead of receiving them")
+    p.add_argument("--overwrite", action="store_true", help="replace the results of a different sweep in --out")
+    p.add_argument("--retry-failed", action="store_true", help="run the failed tasks of an earlier run again")
+    p.add_argument("--no-plot", action="store_true", help="no figures")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--list", action="store_true", help="list the experiments that can be swept")
+    p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("validate", help="validate FMUs with fmpy (exit status 1 on any problem)")
     p.add_argument("fmus", nargs="+", metavar="FMU", help="FMU files")

@@ -36,7 +36,7 @@ import re
 import shutil
 import tempfile
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -264,6 +264,8 @@ class CoSimulation:
         self._tmp = Path(tempfile.mkdtemp(prefix="lpvest-cosim-"))
         self._units: list[_Unit] = []
         self._closed = False
+        self._ran = False  # run() consumed the instances; reset() before running again
+        self._components = tuple(components)  # as constructed: reset() starts from them
         try:
             self._setup(components, connections, record)
             for unit in self._units:
@@ -602,6 +604,8 @@ class CoSimulation:
         """
         if self._closed:
             raise CoSimulationError("the co-simulation is closed")
+        if self._ran:
+            raise CoSimulationError("the co-simulation has run; call reset() before running it again")
         if (n_steps is None) == (stop_time is None):
             raise CoSimulationError("give n_steps or stop_time")
         if n_steps is None:
@@ -610,6 +614,7 @@ class CoSimulation:
             raise CoSimulationError(f"n_steps must be non-negative; found {n_steps}")
         h, t0 = self.step_size, self.start_time
         t_end = t0 + n_steps * h
+        self._ran = True
         for unit in self._units:
             self._call(unit, "setupExperiment", lambda u=unit: u.fmu.setupExperiment(startTime=t0, stopTime=t_end))
             self._set_start_values(unit)
@@ -766,6 +771,48 @@ class CoSimulation:
             if status > 1:
                 what = "reading outputs" if op == "get" else "setting inputs"
                 self._fail(unit, what + (" during initialization" if initial else ""), status, t)
+
+    def reset(self, parameters: Mapping[str, Mapping[str, Any]] | None = None) -> None:
+        """Return every instance to its state after instantiation
+        (``fmi2Reset``), so that :meth:`run` can run again without loading the
+        FMUs anew (a sweep runs many tasks on the instances of one worker).
+
+        Parameters
+        ----------
+        parameters : mapping, optional
+            Start values per component, ``{"plant": {"seed": 4}}``, over the
+            components' own ``parameters`` (a name given here replaces the
+            component's value; the rest are the component's). They do not
+            accumulate: each reset starts from the components as constructed.
+            Checked as at construction; on an error nothing is changed.
+
+        Raises
+        ------
+        CoSimulationError
+            An unknown component or variable, a value of the wrong type, or
+            an instance that cannot be reset.
+        """
+        if self._closed:
+            raise CoSimulationError("the co-simulation is closed")
+        parameters = dict(parameters or {})
+        names = [u.spec.name for u in self._units]
+        for comp in parameters:
+            if comp not in names:
+                raise CoSimulationError(f"reset: no component {comp!r} (components: {', '.join(names)})",
+                                        where="components")
+        saved = [(u.spec, u.start_values) for u in self._units]
+        try:
+            for unit, spec in zip(self._units, self._components, strict=True):
+                extra = parameters.get(spec.name)
+                unit.spec = spec if not extra else replace(spec, parameters={**spec.parameters, **extra})
+                self._check_parameters(unit)
+        except BaseException:
+            for unit, (spec, values) in zip(self._units, saved, strict=True):
+                unit.spec, unit.start_values = spec, values
+            raise
+        for unit in self._units:
+            self._call(unit, "reset", unit.fmu.reset)
+        self._ran = False
 
     # -- inspection and clean-up ----------------------------------------------
     @property

@@ -26,9 +26,10 @@ not run here):
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -44,10 +45,24 @@ from ..estimators.kalman import KalmanModel, kalman_filter
 from ..estimators.truncated import assumption_bounds
 from ..modelfile import load_system
 from ..plotting import save_figure
+from ..sweep.tasks import Task, TaskResult, map_tasks
 from . import Experiment, ExperimentResult
 from .fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
 
-__all__ = ["EXPERIMENTS", "run_example1", "run_truncation", "example1_cosim", "truncation_cosim"]
+if TYPE_CHECKING:
+    from ..sweep.engine import Engine
+
+__all__ = [
+    "EXPERIMENTS",
+    "run_example1",
+    "run_truncation",
+    "example1_cosim",
+    "truncation_cosim",
+    "PREDICTION_FILTERS",
+    "PredictionErrorSetup",
+    "prediction_error_setup",
+    "prediction_error_task",
+]
 
 
 # ---------------------------------------------------------------------------
@@ -202,6 +217,71 @@ def _plot_example1(
 # ---------------------------------------------------------------------------
 TRUNCATION_TAUS = tuple(range(0, 61))
 PREDICTION_TAUS = (0, 1, 2, 5, 10, 20)
+#: The filters whose prediction-error variance is compared (the names of
+#: :func:`~lpvest.analysis.fading_memory.compare_filters` with these taus and ``constant_p = 0``).
+PREDICTION_FILTERS = ("exact", *(f"truncated tau={t}" for t in PREDICTION_TAUS), "frozen K_inf(p_t)",
+                      "constant K_inf(0)")
+
+
+def _truncation_signals(steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """``p_t = sin(0.25 t)`` and ``u_t = sin(0.1 t)``, ``t = 0 .. steps - 1``, as ``(steps, 1)``."""
+    k = np.arange(steps)
+    return np.sin(0.25 * k)[:, None], np.sin(0.1 * k)[:, None]
+
+
+@dataclass(frozen=True)
+class PredictionErrorSetup:
+    """What every Monte Carlo member of the prediction-error check reads: the
+    model, ``p``, ``u``, each filter's gains ``K_t`` and exact variance curve."""
+
+    model: Any
+    p: np.ndarray
+    u: np.ndarray
+    gains: Mapping[str, np.ndarray]  #: filter name -> gains, shape (T, n_x, n_y)
+    exact_trace: Mapping[str, np.ndarray]  #: filter name -> trace of the exact second moment, shape (T,)
+    mean_trace: Mapping[str, float]  #: filter name -> its mean over t >= burn_in
+    runs: int
+    seed: int
+    burn_in: int
+
+
+def prediction_error_setup(
+    *, steps: int = 300, runs: int = 2000, burn_in: int = 50, seed: int = 7, comparison: Any | None = None,
+) -> PredictionErrorSetup:
+    """The set-up of :func:`prediction_error_task` on ``cox-toth-truncation``
+    with ``p_t = sin(0.25 t)``, ``u_t = sin(0.1 t)``: the exact, truncated
+    (theorem start, :data:`PREDICTION_TAUS`), frozen and constant gains
+    (``comparison``: a :func:`~lpvest.analysis.fading_memory.compare_filters`
+    result already computed on that set-up)."""
+    model = load_system("cox-toth-truncation").model()
+    p, u = _truncation_signals(steps)
+    cmp = comparison if comparison is not None else compare_filters(
+        KalmanModel(model), p, PREDICTION_TAUS, constant_p=[0.0], burn_in=burn_in)
+    return PredictionErrorSetup(
+        model, p, u, dict(cmp.gains),
+        {name: np.trace(cmp.errors[name].output, axis1=1, axis2=2) for name in cmp.gains},
+        dict(cmp.mean_trace), runs, seed, burn_in,
+    )
+
+
+def prediction_error_task(setup: PredictionErrorSetup, task: Task) -> TaskResult:
+    """One filter's Monte Carlo check (``task.point["filter"]``): ``runs``
+    trajectories of (1) from ``default_rng(seed + 1)`` (the same for every
+    filter: common random numbers), the sample one-step prediction-error
+    covariance, the mean of its trace over ``t >= burn_in`` against the exact
+    moment's."""
+    name = task.point["filter"]
+    if name not in setup.gains:
+        raise KeyError(f"no filter {name!r} (filters: {', '.join(setup.gains)})")
+    emp = empirical_prediction_error(setup.model, setup.p, setup.u, setup.gains[name], runs=setup.runs,
+                                     rng=setup.seed + 1)
+    trace = np.trace(emp, axis1=1, axis2=2)
+    emp_mean = float(np.mean(trace[setup.burn_in:]))
+    exact = setup.mean_trace[name]
+    return TaskResult(
+        {"mean_trace": exact, "monte_carlo_mean_trace": emp_mean, "relative_difference": emp_mean / exact - 1.0},
+        {"monte_carlo_trace": trace, "exact_trace": setup.exact_trace[name]},
+    )
 
 
 def run_truncation(
@@ -212,11 +292,15 @@ def run_truncation(
     burn_in: int = 50,
     seed: int = 7,
     fmus: ExperimentFmus | str | Path | None = None,
+    engine: Engine | None = None,
 ) -> ExperimentResult:
     """Fading memory of the Kalman gain on ``cox-toth-truncation``, ``p_t = sin(0.25 t)``.
 
     ``runs`` Monte Carlo trajectories (the same ones for every filter) check
     the exact prediction-error variances; averages are over ``t >= burn_in``.
+    One task per filter (:func:`prediction_error_task`), run in this process
+    or, with ``engine`` (a :class:`lpvest.sweep.Engine`), on Dask workers:
+    the same numbers either way.
 
     Through FMUs (:func:`truncation_cosim`): Scheduler, Source and Plant
     (noise seed ``seed``), the Kalman FMU and one TruncatedKalman FMU per
@@ -231,9 +315,7 @@ def run_truncation(
     progress = out_dir is not None
     model = load_system("cox-toth-truncation").model()
     km = KalmanModel(model)
-    k = np.arange(steps)
-    p = np.sin(0.25 * k)[:, None]
-    u = np.sin(0.1 * k)[:, None]
+    p, u = _truncation_signals(steps)
 
     bounds_grid = assumption_bounds(km)
     bounds_traj = assumption_bounds(km, p)
@@ -279,18 +361,16 @@ def run_truncation(
 
     # prediction-error variances of exact, truncated (theorem start) and frozen-gain filters
     cmp = compare_filters(km, p, PREDICTION_TAUS, constant_p=[0.0], burn_in=burn_in)
+    setup = prediction_error_setup(steps=steps, runs=runs, burn_in=burn_in, seed=seed, comparison=cmp)
     variance: dict[str, Any] = {}
-    items = list(cmp.gains.items())
-    if progress:
-        from tqdm import tqdm
-
-        items = tqdm(items, desc="prediction error (Monte Carlo)", unit="filter", leave=False)
     curves = {}
-    for name, K in items:
-        # common random numbers: every filter sees the same trajectories
-        emp = empirical_prediction_error(model, p, u, K, runs=runs, rng=seed + 1)
-        emp_mean = float(np.mean(np.trace(emp[burn_in:], axis1=1, axis2=2)))
-        curves[name] = np.trace(cmp.errors[name].output, axis1=1, axis2=2)
+    names = list(cmp.gains)
+    # common random numbers: every filter sees the same trajectories
+    monte_carlo = map_tasks(prediction_error_task, setup, [{"filter": name} for name in names], engine=engine,
+                            progress=progress, desc="prediction error (Monte Carlo)")
+    for name, mc in zip(names, monte_carlo, strict=True):
+        emp_mean = mc.metrics["monte_carlo_mean_trace"]
+        curves[name] = setup.exact_trace[name]
         variance[name] = {
             "mean_trace": cmp.mean_trace[name],
             "excess_over_exact": cmp.excess[name],

@@ -23,15 +23,17 @@ Examples
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..plotting import save_figure
+from ..sweep.tasks import Task, TaskResult, map_tasks
 from . import Experiment, ExperimentResult
 from .fmus import (
     Agreement,
@@ -44,6 +46,9 @@ from .fmus import (
     column,
     design_difference,
 )
+
+if TYPE_CHECKING:
+    from ..sweep.engine import Engine
 
 __all__ = [
     "EXPERIMENTS",
@@ -58,6 +63,7 @@ __all__ = [
     "HinfFmuResult",
     "EXAMPLE2_FMU_RHOS",
     "example2_cosim",
+    "example2_task",
 ]
 
 #: Table 1 of the paper: (method, filter, gamma).
@@ -577,17 +583,51 @@ def example2_cosim(rhos: Sequence[float] = EXAMPLE2_FMU_RHOS, *, steps: int = 10
     return CoSimSpec(tuple(comps), tuple(conns), base.step_size, base.n_steps, tuple(record))
 
 
+@functools.cache
+def _example2_program() -> Any:
+    """The LMI program of Theorem 1 for Example 2's dimensions, compiled once
+    per process (every rho has the same dimensions: one program serves all)."""
+    from ..design import KIND_PD, HinfProgram
+    from ..modelfile import load_system
+
+    return HinfProgram.for_plant(load_system("peixoto-ex2").model(), kind=KIND_PD)
+
+
+def example2_task(_shared: Any, task: Task) -> TaskResult:
+    """Theorem 1 on Example 2 at ``task.point["rho"]``: the best epsilon
+    (:func:`~lpvest.design.search_epsilon`), or the design at
+    ``task.point["epsilon"]`` when the point gives one. Metrics ``gamma``,
+    ``design_epsilon`` (``inf`` for the limit) and ``n_evaluations``; the value is
+    the :class:`~lpvest.design.HinfDesign`."""
+    from ..design import KIND_PD, design_hinf, search_epsilon
+    from ..modelfile import load_system
+
+    plant = load_system("peixoto-ex2", parameters={"rho": float(task.point["rho"])}).model()
+    if "epsilon" in task.point:
+        design = design_hinf(plant, epsilon=float(task.point["epsilon"]), kind=KIND_PD, program=_example2_program())
+        n = 1
+    else:
+        s = search_epsilon(plant, kind=KIND_PD, program=_example2_program())
+        design, n = s.design, s.n_evaluations
+    return TaskResult({"gamma": float(design.gamma), "design_epsilon": float(design.epsilon),
+                       "n_evaluations": float(n)}, value=design)
+
+
 def run_example2(
     out_dir: Path | None = None,
     *,
     rhos: Sequence[float] = tuple(float(r) for r in range(1, 22)),
     progress: bool | None = None,
     fmus: ExperimentFmus | str | Path | None = None,
+    engine: Engine | None = None,
 ) -> ExperimentResult:
     """Example 2: ``gamma(rho)`` of Theorem 1 with the best ``epsilon`` per ``rho``.
 
     One compiled LMI program serves every ``rho`` (the vertex matrices are
-    parameters). ``progress=None`` shows a tqdm bar when stderr is a terminal.
+    parameters), one per process. ``progress=None`` shows a tqdm bar when
+    stderr is a terminal. One task per ``rho`` (:func:`example2_task`), run in
+    this process or, with ``engine`` (a :class:`lpvest.sweep.Engine`), on Dask
+    workers: the same numbers either way.
 
     Fig. 3 is a design sweep (library only). Through FMUs
     (:func:`example2_cosim`): at each ``rho`` of :data:`EXAMPLE2_FMU_RHOS` in
@@ -596,25 +636,20 @@ def run_example2(
     compared with the sweep's and ``||e||_2 / ||w||_2 <= gamma`` is checked.
     """
     fmus = as_experiment_fmus(fmus)
-    from tqdm import tqdm
+    import sys
 
-    from ..design import KIND_PD, HinfProgram, search_epsilon
     from ..modelfile import load_system
 
     rows: list[dict[str, Any]] = []
     designs: dict[float, Any] = {}
-    program = None
-    bar = tqdm(list(rhos), desc="Example 2: rho sweep", unit="rho", disable=None if progress is None else not progress)
-    for rho in bar:
-        plant = load_system("peixoto-ex2", parameters={"rho": float(rho)}).model()
-        if program is None:
-            program = HinfProgram.for_plant(plant, kind=KIND_PD)
-        s = search_epsilon(plant, kind=KIND_PD, program=program)
-        designs[float(rho)] = s.design
-        rows.append({"rho": float(rho), "epsilon": _eps(s.design.epsilon), "gamma": s.design.gamma,
-                     "status": s.design.status, "n_evaluations": s.n_evaluations})
-        bar.set_postfix(gamma=f"{s.design.gamma:.4f}")
-    bar.close()
+    show = sys.stderr.isatty() if progress is None else progress
+    curve = map_tasks(example2_task, None, [{"rho": float(rho)} for rho in rhos], engine=engine, progress=show,
+                      desc="Example 2: rho sweep")
+    for rho, r in zip(rhos, curve, strict=True):
+        design = r.value
+        designs[float(rho)] = design
+        rows.append({"rho": float(rho), "epsilon": _eps(design.epsilon), "gamma": design.gamma,
+                     "status": design.status, "n_evaluations": int(r.metrics["n_evaluations"])})
     lim = stability_limits()
     lines = [f"{'rho':>6} {'epsilon':>10} {'gamma':>9}", "-" * 27]
     for r in rows:

@@ -44,10 +44,11 @@ next to the FMU ones.
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -55,8 +56,12 @@ from ..estimators.bspline import BSplineObserver, KernelModel, UnknownConstant, 
 from ..modelfile import load_system
 from ..plotting import save_figure
 from ..protocol import run_streaming
+from ..sweep.tasks import Task, TaskResult, map_tasks
 from . import Experiment, ExperimentResult
 from .fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
+
+if TYPE_CHECKING:
+    from ..sweep.engine import Engine
 
 __all__ = [
     "EXPERIMENTS",
@@ -70,6 +75,10 @@ __all__ = [
     "sridhar_cosim",
     "sridhar_data",
     "SridharData",
+    "NoisySetup",
+    "noisy_setup",
+    "noisy_seed_task",
+    "NOISY_METRICS",
 ]
 
 #: Section V-A: "The estimated constant value of a_1 is 0.9617".
@@ -342,37 +351,93 @@ def run_noiseless(
 # -- Section V-B ---------------------------------------------------------------------------------
 
 
+#: The error measures of one fit (:func:`_errors`), per seed.
+_ERROR_KEYS = ("a1", "a0_max_rel_error", "y_max_error", "dy_max_error", "x_max_error")
+#: The metrics of :func:`noisy_seed_task`: least squares, P-spline + GCV (``gcv_``), ...
+NOISY_METRICS = (*_ERROR_KEYS, *(f"gcv_{k}" for k in _ERROR_KEYS), "gcv_penalty", "a1_batch", "noise_sigma")
+
+
+@dataclass(frozen=True)
+class NoisySetup:
+    """What every seed of Section V-B reads: the plant FMU's samples over
+    [0, 9] s, one batch integration's over the same samples, the inner window."""
+
+    t: np.ndarray
+    u: np.ndarray
+    y: np.ndarray
+    x: np.ndarray
+    batch_t: np.ndarray
+    batch_u: np.ndarray
+    batch_y: np.ndarray
+    inner: np.ndarray  #: bool, the inner window [1.5, 7.5] s
+    n_basis: int = 16
+
+
+def noisy_setup(data: SridharData) -> NoisySetup:
+    """The set-up of :func:`noisy_seed_task` from the shared co-simulation."""
+    n9 = int(round(9.0 * RATE)) + 1
+    traj, batch = data.fmu.head(n9), data.batch.head(n9)
+    return NoisySetup(traj.t, traj.u, traj.y, traj.x, batch.t, batch.u, batch.y,
+                      (traj.t >= 1.5) & (traj.t <= 7.5))
+
+
+@functools.cache
+def _noisy_model(n_basis: int) -> KernelModel:
+    return KernelModel.from_io(_system(), a0=UnknownSpline(n_basis, order=3), a1=UnknownConstant())
+
+
+def noisy_seed_task(setup: NoisySetup, task: Task) -> TaskResult:
+    """One noise realization of Section V-B (seed ``task.seed``): 30 dB noise
+    from ``default_rng(seed)`` on the FMU samples' ``y`` (and, for the batch
+    comparison, on the batch integration's), the least-squares fit and the
+    P-spline + GCV fit. Metrics :data:`NOISY_METRICS`; signals ``a0``, ``y``,
+    ``dy`` of the least-squares fit over [0, 9] s."""
+    if task.seed is None:
+        raise ValueError("sridhar-noisy: a task needs a seed")
+    model = _noisy_model(setup.n_basis)
+    traj = _Trajectory(setup.t, setup.u, setup.y, setup.x)
+    y_meas, sigma = noisy_output(setup.y, SNR_DB, np.random.default_rng(task.seed))
+    fit = fit_kernel_model(model, setup.t, setup.u, y_meas)
+    y_batch, _ = noisy_output(setup.batch_y, SNR_DB, np.random.default_rng(task.seed))
+    a1_batch = float(fit_kernel_model(model, setup.batch_t, setup.batch_u, y_batch).constants["a1"])
+    fit_gcv = fit_kernel_model(model, setup.t, setup.u, y_meas, penalty="gcv")
+    ls, gcv = _errors(fit, traj, setup.inner), _errors(fit_gcv, traj, setup.inner)
+    metrics = {**ls, **{f"gcv_{k}": v for k, v in gcv.items()}, "gcv_penalty": float(fit_gcv.penalty),
+               "a1_batch": a1_batch, "noise_sigma": sigma}
+    return TaskResult(metrics, {"a0": fit.values["a0"], "y": fit.y, "dy": fit.dy})
+
+
 def run_noisy(
-    out_dir: Path | None = None, *, seeds: int = 20, fmus: ExperimentFmus | str | Path | None = None
+    out_dir: Path | None = None, *, seeds: int = 20, fmus: ExperimentFmus | str | Path | None = None,
+    engine: Engine | None = None,
 ) -> ExperimentResult:
     """Section V-B: window [0, 9] s, n = 16, 30 dB output noise, inner window [1.5, 7.5] s;
     mean and spread over ``seeds`` noise realizations (seeds 0, 1, ...), on the
-    plant FMU's samples over [0, 9] s with the noise added to ``y`` per seed."""
-    from tqdm import tqdm
+    plant FMU's samples over [0, 9] s with the noise added to ``y`` per seed.
 
+    One task per seed (:func:`noisy_seed_task`), run in this process or, with
+    ``engine`` (a :class:`lpvest.sweep.Engine`), on Dask workers: the same
+    numbers either way."""
     data = sridhar_data(as_experiment_fmus(fmus), progress=out_dir is not None)
-    n9 = int(round(9.0 * RATE)) + 1
-    io, traj = _system(), data.fmu.head(n9)
-    batch = data.batch.head(n9)
-    model = KernelModel.from_io(io, a0=UnknownSpline(16, order=3), a1=UnknownConstant())
-    t = traj.t
-    inner = (t >= 1.5) & (t <= 7.5)
+    setup = noisy_setup(data)
+    n9 = setup.t.size
+    traj = data.fmu.head(n9)
+    t, inner = setup.t, setup.inner
     runs: dict[str, list[dict[str, float]]] = {"ls": [], "gcv": []}
-    keep: dict[str, Any] = {}
     a0_curves = []
     a1_batch: list[float] = []
-    for seed in tqdm(range(seeds), desc="sridhar-noisy seeds", disable=out_dir is None, leave=False):
-        y_meas, sigma = noisy_output(traj.y, SNR_DB, np.random.default_rng(seed))
-        fit = fit_kernel_model(model, t, traj.u, y_meas)
-        y_batch, _ = noisy_output(batch.y, SNR_DB, np.random.default_rng(seed))
-        a1_batch.append(float(fit_kernel_model(model, batch.t, batch.u, y_batch).constants["a1"]))
-        fit_gcv = fit_kernel_model(model, t, traj.u, y_meas, penalty="gcv")
-        runs["ls"].append(_errors(fit, traj, inner) | {"penalty": 0.0})
-        runs["gcv"].append(_errors(fit_gcv, traj, inner) | {"penalty": fit_gcv.penalty})
-        a0_curves.append(fit.values["a0"])
-        if seed == 0:
-            keep = {"fit": fit, "y_meas": y_meas, "sigma": sigma}
-    keys = ("a1", "a0_max_rel_error", "y_max_error", "dy_max_error", "x_max_error")
+    per_seed = map_tasks(noisy_seed_task, setup, [Task(i, seed=i) for i in range(seeds)], engine=engine,
+                         progress=out_dir is not None, desc="sridhar-noisy seeds")
+    for r in per_seed:
+        m = r.metrics
+        runs["ls"].append({k: m[k] for k in _ERROR_KEYS} | {"penalty": 0.0})
+        runs["gcv"].append({k: m[f"gcv_{k}"] for k in _ERROR_KEYS} | {"penalty": m["gcv_penalty"]})
+        a0_curves.append(r.signals["a0"])
+        a1_batch.append(m["a1_batch"])
+    keep = {"fit_y": per_seed[0].signals["y"], "fit_dy": per_seed[0].signals["dy"],
+            "y_meas": noisy_output(setup.y, SNR_DB, np.random.default_rng(0))[0],
+            "sigma": per_seed[0].metrics["noise_sigma"]}  # seed 0
+    keys = _ERROR_KEYS
 
     def summary(rows: list[dict[str, float]]) -> dict[str, float]:
         out: dict[str, float] = {}
@@ -437,7 +502,6 @@ def run_noisy(
     )
     figures: list[Path] = []
     if out_dir is not None:
-        fit = keep["fit"]
         ti = t[inner]
         curves = np.array(a0_curves)[:, inner]
         figures.append(_figure(out_dir / "fig4_a0.png", ti, [
@@ -449,12 +513,12 @@ def run_noisy(
         ], "Fig. 4: estimated a_0, 30 dB output noise (n = 16)"))
         figures.append(_figure(out_dir / "fig5_y.png", ti, [
             {"ylabel": "y", "lines": [("measured (seed 0)", keep["y_meas"][inner], "0.7"),
-                                      ("true y", traj.y[inner], "k-"), ("y_E", fit.y[inner], "r--")]},
-            {"ylabel": "y_E - y", "lines": [("error (seed 0)", (fit.y - traj.y)[inner], "r-")]},
+                                      ("true y", traj.y[inner], "k-"), ("y_E", keep["fit_y"][inner], "r--")]},
+            {"ylabel": "y_E - y", "lines": [("error (seed 0)", (keep["fit_y"] - traj.y)[inner], "r-")]},
         ], "Fig. 5: estimated output y, 30 dB noise"))
         figures.append(_figure(out_dir / "fig6_dy.png", ti, [
-            {"ylabel": "y'", "lines": [("true y'", traj.x[inner, 1], "k-"), ("y_E'", fit.dy[inner], "r--")]},
-            {"ylabel": "y_E' - y'", "lines": [("error (seed 0)", (fit.dy - traj.x[:, 1])[inner], "r-")]},
+            {"ylabel": "y'", "lines": [("true y'", traj.x[inner, 1], "k-"), ("y_E'", keep["fit_dy"][inner], "r--")]},
+            {"ylabel": "y_E' - y'", "lines": [("error (seed 0)", (keep["fit_dy"] - traj.x[:, 1])[inner], "r-")]},
         ], "Fig. 6: estimated derivative of y, 30 dB noise"))
     return ExperimentResult("sridhar-noisy", table, res, tuple(figures), paper, fmu)
 

@@ -1,0 +1,265 @@
+"""Run a sweep: :func:`run_sweep` (``lpvest sweep SPEC.toml``).
+
+Examples
+--------
+>>> from lpvest.sweep import run_sweep
+>>> res = run_sweep("examples/sweep_kalman.toml", "out/sweep")              # doctest: +SKIP
+>>> res.summary.to_pandas().groupby("sched.rate")["rms_x"].mean()           # doctest: +SKIP
+>>> run_sweep("examples/sweep_kalman.toml", "out/sweep", scheduler="tcp://10.0.0.5:8786")  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from .engine import Engine
+from .spec import SweepSpec, load_sweep
+from .store import FORMAT, SweepStore
+from .studies import prepare
+from .tasks import Outcome, SweepError, digest, execute
+
+__all__ = ["run_sweep", "SweepResult", "SweepInterrupted"]
+
+
+class SweepInterrupted(KeyboardInterrupt):
+    """``Ctrl-C`` stopped a sweep: pending tasks were cancelled, finished ones
+    are on disk, and a rerun of the same spec resumes.
+
+    Attributes
+    ----------
+    out : Path
+    finished, total : int
+    """
+
+    def __init__(self, out: Path, finished: int, total: int) -> None:
+        super().__init__(f"interrupted: {finished} of {total} tasks finished and written to {out}; "
+                         "run the same sweep again to resume")
+        self.out, self.finished, self.total = out, finished, total
+
+
+@dataclass(frozen=True)
+class SweepResult:
+    """What a sweep wrote and how it went."""
+
+    out: Path
+    spec: SweepSpec
+    summary: Any  #: pyarrow.Table: task, axes, seed, metrics, status, error (summary.parquet)
+    metrics: tuple[str, ...]
+    n_tasks: int
+    ran: int  #: tasks run by this call
+    resumed: int  #: tasks finished by earlier runs (skipped)
+    complete: bool
+    seconds: float
+    engine: str
+    description: str
+    figures: tuple[Path, ...] = ()
+
+    @property
+    def failures(self) -> list[tuple[int, str]]:
+        """``(task, error)`` of every failed task."""
+        return [(r["task"], r["error"]) for r in self.summary.select(["task", "status", "error"]).to_pylist()
+                if r["status"] != "ok"]
+
+    def trajectories(self) -> Any:
+        """The kept signals (a ``zarr.Group``: one array per signal, first axis the task), or None."""
+        import zarr
+
+        path = self.out / "trajectories.zarr"
+        return zarr.open_group(str(path), mode="r") if path.exists() else None
+
+    def report(self, *, max_failures: int = 5) -> str:
+        """A few lines: what ran, where, each metric's mean and spread per point."""
+        from .plot import metric_statistics
+
+        spec = self.spec
+        n_points = len(spec.points())
+        n_seeds = len(spec.seeds.keys) if spec.seeds else 1
+        shape = f"{n_points} point(s) x {n_seeds} seed(s)" if spec.seeds else f"{n_points} point(s)"
+        lines = [f"sweep {spec.origin}: {self.description}; {self.n_tasks} tasks ({shape})"]
+        if self.ran:
+            lines.append(f"ran {self.ran} task(s) in {self.seconds:.1f} s ({self.engine}); {self.resumed} "
+                         f"finished earlier (resumed); {len(self.failures)} failed")
+        else:
+            lines.append(f"nothing to run: every task finished earlier ({len(self.failures)} failed; "
+                         "--retry-failed runs them again)")
+        if self.metrics and self.summary.num_rows:
+            label_w = 0
+            table = []
+            for m in self.metrics:
+                for st in metric_statistics(self.summary, spec, m):
+                    point = ", ".join(f"{k} = {_fmt(v)}" for k, v in st["point"].items()) or "-"
+                    label_w = max(label_w, len(point))
+                    table.append((m, point, st))
+            mw = max(len(m) for m in self.metrics)
+            if spec.seeds is None:  # one task per point: its value
+                lines.append(f"{'metric':<{mw}}  {'point':<{label_w}}  {'value':>13}")
+                lines += [f"{m:<{mw}}  {point:<{label_w}}  " + (f"{st['mean']:>13.7g}" if st["ok"] else
+                                                                 f"{'failed':>13}") for m, point, st in table]
+                table = []
+            else:
+                lines.append(f"{'metric':<{mw}}  {'point':<{label_w}}  {'ok':>5}  {'mean':>11}  {'std':>10}  "
+                             f"{'min':>11}  {'max':>11}")
+            for m, point, st in table:
+                if st["ok"]:
+                    lines.append(f"{m:<{mw}}  {point:<{label_w}}  {st['ok']:>5}  {st['mean']:>11.5g}  "
+                                 f"{st['std']:>10.3g}  {st['min']:>11.5g}  {st['max']:>11.5g}")
+                else:
+                    lines.append(f"{m:<{mw}}  {point:<{label_w}}  {0:>5}  {'-':>11}")
+        for task, error in self.failures[:max_failures]:
+            lines.append(f"task {task} failed: {error}")
+        if len(self.failures) > max_failures:
+            lines.append(f"... and {len(self.failures) - max_failures} more failed task(s) (summary.parquet)")
+        wrote = [f"{self.out / 'summary.parquet'} ({self.summary.num_rows} rows)"]
+        if (self.out / "trajectories.zarr").exists():
+            wrote.append(str(self.out / "trajectories.zarr"))
+        lines.append("wrote " + ", ".join(wrote))
+        for f in self.figures:
+            lines.append(f"wrote {f}")
+        if not self.complete:
+            lines.append(f"incomplete: {self.summary.num_rows} of {self.n_tasks} tasks finished")
+        return "\n".join(lines)
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, tuple):
+        return "[" + ", ".join(f"{x:g}" for x in v) + "]"
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def run_sweep(
+    spec: SweepSpec | str | Path,
+    out: str | Path,
+    *,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    engine: Engine | None = None,
+    fmus: str | Path | Any | None = None,
+    ship_fmus: bool = True,
+    overwrite: bool = False,
+    retry_failed: bool = False,
+    progress: bool | None = None,
+    plot: bool = True,
+    on_outcome: Callable[[Outcome], None] | None = None,
+    idle_timeout: float | None = None,
+    flush_every: int = 256,
+    flush_seconds: float = 1.0,
+) -> SweepResult:
+    """Run a sweep into the folder ``out`` (see :mod:`lpvest.sweep`).
+
+    Parameters
+    ----------
+    spec : SweepSpec, str or Path
+        The sweep (a :class:`~lpvest.sweep.spec.SweepSpec` or a sweep file).
+    out : str or Path
+        Output folder (:mod:`lpvest.sweep.store`). A rerun of the same spec
+        into it runs only the tasks not finished yet.
+    scheduler : str, optional
+        Address of a running Dask scheduler; default: a ``LocalCluster``.
+    workers : int, optional
+        Worker processes of the ``LocalCluster`` (default: one per core);
+        ``0`` runs the tasks in this process, one after another (no Dask).
+    engine : Engine, optional
+        A started :class:`~lpvest.sweep.engine.Engine` to use (and leave open)
+        instead of ``scheduler``/``workers``.
+    fmus : str, Path or ExperimentFmus, optional
+        The folder of a co-simulation's FMUs (when ``spec`` is a file;
+        overrides its ``fmu_dir``), or the experiments' FMU cache.
+    ship_fmus : bool
+        Send the FMUs to the workers (default); ``False``: workers read them
+        from their paths (a shared file system).
+    overwrite : bool
+        Replace the results of a different sweep in ``out`` (else refused).
+    retry_failed : bool
+        Run the failed tasks of an earlier run again.
+    progress : bool, optional
+        A progress bar (default: when stderr is a terminal).
+    plot : bool
+        Write ``out/figures/<metric>.png``.
+    on_outcome : callable, optional
+        Called in this process with each task's
+        :class:`~lpvest.sweep.tasks.Outcome` as it finishes (after it is recorded).
+    idle_timeout : float, optional
+        Give up when no task finishes for this many seconds.
+    flush_every, flush_seconds : int, float
+        How often finished tasks are committed to disk.
+
+    Raises
+    ------
+    ModelFileError
+        A mistake in the spec (one line naming the field).
+    SweepError
+        ``out`` holds another sweep, the cluster cannot be reached.
+    SweepInterrupted
+        ``Ctrl-C``: the finished tasks are written; run again to resume.
+    """
+    t0 = time.perf_counter()
+    if not isinstance(spec, SweepSpec):
+        path = Path(spec)
+        is_cosim = "cosim" in _peek(path)
+        spec = load_sweep(path, fmu_dir=fmus if is_cosim and isinstance(fmus, str | Path) else None)
+    if workers is not None and workers == 0 and (scheduler is not None or engine is not None):
+        raise SweepError("workers = 0 runs in this process; it takes no scheduler or engine")
+    prepared = prepare(spec, fmus=fmus if spec.experiment is not None else None, ship_fmus=ship_fmus)
+    tasks = spec.tasks()
+    from .._version import __version__
+
+    key = digest({"format": FORMAT, "lpvest": __version__, "spec": spec.identity(), "study": prepared.identity,
+                  "metrics": list(prepared.metrics),
+                  "signals": {k: [list(shape), list(labels)] for k, (shape, labels) in prepared.signals.items()}})
+    store = SweepStore(out, spec, prepared, tasks, key, overwrite=overwrite, retry_failed=retry_failed,
+                       flush_every=flush_every, flush_seconds=flush_seconds)
+    pending = store.pending()
+    show = sys.stderr.isatty() if progress is None else progress
+    desc = f"sweep {Path(spec.origin).name}"
+
+    def record(outcome: Outcome) -> None:
+        store.add(outcome)
+        if on_outcome is not None:
+            on_outcome(outcome)
+
+    own = None
+    label = "in this process, no Dask"
+    try:
+        if pending and workers == 0:
+            from tqdm import tqdm
+
+            for task in tqdm(pending, desc=desc, unit="task", disable=not show):
+                record(execute(prepared.fn, prepared.shared, task))
+        elif pending:
+            if engine is None:
+                own = engine = Engine(scheduler, workers=workers, idle_timeout=idle_timeout).start()
+            label = engine.describe()
+            engine.map(prepared.fn, prepared.shared, pending, on_outcome=record, progress=show, desc=desc)
+        elif engine is not None:
+            label = engine.describe()
+        else:
+            label = "nothing to run"
+    except KeyboardInterrupt:
+        store.finish(complete=False, seconds=time.perf_counter() - t0, engine=label)
+        raise SweepInterrupted(Path(out), len(store.rows), len(tasks)) from None
+    except BaseException:
+        store.finish(complete=False, seconds=time.perf_counter() - t0, engine=label)
+        raise
+    finally:
+        if own is not None:
+            own.close()
+    seconds = time.perf_counter() - t0
+    summary = store.finish(complete=True, seconds=seconds, engine=label)
+    figures: tuple[Path, ...] = ()
+    if plot and prepared.metrics and summary.num_rows:
+        from .plot import plot_metrics
+
+        figures = tuple(plot_metrics(summary, spec, prepared.metrics, Path(out) / "figures"))
+    return SweepResult(Path(out), spec, summary, prepared.metrics, len(tasks), len(store.rows) - store.resumed,
+                       store.resumed, len(store.rows) == len(tasks), seconds, label, prepared.description, figures)
+
+
+def _peek(path: Path) -> dict[str, Any]:
+    from ..tomlfiles import read_toml
+
+    return read_toml(path)
