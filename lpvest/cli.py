@@ -411,11 +411,20 @@ HELP: dict[str, tuple[str, str]] = {
         "lpvest design peixoto-ex1 --out pd.json\n"
         "  lpvest design peixoto-ex2 --param rho=11 --kind robust --epsilon 150 --out robust.json"),
     "cosim": (
-        "Co-simulate FMUs described in a TOML file (format: lpvest/cosimfile.py, examples/*.toml): CSV, plot "
+        "Co-simulate FMUs described in a TOML file (format: lpvest/cosim/files.py, examples/*.toml): CSV, plot "
         "and summary; or write the system as an SSP file.",
         "lpvest cosim examples/peixoto_ex1_hinf.toml --out out/cosim\n"
         "  lpvest cosim examples/cox_toth_kalman.toml --fmus my-fmus/\n"
         "  lpvest cosim examples/peixoto_ex1_hinf.toml --ssp system.ssp"),
+    "sweep": (
+        "Run a co-simulation file, or the Monte Carlo part of a paper experiment, over seeds and parameters "
+        "on Dask (a local cluster, one worker per core, or --scheduler ADDRESS): one co-simulation per task, "
+        "seeds from numpy's SeedSequence by task index, a Parquet summary and Zarr trajectories written as "
+        "tasks finish, a figure per metric; a rerun resumes; a failing task is recorded with its message. "
+        "Format: lpvest/sweep/spec.py; needs the extra lpvest[sweep].",
+        "lpvest sweep examples/sweep_kalman.toml --out out/sweep-kalman\n"
+        "  lpvest sweep examples/sweep_kalman.toml --scheduler tcp://10.0.0.5:8786\n"
+        "  lpvest sweep --list"),
     "validate": (
         "Validate FMUs with fmpy.validation; the exit status is 1 if any FMU has a problem.",
         "lpvest validate fmu-build/*.fmu"),

@@ -361,7 +361,10 @@ def test_model_files_are_accepted_or_refused_by_one_line_naming_the_file(scratch
                                 prefix="", given=raw)
 
 
-COSIM_SEEDS = {p.name: p.read_text() for p in sorted((ROOT / "examples").glob("*.toml"))}
+#: the co-simulation files among examples/*.toml (a sweep file, which names its co-simulation
+#: file with `cosim = ...` or an experiment, is another format: tests/test_sweep.py)
+COSIM_SEEDS = {p.name: p.read_text() for p in sorted((ROOT / "examples").glob("*.toml"))
+               if not {"cosim", "experiment"} & set(tomllib.loads(p.read_text()))}
 
 
 @pytest.fixture(scope="module")

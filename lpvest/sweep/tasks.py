@@ -14,6 +14,7 @@ This module needs only numpy: the experiments import it whether or not the
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -130,12 +131,28 @@ def _worker_name() -> str:
         return f"{socket.gethostname()}:{os.getpid()}"
 
 
+@functools.cache
+def _blas_controller() -> Any:
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController()
+
+
 def execute(fn: Callable[[Any, Task], TaskResult], shared: Any, task: Task) -> Outcome:
     """Run ``fn(shared, task)``; an exception becomes a failed :class:`Outcome`
-    whose ``error`` is ``"ExceptionType: message"`` (one line)."""
+    whose ``error`` is ``"ExceptionType: message"`` (one line).
+
+    The task runs with BLAS on one thread, as on a Dask worker (whose nanny
+    sets ``OMP/OPENBLAS/MKL_NUM_THREADS=1``): a multithreaded BLAS splits its
+    sums by thread and rounds them in another order, so without the limit a
+    task run in this process could differ from the same task on a worker in
+    its last bits (a least-squares fit amplifies that). With it, a task gives
+    the same numbers wherever it runs.
+    """
     t0 = time.perf_counter()
     try:
-        result = fn(shared, task)
+        with _blas_controller().limit(limits=1, user_api="blas"):
+            result = fn(shared, task)
         if not isinstance(result, TaskResult):
             raise TypeError(f"{getattr(fn, '__name__', fn)} returned {type(result).__name__}, not a TaskResult")
         error = None
