@@ -288,7 +288,9 @@ def _display_tree(tree: ast.AST) -> ast.AST:
     class Ints(ast.NodeTransformer):
         def visit_Constant(self, node: ast.Constant) -> ast.AST:
             v = node.value
-            shown = ast.Constant(int(abs(v)) if v.is_integer() and abs(v) < 1e15 else abs(v))
+            if not isinstance(v, float | int) or isinstance(v, bool):
+                return node
+            shown = ast.Constant(int(abs(v)) if float(v).is_integer() and abs(v) < 1e15 else abs(v))
             if math.copysign(1.0, v) < 0:  # a sign ast.unparse would not bracket: "(-1) ** t", not "-1 ** t"
                 return ast.copy_location(ast.UnaryOp(ast.USub(), shown), node)
             return ast.copy_location(shown, node)
@@ -455,7 +457,7 @@ class Expression:
                 f"formula {abbreviate(self.text)} must be a constant here but uses the variable "
                 f"{shorten(shown, 60)}"
             )
-        value = self.tree.body.value if isinstance(self.tree.body, ast.Constant) else self.evaluate({})
+        value: Any = self.tree.body.value if isinstance(self.tree.body, ast.Constant) else self.evaluate({})
         return float(value)
 
     # -- calculus -------------------------------------------------------------
@@ -488,6 +490,7 @@ class Expression:
                 and isinstance(node.left, ast.Name)
                 and node.left.id in index
                 and isinstance(node.right, ast.Constant)
+                and isinstance(node.right.value, int | float)
                 and float(node.right.value).is_integer()
                 and node.right.value >= 0
             ):

@@ -47,7 +47,7 @@ from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar, overload
 
 import numpy as np
 
@@ -83,6 +83,7 @@ __all__ = [
 ]
 
 Model = AffineLPV | PolytopicLPV | InnovationLPV | LPVInputOutput | LTVInputOutput | LTVStateSpace
+_M = TypeVar("_M")
 
 #: Model ``type`` names in files and the classes they load as.
 MODEL_TYPES: dict[str, type] = {
@@ -131,16 +132,47 @@ class SystemFile:
     #: declared ranges of the parameters that have one (``[parameters]`` tables)
     parameter_ranges: Mapping[str, ParameterRange] = field(default_factory=dict)
 
-    def model(self, key: str | None = None) -> Model:
-        """The model named ``key`` (default: the file's default model)."""
+    @overload
+    def model(self, key: str | None = None) -> Model: ...
+
+    @overload
+    def model(self, key: str | None, kind: type[_M]) -> _M: ...
+
+    def model(self, key: str | None = None, kind: type[Any] | None = None) -> Any:
+        """The model named ``key`` (default: the file's default model).
+
+        Parameters
+        ----------
+        key : str, optional
+            The model's key in ``[models.KEY]``; default: the file's ``default``.
+        kind : type, optional
+            The model class the caller needs (e.g. :class:`~lpvest.systems.AffineLPV`):
+            a model of another type is an error naming the file, the model and
+            both types (and a type checker knows the result's type).
+
+        Raises
+        ------
+        ModelFileError
+            No model ``key``, or it is not a ``kind``.
+
+        Examples
+        --------
+        >>> from lpvest import AffineLPV, load_system
+        >>> load_system("cox-toth-truncation").model(None, AffineLPV).nx
+        2
+        """
         key = self.default if key is None else key
         try:
-            return self.models[key]
+            found = self.models[key]
         except KeyError:
             known = shorten(", ".join(self.models), 80)
             raise ModelFileError(
                 f"{self.path or self.name}: no model {abbreviate(key, 30)} (models: {known})"
             ) from None
+        if kind is not None and not isinstance(found, kind):
+            raise ModelFileError(f"{self.path or self.name}: model {key} is a {type(found).__name__}; "
+                                 f"expected a {kind.__name__}")
+        return found
 
 
 # -- reading -----------------------------------------------------------------

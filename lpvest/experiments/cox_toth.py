@@ -46,6 +46,7 @@ from ..estimators.truncated import assumption_bounds
 from ..modelfile import load_system
 from ..plotting import save_figure
 from ..sweep.tasks import Task, TaskResult, map_tasks
+from ..systems import AffineLPV, InnovationLPV, LPVInputOutput
 from . import Experiment, ExperimentResult
 from .fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
 
@@ -104,7 +105,8 @@ def run_example1(
     """
     fmus = as_experiment_fmus(fmus)
     system = load_system("cox-toth-ex1")
-    io, minimal, augmented = system.model("io"), system.model("minimal"), system.model("augmented")
+    io = system.model("io", LPVInputOutput)
+    minimal, augmented = system.model("minimal", InnovationLPV), system.model("augmented", InnovationLPV)
     k = np.arange(steps + 1)
     p = (0.6 + 0.3 * np.sin(0.25 * k))[:, None]  # one extra sample: (21b) needs p_{t+1}
     u = np.random.default_rng(seed).standard_normal((steps, 1))
@@ -253,7 +255,7 @@ def prediction_error_setup(
     (theorem start, :data:`PREDICTION_TAUS`), frozen and constant gains
     (``comparison``: a :func:`~lpvest.analysis.fading_memory.compare_filters`
     result already computed on that set-up)."""
-    model = load_system("cox-toth-truncation").model()
+    model = load_system("cox-toth-truncation").model(None, AffineLPV)
     p, u = _truncation_signals(steps)
     cmp = comparison if comparison is not None else compare_filters(
         KalmanModel(model), p, PREDICTION_TAUS, constant_p=[0.0], burn_in=burn_in)
@@ -313,7 +315,7 @@ def run_truncation(
     """
     fmus = as_experiment_fmus(fmus)
     progress = out_dir is not None
-    model = load_system("cox-toth-truncation").model()
+    model = load_system("cox-toth-truncation").model(None, AffineLPV)
     km = KalmanModel(model)
     p, u = _truncation_signals(steps)
 

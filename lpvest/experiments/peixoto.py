@@ -34,6 +34,7 @@ import numpy as np
 
 from ..plotting import save_figure
 from ..sweep.tasks import Task, TaskResult, map_tasks
+from ..systems import PolytopicLPV
 from . import Experiment, ExperimentResult
 from .fmus import (
     Agreement,
@@ -240,7 +241,7 @@ def run_table1(
     from ..design import KIND_PD, KIND_ROBUST, design_hinf, search_epsilon
     from ..modelfile import load_system
 
-    plant = load_system("peixoto-ex1").model()
+    plant = load_system("peixoto-ex1").model(None, PolytopicLPV)
     pd150 = design_hinf(plant, epsilon=PAPER_EPSILON, kind=KIND_PD)
     rob150 = design_hinf(plant, epsilon=PAPER_EPSILON, kind=KIND_ROBUST)
     pd_best = search_epsilon(plant, kind=KIND_PD)
@@ -371,7 +372,7 @@ def fig1_signals(steps: int = 100, *, plant: Any | None = None) -> Fig1Signals:
     from ..modelfile import load_system
     from .simulate import peixoto_disturbance
 
-    plant = plant if plant is not None else load_system("peixoto-ex1").model()
+    plant = plant if plant is not None else load_system("peixoto-ex1").model(None, PolytopicLPV)
     k = np.arange(steps, dtype=float)
     theta = np.sin(0.25 * k)
     alpha = plant.alpha_batch(theta[:, None])
@@ -397,7 +398,7 @@ def run_fig1(
     from ..modelfile import load_system
 
     fmus = as_experiment_fmus(fmus)
-    plant = load_system("peixoto-ex1").model()
+    plant = load_system("peixoto-ex1").model(None, PolytopicLPV)
     designs = {
         "theorem1": design_hinf(plant, epsilon=PAPER_EPSILON, kind=KIND_PD),
         "corollary1": design_hinf(plant, epsilon=PAPER_EPSILON, kind=KIND_ROBUST),
@@ -510,7 +511,8 @@ def _ex2_vertices(rho: float) -> np.ndarray:
     from ..modelfile import load_system
 
     # the stability study leaves the paper's range [1, 21] on purpose
-    return np.array(load_system("peixoto-ex2", parameters={"rho": rho}, allow_outside_range=True).model().vertices.A)
+    system = load_system("peixoto-ex2", parameters={"rho": rho}, allow_outside_range=True)
+    return np.array(system.model(None, PolytopicLPV).vertices.A)
 
 
 def stability_limits(*, tol: float = 1e-6) -> StabilityLimits:
@@ -555,7 +557,8 @@ def stability_limits(*, tol: float = 1e-6) -> StabilityLimits:
     rho_above = round(frozen + 0.1, 6)
     A = _ex2_vertices(rho_above)
     jsr = max(float(np.max(np.abs(np.linalg.eigvals(a)))) for a in A)
-    plant = load_system("peixoto-ex2", parameters={"rho": rho_above}, allow_outside_range=True).model()
+    plant = load_system("peixoto-ex2", parameters={"rho": rho_above}, allow_outside_range=True).model(None,
+                                                                                                   PolytopicLPV)
     res = HinfProgram.for_plant(plant, kind=KIND_PD).attempt(plant, 1.0)
     return StabilityLimits(float(frozen), float(lo), at_limit, jsr, rho_above, res.status)
 
@@ -590,7 +593,7 @@ def _example2_program() -> Any:
     from ..design import KIND_PD, HinfProgram
     from ..modelfile import load_system
 
-    return HinfProgram.for_plant(load_system("peixoto-ex2").model(), kind=KIND_PD)
+    return HinfProgram.for_plant(load_system("peixoto-ex2").model(None, PolytopicLPV), kind=KIND_PD)
 
 
 def example2_task(_shared: Any, task: Task) -> TaskResult:
@@ -602,7 +605,7 @@ def example2_task(_shared: Any, task: Task) -> TaskResult:
     from ..design import KIND_PD, design_hinf, search_epsilon
     from ..modelfile import load_system
 
-    plant = load_system("peixoto-ex2", parameters={"rho": float(task.point["rho"])}).model()
+    plant = load_system("peixoto-ex2", parameters={"rho": float(task.point["rho"])}).model(None, PolytopicLPV)
     if "epsilon" in task.point:
         design = design_hinf(plant, epsilon=float(task.point["epsilon"]), kind=KIND_PD, program=_example2_program())
         n = 1
@@ -678,7 +681,7 @@ def run_example2(
     runs, fmu_rows = [], []
     for rho in fmu_rhos:
         tag = f"{rho:g}".replace(".", "_")
-        plant = load_system("peixoto-ex2", parameters={"rho": rho}).model()
+        plant = load_system("peixoto-ex2", parameters={"rho": rho}).model(None, PolytopicLPV)
         run = _hinf_fmus(fmus, res, spec, plant, {f"pd_rho{tag}": designs[rho]}, plant_name=f"plant_rho{tag}",
                          label=f"rho = {rho:g}", signals=not runs)
         runs.append(run)

@@ -57,6 +57,7 @@ from ..modelfile import load_system
 from ..plotting import save_figure
 from ..protocol import run_streaming
 from ..sweep.tasks import Task, TaskResult, map_tasks
+from ..systems import LTVInputOutput
 from . import Experiment, ExperimentResult
 from .fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
 
@@ -92,7 +93,7 @@ RATE = 1000.0
 
 
 def _system():
-    return load_system("sridhar-ltv").model("io")
+    return load_system("sridhar-ltv").model("io", LTVInputOutput)
 
 
 def noisy_output(y: np.ndarray, snr_db: float, rng: np.random.Generator) -> tuple[np.ndarray, float]:

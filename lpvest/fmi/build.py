@@ -221,7 +221,7 @@ def plan_system(
     model = system.models[key]
     params = tuple(system.parameters)
     title = system.title or system.name
-    common = {"system_path": system.path, "system_name": system.name, "model_key": key}
+    common: dict[str, Any] = {"system_path": system.path, "system_name": system.name, "model_key": key}
     plans: list[FmuPlan] = []
     if isinstance(model, LTVStateSpace | LTVInputOutput):
         plans.append(FmuPlan(f"{stem}Plant", "Plant", "lpvest_ltv_plant.py",

@@ -95,6 +95,12 @@ __all__ = [
     "FREE_MOMENTS",
 ]
 
+#: Moments ``F[k]`` (or ``B[k]``) of one integrand, indexed by the power ``k``
+#: (a list of arrays over the samples, or a stacked array).
+Moments = Sequence[np.ndarray] | np.ndarray
+#: ``t - a`` or ``b - t``: at every sample (an array) or at one point.
+Span = np.ndarray | float
+
 #: Number of moments ``s^0 .. s^3`` the kernels (13)-(17) need.
 MOMENTS = 4
 #: The moments ``k`` (of ``phi v``) that :func:`slot_identity` and
@@ -419,22 +425,22 @@ def check_uniform_samples(t: object, name: str = "t") -> tuple[np.ndarray, float
 # -- the kernel integrals as combinations of moments -----------------------------------------
 
 
-def free_identity(F: np.ndarray, B: np.ndarray, T: np.ndarray, R: np.ndarray) -> np.ndarray:
+def free_identity(F: Moments, B: Moments, T: Span, R: Span) -> np.ndarray:
     """Kernel part depending on no coefficient (ERRATA: missing from (24)/(28)):
     ``int_a^t [4 s - 2 (t - xi)] y + int_t^b [4 r + 2 (t - zeta)] y``;
     ``F, B`` are the moments of ``y``."""
     return 6.0 * F[1] - 2.0 * T * F[0] + 6.0 * B[1] - 2.0 * R * B[0]
 
 
-def free_derivative(F: np.ndarray, B: np.ndarray) -> np.ndarray:
+def free_derivative(F: Moments, B: Moments) -> np.ndarray:
     """``t``-derivative of the integrals of :func:`free_identity` without the
     boundary terms (those are ``(2T - 2R) y(t)``)."""
     return -2.0 * F[0] + 2.0 * B[0]
 
 
 def slot_identity(
-    order: int, F: np.ndarray, B: np.ndarray, T: np.ndarray, R: np.ndarray,
-    Fd: np.ndarray | None = None, Bd: np.ndarray | None = None,
+    order: int, F: Moments, B: Moments, T: Span, R: Span,
+    Fd: Moments | None = None, Bd: Moments | None = None,
 ) -> np.ndarray:
     """Kernel integrals of one coefficient: ``order`` 0 (``a_0``/``b_0``) or 1
     (``a_1``/``b_1``); ``F, B`` moments of ``phi v``, ``Fd, Bd`` of ``phi' v``
@@ -448,7 +454,7 @@ def slot_identity(
 
 
 def slot_derivative(
-    order: int, F: np.ndarray, B: np.ndarray, Fd: np.ndarray | None = None, Bd: np.ndarray | None = None
+    order: int, F: Moments, B: Moments, Fd: Moments | None = None, Bd: Moments | None = None
 ) -> np.ndarray:
     """``t``-derivative of the integrals of :func:`slot_identity` without the
     boundary terms (those are ``-C phi(t) v(t)`` for order 1, none for 0)."""
