@@ -148,6 +148,7 @@ class _Unit:
     log: list[str]
     funcs: dict[str, Any] = field(default_factory=dict)
     start_values: list[tuple[_Var, Any, str]] = field(default_factory=list)  # (variable, value, parameter key)
+    callbacks: Any = None  #: the FMI callbacks given to instantiate (kept alive while the instance lives)
 
 
 def _log_text(unit: _Unit) -> str:
@@ -427,8 +428,8 @@ class CoSimulation:
             links.append((s, d))
         return links
 
-    def _order(self) -> list[tuple[str, int, list[tuple[_Var, _Var]]]]:
-        """Operations per step: ``("get", comp, [...])`` reads outputs, ``("set",
+    def _order(self) -> list[tuple[str, int, list[Any]]]:
+        """Operations per step: ``("get", comp, [_Var, ...])`` reads outputs, ``("set",
         comp, links)`` copies upstream values into inputs, in dependency order."""
         # nodes: ("o", comp, output) and ("i", comp, input)
         edges: dict[tuple, set[tuple]] = {}
@@ -559,7 +560,7 @@ class CoSimulation:
             callbacks.logger = fmi2CallbackLoggerTYPE(logger)
             callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
             callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-            unit.callbacks = callbacks  # type: ignore[attr-defined] (keep alive)
+            unit.callbacks = callbacks
             self._call(
                 unit, "instantiate", lambda u=unit, cb=callbacks: u.fmu.instantiate(callbacks=cb, loggingOn=True)
             )
@@ -725,7 +726,7 @@ class CoSimulation:
                     self._values[(comp, v.name)] = (buf, j)
             return ("get", unit, unit.fmu._functions[f"fmi2Get{typ}"], vrs, n, buf, ())
 
-        ops: list[tuple] = []
+        ops: list[tuple[Any, ...]] = []
         get_iter = iter(gets)
         for op, comp, items in self._schedule:
             if op == "get":
@@ -738,12 +739,12 @@ class CoSimulation:
         # set (they may depend on inputs)
         for (comp, typ), vars_ in extra.items():
             ops.append(get_op(comp, typ, vars_))
-        plan = []
-        for op in ops:
-            if op[0] == "get":
-                plan.append(op)
+        plan: list[tuple[Any, ...]] = []
+        for entry in ops:
+            if entry[0] == "get":
+                plan.append(entry)
                 continue
-            _, comp, items = op
+            _, comp, items = entry
             unit = self._units[comp]
             for typ in _TYPES:
                 links = [it for it in items if it[1].type == typ]
