@@ -43,7 +43,7 @@ from __future__ import annotations
 import datetime
 import math
 import re
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -235,7 +235,8 @@ class _Reader:
                              f"expected a table, found {_kind(val)}")
         return val
 
-    def keys(self, data: Mapping, where: str, allowed: set[str], required: set[str] = frozenset()) -> None:
+    def keys(self, data: Mapping, where: str, allowed: set[str] | frozenset[str],
+             required: set[str] | frozenset[str] = frozenset()) -> None:
         unknown = sorted(set(data) - allowed)
         if unknown:
             raise self.error(
@@ -398,18 +399,19 @@ class _Reader:
         if not isinstance(spec, dict):
             raise self.error(where, f"expected a table, found {_kind(spec)}")
         kind = self.string(spec, "type", where)
-        reader = {
+        readers: dict[str, Callable[[str, Mapping, SchedulingSpace | None, str], Model]] = {
             "affine": self.affine,
             "polytopic": self.polytopic,
             "innovation": self.innovation,
             "lpv-io": self.lpv_io,
             "ltv-io": self.ltv_io,
             "ltv-ss": self.ltv_ss,
-        }.get(kind)
+        }
+        reader = readers.get(kind)
         if reader is None:
             known = ", ".join(MODEL_TYPES)
             raise self.error(f"{where}.type", f"unknown model type {abbreviate(kind, 30)} (expected one of: {known})")
-        return reader(key, spec, space, where)  # type: ignore[operator]
+        return reader(key, spec, space, where)
 
     def affine(self, key: str, spec: Mapping, space: SchedulingSpace | None, where: str) -> AffineLPV:
         names = ("A", "B", "C", "D", "G", "H")
@@ -426,7 +428,7 @@ class _Reader:
         x0 = self.numbers(spec["x0"], f"{where}.x0") if "x0" in spec else None
         P0 = self.matrix(spec["P0"], f"{where}.P0") if "P0" in spec else None
         with self.at(where):
-            return AffineLPV.from_matrices(space, basis, **mats, **noise, x0=x0, P0=P0, name=self.name_of(key))  # type: ignore[arg-type]
+            return AffineLPV.from_matrices(space, basis, **mats, **noise, x0=x0, P0=P0, name=self.name_of(key))
 
     def simplex_map(self, spec: Any, space: SchedulingSpace | None, where: str) -> SimplexMap:
         if not isinstance(spec, dict):

@@ -313,7 +313,7 @@ class TimedComponent(Component):
         self.t0 = float(t0)
         super().__init__(inputs, outputs)
 
-    def reset(self, t0: float | None = None) -> None:  # type: ignore[override]
+    def reset(self, t0: float | None = None) -> None:
         """Back to the initial state at time ``t0`` (default: the last start time)."""
         if t0 is not None:
             self.t0 = float(t0)
@@ -321,7 +321,7 @@ class TimedComponent(Component):
         self._reset()
 
     @abstractmethod
-    def _commit(self, pending: Any, t_end: float = 0.0) -> None:  # type: ignore[override]
+    def _commit(self, pending: Any, t_end: float = 0.0) -> None:
         """Advance to ``t_end`` with what :meth:`_evaluate` prepared."""
 
     @property
@@ -340,7 +340,7 @@ class TimedComponent(Component):
         self._commit(pending, self.time + dt if t_end is None else float(t_end))
         return out
 
-    def advance(self, *, dt: float = 0.0, t_end: float | None = None) -> dict[str, np.ndarray] | None:  # type: ignore[override]
+    def advance(self, *, dt: float = 0.0, t_end: float | None = None) -> dict[str, np.ndarray] | None:
         """:meth:`step` with the inputs of the last :meth:`outputs` call (see
         :meth:`Component.advance`); ``None`` (and no step) when none is kept."""
         kept = self._kept()

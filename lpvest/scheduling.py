@@ -120,7 +120,10 @@ class SchedulingSpace:
 class BasisFunction(Protocol):
     """A scalar function ``psi(p)`` of the scheduling vector."""
 
-    name: str
+    @property
+    def name(self) -> str:
+        """How the function is written (a formula)."""
+        ...
 
     def __call__(self, p: np.ndarray) -> float: ...
 
@@ -278,7 +281,7 @@ def parse_basis(
     return FormulaBasis(expr, space.names, bounds, text)
 
 
-def box_vertices(lower: Sequence[float], upper: Sequence[float]) -> np.ndarray:
+def box_vertices(lower: Sequence[float] | np.ndarray, upper: Sequence[float] | np.ndarray) -> np.ndarray:
     """Corners of a box in the bit order of :meth:`SchedulingSpace.corners`."""
     n = len(lower)
     rows = []

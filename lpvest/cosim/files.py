@@ -103,7 +103,8 @@ def _kind(value: Any) -> str:
         return f"a string ({abbreviate(value, 30)})"
     if isinstance(value, datetime.date | datetime.time):
         return "a date/time"
-    return {dict: "a table", list: "a list"}.get(type(value), type(value).__name__)
+    names: dict[type, str] = {dict: "a table", list: "a list"}
+    return names.get(type(value), type(value).__name__)
 
 
 @dataclass(frozen=True)
@@ -225,7 +226,7 @@ class CoSimResult:
 
     @property
     def names(self) -> list[str]:
-        return [n for n in self.data.dtype.names if n != "time"]
+        return [n for n in self.data.dtype.names or () if n != "time"]
 
     def write_csv(self, path: str | Path) -> Path:
         """``time`` and every recorded variable, full precision."""

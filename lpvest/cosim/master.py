@@ -550,7 +550,7 @@ class CoSimulation:
         # Messages arrive as format strings: lpvest FMUs double every '%'.
         for unit in self._units:
 
-            def logger(_env, _inst, status, category, message, _log=unit.log):  # type: ignore[no-untyped-def]
+            def logger(_env, _inst, status, category, message, _log=unit.log):
                 label = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"][status] if 0 <= status < 6 else "?"
                 text = (message or b"").decode("utf-8", "replace").replace("%%", "%")
                 _log.append(f"[{label}] {text}")

@@ -251,7 +251,7 @@ class HinfDesign:
         if check:
             alpha = as_vector(alpha, "alpha", self.n_vertices)
             check_simplex(alpha, "alpha")
-        return FilterMatrices(**self._stack.at(alpha))  # type: ignore[attr-defined,arg-type]
+        return FilterMatrices(**self._stack.at(alpha))  # type: ignore[attr-defined]  # set in __post_init__ (frozen)
 
     # -- JSON -------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:

@@ -418,7 +418,7 @@ def truncation_cosim(steps: int = 300, *, seed: int = 7, taus: Sequence[int] = P
     Source (``u_t = sin(0.1 t)``, ``w = 0``), Plant (its own noise, seed
     ``seed``), the exact Kalman FMU and a TruncatedKalman FMU (theorem start)
     per ``tau``; ``steps`` samples."""
-    filters = [("kalman", "CoxTothTruncationKalman", {})]
+    filters: list[tuple[str, str, dict[str, Any]]] = [("kalman", "CoxTothTruncationKalman", {})]
     filters += [(f"trunc{t}", "CoxTothTruncationTruncatedKalman", {"tau": int(t), "start": "theorem"}) for t in taus]
     conns = ["sched.p -> plant.p", "source.u -> plant.u", "source.w -> plant.w"]
     record = ["sched.p", "source.u", "plant.y", "plant.x"]

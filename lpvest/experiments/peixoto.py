@@ -542,6 +542,7 @@ def stability_limits(*, tol: float = 1e-6) -> StabilityLimits:
         prob.solve(solver="CLARABEL")
         if prob.status != "optimal":
             return False
+        assert P.value is not None  # optimal: the variable has a value
         Pv = 0.5 * (P.value + P.value.T)
         return bool(np.all(np.linalg.eigvalsh(Pv) > 0)) and all(
             np.max(np.linalg.eigvalsh(a.T @ Pv @ a - Pv)) < 0 for a in A
@@ -619,7 +620,7 @@ def example2_task(_shared: Any, task: Task) -> TaskResult:
 def run_example2(
     out_dir: Path | None = None,
     *,
-    rhos: Sequence[float] = tuple(float(r) for r in range(1, 22)),
+    rhos: Sequence[float] = tuple(map(float, range(1, 22))),
     progress: bool | None = None,
     fmus: ExperimentFmus | str | Path | None = None,
     engine: Engine | None = None,
@@ -655,9 +656,9 @@ def run_example2(
                      "status": design.status, "n_evaluations": int(r.metrics["n_evaluations"])})
     lim = stability_limits()
     lines = [f"{'rho':>6} {'epsilon':>10} {'gamma':>9}", "-" * 27]
-    for r in rows:
-        eps = "inf" if r["epsilon"] is None else f"{r['epsilon']:.4g}"
-        lines.append(f"{r['rho']:>6g} {eps:>10} {r['gamma']:>9.4f}")
+    for row in rows:
+        eps = "inf" if row["epsilon"] is None else f"{row['epsilon']:.4g}"
+        lines.append(f"{row['rho']:>6g} {eps:>10} {row['gamma']:>9.4f}")
     lines.append(
         "epsilon: the search's best point; gamma(epsilon) often has a flat minimum (rho = 1 and 11: constant "
         "to ~1e-6 over wide ranges of epsilon), so it is one point of that minimum."
@@ -678,7 +679,8 @@ def run_example2(
     timer = Timer()
     spec = example2_cosim(fmu_rhos)
     res = timer.run(spec, fmus)
-    runs, fmu_rows = [], []
+    runs: list[HinfFmuResult] = []
+    fmu_rows: list[dict[str, Any]] = []
     for rho in fmu_rhos:
         tag = f"{rho:g}".replace(".", "_")
         plant = load_system("peixoto-ex2", parameters={"rho": rho}).model(None, PolytopicLPV)

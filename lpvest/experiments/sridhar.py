@@ -151,7 +151,7 @@ def _figure(path: Path, t: np.ndarray, panels: list[dict[str, Any]], title: str)
 # -- the data, through FMUs ----------------------------------------------------------------------
 
 #: The sliding observer's configuration (the observer FMU's defaults).
-OBSERVER = {"window": 4.0, "hop": 0.5, "n_basis": 18}
+OBSERVER: dict[str, Any] = {"window": 4.0, "hop": 0.5, "n_basis": 18}
 #: Length of the shared co-simulation (s): the longest window of the experiments.
 T_END = 20.0
 
@@ -435,7 +435,7 @@ def run_noisy(
         runs["gcv"].append({k: m[f"gcv_{k}"] for k in _ERROR_KEYS} | {"penalty": m["gcv_penalty"]})
         a0_curves.append(r.signals["a0"])
         a1_batch.append(m["a1_batch"])
-    keep = {"fit_y": per_seed[0].signals["y"], "fit_dy": per_seed[0].signals["dy"],
+    keep: dict[str, Any] = {"fit_y": per_seed[0].signals["y"], "fit_dy": per_seed[0].signals["dy"],
             "y_meas": noisy_output(setup.y, SNR_DB, np.random.default_rng(0))[0],
             "sigma": per_seed[0].metrics["noise_sigma"]}  # seed 0
     keys = _ERROR_KEYS

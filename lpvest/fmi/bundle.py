@@ -233,7 +233,7 @@ def _scan(start: Sequence[str], roots: Sequence[SourceRoot]) -> _Scan:
         eager = _module_level_nodes(tree)
         for node in ast.walk(tree):
             if isinstance(node, ast.Import):
-                targets = [(a.name, None) for a in node.names]
+                targets: list[tuple[str, list[str] | None]] = [(a.name, None) for a in node.names]
             elif isinstance(node, ast.ImportFrom):
                 base = _absolute(node, module)
                 targets = [(base, [a.name for a in node.names])]

@@ -123,7 +123,7 @@ def resolve(target: str) -> Callable[..., Any]:
         obj = getattr(obj, part)
     if not callable(obj):
         raise ArgumentTypeError(f"{target} is not callable")
-    return obj  # type: ignore[no-any-return]
+    return obj
 
 
 #: The estimator FMUs built for every applicable model: one line per filter.

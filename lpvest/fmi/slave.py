@@ -77,7 +77,8 @@ MAX_MESSAGE = 1000
 INT32 = (-(2**31), 2**31 - 1)
 
 try:  # numpy >= 2: the floating-point error state is a context variable, set here with a prepared value
-    from numpy._core._ufunc_config import _extobj_contextvar, _make_extobj
+    # numpy's private API, deliberately (a prepared error state per FMU instance); not in its stubs
+    from numpy._core._ufunc_config import _extobj_contextvar, _make_extobj  # type: ignore[attr-defined]
 except ImportError:  # pragma: no cover - numpy 1.x: np.errstate
     _extobj_contextvar = _make_extobj = None
 
@@ -512,9 +513,8 @@ class LpvestSlave(Fmi2Slave):
                 raise ArgumentError("these parameters change the FMU's inputs or outputs; rebuild the FMU instead")
             self._reset_component(component, self._start_time)
             self._component = component
-            fast = isinstance(component, Component)
-            self._advance = component.advance if fast else None
-            self._prepare = component.prepare if fast else None
+            self._advance = component.advance if isinstance(component, Component) else None
+            self._prepare = component.prepare if isinstance(component, Component) else None
             self._feedthrough = self._direct_outputs(component)
             self._time = self._start_time
             self._initialized = True
@@ -595,11 +595,13 @@ class LpvestSlave(Fmi2Slave):
         return True
 
     def _get(self, vrs: list[int], fmi_type: str, nan: Any) -> list[Any]:
-        elements = [self._elements.get(vr) for vr in vrs]
-        for vr, e in zip(vrs, elements, strict=True):
+        found = [self._elements.get(vr) for vr in vrs]
+        elements: list[_Element] = []
+        for vr, e in zip(vrs, found, strict=True):
             if e is None or e.fmi_type != fmi_type:
                 self._log(Fmi2Status.error, f"fmi2Get{fmi_type}: value reference {vr} is not a {fmi_type} variable")
                 return [nan] * len(vrs)
+            elements.append(e)
         if any(e.kind == "output" for e in elements):
             self._guard(f"fmi2Get{fmi_type} (computing the outputs)", lambda: self._compute(self._refresh), None)
             if self._nonfinite is not None:
@@ -692,12 +694,12 @@ class LpvestSlave(Fmi2Slave):
             "component": self._component.get_state() if self._initialized else None,
         }
 
-    def _get_fmu_state(self) -> bytes:  # type: ignore[override]
+    def _get_fmu_state(self) -> bytes:
         """The whole state, already serialized (pythonfmu keeps it as the opaque
         fmi2FMUstate and hands it to :meth:`_fmu_state_to_bytes`)."""
         return self._guard("fmi2GetFMUstate", lambda: encode_state(self._snapshot()), b"")
 
-    def _set_fmu_state(self, state: Any) -> None:  # type: ignore[override]
+    def _set_fmu_state(self, state: Any) -> None:
         def run() -> None:
             snap = decode_state(bytes(state))
             if snap.get("identifier") != self.modelName:
@@ -716,9 +718,8 @@ class LpvestSlave(Fmi2Slave):
             if snap["initialized"]:
                 component = self.make_component(params)
                 component.set_state(snap["component"])
-            fast = isinstance(component, Component)
-            self._advance = component.advance if fast else None
-            self._prepare = component.prepare if fast else None
+            self._advance = component.advance if isinstance(component, Component) else None
+            self._prepare = component.prepare if isinstance(component, Component) else None
             self._params = params
             for name, value in inputs.items():  # in place: the fast set_real writes into these arrays
                 self._inputs[name][...] = value
@@ -739,9 +740,9 @@ class LpvestSlave(Fmi2Slave):
         self._guard("fmi2SetFMUstate", run, None)
 
     @staticmethod
-    def _fmu_state_to_bytes(state: Any) -> bytes:  # type: ignore[override]
+    def _fmu_state_to_bytes(state: Any) -> bytes:
         return bytes(state) if isinstance(state, bytes | bytearray) else b""
 
     @staticmethod
-    def _fmu_state_from_bytes(state: bytes) -> bytes:  # type: ignore[override]
+    def _fmu_state_from_bytes(state: bytes) -> bytes:
         return bytes(state)

@@ -125,7 +125,8 @@ def plot_metrics(summary: Any, spec: SweepSpec, metrics: Sequence[str], folder: 
                     ax.plot(x, [members[i]["min"] for i in order], ":", color=line.get_color(), lw=0.8)
                     ax.plot(x, [members[i]["max"] for i in order], ":", color=line.get_color(), lw=0.8)
             if not numeric:
-                ax.set_xticks(list(positions.values()), [_label(v) for v in x_axis.values],
+                ax.set_xticks([float(v) for v in positions.values() if v is not None],
+                              [_label(v) for v in x_axis.values],
                               rotation=30 if len(x_axis.values) > 4 else 0, ha="right" if len(x_axis.values) > 4
                               else "center", fontsize="small")
             ax.set_xlabel(x_axis.name)

@@ -74,7 +74,8 @@ def _kind(value: Any) -> str:
         return f"a number ({value!r})"
     if isinstance(value, str):
         return f"a string ({value!r})"
-    return {dict: "a table", list: "a list"}.get(type(value), type(value).__name__)
+    names: dict[type, str] = {dict: "a table", list: "a list"}
+    return names.get(type(value), type(value).__name__)
 
 
 @dataclass(frozen=True)
@@ -397,10 +398,10 @@ def sweep_spec(
             zips.append(axes)
     names = [a.name for a in grid] + [a.name for g in zips for a in g]
     seen: set[str] = set()
-    for n in names:
-        if n in seen:
-            raise r.error("parameters", f"{n} is swept twice")
-        seen.add(n)
+    for name in names:
+        if name in seen:
+            raise r.error("parameters", f"{name} is swept twice")
+        seen.add(name)
     if seeds is not None:
         for p in seeds.parameters:
             if p in seen:

@@ -243,6 +243,7 @@ class SweepStore:
         """Commit the buffered outcomes: trajectories, then a part file."""
         import pyarrow as pa
         import pyarrow.parquet as pq
+        import zarr
 
         if not self._buffer:
             return
@@ -253,7 +254,9 @@ class SweepStore:
             for name, (shape, _) in self.prepared.signals.items():
                 rows = np.stack([np.asarray(o.result.signals[name], dtype=float).reshape(shape)  # type: ignore[union-attr]
                                  for o in good])
-                self.group[name].oindex[(idx, *(slice(None),) * len(shape))] = rows
+                array = self.group[name]
+                assert isinstance(array, zarr.Array)  # written by this store: one array per kept signal
+                array.oindex[(idx, *(slice(None),) * len(shape))] = rows
         cols: dict[str, Any] = {
             "task": pa.array([o.index for o in batch], pa.int64()),
             "status": pa.array(["ok" if o.ok else "error" for o in batch], pa.string()),

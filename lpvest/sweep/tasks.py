@@ -166,7 +166,7 @@ def execute(fn: Callable[[Any, Task], TaskResult], shared: Any, task: Task) -> O
 def map_tasks(
     fn: Callable[[Any, Task], TaskResult],
     shared: Any,
-    points: Sequence[Mapping[str, Any]] | Sequence[Task],
+    points: Sequence[Mapping[str, Any] | Task],
     *,
     engine: Engine | None = None,
     progress: bool = False,

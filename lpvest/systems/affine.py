@@ -150,7 +150,7 @@ class AffineDependence:
         return (CONSTANT_TERM, *(b.name for b in self.basis))
 
     def shape(self, name: str) -> tuple[int, int]:
-        return self._stack.shapes[name]  # type: ignore[attr-defined,no-any-return]
+        return self._stack.shapes[name]  # type: ignore[attr-defined]  # set in __post_init__ (frozen)
 
     def psi(self, p: np.ndarray, *, check: bool = True) -> np.ndarray:
         """``[1, psi_1(p), ..., psi_n(p)]`` for one scheduling vector."""
@@ -179,12 +179,12 @@ class AffineDependence:
 
     def at_psi(self, psi: np.ndarray) -> dict[str, np.ndarray]:
         """Every matrix for given basis values ``psi = [1, psi_1(p), ...]`` (:meth:`psi`)."""
-        return self._stack.at(psi)  # type: ignore[attr-defined,no-any-return]
+        return self._stack.at(psi)  # type: ignore[attr-defined]  # set in __post_init__ (frozen)
 
     def evaluate_batch(self, p: np.ndarray, *, check: bool = True) -> dict[str, np.ndarray]:
         """Every matrix along a trajectory ``p`` (T, n_p): arrays ``(T, rows, cols)``;
         row ``t`` is :meth:`evaluate` of ``p[t]`` to the bit."""
-        return self._stack.at_batch(self.psi_batch(p, check=check))  # type: ignore[attr-defined,no-any-return]
+        return self._stack.at_batch(self.psi_batch(p, check=check))  # type: ignore[attr-defined]  # set in __post_init__ (frozen)
 
     def subset(self, names: Sequence[str]) -> AffineDependence:
         """The dependence restricted to ``names``."""

@@ -344,10 +344,8 @@ class LPVInputOutput:
         for t in range(T):
             self.space.check(p[t], what=f"scheduling value at t={t}:")
         u = as_signal(u, "u", 1, T)[:, 0]
-        if e is None:
-            e = as_rng(rng).standard_normal(T) * np.sqrt(self.noise_variance)
-        else:
-            e = as_signal(e, "e", 1, T)[:, 0]
+        ev: np.ndarray = (as_rng(rng).standard_normal(T) * np.sqrt(self.noise_variance) if e is None
+                          else as_signal(e, "e", 1, T)[:, 0])
         vals = self.space.as_dict(p)
 
         def coeffs(seq: tuple[Expression, ...]) -> np.ndarray:
@@ -356,7 +354,7 @@ class LPVInputOutput:
         a, b, c = coeffs(self.y_coefficients), coeffs(self.u_coefficients), coeffs(self.e_coefficients)
         y = np.zeros(T)
         for t in range(T):
-            acc = e[t]
+            acc = ev[t]
             for i in range(a.shape[0]):
                 if t - 1 - i >= 0:
                     acc += a[i, t] * y[t - 1 - i]
@@ -365,9 +363,9 @@ class LPVInputOutput:
                     acc += b[i, t] * u[t - i]
             for i in range(c.shape[0]):
                 if t - 1 - i >= 0:
-                    acc += c[i, t] * e[t - 1 - i]
+                    acc += c[i, t] * ev[t - 1 - i]
             y[t] = acc
-        return InnovationTrajectory(np.zeros((T, 0)), y[:, None], e[:, None])
+        return InnovationTrajectory(np.zeros((T, 0)), y[:, None], ev[:, None])
 
 
     # -- text forms ---------------------------------------------------------------------

@@ -32,6 +32,15 @@ from .text import number, time_value
 __all__ = ["TimeFunction", "LTVStateSpace", "LTVInputOutput", "LTVTrajectory"]
 
 
+def _of_t(expr: Expression) -> Callable[[Any], Any]:
+    """The formula ``expr`` as a function of ``t`` (a number or an array of times)."""
+
+    def f(t: Any) -> Any:
+        return expr.evaluate({"t": t})
+
+    return f
+
+
 @dataclass(frozen=True, eq=False)
 class TimeFunction:
     """A scalar function of time: a formula of ``t`` or a Python callable.
@@ -47,7 +56,7 @@ class TimeFunction:
     _derivative: Callable[[np.ndarray], np.ndarray] | None = None
 
     @classmethod
-    def of(cls, value: TimeFunction | str | float | int | Callable) -> TimeFunction:
+    def of(cls, value: object) -> TimeFunction:
         """A :class:`TimeFunction` from a formula (``"t**2 + 1"``), a number, a
         callable of ``t`` or a :class:`TimeFunction`."""
         if isinstance(value, TimeFunction):
@@ -61,7 +70,7 @@ class TimeFunction:
             return cls(value, f"<{name}>")
         else:
             raise ExpressionError(f"{abbreviate(value, 30)} is neither a formula of t, a number nor a callable")
-        return cls(lambda t, _e=expr: _e.evaluate({"t": t}), expr.text, expr)
+        return cls(_of_t(expr), expr.text, expr)
 
     @classmethod
     def from_callable(
@@ -81,7 +90,7 @@ class TimeFunction:
         """The time derivative as a :class:`TimeFunction`."""
         if self.expression is not None:
             d = self.expression.derivative("t")
-            return TimeFunction(lambda t, _e=d: _e.evaluate({"t": t}), d.source, d)
+            return TimeFunction(_of_t(d), d.source, d)
         if self._derivative is not None:
             return TimeFunction.from_callable(self._derivative, name=f"d/dt {self.text}")
 

@@ -73,7 +73,8 @@ class PolytopicTrajectory(NamedTuple):
 class SimplexMap(Protocol):
     """Maps the physical scheduling vector to ``alpha`` on the unit simplex."""
 
-    space: SchedulingSpace
+    @property
+    def space(self) -> SchedulingSpace: ...
 
     @property
     def n_vertices(self) -> int: ...
@@ -141,9 +142,9 @@ class FormulaSimplexMap:
         key = p.tobytes()
         last = self._last  # type: ignore[attr-defined]
         if last is not None and last[0] == key:
-            return last[1].copy()  # type: ignore[no-any-return]
+            return last[1].copy()
         alpha = np.asarray(self._vector.evaluate(  # type: ignore[attr-defined]
-            {n: float(v) for n, v in zip(self.space.names, p, strict=True)}), dtype=float)
+            {n: float(v) for n, v in zip(self.space.names, p, strict=True)}), dtype=np.float64)
         object.__setattr__(self, "_last", (key, alpha))
         return alpha.copy()
 
@@ -181,8 +182,8 @@ class MultilinearSimplexMap:
         self,
         space: SchedulingSpace,
         coordinates: Sequence[BasisFunction],
-        lower: Sequence[float],
-        upper: Sequence[float],
+        lower: Sequence[float] | np.ndarray,
+        upper: Sequence[float] | np.ndarray,
     ) -> None:
         coords = tuple(coordinates)
         lo = as_vector(lower, "multilinear map lower bound", len(coords))
@@ -362,6 +363,7 @@ class PolytopicLPV:
                 f"the simplex map gives {simplex_map.n_vertices} weights; the model has {N} vertices"
             )
         object.__setattr__(self, "vertices", PolytopicMatrices(**stacks))
+        self._stack: MatrixStack
         object.__setattr__(self, "_stack", MatrixStack(stacks))
         object.__setattr__(self, "simplex_map", simplex_map)
         object.__setattr__(self, "affine", affine)

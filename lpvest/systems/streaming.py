@@ -59,8 +59,6 @@ class _Rules:
     """How :class:`DiscretePlant` streams one kind of discrete-time model: its
     ports, its noise, its initial state and one sample (the model's own step)."""
 
-    takes_P0 = False  #: the initial state is drawn from N(x0, P0)
-
     def __init__(self, model: Any) -> None:
         self.model = model
 
@@ -103,7 +101,7 @@ class _PolytopicRules(_Rules):
         if m.simplex_map is None:
             sched = Port("alpha", (m.n_vertices,), "vertex weights")
         else:
-            sched = Port("p", (m.space.dim,), "scheduling")
+            sched = Port("p", (m.simplex_map.space.dim,), "scheduling")
         return ([sched, Port("w", (m.nw,), "disturbance")],
                 [Port("y", (m.ny,), "measured output"), Port("z", (m.nz,), "signal to be estimated")])
 
@@ -121,7 +119,6 @@ class _PolytopicRules(_Rules):
 
 class _AffineRules(_Rules):
     model: AffineLPV
-    takes_P0 = True
 
     def ports(self) -> tuple[list[Port], list[Port]]:
         m = self.model
@@ -265,7 +262,7 @@ class DiscretePlant(Component):
         nx = model.nx
         self._x0 = None if x0 is None else as_vector(x0, "x0", nx)
         self._P0 = None
-        if rules.takes_P0:
+        if isinstance(model, AffineLPV):  # its initial state is drawn from N(x0, P0)
             self._P0 = model.P0 if P0 is None else check_positive_definite(
                 as_matrix(P0, "P0", (nx, nx)), "P0", semidefinite=True)
         elif P0 is not None:

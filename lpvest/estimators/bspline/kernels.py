@@ -266,7 +266,7 @@ class ProductQuadrature:
         J = self.m - 1
         out = pieces[..., :J]
         if pieces.shape[-1] > J:
-            np.add.at(out, (..., self.piece_interval[J:]), pieces[..., J:])
+            np.add.at(out, (Ellipsis, self.piece_interval[J:]), pieces[..., J:])  # type: ignore[arg-type]  # numpy's stubs omit index tuples
         return out
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -37,7 +38,7 @@ class Known:
     function: TimeFunction
 
     def __init__(self, value: object) -> None:
-        object.__setattr__(self, "function", TimeFunction.of(value))  # type: ignore[arg-type]
+        object.__setattr__(self, "function", TimeFunction.of(value))
 
     def __repr__(self) -> str:
         return f"Known({self.function.text!r})"
@@ -159,7 +160,7 @@ class KernelModel:
             raise DimensionError(f"unknown coefficient name {abbreviate(bad[0], 30)}; expected one of "
                                  f"{', '.join(COEFFICIENTS)}")
         b = (*io.b, *(TimeFunction.of(0.0) for _ in range(2 - len(io.b))))
-        known = {"a0": io.a[0], "a1": io.a[1], "b0": b[0], "b1": b[1]}
+        known: dict[str, Any] = {"a0": io.a[0], "a1": io.a[1], "b0": b[0], "b1": b[1]}
         known.update(unknown)
         return cls(**known)
 

@@ -310,7 +310,7 @@ SIGNAL_OF = {"a": "y", "b": "u"}
 
 
 def _known_functions(model: KernelModel) -> dict[str, TimeFunction]:
-    return {n: model.coefficient(n).function for n in COEFFICIENTS if isinstance(model.coefficient(n), Known)}
+    return {n: c.function for n in COEFFICIENTS if isinstance(c := model.coefficient(n), Known)}
 
 
 @dataclass(frozen=True, eq=False)

@@ -188,11 +188,12 @@ class KalmanModel:
         basis = dep.basis
         from ...scheduling import Monomial
 
-        monomial = all(isinstance(b, Monomial) for b in basis)
+        monomials = [b for b in basis if isinstance(b, Monomial)]
+        monomial = len(monomials) == len(basis)
         # the common case psi_i(p) = p_j: read the components directly
         components = None
-        if monomial and all(sorted(b.exponents) == [0] * (len(b.exponents) - 1) + [1] for b in basis):
-            components = [b.exponents.index(1) for b in basis]
+        if monomial and all(sorted(b.exponents) == [0] * (len(b.exponents) - 1) + [1] for b in monomials):
+            components = [b.exponents.index(1) for b in monomials]
         space = self.model.space
         tol = 1e-12 * np.maximum(1.0, np.maximum(np.abs(space.lower), np.abs(space.upper)))
         object.__setattr__(
@@ -207,7 +208,7 @@ class KalmanModel:
                 "pairs": pairs,
                 "k": k,
                 "basis": basis,
-                "exponents": [b.exponents for b in basis] if monomial else None,
+                "exponents": [b.exponents for b in monomials] if monomial else None,
                 "components": components,
                 "lo": (space.lower - tol).tolist(),
                 "hi": (space.upper + tol).tolist(),

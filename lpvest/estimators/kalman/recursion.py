@@ -303,7 +303,7 @@ def kalman_step(
         x_filt=xs[n:],
         P_filt=PP[n:, n:],
         next=KalmanState(xs[:n], PP[:n, :n], state.t + 1),
-        log_likelihood=ll,
+        log_likelihood=float(ll),
     )
 
 

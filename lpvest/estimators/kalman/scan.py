@@ -682,7 +682,11 @@ def scan_filter(
             )
         xi = yd[sl] - _mv(Cj, x)
         xi_[sl] = xi
-        LT = CP / Om if m == 1 else _usolve(Lo, _lsolve(Lo, CP))  # Omega^-1 C P = L^T
+        if m == 1:
+            LT = CP / Om
+        else:
+            assert Lo is not None  # the Cholesky factors, computed for n_y > 1
+            LT = _usolve(Lo, _lsolve(Lo, CP))  # Omega^-1 C P = L^T
         LT_[sl] = LT
         KT_[sl] = LT @ AjT  # K^T = (Abar L + J)^T; J added below
         x_f = x + _mv(mT(LT), xi)

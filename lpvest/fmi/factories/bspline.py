@@ -67,7 +67,9 @@ class SampledObserver(TimedComponent):
     def _commit(self, inputs: Mapping[str, Any], t_end: float = 0.0) -> None:
         self._obs.step(inputs)  # step() checked that this is the observer's next sample
 
-    def step(self, inputs: Mapping[str, Any], *, dt: float, t_end: float | None = None) -> dict[str, np.ndarray]:
+    def step(  # type: ignore[override]  # the timed protocol: step(inputs, dt=h, t_end=t + h)
+        self, inputs: Mapping[str, Any], *, dt: float, t_end: float | None = None
+    ) -> dict[str, np.ndarray]:
         if abs(dt - self.dt) > 1e-9 * self.dt:
             raise SamplingError(
                 f"communication step {dt!r} s differs from the observer's sample time dt = {self.dt!r} s "
@@ -81,7 +83,7 @@ class SampledObserver(TimedComponent):
             )
         return super().step(inputs, dt=dt, t_end=expected + dt if t_end is None else t_end)
 
-    def advance(self, *, dt: float = 0.0, t_end: float | None = None) -> dict[str, np.ndarray] | None:  # type: ignore[override]
+    def advance(self, *, dt: float = 0.0, t_end: float | None = None) -> dict[str, np.ndarray] | None:
         """The FMU's fast path: not taken (the sample-time checks live in :meth:`step`)."""
         return None
 
