@@ -239,7 +239,10 @@ class Engine:
                     index = index_of[future.key]
                     if index in outcomes:  # pragma: no cover - as_completed yields a future once
                         continue
-                    if future.status == "finished" and isinstance(value, Outcome):
+                    if isinstance(value, Outcome):
+                        # the result arrived; the future's status may already say
+                        # otherwise (its worker died after sending it: "lost" or
+                        # "pending" while the scheduler recomputes it)
                         outcome = value
                     else:  # the task could not run: KilledWorker, cancelled, lost data
                         exc = value[1] if isinstance(value, tuple) and len(value) == 3 else value
