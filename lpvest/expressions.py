@@ -66,8 +66,10 @@ MAX_FORMULA_LENGTH = 2000
 MAX_FORMULA_DEPTH = 100
 
 _BINOPS = (ast.Add, ast.Sub, ast.Mult, ast.Div, ast.Pow)
+# ``a ** b`` is compiled as a call of numpy's power (see _compile)
+_POWER = "__power__"
 # the only globals a formula sees: the whitelisted functions, no builtins
-_GLOBALS: dict[str, Any] = {"__builtins__": {}, **FUNCTIONS}
+_GLOBALS: dict[str, Any] = {"__builtins__": {}, **FUNCTIONS, _POWER: np.power}
 _SHIFT_PREFIX = "__shift__"
 
 
@@ -110,15 +112,42 @@ def _arithmetic_failure(exc: BaseException) -> str:
         return "takes the log of zero"
     if isinstance(exc, ZeroDivisionError) or "divide by zero" in text:
         return "divides by zero"
+    if "invalid value encountered in power" in text:
+        return "is not a real number (a negative number to a fractional power)"
     if isinstance(exc, OverflowError) or "overflow" in text:
         return "overflows (its value exceeds the floating-point range, about 1.8e308)"
     return "is undefined (e.g. the log or square root of a negative number)"
 
 
+class _PowerAsCall(ast.NodeTransformer):
+    def visit_BinOp(self, node: ast.BinOp) -> ast.expr:
+        self.generic_visit(node)
+        if isinstance(node.op, ast.Pow):
+            call = ast.Call(ast.Name(_POWER, ast.Load()), [node.left, node.right], [])
+            return ast.copy_location(call, node)
+        return node
+
+
+def _compile(node: ast.expr, filename: str = "<lpvest formula>") -> Any:
+    """The code object of a formula's syntax tree (the tree is not changed).
+
+    ``a ** b`` becomes ``numpy.power(a, b)``: one power function for every
+    evaluation path. Python's ``float.__pow__`` calls the C library's ``pow``,
+    numpy's array loops may run their own SIMD implementation (on AVX-512 a
+    result can differ in the last bit: ``10 ** 0.7071067811865476`` is
+    5.094561170451297 in Python, 5.094561170451296 in numpy), so a formula
+    evaluated one sample at a time (FMUs, streaming) would otherwise differ
+    from the same formula evaluated on arrays (simulations). The other
+    operations are IEEE-exact and the functions numpy's already.
+    """
+    tree = _PowerAsCall().visit(ast.Expression(copy.deepcopy(node)))
+    return compile(ast.fix_missing_locations(tree), filename, "eval")
+
+
 def _fold(text: str, node: ast.expr) -> ast.Constant:
     """The value of an operation on constants, in floating point, as a constant
     node; a division by zero, an overflow or a non-real result is an error."""
-    code = compile(ast.fix_missing_locations(ast.Expression(node)), "<lpvest formula>", "eval")
+    code = _compile(node)
     try:
         with np.errstate(all="raise"):
             value = eval(code, _GLOBALS, {})  # noqa: S307 (whitelisted AST of constants)
@@ -391,8 +420,7 @@ class Expression:
 
     @classmethod
     def _from_tree(cls, text: str, tree: ast.Expression) -> Expression:
-        code = compile(tree, "<lpvest formula>", "eval")
-        return cls(text, tree, code, _free_names(tree))
+        return cls(text, tree, _compile(tree.body), _free_names(tree))
 
     @classmethod
     def constant(cls, value: float) -> Expression:
@@ -773,9 +801,7 @@ class FormulaVector:
 
     def __init__(self, formulas: Iterable[Expression]) -> None:
         self.formulas = tuple(formulas)
-        body = ast.Tuple([f.tree.body for f in self.formulas], ast.Load())
-        tree = ast.fix_missing_locations(ast.Expression(body))
-        self._code = compile(tree, "<lpvest formulas>", "eval")
+        self._code = _compile(ast.Tuple([f.tree.body for f in self.formulas], ast.Load()), "<lpvest formulas>")
         self._names = frozenset().union(*(f.names for f in self.formulas))
 
     def evaluate(self, values: Mapping[str, Any]) -> np.ndarray:
