@@ -40,7 +40,6 @@ the FMI parameter's ``min``/``max`` (so a host refuses such a value too).
 
 from __future__ import annotations
 
-import datetime
 import math
 import re
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -68,7 +67,8 @@ from .systems.polytopic import (
     PolytopicLPV,
     SimplexMap,
 )
-from .tomlfiles import parse_toml, read_toml
+from .systems.text import number
+from .tomlfiles import describe_value, parse_toml, read_toml
 
 __all__ = [
     "SystemFile",
@@ -232,7 +232,7 @@ class _Reader:
         val = data[key]
         if not isinstance(val, dict):
             raise self.error(f"{where}.{key}" if where and where != key else key,
-                             f"expected a table, found {_kind(val)}")
+                             f"expected a table, found {describe_value(val)}")
         return val
 
     def keys(self, data: Mapping, where: str, allowed: set[str] | frozenset[str],
@@ -253,7 +253,7 @@ class _Reader:
             return default
         val = data[key]
         if not isinstance(val, str):
-            raise self.error(f"{where}.{key}", f"expected a string, found {_kind(val)}")
+            raise self.error(f"{where}.{key}", f"expected a string, found {describe_value(val)}")
         return val
 
     def number(self, value: Any, where: str) -> float:
@@ -265,7 +265,7 @@ class _Reader:
             with self.at(where):
                 number = Expression.parse(value, parameters=self.parameters).value()
         else:
-            raise self.error(where, f"expected a number or formula, found {_kind(value)}")
+            raise self.error(where, f"expected a number or formula, found {describe_value(value)}")
         if not math.isfinite(number):
             raise self.error(where, f"expected a finite number, found {number}")
         if abs(number) > MAX_MAGNITUDE:
@@ -289,7 +289,7 @@ class _Reader:
 
     def numbers(self, value: Any, where: str) -> list[float]:
         if not isinstance(value, list):
-            raise self.error(where, f"expected a list of numbers, found {_kind(value)}")
+            raise self.error(where, f"expected a list of numbers, found {describe_value(value)}")
         return [self.number(v, f"{where}[{i + 1}]") for i, v in enumerate(value)]
 
     def matrix(self, value: Any, where: str) -> np.ndarray:
@@ -297,7 +297,7 @@ class _Reader:
         if isinstance(value, int | float | str) and not isinstance(value, bool):
             return np.array([[self.number(value, where)]])
         if not isinstance(value, list) or not value or not all(isinstance(r, list) for r in value):
-            raise self.error(where, f"expected a matrix (list of rows), found {_kind(value)}")
+            raise self.error(where, f"expected a matrix (list of rows), found {describe_value(value)}")
         widths = sorted({len(r) for r in value})
         if len(widths) != 1:
             shown = ", ".join(map(str, widths[:4])) + (", ..." if len(widths) > 4 else "")
@@ -310,7 +310,7 @@ class _Reader:
 
     def strings(self, value: Any, where: str) -> list[str]:
         if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-            raise self.error(where, f"expected a list of strings, found {_kind(value)}")
+            raise self.error(where, f"expected a list of strings, found {describe_value(value)}")
         return list(value)
 
     # -- pieces ---------------------------------------------------------------
@@ -344,7 +344,7 @@ class _Reader:
     def basis(self, spec: Mapping, space: SchedulingSpace, matrices: Mapping, where: str) -> list[BasisFunction]:
         bounds_tab = spec.get("bounds", {})
         if not isinstance(bounds_tab, dict):
-            raise self.error(f"{where}.bounds", f"expected a table, found {_kind(bounds_tab)}")
+            raise self.error(f"{where}.bounds", f"expected a table, found {describe_value(bounds_tab)}")
         if "basis" in spec:
             texts = self.strings(spec["basis"], f"{where}.basis")
         else:  # order of first appearance in the matrices
@@ -397,7 +397,7 @@ class _Reader:
     def model(self, key: str, spec: Any, space: SchedulingSpace | None) -> Model:
         where = f"models.{_key(key)}"
         if not isinstance(spec, dict):
-            raise self.error(where, f"expected a table, found {_kind(spec)}")
+            raise self.error(where, f"expected a table, found {describe_value(spec)}")
         kind = self.string(spec, "type", where)
         readers: dict[str, Callable[[str, Mapping, SchedulingSpace | None, str], Model]] = {
             "affine": self.affine,
@@ -432,14 +432,14 @@ class _Reader:
 
     def simplex_map(self, spec: Any, space: SchedulingSpace | None, where: str) -> SimplexMap:
         if not isinstance(spec, dict):
-            raise self.error(where, f"expected a table, found {_kind(spec)}")
+            raise self.error(where, f"expected a table, found {describe_value(spec)}")
         space = self.need_space(space, where)
         kind = self.string(spec, "kind", where)
         if kind == "formulas":
             self.keys(spec, where, {"kind", "alpha"}, {"alpha"})
             alpha = spec["alpha"]
             if not isinstance(alpha, list):
-                raise self.error(f"{where}.alpha", f"expected a list of formulas, found {_kind(alpha)}")
+                raise self.error(f"{where}.alpha", f"expected a list of formulas, found {describe_value(alpha)}")
             with self.at(f"{where}.alpha"):
                 return FormulaSimplexMap(
                     space, [Expression.parse(a, parameters=self.parameters, allowed=space.names) for a in alpha]
@@ -548,7 +548,7 @@ class _Reader:
 
     def formulas(self, value: Any, where: str, allowed: list[str]) -> list[Expression]:
         if not isinstance(value, list):
-            raise self.error(where, f"expected a list of formulas, found {_kind(value)}")
+            raise self.error(where, f"expected a list of formulas, found {describe_value(value)}")
         out = []
         for i, v in enumerate(value):
             with self.at(f"{where}[{i + 1}]"):
@@ -587,29 +587,13 @@ class _Reader:
             return LTVStateSpace(mats["A"], mats["B"], mats["C"], input=u, x0=x0, name=self.name_of(key))
 
 
-def _kind(value: Any) -> str:
-    """What a TOML value is, for a message (numbers with their value)."""
-    if isinstance(value, bool):
-        return f"a boolean ({str(value).lower()})"
-    if isinstance(value, int | float):
-        return f"a number ({value!r})"
-    if isinstance(value, str):
-        return f"a string ({abbreviate(value, 30)})"
-    if isinstance(value, dict):
-        return "a table"
-    if isinstance(value, list):
-        return "a list"
-    if isinstance(value, datetime.date | datetime.time):
-        return "a date/time"
-    return type(value).__name__
-
 
 def loads_system(
     text: str, *, origin: str = "<string>", parameters: Mapping[str, float] | None = None
 ) -> SystemFile:
     """Parse a model file from TOML text (``origin`` names it in errors)."""
     if not isinstance(text, str):
-        raise ModelFileError(f"{origin}: expected the TOML text as a string, found {_kind(text)}")
+        raise ModelFileError(f"{origin}: expected the TOML text as a string, found {describe_value(text)}")
     return _build(parse_toml(text, origin), origin, parameters, None)
 
 
@@ -683,7 +667,7 @@ def _build(
         if k not in params:
             raise r.error("parameters", f"no parameter {abbreviate(k, 30)} to override (known: {_names(params)})")
         if isinstance(v, bool) or not isinstance(v, int | float | np.integer | np.floating):
-            raise r.error(f"parameters.{k}", f"override: expected a number, found {_kind(v)}")
+            raise r.error(f"parameters.{k}", f"override: expected a number, found {describe_value(v)}")
         params[k] = r.number(float(v), f"parameters.{k} (override)")
         if k in ranges and not ranges[k].contains(params[k]) and not allow_outside_range:
             raise r.error(f"parameters.{k}", f"override {params[k]:.15g} is outside its declared range "
@@ -714,10 +698,6 @@ def _build(
 # -- writing -----------------------------------------------------------------
 
 
-def _num(x: float) -> float | int:
-    return float(x)
-
-
 def _model_out(model: Model) -> dict:
     to_toml = getattr(model, "to_toml", None)
     if to_toml is None:
@@ -727,12 +707,12 @@ def _model_out(model: Model) -> dict:
 
 def _parameter_out(value: float, rng: ParameterRange | None) -> Any:
     if rng is None:
-        return _num(value)
-    out: dict[str, Any] = {"value": _num(value)}
+        return number(value)
+    out: dict[str, Any] = {"value": number(value)}
     if rng.lower is not None:
-        out["lower"] = _num(rng.lower)
+        out["lower"] = number(rng.lower)
     if rng.upper is not None:
-        out["upper"] = _num(rng.upper)
+        out["upper"] = number(rng.upper)
     if rng.description:
         out["description"] = rng.description
     return out
@@ -756,8 +736,8 @@ def dump_system(system: SystemFile) -> str:
         s = system.scheduling
         data["scheduling"] = {
             "names": list(s.names),
-            "lower": [_num(v) for v in s.lower],
-            "upper": [_num(v) for v in s.upper],
+            "lower": [number(v) for v in s.lower],
+            "upper": [number(v) for v in s.upper],
         }
     data["models"] = {k: _model_out(m) for k, m in system.models.items()}
     return tomli_w.dumps(data)

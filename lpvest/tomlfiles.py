@@ -16,13 +16,14 @@ lpvest.errors.ModelFileError: my.toml: not valid TOML: Invalid value (at end of 
 
 from __future__ import annotations
 
+import datetime
 import tomllib
 from pathlib import Path
 from typing import Any
 
 from .errors import ModelFileError, abbreviate, shorten
 
-__all__ = ["parse_toml", "read_toml"]
+__all__ = ["parse_toml", "read_toml", "describe_value"]
 
 
 def parse_toml(text: str, origin: str) -> dict[str, Any]:
@@ -54,3 +55,25 @@ def read_toml(path: str | Path) -> dict[str, Any]:
             + (" (the file is UTF-16; save it as UTF-8)" if raw[:2] in (b"\xff\xfe", b"\xfe\xff") else "")
         ) from None
     return parse_toml(text, str(path))
+
+
+def describe_value(value: Any) -> str:
+    """What a TOML value is, for a one-line message (numbers with their
+    value, strings abbreviated).
+
+    >>> describe_value(True), describe_value(2.5), describe_value([1]), describe_value({})
+    ('a boolean (true)', 'a number (2.5)', 'a list', 'a table')
+    """
+    if isinstance(value, bool):
+        return f"a boolean ({str(value).lower()})"
+    if isinstance(value, int | float):
+        return f"a number ({value!r})"
+    if isinstance(value, str):
+        return f"a string ({abbreviate(value, 30)})"
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, list):
+        return "a list"
+    if isinstance(value, datetime.date | datetime.time):
+        return "a date/time"
+    return type(value).__name__

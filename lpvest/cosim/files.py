@@ -39,20 +39,18 @@ Examples
 
 from __future__ import annotations
 
-import datetime
 import math
 import re
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from ..errors import ModelFileError, abbreviate, shorten
 from ..plotting import save_figure
-from ..tomlfiles import read_toml
+from ..tomlfiles import describe_value, read_toml
 from .master import Component, Connection, CoSimulation, CoSimulationError
 
 __all__ = ["CoSimFile", "CoSimResult", "load_cosim", "DEFAULT_FMU_DIR"]
@@ -93,18 +91,6 @@ _TOP_KEYS = {"title", "description", "step_size", "steps", "stop_time", "start_t
              "record", "plots", "components"}
 _COMPONENT_KEYS = {"fmu", "parameters", "feedthrough"}
 
-
-def _kind(value: Any) -> str:
-    if isinstance(value, bool):
-        return f"a boolean ({str(value).lower()})"
-    if isinstance(value, int | float):
-        return f"a number ({value!r})"
-    if isinstance(value, str):
-        return f"a string ({abbreviate(value, 30)})"
-    if isinstance(value, datetime.date | datetime.time):
-        return "a date/time"
-    names: dict[type, str] = {dict: "a table", list: "a list"}
-    return names.get(type(value), type(value).__name__)
 
 
 @dataclass(frozen=True)
@@ -307,7 +293,7 @@ class _Reader:
             return default
         value = data[key]
         if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-            raise self.error(key, f"expected a finite number, found {_kind(value)}")
+            raise self.error(key, f"expected a finite number, found {describe_value(value)}")
         if positive and not value > 0:
             raise self.error(key, f"expected a positive number, found {value!r}")
         return float(value)
@@ -315,10 +301,10 @@ class _Reader:
     def strings(self, data: Mapping, key: str) -> list[str]:
         value = data[key]
         if not isinstance(value, list):
-            raise self.error(key, f"expected a list of strings, found {_kind(value)}")
+            raise self.error(key, f"expected a list of strings, found {describe_value(value)}")
         for i, v in enumerate(value):
             if not isinstance(v, str):
-                raise self.error(f"{key}[{i + 1}]", f"expected a string, found {_kind(v)}")
+                raise self.error(f"{key}[{i + 1}]", f"expected a string, found {describe_value(v)}")
         return list(value)
 
     def variable(self, text: str, where: str, components: Sequence[str]) -> None:
@@ -356,7 +342,7 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
         raise r.error(_key(unknown[0]), f"unknown key (expected one of: {', '.join(sorted(_TOP_KEYS))})")
     title = data.get("title", "")
     if not isinstance(title, str):
-        raise r.error("title", f"expected a string, found {_kind(title)}")
+        raise r.error("title", f"expected a string, found {describe_value(title)}")
 
     # timing
     h = r.number(data, "step_size", positive=True)
@@ -366,7 +352,7 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
     if "steps" in data:
         steps = data["steps"]
         if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
-            raise r.error("steps", f"expected a positive integer, found {_kind(steps)}")
+            raise r.error("steps", f"expected a positive integer, found {describe_value(steps)}")
         n_steps = int(steps)
         where_steps = "steps"
     else:
@@ -392,12 +378,12 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
     if comps_raw is None:
         raise r.error("components", "missing (expected a table [components.NAME] per component)")
     if not isinstance(comps_raw, dict) or not comps_raw:
-        raise r.error("components", f"expected a table of components, found {_kind(comps_raw)}")
+        raise r.error("components", f"expected a table of components, found {describe_value(comps_raw)}")
     if fmu_dir is not None:
         folder = Path(fmu_dir)
     elif "fmu_dir" in data:
         if not isinstance(data["fmu_dir"], str):
-            raise r.error("fmu_dir", f"expected a string (a folder), found {_kind(data['fmu_dir'])}")
+            raise r.error("fmu_dir", f"expected a string (a folder), found {describe_value(data['fmu_dir'])}")
         folder = path.parent / data["fmu_dir"]
     else:
         folder = Path(DEFAULT_FMU_DIR)
@@ -407,7 +393,7 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
         if not name.isidentifier():
             raise r.error(where, f"expected a component name that is an identifier, found {abbreviate(name, 30)}")
         if not isinstance(spec, dict):
-            raise r.error(where, f"expected a table, found {_kind(spec)}")
+            raise r.error(where, f"expected a table, found {describe_value(spec)}")
         bad = sorted(set(spec) - _COMPONENT_KEYS)
         if bad:
             raise r.error(f"{where}.{_key(bad[0])}",
@@ -415,7 +401,7 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
         fmu = spec.get("fmu")
         if not isinstance(fmu, str) or not fmu:
             raise r.error(f"{where}.fmu", "missing (expected a built FMU's name or a path to an .fmu file)"
-                          if fmu is None else f"expected a string, found {_kind(fmu)}")
+                          if fmu is None else f"expected a string, found {describe_value(fmu)}")
         if fmu.lower().endswith(".fmu") or "/" in fmu or "\\" in fmu:
             fmu_path = path.parent / fmu
             if not _is_file(fmu_path):
@@ -429,15 +415,15 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
                               f"with `lpvest build --out {shown}`, or point --fmus or fmu_dir at their folder)")
         params = spec.get("parameters", {})
         if not isinstance(params, dict):
-            raise r.error(f"{where}.parameters", f"expected a table of start values, found {_kind(params)}")
+            raise r.error(f"{where}.parameters", f"expected a table of start values, found {describe_value(params)}")
         for pname, value in params.items():
             if isinstance(value, dict) or (isinstance(value, list) and any(isinstance(v, dict | list)
                                                                            for v in value)):
                 raise r.error(f"{where}.parameters.{_key(pname)}",
-                              f"expected a number, string, boolean or a list of them, found {_kind(value)}")
+                              f"expected a number, string, boolean or a list of them, found {describe_value(value)}")
         feed = spec.get("feedthrough")
         if feed is not None and not isinstance(feed, bool):
-            raise r.error(f"{where}.feedthrough", f"expected true or false, found {_kind(feed)}")
+            raise r.error(f"{where}.feedthrough", f"expected true or false, found {describe_value(feed)}")
         components.append(Component(name, fmu_path, dict(params), feed))
     names = [c.name for c in components]
 
@@ -462,11 +448,11 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
     if "plots" in data:
         panels = data["plots"]
         if not isinstance(panels, list):
-            raise r.error("plots", f"expected a list of panels (lists of variables), found {_kind(panels)}")
+            raise r.error("plots", f"expected a list of panels (lists of variables), found {describe_value(panels)}")
         for i, panel in enumerate(panels):
             where = f"plots[{i + 1}]"
             if not isinstance(panel, list) or not panel or not all(isinstance(v, str) for v in panel):
-                raise r.error(where, f"expected a non-empty list of variable names, found {_kind(panel)}")
+                raise r.error(where, f"expected a non-empty list of variable names, found {describe_value(panel)}")
             for v in panel:
                 r.variable(v, where, names)
             plots.append(tuple(panel))

@@ -53,6 +53,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..errors import ModelFileError
+from ..tomlfiles import describe_value
 from .metrics import Metric, parse as parse_metric
 from .tasks import Task, task_seeds
 
@@ -66,16 +67,6 @@ _TOP_KEYS = {"title", "description", "cosim", "experiment", "fmu_dir", "steps", 
 _SEED_KEYS = {"count", "keys", "root", "parameters", "common"}
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
-
-def _kind(value: Any) -> str:
-    if isinstance(value, bool):
-        return f"a boolean ({str(value).lower()})"
-    if isinstance(value, int | float):
-        return f"a number ({value!r})"
-    if isinstance(value, str):
-        return f"a string ({value!r})"
-    names: dict[type, str] = {dict: "a table", list: "a list"}
-    return names.get(type(value), type(value).__name__)
 
 
 @dataclass(frozen=True)
@@ -188,7 +179,7 @@ class _Reader:
 
     def axes(self, table: Any, where: str, *, dotted: bool) -> list[Axis]:
         if not isinstance(table, Mapping):
-            raise self.error(where, f"expected a table of name = [values], found {_kind(table)}")
+            raise self.error(where, f"expected a table of name = [values], found {describe_value(table)}")
         flat: dict[str, Any] = {}
 
         def walk(t: Mapping, prefix: str) -> None:
@@ -208,19 +199,19 @@ class _Reader:
             if not dotted and not _NAME.match(name):
                 raise self.error(w, "expected an axis name of the experiment")
             if not isinstance(values, list) or not values:
-                raise self.error(w, f"expected a non-empty list of values, found {_kind(values)}")
+                raise self.error(w, f"expected a non-empty list of values, found {describe_value(values)}")
             kinds = set()
             for i, v in enumerate(values):
                 if isinstance(v, list):
                     if not v or not all(isinstance(x, int | float) and not isinstance(x, bool) for x in v):
                         raise self.error(f"{w}[{i + 1}]", f"expected a number, string, boolean or a list of "
-                                         f"numbers, found {_kind(v)} {v!r}")
+                                         f"numbers, found {describe_value(v)} {v!r}")
                     kinds.add("vector")
                 elif isinstance(v, bool | int | float | str):
                     kinds.add({bool: "bool", str: "str"}.get(type(v), "number"))
                 else:
                     raise self.error(f"{w}[{i + 1}]", f"expected a number, string, boolean or a list of numbers, "
-                                     f"found {_kind(v)}")
+                                     f"found {describe_value(v)}")
             if len(kinds) > 1:
                 raise self.error(w, f"mixes {' and '.join(sorted(kinds))} values (one kind per axis)")
             out.append(Axis(name, tuple(tuple(v) if isinstance(v, list) else v for v in values)))
@@ -228,11 +219,11 @@ class _Reader:
 
     def strings(self, value: Any, where: str, *, dotted: bool = True) -> tuple[str, ...]:
         if not isinstance(value, list):
-            raise self.error(where, f"expected a list of strings, found {_kind(value)}")
+            raise self.error(where, f"expected a list of strings, found {describe_value(value)}")
         for i, v in enumerate(value):
             if not isinstance(v, str) or (dotted and "." not in v):
                 what = "'component.variable'" if dotted else "a name"
-                raise self.error(f"{where}[{i + 1}]", f"expected {what}, found {_kind(v)}")
+                raise self.error(f"{where}[{i + 1}]", f"expected {what}, found {describe_value(v)}")
         if len(set(value)) != len(value):
             dup = next(v for v in value if value.count(v) > 1)
             raise self.error(where, f"{dup!r} is listed twice")
@@ -240,13 +231,15 @@ class _Reader:
 
     def seeds(self, value: Any, *, cosim: bool) -> Seeds:
         if isinstance(value, bool):
-            raise self.error("seeds", f"expected a count, a list of seed keys or a table, found {_kind(value)}")
+            raise self.error("seeds", "expected a count, a list of seed keys or a table, found "
+                                      f"{describe_value(value)}")
         if isinstance(value, int):
             value = {"count": value}
         elif isinstance(value, list):
             value = {"keys": value}
         if not isinstance(value, Mapping):
-            raise self.error("seeds", f"expected a count, a list of seed keys or a table, found {_kind(value)}")
+            raise self.error("seeds", "expected a count, a list of seed keys or a table, found "
+                                      f"{describe_value(value)}")
         unknown = sorted(set(value) - _SEED_KEYS)
         if unknown:
             raise self.error(f"seeds.{unknown[0]}", f"unknown key (expected one of: {', '.join(sorted(_SEED_KEYS))})")
@@ -255,24 +248,25 @@ class _Reader:
         if "count" in value:
             n = value["count"]
             if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-                raise self.error("seeds.count", f"expected a positive integer, found {_kind(n)}")
+                raise self.error("seeds.count", f"expected a positive integer, found {describe_value(n)}")
             keys = tuple(range(n))
         else:
             raw = value["keys"]
             if not isinstance(raw, list) or not raw:
-                raise self.error("seeds.keys", f"expected a non-empty list of integers, found {_kind(raw)}")
+                raise self.error("seeds.keys", f"expected a non-empty list of integers, found {describe_value(raw)}")
             for i, k in enumerate(raw):
                 if isinstance(k, bool) or not isinstance(k, int) or k < 0:
-                    raise self.error(f"seeds.keys[{i + 1}]", f"expected a non-negative integer, found {_kind(k)}")
+                    raise self.error(f"seeds.keys[{i + 1}]",
+                                     f"expected a non-negative integer, found {describe_value(k)}")
             if len(set(raw)) != len(raw):
                 raise self.error("seeds.keys", f"seed key {next(k for k in raw if raw.count(k) > 1)} is listed twice")
             keys = tuple(raw)
         root = value.get("root", 0)
         if isinstance(root, bool) or not isinstance(root, int) or root < 0:
-            raise self.error("seeds.root", f"expected a non-negative integer, found {_kind(root)}")
+            raise self.error("seeds.root", f"expected a non-negative integer, found {describe_value(root)}")
         common = value.get("common", True)
         if not isinstance(common, bool):
-            raise self.error("seeds.common", f"expected true or false, found {_kind(common)}")
+            raise self.error("seeds.common", f"expected true or false, found {describe_value(common)}")
         params: tuple[str, ...] = ()
         if cosim:
             if "parameters" not in value:
@@ -335,13 +329,13 @@ def sweep_spec(
     r = _Reader(origin)
     base = Path(base)
     if not isinstance(data, Mapping):
-        raise ModelFileError(f"{origin}: expected a table, found {_kind(data)}")
+        raise ModelFileError(f"{origin}: expected a table, found {describe_value(data)}")
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
         raise r.error(unknown[0], f"unknown key (expected one of: {', '.join(sorted(_TOP_KEYS))})")
     title = data.get("title", "")
     if not isinstance(title, str):
-        raise r.error("title", f"expected a string, found {_kind(title)}")
+        raise r.error("title", f"expected a string, found {describe_value(title)}")
     if ("cosim" in data) == ("experiment" in data):
         raise r.error("cosim", "give either cosim (a co-simulation file) or experiment (a registered "
                       "experiment), exactly one")
@@ -349,27 +343,27 @@ def sweep_spec(
     experiment = None
     if "cosim" in data:
         if not isinstance(data["cosim"], str):
-            raise r.error("cosim", f"expected a co-simulation file (a path), found {_kind(data['cosim'])}")
+            raise r.error("cosim", f"expected a co-simulation file (a path), found {describe_value(data['cosim'])}")
         for key in ("options",):
             if key in data:
                 raise r.error(key, "only an experiment takes options")
         folder = fmu_dir
         if folder is None and "fmu_dir" in data:
             if not isinstance(data["fmu_dir"], str):
-                raise r.error("fmu_dir", f"expected a folder (a path), found {_kind(data['fmu_dir'])}")
+                raise r.error("fmu_dir", f"expected a folder (a path), found {describe_value(data['fmu_dir'])}")
             folder = base / data["fmu_dir"]
         cosim = load_cosim(base / data["cosim"], fmu_dir=folder)
         if "steps" in data:
             steps = data["steps"]
             if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
-                raise r.error("steps", f"expected a positive integer, found {_kind(steps)}")
+                raise r.error("steps", f"expected a positive integer, found {describe_value(steps)}")
             cosim = replace(cosim, n_steps=steps)
     else:
         from .studies import study
 
         name = data["experiment"]
         if not isinstance(name, str):
-            raise r.error("experiment", f"expected an experiment name, found {_kind(name)}")
+            raise r.error("experiment", f"expected an experiment name, found {describe_value(name)}")
         for key in ("steps", "fmu_dir"):
             if key in data:
                 raise r.error(key, "only a co-simulation takes this key (an experiment has options)")
@@ -384,7 +378,7 @@ def sweep_spec(
         if isinstance(groups, Mapping):
             groups = [groups]
         if not isinstance(groups, list):
-            raise r.error("zip", f"expected tables [[zip]] of lists of equal length, found {_kind(groups)}")
+            raise r.error("zip", f"expected tables [[zip]] of lists of equal length, found {describe_value(groups)}")
         for i, g in enumerate(groups):
             where = f"zip[{i + 1}]"
             axes = tuple(r.axes(g, where, dotted=cosim is not None))
@@ -416,7 +410,7 @@ def sweep_spec(
     if cosim is not None:
         table = data.get("metrics", {})
         if not isinstance(table, Mapping):
-            raise r.error("metrics", f"expected a table of name = {{ kind = ..., ... }}, found {_kind(table)}")
+            raise r.error("metrics", f"expected a table of name = {{ kind = ..., ... }}, found {describe_value(table)}")
         for name, t in table.items():
             where = f"metrics.{name}"
             if not _NAME.match(name) or name in ("task", "seed", "status", "error"):
@@ -449,7 +443,7 @@ def sweep_spec(
             raise r.error("seeds", f"{experiment} has no seed axis")
         raw = data.get("options", {})
         if not isinstance(raw, Mapping):
-            raise r.error("options", f"expected a table, found {_kind(raw)}")
+            raise r.error("options", f"expected a table, found {describe_value(raw)}")
         for key, value in raw.items():
             if key not in st.options:
                 raise r.error(f"options.{key}", f"unknown option of {experiment} "
@@ -457,7 +451,8 @@ def sweep_spec(
             default = st.options[key]
             if isinstance(value, bool) != isinstance(default, bool) or not isinstance(value, type(default)) \
                     and not (isinstance(default, float) and isinstance(value, int)):
-                raise r.error(f"options.{key}", f"expected {_kind(default).split(' (')[0]}, found {_kind(value)}")
+                raise r.error(f"options.{key}",
+                              f"expected {describe_value(default).split(' (')[0]}, found {describe_value(value)}")
             options[key] = value
     spec = SweepSpec(origin, title, cosim, experiment, grid, tuple(zips), seeds, keep, tuple(metrics),
                      metric_names, options)
