@@ -109,13 +109,14 @@ def _schedule(space: SchedulingSpace, formulas: list[str] | None, k: np.ndarray)
     return np.column_stack(cols)
 
 
-def _add(columns: dict, groups: dict, group: str, prefix: str, arr: np.ndarray) -> None:
+def _add(sim: Simulation, group: str, prefix: str, arr: np.ndarray) -> None:
+    """Columns ``prefix`` (or ``prefix[i]``) of ``arr`` into ``sim``, in the plot panel ``group``."""
     arr = np.asarray(arr)
     arr = arr[:, None] if arr.ndim == 1 else arr
     names = [f"{prefix}[{i + 1}]" if arr.shape[1] > 1 else prefix for i in range(arr.shape[1])]
     for i, n in enumerate(names):
-        columns[n] = arr[:, i]
-    groups.setdefault(group, []).extend(names)
+        sim.columns[n] = arr[:, i]
+    sim.groups.setdefault(group, []).extend(names)
 
 
 def simulate_system(
@@ -155,6 +156,10 @@ class _Run:
     seed: int
     t_end: float
 
+    def start(self, time_name: str, time: np.ndarray) -> Simulation:
+        """An empty simulation of this model with its time column."""
+        return Simulation(self.system.name, self.key, time_name, {time_name: time}, {})
+
 
 def _simulate(
     system: SystemFile,
@@ -177,54 +182,50 @@ def _simulate_model(model: object, run: _Run) -> Simulation:
 @_simulate_model.register(LTVInputOutput)
 @_simulate_model.register(LTVStateSpace)
 def _(model: LTVInputOutput | LTVStateSpace, run: _Run) -> Simulation:
-    columns: dict[str, np.ndarray] = {}
-    groups: dict[str, list[str]] = {}
     t = np.linspace(0.0, run.t_end, run.steps)
     traj = model.simulate(t)
-    columns["t"] = t
-    _add(columns, groups, "input", "u", traj.u)
-    _add(columns, groups, "output", "y", traj.y)
-    _add(columns, groups, "state", "x", traj.x)
-    return Simulation(run.system.name, run.key, "t", columns, groups)
+    sim = run.start("t", t)
+    _add(sim, "input", "u", traj.u)
+    _add(sim, "output", "y", traj.y)
+    _add(sim, "state", "x", traj.x)
+    return sim
 
 
 @_simulate_model.register
 def _(model: PolytopicLPV, run: _Run) -> Simulation:
     k = np.arange(run.steps, dtype=float)
-    columns: dict[str, np.ndarray] = {"k": k}
-    groups: dict[str, list[str]] = {}
+    sim = run.start("k", k)
     if model.simplex_map is not None:
         p = _schedule(model.simplex_map.space, run.schedule, k)
         alpha = model.alpha_batch(p)
-        _add(columns, groups, "scheduling", model.simplex_map.space.names[0] if p.shape[1] == 1 else "p", p)
+        _add(sim, "scheduling", model.simplex_map.space.names[0] if p.shape[1] == 1 else "p", p)
     else:
         raw = _schedule(SchedulingSpace(["s"], [0.0], [1.0]), run.schedule, k)[:, 0]
         alpha = np.column_stack([1.0 - raw, raw])
-    _add(columns, groups, "alpha", "alpha", alpha)
+    _add(sim, "alpha", "alpha", alpha)
     w = np.tile(peixoto_disturbance(k)[:, None], (1, model.nw))
     traj = model.simulate(alpha, w)
-    _add(columns, groups, "disturbance", "w", w)
-    _add(columns, groups, "output", "y", traj.y)
-    _add(columns, groups, "to estimate", "z", traj.z)
-    _add(columns, groups, "state", "x", traj.x)
-    return Simulation(run.system.name, run.key, "k", columns, groups)
+    _add(sim, "disturbance", "w", w)
+    _add(sim, "output", "y", traj.y)
+    _add(sim, "to estimate", "z", traj.z)
+    _add(sim, "state", "x", traj.x)
+    return sim
 
 
 @_simulate_model.register
 def _(model: AffineLPV, run: _Run) -> Simulation:
     assert run.system.scheduling is not None
     k = np.arange(run.steps, dtype=float)
-    columns: dict[str, np.ndarray] = {"k": k}
-    groups: dict[str, list[str]] = {}
+    sim = run.start("k", k)
     p = _schedule(run.system.scheduling, run.schedule, k)
     u = np.sin(0.1 * k)[:, None] * np.ones((1, model.nu))
     traj = model.simulate(p, u, rng=run.seed)
-    _add(columns, groups, "scheduling", "p", p)
+    _add(sim, "scheduling", "p", p)
     if model.nu:
-        _add(columns, groups, "input", "u", u)
-    _add(columns, groups, "output", "y", traj.y)
-    _add(columns, groups, "state", "x", traj.x)
-    return Simulation(run.system.name, run.key, "k", columns, groups)
+        _add(sim, "input", "u", u)
+    _add(sim, "output", "y", traj.y)
+    _add(sim, "state", "x", traj.x)
+    return sim
 
 
 def _simulate_io(model: InnovationLPV | LPVInputOutput, run: _Run, window: tuple[int, int], nu: int,
@@ -232,20 +233,19 @@ def _simulate_io(model: InnovationLPV | LPVInputOutput, run: _Run, window: tuple
     assert run.system.scheduling is not None
     steps = run.steps
     k = np.arange(steps, dtype=float)
-    columns: dict[str, np.ndarray] = {"k": k}
-    groups: dict[str, list[str]] = {}
+    sim = run.start("k", k)
     back, ahead = window
     p = _schedule(run.system.scheduling, run.schedule, np.arange(-back, steps + ahead, dtype=float))
     u = np.sin(0.1 * k)[:, None]
     e = np.random.default_rng(run.seed).standard_normal((steps, 1))
     traj = model.simulate(p, u[:, :nu], e=e)
     if state:
-        _add(columns, groups, "state", "x", traj.x)
-    _add(columns, groups, "scheduling", "p", p[back : back + steps])
-    _add(columns, groups, "input", "u", u)
-    _add(columns, groups, "noise", "e", e)
-    _add(columns, groups, "output", "y", traj.y)
-    return Simulation(run.system.name, run.key, "k", columns, groups)
+        _add(sim, "state", "x", traj.x)
+    _add(sim, "scheduling", "p", p[back : back + steps])
+    _add(sim, "input", "u", u)
+    _add(sim, "noise", "e", e)
+    _add(sim, "output", "y", traj.y)
+    return sim
 
 
 @_simulate_model.register

@@ -112,6 +112,26 @@ class TimeFunction:
         return f"TimeFunction({self.text!r})"
 
 
+def _input_and_x0_table(u: TimeFunction | None, x0: np.ndarray | None) -> dict[str, Any]:
+    """The optional ``input`` and ``x0`` entries of an LTV model's table."""
+    out: dict[str, Any] = {}
+    if u is not None:
+        out["input"] = time_value(u, "input")
+    if x0 is not None:
+        out["x0"] = [number(v) for v in x0]
+    return out
+
+
+def _input_and_x0_lines(u: TimeFunction | None, x0: np.ndarray | None) -> list[str]:
+    """The optional input and initial-state lines of an LTV model's description."""
+    lines = []
+    if u is not None:
+        lines.append(f"    input u(t) = {u.text}")
+    if x0 is not None:
+        lines.append(f"    x(0) = {x0.tolist()}")
+    return lines
+
+
 class LTVTrajectory(NamedTuple):
     """A simulated continuous-time trajectory at the sample times ``t``."""
 
@@ -231,22 +251,14 @@ class LTVStateSpace:
             if fm is None:
                 raise ModelFileError(f"{n}(t) is a Python callable and cannot be written to a model file")
             out[n] = fm.to_list()
-        if self.input is not None:
-            out["input"] = time_value(self.input, "input")
-        if self.x0 is not None:
-            out["x0"] = [number(v) for v in self.x0]
-        return out
+        return out | _input_and_x0_table(self.input, self.x0)
 
     def describe(self, key: str) -> list[str]:
         """Lines for a person (``lpvest systems show``)."""
         lines = [f"  model {key}: continuous-time LTV state space, n = {self.n}"]
         for name, fm in self.formulas.items():
             lines.append(f"    {name}(t) = {fm.to_list() if fm is not None else '<callable>'}")
-        if self.input is not None:
-            lines.append(f"    input u(t) = {self.input.text}")
-        if self.x0 is not None:
-            lines.append(f"    x(0) = {self.x0.tolist()}")
-        return lines
+        return lines + _input_and_x0_lines(self.input, self.x0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -359,11 +371,7 @@ class LTVInputOutput:
             "a": [time_value(f, f"a[{i}]") for i, f in enumerate(self.a)],
             "b": [time_value(f, f"b[{i}]") for i, f in enumerate(self.b)],
         }
-        if self.input is not None:
-            out["input"] = time_value(self.input, "input")
-        if self.x0 is not None:
-            out["x0"] = [number(v) for v in self.x0]
-        return out
+        return out | _input_and_x0_table(self.input, self.x0)
 
     def describe(self, key: str) -> list[str]:
         """Lines for a person (``lpvest systems show``): the differential equation."""
@@ -371,8 +379,4 @@ class LTVInputOutput:
         lines = [f"  model {key}: continuous-time LTV input-output, order {n}",
                  "    y^(" + str(n) + ") + " + " + ".join(f"({f.text}) y^({i})" for i, f in enumerate(self.a))
                  + " + " + " + ".join(f"({f.text}) u^({i})" for i, f in enumerate(self.b)) + " = 0"]
-        if self.input is not None:
-            lines.append(f"    input u(t) = {self.input.text}")
-        if self.x0 is not None:
-            lines.append(f"    x(0) = {self.x0.tolist()}")
-        return lines
+        return lines + _input_and_x0_lines(self.input, self.x0)
