@@ -128,8 +128,16 @@ class _PowerAsCall(ast.NodeTransformer):
         return node
 
 
-def _compile(node: ast.expr, filename: str = "<lpvest formula>") -> Any:
-    """The code object of a formula's syntax tree (the tree is not changed).
+@dataclass(frozen=True)
+class _Compiled:
+    code: Any
+    #: the formula calls numpy (a power or a function), which warns where IEEE
+    #: arithmetic gives nan or inf unless evaluated under np.errstate
+    calls_numpy: bool
+
+
+def _compile(node: ast.expr, filename: str = "<lpvest formula>") -> _Compiled:
+    """The compiled form of a formula's syntax tree (the tree is not changed).
 
     ``a ** b`` becomes ``numpy.power(a, b)``: one power function for every
     evaluation path. Python's ``float.__pow__`` calls the C library's ``pow``,
@@ -141,13 +149,14 @@ def _compile(node: ast.expr, filename: str = "<lpvest formula>") -> Any:
     operations are IEEE-exact and the functions numpy's already.
     """
     tree = _PowerAsCall().visit(ast.Expression(copy.deepcopy(node)))
-    return compile(ast.fix_missing_locations(tree), filename, "eval")
+    calls = any(isinstance(n, ast.Call) for n in ast.walk(tree))
+    return _Compiled(compile(ast.fix_missing_locations(tree), filename, "eval"), calls)
 
 
 def _fold(text: str, node: ast.expr) -> ast.Constant:
     """The value of an operation on constants, in floating point, as a constant
     node; a division by zero, an overflow or a non-real result is an error."""
-    code = _compile(node)
+    code = _compile(node).code
     try:
         with np.errstate(all="raise"):
             value = eval(code, _GLOBALS, {})  # noqa: S307 (whitelisted AST of constants)
@@ -287,10 +296,12 @@ def _has_complex(result: Any) -> bool:
     return isinstance(result, complex)
 
 
-def _evaluate(code: Any, values: Mapping[str, Any]) -> Any:
-    if all(type(v) is float for v in values.values()):
-        # one sample (the per-step path): plain Python floats need no numpy error state
-        # unless something goes wrong, and then the general path below gives the IEEE result
+def _evaluate(compiled: _Compiled, values: Mapping[str, Any]) -> Any:
+    code = compiled.code
+    if not compiled.calls_numpy and all(type(v) is float for v in values.values()):
+        # one sample (the per-step path) of plain arithmetic: Python floats need no
+        # numpy error state unless something goes wrong, and then the general path
+        # below gives the IEEE result
         try:
             result = eval(code, _GLOBALS, values)  # noqa: S307 (whitelisted AST)
         except (ZeroDivisionError, OverflowError, ValueError):
@@ -345,7 +356,7 @@ class Expression:
 
     text: str
     tree: ast.Expression = field(repr=False)
-    _code: Any = field(repr=False)
+    _code: _Compiled = field(repr=False)
     _names: frozenset[str] = field(repr=False, default=frozenset())
 
     @classmethod
