@@ -508,7 +508,8 @@ def build_parser() -> argparse.ArgumentParser:
     group = p.add_mutually_exclusive_group()
     group.add_argument("--epsilon", type=float, help="design at this epsilon")
     group.add_argument("--search", action="store_true", help="search the best epsilon over the real line (default)")
-    p.add_argument("--solver", default="CLARABEL", help="cvxpy solver (default CLARABEL)")
+    p.add_argument("--solver", default="AUTO",
+                   help="cvxpy solver, or AUTO (default): Clarabel for small LMI programs, SCS for large ones")
     p.add_argument("--out", required=True, metavar="DESIGN.json", help="the design file to write")
     p.set_defaults(func=cmd_design)
 
