@@ -67,6 +67,7 @@ from .systems import (
     PolytopicLPV as PolytopicLPV,
     TimeFunction as TimeFunction,
     affine_to_polytopic as affine_to_polytopic,
+    hinf_setting as hinf_setting,
 )
 
 # -- signals and streaming plants ----------------------------------------------------
@@ -152,7 +153,7 @@ __all__ = [
     # model files, systems, scheduling, formulas
     "example_systems", "load_system", "loads_system", "dump_system", "save_system", "SystemFile",
     "AffineLPV", "AffineDependence", "NoiseCovariance", "PolytopicLPV", "FormulaSimplexMap",
-    "MultilinearSimplexMap", "affine_to_polytopic", "InnovationLPV", "LPVInputOutput", "LTVStateSpace",
+    "MultilinearSimplexMap", "affine_to_polytopic", "hinf_setting", "InnovationLPV", "LPVInputOutput", "LTVStateSpace",
     "LTVInputOutput", "TimeFunction", "SchedulingSpace", "FormulaBasis", "CallableBasis", "Monomial",
     "Expression", "FormulaMatrix",
     # signals and streaming plants

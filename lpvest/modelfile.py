@@ -61,6 +61,7 @@ from .systems.affine import CONSTANT_TERM, AffineDependence, AffineLPV
 from .systems.innovation import InnovationLPV, LPVInputOutput
 from .systems.ltv import LTVInputOutput, LTVStateSpace
 from .systems.polytopic import (
+    POLYTOPIC_INPUT_MATRICES,
     POLYTOPIC_MATRICES,
     FormulaSimplexMap,
     MultilinearSimplexMap,
@@ -418,7 +419,7 @@ class _Reader:
         self.keys(
             spec,
             where,
-            {"type", "title", "basis", "bounds", *names, "Q", "R", "S", "x0", "P0"},
+            {"type", "title", "basis", "bounds", *names, "Q", "R", "S", "x0", "P0", "Cz"},
             {"A", "C", "Q", "R"},
         )
         space = self.need_space(space, where)
@@ -427,8 +428,10 @@ class _Reader:
         noise = {k: self.matrix(spec[k], f"{where}.{k}") for k in ("Q", "R", "S") if k in spec}
         x0 = self.numbers(spec["x0"], f"{where}.x0") if "x0" in spec else None
         P0 = self.matrix(spec["P0"], f"{where}.P0") if "P0" in spec else None
+        Cz = self.matrix(spec["Cz"], f"{where}.Cz") if "Cz" in spec else None
         with self.at(where):
-            return AffineLPV.from_matrices(space, basis, **mats, **noise, x0=x0, P0=P0, name=self.name_of(key))
+            return AffineLPV.from_matrices(space, basis, **mats, **noise, x0=x0, P0=P0, name=self.name_of(key),
+                                           Cz=Cz)
 
     def simplex_map(self, spec: Any, space: SchedulingSpace | None, where: str) -> SimplexMap:
         if not isinstance(spec, dict):
@@ -464,9 +467,11 @@ class _Reader:
         affine = None
         if "affine" in spec:
             aff = self.table(spec, "affine", where)
-            self.keys(aff, f"{where}.affine", {"basis", "bounds", *POLYTOPIC_MATRICES}, set(POLYTOPIC_MATRICES))
+            self.keys(aff, f"{where}.affine", {"basis", "bounds", *POLYTOPIC_MATRICES, *POLYTOPIC_INPUT_MATRICES},
+                      set(POLYTOPIC_MATRICES))
             aff_space = self.need_space(space, f"{where}.affine")
-            affine = self.dependence(aff, aff_space, POLYTOPIC_MATRICES, f"{where}.affine")
+            affine = self.dependence(aff, aff_space, (*POLYTOPIC_MATRICES, *POLYTOPIC_INPUT_MATRICES),
+                                     f"{where}.affine")
         if "vertex" not in spec:
             if affine is None:
                 raise self.error(where, "give the vertices ([[...vertex]] tables) or the affine form ([...affine])")
@@ -475,19 +480,22 @@ class _Reader:
             with self.at(where):
                 model = PolytopicLPV.from_affine(affine, parameters=self.parameters, name=self.name_of(key))
             if mapping is not None:
-                self.check_consistent(model.vertices._asdict(), mapping, affine, where)
-                model = PolytopicLPV(model.vertices, mapping, affine, self.parameters, self.name_of(key))
+                self.check_consistent(model.vertex_stacks(), mapping, affine, where)
+                model = PolytopicLPV(model.vertex_stacks(), mapping, affine, self.parameters, self.name_of(key))
             return model
         vertices = spec["vertex"]
         if not isinstance(vertices, list) or not all(isinstance(v, dict) for v in vertices) or not vertices:
             raise self.error(f"{where}.vertex", "expected one or more [[vertex]] tables")
         common = self.table(spec, "common", where, required=False)
-        self.keys(common, f"{where}.common", set(POLYTOPIC_MATRICES))
+        allowed = {*POLYTOPIC_MATRICES, *POLYTOPIC_INPUT_MATRICES}
+        self.keys(common, f"{where}.common", allowed)
+        # a known input (Bu, and Dzu, Dyu if not zero) is optional, but then at every vertex
+        inputs = [n for n in POLYTOPIC_INPUT_MATRICES if n in common or any(n in vt for vt in vertices)]
         stacks: dict[str, list[np.ndarray]] = {}
         for i, vt in enumerate(vertices):
             vw = f"{where}.vertex[{i + 1}]"
-            self.keys(vt, vw, set(POLYTOPIC_MATRICES))
-            for n in POLYTOPIC_MATRICES:
+            self.keys(vt, vw, allowed)
+            for n in (*POLYTOPIC_MATRICES, *inputs):
                 if n in vt and n in common:
                     raise self.error(f"{vw}.{n}", f"{n} is also given in [{where}.common]")
                 if n in vt:
@@ -518,7 +526,7 @@ class _Reader:
         pts = np.vstack([space.corners(), space.sample(np.random.default_rng(0), 16)])
         alpha = mapping.evaluate(pts)
         direct = affine.evaluate_batch(pts, check=False)
-        for n in POLYTOPIC_MATRICES:
+        for n in (m for m in (*POLYTOPIC_MATRICES, *POLYTOPIC_INPUT_MATRICES) if m in vertices and m in direct):
             combo = np.einsum("ti,irc->trc", alpha, vertices[n])
             err = np.max(np.abs(combo - direct[n]))
             scale = max(1.0, float(np.max(np.abs(direct[n]))))

@@ -10,7 +10,6 @@ import pytest
 from lpvest.cli import main
 from lpvest.experiments import registry
 from lpvest.experiments.peixoto import run_example2, stability_limits
-
 from tests.tolerances import LMI_RESOLVE_GAMMA_RTOL
 
 

@@ -27,6 +27,40 @@ port          shape                  when
 ============  =====================  =========================================
 
 A robust filter (Corollary 1) has constant matrices and no scheduling input.
+
+Known inputs
+------------
+Peixoto et al.'s plant (1) has no known input. For a plant with one
+(:class:`~lpvest.systems.polytopic.PolytopicLPV` with ``Bu``, ``Dzu``, ``Dyu``)
+the filter runs, next to (2), a copy of the plant driven by ``u`` alone and
+feeds (2) with the measurement minus that copy's output::
+
+    x_{u,k+1} = A(alpha_k) x_{u,k} + Bu(alpha_k) u_k                     (x_{u,0} = 0)
+    y~_k      = y_k - Cy(alpha_k) x_{u,k} - Dyu(alpha_k) u_k
+    (2) on y~: x_{f,k+1} = H^-1 (Af x_{f,k} + Bf y~_k),  z_{f,k} = Cf x_{f,k} + Df y~_k
+    zhat_k    = Cz(alpha_k) x_{u,k} + Dzu(alpha_k) u_k + z_{f,k}
+
+**Proposition.** For every parameter sequence ``alpha_k`` on the simplex,
+every input ``u`` and disturbance ``w``, the estimation error
+``e_k = z_k - zhat_k`` equals the error of filter (2) on the plant without
+input, (1), driven by the same ``w`` from ``x_0``; so ``e`` does not depend on
+``u``, and a design certified by Theorem 1 (or Corollary 1) for (1) gives
+``||e||_2 < gamma ||w||_2`` (``x_0 = 0``) for the plant with input too.
+
+*Proof.* The plant is linear in ``(x_0, u, w)`` for a fixed ``alpha``
+sequence, so ``x = x_u + x_w`` with ``x_w`` the state of (1) driven by ``w``
+from ``x_0`` and ``x_u`` the state driven by ``u`` from zero, which is the
+filter's copy. Then ``y~ = Cy x_w + Dy w`` is exactly the output of (1),
+``z - Cz x_u - Dzu u = Cz x_w + Dz w`` its ``z``, and ``e = z_w - z_f``
+is the error of (2) on (1). The LMIs involve only ``A, Bw, Cz, Dz, Cy, Dy``
+(no condition on the input matrices is needed). QED
+
+The copy runs open loop, so it needs ``A(alpha)`` stable, which the LMIs
+imply (:func:`lpvest.design.hinf._instability`). It needs ``alpha``, so a
+robust filter for a plant whose input path depends on ``alpha`` takes the
+scheduling input as well; its gains stay constant. ``test_hinf_filter.py``
+checks ``e`` with and without ``u`` to rounding and the certified gamma on
+the worst-case-gain oracle.
 """
 
 from __future__ import annotations
@@ -39,7 +73,7 @@ import numpy as np
 from ..design.result import HinfDesign
 from ..errors import ArgumentTypeError, DimensionError, NumericalError
 from ..protocol import Component, Port
-from ..systems.polytopic import SimplexMap
+from ..systems.polytopic import PolytopicLPV, SimplexMap
 from ..validation import as_signal, as_vector, check_simplex
 
 __all__ = ["HinfFilter", "HinfStep", "HinfRun", "hinf_step", "hinf_filter_batch"]
@@ -132,9 +166,13 @@ class HinfFilter(Component):
         The plant's map from the physical scheduling ``p`` to ``alpha``
         (``plant.simplex_map``). When given, the scheduling input port is ``p``
         (checked against the scheduling box) instead of ``alpha``. Only for a
-        parameter-dependent design.
+        filter with a scheduling input.
     xf0 : array_like, shape (n_x,), optional
         Initial filter state (default zero).
+    plant : PolytopicLPV, optional
+        The plant, when it has a known input ``u``: the filter then takes
+        ``u`` and compensates it exactly (see *Known inputs* in the module
+        documentation); the design must be for this plant.
 
     Examples
     --------
@@ -149,12 +187,27 @@ class HinfFilter(Component):
     """
 
     def __init__(
-        self, design: HinfDesign, *, simplex_map: SimplexMap | None = None, xf0: object | None = None
+        self,
+        design: HinfDesign,
+        *,
+        simplex_map: SimplexMap | None = None,
+        xf0: object | None = None,
+        plant: PolytopicLPV | None = None,
     ) -> None:
         if not isinstance(design, HinfDesign):
             raise ArgumentTypeError(f"design must be an HinfDesign; found {type(design).__name__}")
+        if plant is not None:
+            if not isinstance(plant, PolytopicLPV):
+                raise ArgumentTypeError(f"plant must be a PolytopicLPV; found {type(plant).__name__}")
+            design.check_model(plant, source=f"{design.kind} design")
+            if plant.known_input is None:
+                plant = None  # nothing to compensate
+        #: the plant whose known input the filter compensates (None: no input)
+        self.plant = plant
+        #: the filter needs alpha: its gains are scheduled, or the input path varies
+        self.scheduled = design.scheduled or (plant is not None and plant.input_path_varies())
         if simplex_map is not None:
-            if not design.scheduled:
+            if not self.scheduled:
                 raise ArgumentTypeError("a robust filter takes no scheduling input: do not pass simplex_map")
             if simplex_map.n_vertices != design.n_vertices:
                 raise DimensionError(
@@ -165,12 +218,14 @@ class HinfFilter(Component):
         self.simplex_map = simplex_map
         self._xf0 = np.zeros(design.nx) if xf0 is None else as_vector(xf0, "xf0", design.nx).copy()
         ports = []
-        if design.scheduled:
+        if self.scheduled:
             if simplex_map is None:
                 ports.append(Port("alpha", (design.n_vertices,), "scheduling on the unit simplex"))
             else:
                 ports.append(Port("p", (simplex_map.space.dim,), "physical scheduling (" +
                                   ", ".join(simplex_map.space.names) + ")"))
+        if plant is not None:
+            ports.append(Port("u", (plant.nu,), "known input u_k (compensated)"))
         ports.append(Port("y", (design.ny,), "measured output y_k"))
         outputs = (
             Port("zhat", (design.nz,), "estimate z_f,k of z_k"),
@@ -181,9 +236,10 @@ class HinfFilter(Component):
     def _reset(self) -> None:
         """Back to the initial filter state."""
         self._xf = self._xf0.copy()
+        self._xu = np.zeros(0 if self.plant is None else self.plant.nx)
         self._k = 0
 
-    def _read(self, inputs: Mapping[str, Any]) -> tuple[np.ndarray | None, np.ndarray]:
+    def _read(self, inputs: Mapping[str, Any]) -> tuple[np.ndarray | None, np.ndarray, np.ndarray | None]:
         missing = [n for n in self._in_names if n not in inputs]
         if missing or len(inputs) != len(self._in_names):
             unknown = sorted(set(inputs) - set(self._in_names))
@@ -192,8 +248,9 @@ class HinfFilter(Component):
                 f"missing {missing}, unknown {unknown}"
             )
         y = as_vector(inputs["y"], "y", self.design.ny)
+        u = None if self.plant is None else as_vector(inputs["u"], "u", self.plant.nu)
         alpha: np.ndarray | None = None
-        if self.design.scheduled:
+        if self.scheduled:
             if self.simplex_map is None:
                 alpha = as_vector(inputs["alpha"], "alpha", self.design.n_vertices)
                 check_simplex(alpha, "alpha")
@@ -201,30 +258,49 @@ class HinfFilter(Component):
                 space = self.simplex_map.space
                 p = space.check(as_vector(inputs["p"], "p", space.dim))
                 alpha = np.asarray(self.simplex_map(p), dtype=float)  # on the simplex by construction
-        return alpha, y
+        return alpha, y, u
 
-    def _evaluate(self, sample: tuple[np.ndarray | None, np.ndarray]) -> tuple[dict[str, np.ndarray], Any]:
+    def _evaluate(
+        self, sample: tuple[np.ndarray | None, np.ndarray, np.ndarray | None]
+    ) -> tuple[dict[str, np.ndarray], Any]:
         """``zhat`` and ``xf`` at the current sample; the matrices are kept for the step."""
-        alpha, y = sample
-        m = self.design.matrices_at(alpha, check=False)
-        zhat = m.Cf @ self._xf + m.Df @ y
-        return {"zhat": zhat, "xf": self._xf.copy()}, (m, alpha, y, zhat)
+        alpha, y, u = sample
+        m = self.design.matrices_at(alpha if self.design.scheduled else None, check=False)
+        if self.plant is None:
+            zhat = m.Cf @ self._xf + m.Df @ y
+            return {"zhat": zhat, "xf": self._xf.copy()}, (m, alpha, y, zhat, None, None)
+        # without alpha the input path is the same at every vertex: the first one
+        a = self.plant.matrices(np.eye(1, self.design.n_vertices)[0] if alpha is None else alpha)
+        y_w = y - a["Cy"] @ self._xu - a["Dyu"] @ u  # the measurement of the plant without input
+        z_f = m.Cf @ self._xf + m.Df @ y_w
+        zhat = a["Cz"] @ self._xu + a["Dzu"] @ u + z_f
+        return {"zhat": zhat, "xf": self._xf.copy()}, (m, alpha, y_w, z_f, a, u)
 
     def _commit(self, pending: Any) -> None:
-        m, alpha, y, zhat = pending
+        m, alpha, y, zhat, a, u = pending
         self._xf = _step_with(m, self._xf, alpha, y, zhat).xf_next
+        if a is not None:
+            self._xu = a["A"] @ self._xu + a["Bu"] @ u
         self._k += 1
 
     def get_state(self) -> dict[str, Any]:
-        """``{"xf": x_f,k, "k": k}`` (copies)."""
-        return {"xf": self._xf.copy(), "k": self._k}
+        """``{"xf": x_f,k, "k": k}`` and, with a known input, ``"xu"``: the
+        state of the filter's copy of the plant driven by ``u`` (copies)."""
+        out: dict[str, Any] = {"xf": self._xf.copy(), "k": self._k}
+        if self.plant is not None:
+            out["xu"] = self._xu.copy()
+        return out
 
     def _set_state(self, state: Mapping[str, Any]) -> None:
         """Restore a state from :meth:`get_state`."""
-        if "xf" not in state or "k" not in state:
-            raise DimensionError(f"a HinfFilter state needs 'xf' and 'k'; found {sorted(state)}")
+        need = ["xf", "xu", "k"] if self.plant is not None else ["xf", "k"]
+        if any(n not in state for n in need):
+            names = ", ".join(repr(n) for n in need[:-1]) + f" and {need[-1]!r}"
+            raise DimensionError(f"a HinfFilter state needs {names}; found {sorted(state)}")
         xf = as_vector(state["xf"], "xf", self.design.nx).copy()
         k = int(state["k"])
         if k < 0:
             raise DimensionError(f"the sample counter k of a HinfFilter state must be >= 0; found {k}")
+        if self.plant is not None:
+            self._xu = as_vector(state["xu"], "xu", self.plant.nx).copy()
         self._xf, self._k = xf, k

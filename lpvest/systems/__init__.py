@@ -39,6 +39,7 @@ from .polytopic import (
     PolytopicTrajectory as PolytopicTrajectory,
     SimplexMap as SimplexMap,
     affine_to_polytopic as affine_to_polytopic,
+    hinf_setting as hinf_setting,
 )
 
 __all__ = [
@@ -62,4 +63,5 @@ __all__ = [
     "PolytopicTrajectory",
     "SimplexMap",
     "affine_to_polytopic",
+    "hinf_setting",
 ]

@@ -281,6 +281,9 @@ class AffineLPV:
     x0: np.ndarray
     P0: np.ndarray
     name: str = ""
+    #: ``Cz`` of the signal ``z = Cz x`` the H-infinity filters estimate
+    #: (:func:`lpvest.systems.polytopic.hinf_setting`); ``None``: every state
+    Cz: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         dep = self.dependence
@@ -306,6 +309,8 @@ class AffineLPV:
             raise DimensionError(f"x0 has shape {self.x0.shape}; expected ({nx},)")
         if self.P0.shape != (nx, nx):
             raise DimensionError(f"P0 has shape {self.P0.shape}; expected ({nx}, {nx})")
+        if self.Cz is not None and (self.Cz.ndim != 2 or self.Cz.shape[1] != nx or self.Cz.shape[0] < 1):
+            raise DimensionError(f"Cz has shape {self.Cz.shape}; expected (n_z, {nx})")
 
     @classmethod
     def from_matrices(
@@ -325,12 +330,14 @@ class AffineLPV:
         x0: object | None = None,
         P0: object | None = None,
         name: str = "",
+        Cz: object | None = None,
     ) -> AffineLPV:
         """Build the model; each matrix is an array (constant) or a mapping of
         term name to coefficient (see :meth:`AffineDependence.build`).
 
         Defaults: no input (``B``, ``D`` with zero columns), ``G = I``,
-        ``H = I``, ``S = 0``, ``x0 = 0``, ``P0 = 0``.
+        ``H = I``, ``S = 0``, ``x0 = 0``, ``P0 = 0``, ``Cz``: every state is
+        what an H-infinity filter estimates.
         """
         noise = NoiseCovariance(Q, R, S)
         nw, nv = noise.Q.shape[0], noise.R.shape[0]
@@ -365,7 +372,10 @@ class AffineLPV:
         P0m = np.zeros((nx, nx)) if P0 is None else as_matrix(P0, "P0", (nx, nx))
         if P0 is not None:
             P0m = check_positive_definite(P0m, "P0", semidefinite=True)
-        return cls(dep, noise, x0v, P0m, name)
+        Czm = None if Cz is None else as_matrix(Cz, "Cz", (None, nx))
+        if Czm is not None:
+            Czm.setflags(write=False)
+        return cls(dep, noise, x0v, P0m, name, Czm)
 
     # -- dimensions -----------------------------------------------------------
     @property
@@ -484,6 +494,8 @@ class AffineLPV:
         out: dict[str, Any] = {"type": "affine", **dependence_table(self.dependence)}
         out.update(Q=matrix_table(self.noise.Q), R=matrix_table(self.noise.R), S=matrix_table(self.noise.S))
         out.update(x0=[number(v) for v in self.x0], P0=matrix_table(self.P0))
+        if self.Cz is not None:
+            out["Cz"] = matrix_table(self.Cz)
         return out
 
     def describe(self, key: str) -> list[str]:
@@ -493,4 +505,6 @@ class AffineLPV:
         lines += describe_dependence(self.dependence)
         for name in ("Q", "S", "R"):
             lines += [f"    {name}", format_matrix(getattr(self.noise, name))]
+        if self.Cz is not None:
+            lines += ["    Cz (z = Cz x, estimated by the H-infinity filters)", format_matrix(self.Cz)]
         return lines

@@ -20,11 +20,11 @@ from typing import Any, NamedTuple, Protocol, runtime_checkable
 import numpy as np
 
 from .._linalg import MatrixStack
-from ..errors import DimensionError, ExpressionError, ModelFileError, SchedulingRangeError
+from ..errors import ArgumentTypeError, DimensionError, ExpressionError, ModelFileError, SchedulingRangeError
 from ..expressions import Expression, FormulaVector
 from ..scheduling import BasisFunction, Monomial, SchedulingSpace, box_vertices
 from ..validation import as_float_array, as_matrix, as_signal, as_vector, check_simplex
-from .affine import AffineDependence
+from .affine import AffineDependence, AffineLPV
 from .text import (
     basis_name,
     dependence_table,
@@ -44,10 +44,17 @@ __all__ = [
     "MultilinearSimplexMap",
     "affine_to_polytopic",
     "POLYTOPIC_MATRICES",
+    "POLYTOPIC_INPUT_MATRICES",
+    "PolytopicInput",
+    "hinf_setting",
 ]
 
 #: Matrix names of the polytopic model, in the order of eq. (1).
 POLYTOPIC_MATRICES = ("A", "Bw", "Cz", "Dz", "Cy", "Dy")
+#: Optional matrices of a known input ``u`` (not in the paper's (1)):
+#: ``x+ = ... + Bu u``, ``z = ... + Dzu u``, ``y = ... + Dyu u``. ``Bu`` gives
+#: the input; ``Dzu`` and ``Dyu`` are zero unless given.
+POLYTOPIC_INPUT_MATRICES = ("Bu", "Dzu", "Dyu")
 
 
 class PolytopicMatrices(NamedTuple):
@@ -59,6 +66,14 @@ class PolytopicMatrices(NamedTuple):
     Dz: np.ndarray
     Cy: np.ndarray
     Dy: np.ndarray
+
+
+class PolytopicInput(NamedTuple):
+    """The vertex stacks of a known input's matrices, shape (N, rows, n_u)."""
+
+    Bu: np.ndarray
+    Dzu: np.ndarray
+    Dyu: np.ndarray
 
 
 class PolytopicTrajectory(NamedTuple):
@@ -292,7 +307,10 @@ class PolytopicLPV:
     Parameters
     ----------
     vertices : mapping of str to array_like, shape (N, rows, cols)
-        Vertex stacks of ``A, Bw, Cz, Dz, Cy, Dy``.
+        Vertex stacks of ``A, Bw, Cz, Dz, Cy, Dy``; optionally ``Bu`` (and
+        ``Dzu``, ``Dyu``, zero unless given) of a known input ``u``
+        (:data:`POLYTOPIC_INPUT_MATRICES`), which the H-infinity filters
+        compensate exactly (:class:`~lpvest.estimators.hinf.HinfFilter`).
     simplex_map : SimplexMap, optional
         Map from the physical scheduling to ``alpha``; ``None`` when the model is
         scheduled by ``alpha`` itself.
@@ -313,6 +331,7 @@ class PolytopicLPV:
     """
 
     vertices: PolytopicMatrices
+    known_input: PolytopicInput | None = None  #: ``None`` when the model has no known input
     simplex_map: SimplexMap | None = None
     affine: AffineDependence | None = None
     parameters: Mapping[str, float] = field(default_factory=dict)
@@ -328,12 +347,14 @@ class PolytopicLPV:
     ) -> None:
         vmap = vertices._asdict() if isinstance(vertices, PolytopicMatrices) else dict(vertices)
         missing = [n for n in POLYTOPIC_MATRICES if n not in vmap]
-        unknown = [n for n in vmap if n not in POLYTOPIC_MATRICES]
+        unknown = [n for n in vmap if n not in (*POLYTOPIC_MATRICES, *POLYTOPIC_INPUT_MATRICES)]
         if missing or unknown:
             raise DimensionError(
-                f"polytopic vertices need exactly {list(POLYTOPIC_MATRICES)}; "
-                f"missing {missing}, unknown {unknown}"
+                f"polytopic vertices need exactly {list(POLYTOPIC_MATRICES)} (and optionally "
+                f"{list(POLYTOPIC_INPUT_MATRICES)}); missing {missing}, unknown {unknown}"
             )
+        if any(n in vmap for n in POLYTOPIC_INPUT_MATRICES) and "Bu" not in vmap:
+            raise DimensionError("a known input needs Bu (Dzu and Dyu are zero unless given)")
         stacks = {}
         for n in POLYTOPIC_MATRICES:
             arr = np.array(as_float_array(vmap[n], f"{n} vertices"))
@@ -353,18 +374,33 @@ class PolytopicLPV:
             "Cy": (N, ny, nx),
             "Dy": (N, ny, nw),
         }
+        known = None
+        if "Bu" in vmap:
+            bu = np.array(as_float_array(vmap["Bu"], "Bu vertices"))
+            if bu.ndim != 3 or bu.shape[:2] != (N, nx) or bu.shape[2] < 1:
+                raise DimensionError(f"Bu vertices have shape {bu.shape}; expected ({N}, {nx}, n_u)")
+            nu = bu.shape[2]
+            inputs = {"Bu": bu}
+            for n, rows in (("Dzu", nz), ("Dyu", ny)):
+                inputs[n] = (np.array(as_float_array(vmap[n], f"{n} vertices")) if n in vmap
+                             else np.zeros((N, rows, nu)))
+            expected.update(Bu=(N, nx, nu), Dzu=(N, nz, nu), Dyu=(N, ny, nu))
+            stacks.update(inputs)
         for n, shp in expected.items():
             if stacks[n].shape != shp:
                 raise DimensionError(f"{n} vertices have shape {stacks[n].shape}; expected {shp}")
             as_matrix(stacks[n].reshape(N * shp[1], shp[2]), f"{n} vertices")  # finite check
             stacks[n].setflags(write=False)
+        if "Bu" in stacks:
+            known = PolytopicInput(*(stacks.pop(n) for n in POLYTOPIC_INPUT_MATRICES))
         if simplex_map is not None and simplex_map.n_vertices != N:
             raise DimensionError(
                 f"the simplex map gives {simplex_map.n_vertices} weights; the model has {N} vertices"
             )
         object.__setattr__(self, "vertices", PolytopicMatrices(**stacks))
+        object.__setattr__(self, "known_input", known)
         self._stack: MatrixStack
-        object.__setattr__(self, "_stack", MatrixStack(stacks))
+        object.__setattr__(self, "_stack", MatrixStack({**stacks, **({} if known is None else known._asdict())}))
         object.__setattr__(self, "simplex_map", simplex_map)
         object.__setattr__(self, "affine", affine)
         object.__setattr__(self, "parameters", dict(parameters or {}))
@@ -380,7 +416,8 @@ class PolytopicLPV:
     ) -> PolytopicLPV:
         """The exact polytopic form of a system stated as affine in ``p``
         (see :func:`affine_to_polytopic`); keeps the affine form."""
-        vertices, mapping = affine_to_polytopic(dependence.subset(POLYTOPIC_MATRICES))
+        names = [n for n in (*POLYTOPIC_MATRICES, *POLYTOPIC_INPUT_MATRICES) if n in dependence.coefficients]
+        vertices, mapping = affine_to_polytopic(dependence.subset(names))
         return cls(vertices, mapping, dependence, parameters, name)
 
     # -- dimensions -----------------------------------------------------------
@@ -403,6 +440,29 @@ class PolytopicLPV:
     @property
     def ny(self) -> int:
         return self.vertices.Cy.shape[1]
+
+    @property
+    def nu(self) -> int:
+        """Dimension of the known input ``u`` (0 without one)."""
+        return 0 if self.known_input is None else self.known_input.Bu.shape[2]
+
+    def vertex_stacks(self) -> dict[str, np.ndarray]:
+        """Every vertex stack by name, the known input's included (the
+        ``vertices`` argument that rebuilds this model)."""
+        return {**self.vertices._asdict(), **({} if self.known_input is None else self.known_input._asdict())}
+
+    def input_path_varies(self) -> bool:
+        """True when the response to ``u`` depends on ``alpha``: a filter
+        that compensates ``u`` then needs ``alpha`` (even a robust one)."""
+        if self.known_input is None:
+            return False
+        stacks = (self.vertices.A, self.vertices.Cz, self.vertices.Cy, *self.known_input)
+        return any(not np.array_equal(s, np.broadcast_to(s[0], s.shape)) for s in stacks)
+
+    def matrices(self, alpha: np.ndarray) -> dict[str, np.ndarray]:
+        """Every matrix at ``alpha`` (validated: on the simplex), the known
+        input's included: ``A, Bw, Cz, Dz, Cy, Dy[, Bu, Dzu, Dyu]``."""
+        return self._stack.at(alpha)
 
     @property
     def space(self) -> SchedulingSpace | None:
@@ -446,31 +506,43 @@ class PolytopicLPV:
                 check_simplex(a[t], f"alpha at k={t}")
         return PolytopicMatrices(**self._stack.at_batch(a))
 
-    def step(self, x: np.ndarray, alpha: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def step(
+        self, x: np.ndarray, alpha: np.ndarray, w: np.ndarray, u: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """One sample of (1), a pure function: ``(y_k, z_k, x_{k+1})`` from the
         state ``x_k`` (n_x,), the weights ``alpha_k`` (N,) (unchecked: on the
-        simplex) and the disturbance ``w_k`` (n_w,).
+        simplex), the disturbance ``w_k`` (n_w,) and, for a model with a known
+        input, ``u_k`` (n_u,).
 
         :meth:`simulate`, the streaming plant and the Plant FMU all call it.
         """
         m = self._stack.at(alpha)
-        return (m["Cy"] @ x + m["Dy"] @ w, m["Cz"] @ x + m["Dz"] @ w, m["A"] @ x + m["Bw"] @ w)
+        y, z, nxt = m["Cy"] @ x + m["Dy"] @ w, m["Cz"] @ x + m["Dz"] @ w, m["A"] @ x + m["Bw"] @ w
+        if u is not None and self.known_input is not None:
+            y, z, nxt = y + m["Dyu"] @ u, z + m["Dzu"] @ u, nxt + m["Bu"] @ u
+        return y, z, nxt
 
-    def simulate(self, alpha: object, w: object, *, x0: object | None = None) -> PolytopicTrajectory:
-        """Simulate (1) for ``alpha`` (T, N) and disturbance ``w`` (T, n_w)
-        from ``x0`` (default zero): :meth:`step` sample by sample."""
+    def simulate(
+        self, alpha: object, w: object, *, x0: object | None = None, u: object | None = None
+    ) -> PolytopicTrajectory:
+        """Simulate (1) for ``alpha`` (T, N), disturbance ``w`` (T, n_w) and,
+        for a model with a known input, ``u`` (T, n_u; default zero), from
+        ``x0`` (default zero): :meth:`step` sample by sample."""
         a = as_signal(alpha, "alpha", self.n_vertices)
         for t in range(a.shape[0]):
             check_simplex(a[t], f"alpha at k={t}")
         T = a.shape[0]
         w = as_signal(w, "w", self.nw, T)
+        if u is not None and self.known_input is None:
+            raise DimensionError(f"model {self.name or '(unnamed)'} has no known input: do not pass u")
+        uu = None if u is None else as_signal(u, "u", self.nu, T)
         x = np.zeros(self.nx) if x0 is None else as_vector(x0, "x0", self.nx)
         X = np.empty((T, self.nx))
         Z = np.empty((T, self.nz))
         Y = np.empty((T, self.ny))
         for k in range(T):
             X[k] = x
-            Y[k], Z[k], x = self.step(x, a[k], w[k])
+            Y[k], Z[k], x = self.step(x, a[k], w[k], None if uu is None else uu[k])
         return PolytopicTrajectory(X, Z, Y)
 
 
@@ -484,7 +556,7 @@ class PolytopicLPV:
                 raise ModelFileError(f"simplex map {type(self.simplex_map).__name__} cannot be written to a "
                                      "model file")
             out["map"] = to_toml()
-        out["vertex"] = [{n: matrix_table(getattr(self.vertices, n)[i]) for n in POLYTOPIC_MATRICES}
+        out["vertex"] = [{n: matrix_table(m[i]) for n, m in self.vertex_stacks().items()}
                          for i in range(self.n_vertices)]
         if self.affine is not None:
             out["affine"] = dependence_table(self.affine)
@@ -493,7 +565,8 @@ class PolytopicLPV:
     def describe(self, key: str) -> list[str]:
         """Lines for a person (``lpvest systems show``): vertices, map, affine form."""
         lines = [f"  model {key}: polytopic LPV (Peixoto et al. (1)), N={self.n_vertices} vertices",
-                 f"    n_x={self.nx} n_w={self.nw} n_z={self.nz} n_y={self.ny}"]
+                 f"    n_x={self.nx} n_w={self.nw} n_z={self.nz} n_y={self.ny}"
+                 + (f" n_u={self.nu} (known input)" if self.nu else "")]
         if self.parameters:
             lines.append("    parameters: " + ", ".join(f"{k} = {v:g}" for k, v in self.parameters.items()))
         m = self.simplex_map
@@ -505,9 +578,82 @@ class PolytopicLPV:
             lines.append(f"    alpha: {type(m).__name__}")
         for i in range(self.n_vertices):
             lines.append(f"    vertex {i + 1}:")
-            for name, stack in self.vertices._asdict().items():
+            for name, stack in self.vertex_stacks().items():
                 lines += [f"      {name}  {stack.shape[1]}x{stack.shape[2]}", format_matrix(stack[i], "        ")]
         if self.affine is not None:
             lines.append("    affine form:")
             lines += describe_dependence(self.affine)
         return lines
+
+
+def hinf_setting(model: AffineLPV, *, z: object | None = None, name: str = "") -> PolytopicLPV:
+    r"""The H-infinity setting of Peixoto et al. for a model with general noise.
+
+    The model (Cox & Toth (1)-(3))::
+
+        x+ = A(p) x + B(p) u + G(p) w,    y = C(p) x + D(p) u + H(p) v,
+        [w; v] ~ N(0, Sigma),  Sigma = [[Q, S], [S^T, R]] > 0,
+
+    has its noise written as ``[w; v] = L w~`` with ``L L^T = Sigma``
+    (Cholesky) and ``w~`` of identity covariance, so that ::
+
+        Bw = G L_w,  Dy = H L_v     (L_w, L_v: the first n_w and the last n_v rows of L)
+        z  = Cz x,   Dz = 0         (Cz = z, default the identity: every state)
+        Bu = B,  Dyu = D,  Dzu = 0  (the known input, compensated by the filter)
+
+    and the bound a design certifies, ``||z - z_hat||_2 < gamma ||w~||_2``,
+    is in units in which the noise is white with unit intensity (the
+    correlation S included). The matrices stay affine in the basis functions
+    of ``p`` (``L`` is constant), so the polytopic form is exact
+    (:func:`affine_to_polytopic`, ``2^k`` vertices for ``k`` scheduling
+    components). ``x0``, ``P0`` and the Gaussian law do not enter: an
+    H-infinity filter assumes only bounded energy.
+
+    Parameters
+    ----------
+    model : AffineLPV
+    z : array_like, shape (n_z, n_x), optional
+        Which combination of states the filter estimates (default: the
+        model's ``Cz``, model-file key ``Cz``; without one every state).
+    name : str, optional
+        Name of the polytopic model (default: the model's).
+
+    Examples
+    --------
+    >>> from lpvest import load_system
+    >>> plant = hinf_setting(load_system("cox-toth-truncation").model(), z=[[1.0, 0.0]])
+    >>> plant.n_vertices, plant.nx, plant.nw, plant.nz, plant.ny, plant.nu
+    (2, 2, 4, 1, 2, 1)
+    """
+    if not isinstance(model, AffineLPV):
+        raise ArgumentTypeError(f"hinf_setting converts an AffineLPV (general noise); found {type(model).__name__}")
+    dep = model.dependence
+    if z is None:
+        z = model.Cz
+    Cz = np.eye(model.nx) if z is None else as_matrix(z, "z", (None, model.nx))
+    L = np.linalg.cholesky(model.noise.joint)  # exists: the joint covariance is checked positive definite
+    nw = model.nw
+    coeffs = dep.coefficients
+    n_terms = coeffs["A"].shape[0]
+    n_noise = L.shape[0]
+
+    def const(m: np.ndarray) -> np.ndarray:
+        out = np.zeros((n_terms, *m.shape))
+        out[0] = m
+        return out
+
+    matrices = {
+        "A": coeffs["A"],
+        "Bw": coeffs["G"] @ L[:nw],
+        "Cz": const(Cz),
+        "Dz": np.zeros((n_terms, Cz.shape[0], n_noise)),
+        "Cy": coeffs["C"],
+        "Dy": coeffs["H"] @ L[nw:],
+    }
+    if model.nu:
+        matrices.update(Bu=coeffs["B"], Dzu=np.zeros((n_terms, Cz.shape[0], model.nu)), Dyu=coeffs["D"])
+    converted = AffineDependence(dep.space, dep.basis, matrices)
+    if not dep.basis:
+        vertices = {k: v[:1] for k, v in matrices.items()}
+        return PolytopicLPV(vertices, None, converted, name=name or model.name)
+    return PolytopicLPV.from_affine(converted, name=name or model.name)

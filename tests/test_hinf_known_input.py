@@ -1,0 +1,147 @@
+"""H-infinity filters for a model with general noise and a known input:
+the conversion to Peixoto et al.'s setting (lpvest.systems.polytopic.hinf_setting)
+and the exact compensation of u (module docs of lpvest.estimators.hinf)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from lpvest import load_system
+from lpvest.design import KIND_PD, KIND_ROBUST, design_hinf
+from lpvest.errors import ArgumentTypeError, DimensionError, ModelFileError
+from lpvest.estimators.hinf import HinfFilter
+from lpvest.modelfile import save_system
+from lpvest.protocol import run_streaming
+from lpvest.systems.polytopic import PolytopicLPV, hinf_setting
+from tests import hinf_oracle as oracle
+from tests.tolerances import roundoff
+
+pytestmark = pytest.mark.blas_sensitive  # numerical agreement: ./dev test runs it under a second BLAS kernel
+
+_CACHE: dict = {}
+
+
+def model():
+    return load_system("cox-toth-truncation").model()  # affine, S != 0, G(p), H(p), one known input
+
+
+def setup(kind):
+    if kind not in _CACHE:
+        plant = hinf_setting(model())
+        _CACHE[kind] = (plant, design_hinf(plant, epsilon=1.0, kind=kind))
+    return _CACHE[kind]
+
+
+def test_the_setting_is_the_model_with_whitened_noise():
+    m = model()
+    plant = hinf_setting(m, z=[[1.0, -1.0]])
+    assert (plant.n_vertices, plant.nx, plant.nw, plant.nz, plant.ny, plant.nu) == (2, 2, 4, 1, 2, 1)
+    L = np.linalg.cholesky(m.noise.joint)
+    np.testing.assert_allclose(L @ L.T, m.noise.joint, rtol=0, atol=roundoff(np.max(np.abs(m.noise.joint)), n=4))
+    for p in np.linspace(-1.0, 1.0, 9):
+        s = m.at([p])
+        a = plant.matrices(plant.alpha([p]))
+        # vertices combined by multilinear weights: sums of 2 products per entry, then the
+        # model's own affine combination: a few roundings of the entries' size
+        for got, want in ((a["A"], s.A), (a["Cy"], s.C), (a["Bu"], s.B), (a["Dyu"], s.D),
+                          (a["Bw"], s.G @ L[:2]), (a["Dy"], s.H @ L[2:])):
+            np.testing.assert_allclose(got, want, rtol=0, atol=roundoff(1.0 + np.max(np.abs(want)), 3, n=4))
+        np.testing.assert_array_equal(a["Cz"], [[1.0, -1.0]])
+        np.testing.assert_array_equal(a["Dz"], np.zeros((1, 4)))
+        np.testing.assert_array_equal(a["Dzu"], np.zeros((1, 1)))
+    # the noise [w; v] = L w~ has the model's covariance: Bw Bw^T = G Q G^T etc.
+    s = m.at([0.3])
+    a = plant.matrices(plant.alpha([0.3]))
+    np.testing.assert_allclose(a["Bw"] @ a["Dy"].T, s.G @ m.noise.S @ s.H.T, rtol=0, atol=roundoff(1.0, 3, n=8))
+
+
+@pytest.mark.parametrize("kind", [KIND_PD, KIND_ROBUST])
+def test_the_estimation_error_does_not_depend_on_the_known_input(kind):
+    plant, d = setup(kind)
+    T = 120
+    k = np.arange(float(T))
+    p = np.sin(0.3 * k)[:, None]
+    alpha = plant.alpha_batch(p)
+    rng = np.random.default_rng(5)
+    w = rng.standard_normal((T, plant.nw))
+    u = 10.0 * rng.standard_normal((T, 1)) + 5.0 * np.sin(0.05 * k)[:, None]
+    f = HinfFilter(d, simplex_map=plant.simplex_map, plant=plant)
+    assert [q.name for q in f.input_ports] == ["p", "u", "y"]  # the robust filter too: A(p) varies
+    with_u = plant.simulate(alpha, w, u=u)
+    without = plant.simulate(alpha, w)
+    out_u = run_streaming(f, {"p": p, "u": u, "y": with_u.y})
+    f.reset()
+    out_0 = run_streaming(f, {"p": p, "u": np.zeros_like(u), "y": without.y})
+    e_u = with_u.z - out_u["zhat"]
+    e_0 = without.z - out_0["zhat"]
+    # the same error by two routes that differ by the u-driven parts (of the size of
+    # the plant's state with u), cancelled in each step: per step sums of at most
+    # 2 n_x + n_y + n_u products, T steps of stable recursions (no growth assumed)
+    size = float(np.max(np.abs(with_u.x)) + np.max(np.abs(with_u.y)) + np.max(np.abs(out_u["zhat"])))
+    assert size > 50 * float(np.max(np.abs(e_0)))  # u dominates the signals
+    np.testing.assert_allclose(e_u, e_0, rtol=0, atol=roundoff(size, T, n=7))
+    # the Proposition: e is the error of filter (2) on plant (1) without input (augmented system (3))
+    err = oracle.simulate_error(plant, d, alpha, w)
+    np.testing.assert_allclose(e_0, err, rtol=0, atol=roundoff(size, T, n=7))
+    # the certified bound holds with the input: ||e||_2 < gamma ||w||_2 from zero initial state
+    assert np.linalg.norm(e_u) < d.gamma * np.linalg.norm(w)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", [KIND_PD, KIND_ROBUST])
+def test_gamma_is_above_the_worst_case_gain_found(kind):
+    plant, d = setup(kind)
+    gain, where = oracle.worst_case_gain(plant, d, np.random.default_rng(0), n_random=8)
+    assert gain < d.gamma, f"worst case {gain:.6g} ({where}) above gamma {d.gamma:.6g}"
+
+
+def test_a_filter_without_the_plant_ignores_u_and_a_wrong_plant_is_refused():
+    plant, d = setup(KIND_PD)
+    f = HinfFilter(d, simplex_map=plant.simplex_map)
+    assert [q.name for q in f.input_ports] == ["p", "y"]
+    other = hinf_setting(model(), z=[[1.0, 0.0]])
+    with pytest.raises(ModelFileError, match="designed for a plant with nz = 2"):
+        HinfFilter(d, plant=other)
+    with pytest.raises(ArgumentTypeError, match="converts an AffineLPV"):
+        hinf_setting(plant)  # type: ignore[arg-type]
+
+
+def test_polytopic_input_matrices_are_checked():
+    plant, _ = setup(KIND_PD)
+    v = {**plant.vertices._asdict()}
+    with pytest.raises(DimensionError, match="needs Bu"):
+        PolytopicLPV({**v, "Dyu": np.zeros((2, 2, 1))})
+    with pytest.raises(DimensionError, match=r"Bu vertices have shape \(2, 3, 1\); expected \(2, 2, n_u\)"):
+        PolytopicLPV({**v, "Bu": np.zeros((2, 3, 1))})
+    with pytest.raises(DimensionError, match="has no known input"):
+        PolytopicLPV(v).simulate(np.full((3, 2), 0.5), np.zeros((3, 4)), u=np.zeros((3, 1)))
+    state_names = sorted(HinfFilter(setup(KIND_PD)[1], plant=plant).get_state())
+    assert state_names == ["k", "xf", "xu"]
+
+
+def test_model_files_choose_z_and_carry_known_input_matrices(tmp_path):
+    text = (load_system("cox-toth-truncation").path.read_text(encoding="utf-8")
+            + "Cz = [[1.0, 0.0]]\n")  # appended to [models.plant]: z = x_1
+    path = tmp_path / "plant.toml"
+    path.write_text(text, encoding="utf-8")
+    m = load_system(path).model()
+    np.testing.assert_array_equal(m.Cz, [[1.0, 0.0]])
+    plant = hinf_setting(m)
+    assert plant.nz == 1
+    assert m.to_toml()["Cz"] == [[1.0, 0.0]]
+    assert any("Cz (z = Cz x" in line for line in m.describe("plant"))
+    # the polytopic form, with its input matrices, written to a model file and read back
+    poly = tmp_path / "poly.toml"
+    source = load_system(path)
+    save_system(dataclasses.replace(source, models={"plant": plant}), poly)
+    again = load_system(poly).model()
+    assert again.nu == 1
+    for a, b in zip((*again.vertices, *again.known_input), (*plant.vertices, *plant.known_input), strict=True):
+        np.testing.assert_array_equal(a, b)
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace("Cz = [[1.0, 0.0]]", "Cz = [[1.0, 0.0, 0.0]]"), encoding="utf-8")
+    with pytest.raises(ModelFileError, match=r"models\.plant.*Cz"):
+        load_system(bad)
