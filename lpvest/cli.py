@@ -31,7 +31,7 @@ import time
 import zipfile
 from collections.abc import Sequence
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -250,7 +250,12 @@ def cmd_build(args: argparse.Namespace) -> int:
     roles = None
     if args.kinds:
         roles = [r.strip() for item in args.kinds for r in item.split(",") if r.strip()]
-    results, notes = build_fmus(sources, out, roles=roles, designs=designs,
+    options: dict[str, Any] = {}
+    if args.epsilon is not None:
+        options["epsilon"] = args.epsilon
+    if args.solver is not None:
+        options["solver"] = args.solver
+    results, notes = build_fmus(sources, out, roles=roles, designs=designs, design_options=options,
                                 progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     print(format_table([r.validation for r in results]))
     for note in notes:
@@ -269,13 +274,14 @@ def cmd_design(args: argparse.Namespace) -> int:
     from .design.hinf import design_hinf, search_epsilon
     from .design.result import KIND_PD, KIND_ROBUST
     from .modelfile import load_system
+    from .systems.affine import AffineLPV
     from .systems.polytopic import PolytopicLPV
 
     system = load_system(args.target, parameters=_parse_params(args.param))
     model = system.model(args.model)
-    if not isinstance(model, PolytopicLPV):
-        raise LpvestError(f"{system.name}: model {args.model or system.default!r} is not polytopic; "
-                          "an H-infinity design needs a polytopic plant")
+    if not isinstance(model, PolytopicLPV | AffineLPV):
+        raise LpvestError(f"{system.name}: model {args.model or system.default!r} is {type(model).__name__}; "
+                          "an H-infinity design needs a polytopic plant or an affine model with general noise")
     kind = {"pd": KIND_PD, "robust": KIND_ROBUST}[args.kind]
     t = time.perf_counter()
     if args.epsilon is not None:
@@ -496,6 +502,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--design", action="append", metavar="[ROLE=]FILE.json",
                    help="carry this design (from `lpvest design`) in the H-infinity filter FMU instead of "
                         "solving one; the role follows the design's kind unless given; needs one --model")
+    p.add_argument("--epsilon", type=float, metavar="E",
+                   help="H-infinity filters designed at build time: design at this epsilon instead of searching "
+                        "the best one")
+    p.add_argument("--solver", metavar="NAME",
+                   help="H-infinity filters designed at build time: cvxpy solver, or AUTO (default)")
     p.set_defaults(func=cmd_build)
 
     p = sub.add_parser("design", help="design an H-infinity filter (LMIs) and write it as JSON for `lpvest build "

@@ -25,10 +25,12 @@ EXPECTED = {
     "CoxTothEx1Plant", "CoxTothEx1Scheduler", "CoxTothEx1Source",
     "CoxTothTruncationPlant", "CoxTothTruncationScheduler", "CoxTothTruncationSource",
     "CoxTothTruncationKalman", "CoxTothTruncationTruncatedKalman",
+    "CoxTothTruncationHinfPD", "CoxTothTruncationHinfRobust",
     "PeixotoEx1Plant", "PeixotoEx1Scheduler", "PeixotoEx1Source", "PeixotoEx1HinfPD", "PeixotoEx1HinfRobust",
     "PeixotoEx2Plant", "PeixotoEx2Scheduler", "PeixotoEx2Source", "PeixotoEx2HinfPD", "PeixotoEx2HinfRobust",
     "SridharLtvPlant", "SridharLtvBSplineObserver",
     "AffineDemoPlant", "AffineDemoScheduler", "AffineDemoSource", "AffineDemoKalman", "AffineDemoTruncatedKalman",
+    "AffineDemoHinfPD", "AffineDemoHinfRobust",
     "PeixotoEx1MovingAverage",
 }
 

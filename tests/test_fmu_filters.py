@@ -76,12 +76,36 @@ def _hinf_from_fmu(name: str) -> StreamingEstimator:
     return HinfFilter(design, simplex_map=plant.simplex_map if design.scheduled else None)
 
 
+def _hinf_known_input(name: str, system: str) -> StreamingEstimator:
+    """The library's HinfFilter, compensating u, on the design an affine model's
+    H-infinity FMU carries (the model in its H-infinity setting)."""
+    import zipfile
+
+    from lpvest.design import HinfDesign
+    from lpvest.estimators.hinf import HinfFilter
+    from lpvest.systems.polytopic import hinf_setting
+
+    with zipfile.ZipFile(FMU_PATHS[name]) as z:
+        design = HinfDesign.from_json(z.read("resources/design.json").decode())
+    plant = hinf_setting(load_system(system).model())
+    return HinfFilter(design, simplex_map=plant.simplex_map, plant=plant)  # A(p) varies: both kinds take p
+
+
+def _affine_demo_data(T: int) -> dict[str, np.ndarray]:
+    model = load_system(FMU_PATHS["affine_model"]).model()
+    k = np.arange(T)
+    p = np.column_stack([np.sin(0.25 * k), 1.0 + np.cos(0.1 * k)])
+    u = np.sin(0.1 * k)[:, None]
+    return {"p": p, "u": u, "y": model.simulate(p, u, rng=4).y}
+
+
 FMU_PATHS: dict[str, object] = {}
 
 
 @pytest.fixture(autouse=True)
 def _paths(fmus):
     FMU_PATHS.update(fmus.paths)
+    FMU_PATHS["affine_model"] = fmus.affine_model
 
 
 def _peixoto_robust_data(T: int) -> dict[str, np.ndarray]:
@@ -96,6 +120,13 @@ FILTERS = {
     "SridharLtvBSplineObserver": (_observer, {"window": 0.4, "hop": 0.1}, _sridhar_data, 700, 1e-3),
     "PeixotoEx1HinfPD": (lambda: _hinf_from_fmu("PeixotoEx1HinfPD"), {}, _peixoto_data, 60, 1.0),
     "PeixotoEx1HinfRobust": (lambda: _hinf_from_fmu("PeixotoEx1HinfRobust"), {}, _peixoto_robust_data, 60, 1.0),
+    # a model with general noise and a known input: the filters in its H-infinity setting, u compensated
+    "CoxTothTruncationHinfPD": (lambda: _hinf_known_input("CoxTothTruncationHinfPD", "cox-toth-truncation"), {},
+                                _truncation_data, 60, 1.0),
+    "CoxTothTruncationHinfRobust": (lambda: _hinf_known_input("CoxTothTruncationHinfRobust", "cox-toth-truncation"),
+                                    {}, _truncation_data, 60, 1.0),
+    "AffineDemoHinfPD": (lambda: _hinf_known_input("AffineDemoHinfPD", FMU_PATHS["affine_model"]), {},
+                         _affine_demo_data, 60, 1.0),
 }
 
 

@@ -17,6 +17,7 @@ import pytest
 
 from lpvest import load_system
 from lpvest.cli import main
+from tests.conftest_fmu import AFFINE_TOML
 from tests.kalman_helpers import kalman_fmu_tolerance
 from tests.test_fmu import EXPECTED, paper_w, theta
 from tests.tolerances import roundoff
@@ -312,15 +313,41 @@ def test_fmus_run_in_a_fresh_virtual_environment_with_exactly_their_requirements
 
 def test_lpvest_build_for_a_users_model_file(fmus, tmp_path, capsys):
     out = tmp_path / "out"
-    assert main(["build", "--out", str(out), "--model", str(fmus.affine_model)]) == 0
-    text = capsys.readouterr().out
-    # the plant, its signal sources, and every filter that applies to an affine model
+    args = ["build", "--out", str(out), "--model", str(fmus.affine_model), "--epsilon", "1"]
+    assert main(args) == 0
+    captured = capsys.readouterr()
+    text = captured.out
+    # the plant, its signal sources, and every filter that applies to an affine model with
+    # general noise: the H-infinity filters in its H-infinity setting (lpvest.hinf_setting)
     names = ("AffineDemoPlant.fmu", "AffineDemoScheduler.fmu", "AffineDemoSource.fmu",
-             "AffineDemoKalman.fmu", "AffineDemoTruncatedKalman.fmu")
+             "AffineDemoKalman.fmu", "AffineDemoTruncatedKalman.fmu", "AffineDemoHinfPD.fmu",
+             "AffineDemoHinfRobust.fmu")
     for name in names:
         assert (out / name).is_file()
         assert any(line.startswith(name) and line.rstrip().endswith("ok") for line in text.splitlines())
     assert f"{len(names)} FMU(s)" in text and "all valid" in text
+    assert "building AffineDemoHinfPD (6/7)" in captured.err  # progress per FMU
+    assert "AffineDemoHinfPD: designing (lpvest.fmi.designs:hinf_pd, epsilon = 1.0)" in captured.err
+    first = (out / "AffineDemoHinfPD.fmu").read_bytes()
+    # a rebuild reuses the designs made at build time (out/.designs): no solve, the same FMU
+    assert main(args + ["--kinds", "HinfPD"]) == 0
+    assert "AffineDemoHinfPD: design reused from" in capsys.readouterr().err
+    assert (out / "AffineDemoHinfPD.fmu").read_bytes() == first
+
+
+def test_a_design_that_fails_leaves_the_other_fmus_built(tmp_path, capsys):
+    # an unstable plant: no H-infinity filter exists, the Kalman filters do
+    text = AFFINE_TOML.replace('A = { "1" = [[0.5, 0.1], [0.0, 0.4]]', 'A = { "1" = [[1.5, 0.1], [0.0, 0.4]]')
+    model = tmp_path / "unstable.toml"
+    model.write_text(text)
+    out = tmp_path / "out"
+    assert main(["build", "--out", str(out), "--model", str(model), "--kinds", "Plant,Kalman,HinfPD"]) == 1
+    table = capsys.readouterr().out
+    rows = {line.split()[0]: line for line in table.splitlines() if line.startswith("AffineDemo")}
+    assert rows["AffineDemoPlant.fmu"].rstrip().endswith("ok") and rows["AffineDemoKalman.fmu"].rstrip().endswith("ok")
+    assert "1 problem(s)" in rows["AffineDemoHinfPD.fmu"]
+    assert "AffineDemoHinfPD.fmu: not built: LMIInfeasibleError" in table and "spectral radius" in table
+    assert "3 FMU(s)" in table and "1 failed validation" in table
 
 
 def test_build_fmus_script_builds_every_example(tmp_path):

@@ -105,8 +105,9 @@ def test_a_filter_without_the_plant_ignores_u_and_a_wrong_plant_is_refused():
     other = hinf_setting(model(), z=[[1.0, 0.0]])
     with pytest.raises(ModelFileError, match="designed for a plant with nz = 2"):
         HinfFilter(d, plant=other)
+    assert hinf_setting(plant) is plant  # a polytopic plant is in the setting already
     with pytest.raises(ArgumentTypeError, match="converts an AffineLPV"):
-        hinf_setting(plant)  # type: ignore[arg-type]
+        hinf_setting(load_system("cox-toth-ex1").model())  # an innovation-form model
 
 
 def test_polytopic_input_matrices_are_checked():

@@ -20,6 +20,7 @@ from .hinf import (
     EpsilonSearch as EpsilonSearch,
     HinfProgram as HinfProgram,
     LMIBlock as LMIBlock,
+    choose_solver as choose_solver,
     design_hinf as design_hinf,
     epsilon_curve as epsilon_curve,
     lmi_matrices as lmi_matrices,
@@ -38,6 +39,7 @@ from .result import (
 __all__ = [
     "DEFAULT_MARGIN",
     "DEFAULT_SOLVER",
+    "choose_solver",
     "DesignAttempt",
     "EpsilonCurve",
     "EpsilonSearch",

@@ -92,7 +92,8 @@ from ..errors import (
     NonFiniteError,
     abbreviate,
 )
-from ..systems.polytopic import PolytopicLPV
+from ..systems.affine import AffineLPV
+from ..systems.polytopic import PolytopicLPV, hinf_setting
 from .result import KIND_PD, KIND_ROBUST, HinfDesign, model_digest
 
 __all__ = [
@@ -147,8 +148,9 @@ def choose_solver(n_vertices: int, nx: int, nz: int, nw: int, kind: str = KIND_P
     one sparse factorization per solve) takes 0.5-2 s on the 4-vertex plant,
     with gamma within ~1e-4 (relative) of Clarabel's, and warm-starts along an
     epsilon search; where its answer fails the eigenvalue check, even with
-    the larger margin, the program falls back to Clarabel. Every design is
-    certified by the eigenvalue check whichever solver made it.
+    the larger margin, a single design falls back to Clarabel (a search goes
+    on with its other points). Every design is certified by the eigenvalue
+    check whichever solver made it.
 
     >>> choose_solver(2, 2, 2, 1)   # Peixoto Example 1: 6 LMIs of size 11
     'CLARABEL'
@@ -482,8 +484,10 @@ class HinfProgram:
         self.compile_time = time.perf_counter() - t0
 
     @classmethod
-    def for_plant(cls, plant: PolytopicLPV, **options: Any) -> HinfProgram:
-        """A program for the dimensions of ``plant`` (options as in the constructor)."""
+    def for_plant(cls, plant: PolytopicLPV | AffineLPV, **options: Any) -> HinfProgram:
+        """A program for the dimensions of ``plant`` (options as in the constructor;
+        an :class:`~lpvest.systems.affine.AffineLPV` in its H-infinity setting)."""
+        plant = _setting(plant)
         _check_plant(plant)
         return cls(plant.n_vertices, plant.nx, plant.ny, plant.nz, plant.nw, **options)
 
@@ -628,9 +632,10 @@ class HinfProgram:
         # stop within their tolerances, which may overshoot a small margin),
         # once more with a margin RETRY_MARGIN_FACTOR times larger; an SCS
         # answer chosen by "AUTO" that still fails is solved by Clarabel
-        # (slower on large programs, but accurate to 1e-8)
+        # (slower on large programs, but accurate to 1e-8), except within a
+        # search, which goes on with its other points
         tries = [(self.solver, self.margin), (self.solver, self.margin * RETRY_MARGIN_FACTOR)]
-        if self.auto and self.solver != "CLARABEL":
+        if self.auto and self.solver != "CLARABEL" and not self._warm:
             tries.append(("CLARABEL", self.margin))
         for solver, margin in tries:
             self._margin.value = margin
@@ -713,7 +718,19 @@ def _check_margin(margin: object) -> None:
 
 def _check_plant(plant: object) -> None:
     if not isinstance(plant, PolytopicLPV):
-        raise ArgumentTypeError(f"the plant must be a PolytopicLPV; found {type(plant).__name__}")
+        raise ArgumentTypeError(
+            f"the plant must be a PolytopicLPV or an AffineLPV (general noise, converted by "
+            f"lpvest.hinf_setting); found {type(plant).__name__}"
+        )
+
+
+def _setting(plant: object) -> PolytopicLPV:
+    """A model with general noise in the H-infinity setting (hinf_setting); a
+    polytopic plant unchanged; anything else an error."""
+    out = hinf_setting(plant) if isinstance(plant, AffineLPV) else plant
+    _check_plant(out)
+    assert isinstance(out, PolytopicLPV)
+    return out
 
 
 def _simplex_points(n_vertices: int) -> np.ndarray:
@@ -798,7 +815,7 @@ def _program_for(
 # public entry points
 # ---------------------------------------------------------------------------
 def design_hinf(
-    plant: PolytopicLPV,
+    plant: PolytopicLPV | AffineLPV,
     *,
     epsilon: float,
     kind: str = KIND_PD,
@@ -812,8 +829,10 @@ def design_hinf(
 
     Parameters
     ----------
-    plant : PolytopicLPV
-        The plant (1), any ``N``, ``nx``, ``ny``, ``nz``, ``nw``.
+    plant : PolytopicLPV or AffineLPV
+        The plant (1), any ``N``, ``nx``, ``ny``, ``nz``, ``nw``; a model with
+        general noise is taken in its H-infinity setting
+        (:func:`lpvest.systems.polytopic.hinf_setting`).
     epsilon : float
         The paper's scalar; any real number, or ``math.inf``.
     kind : {"parameter-dependent", "robust"}
@@ -847,6 +866,7 @@ def design_hinf(
     >>> round(d.gamma, 1)
     8.2
     """
+    plant = _setting(plant)
     prog = _program_for(plant, kind, solver, margin, solver_options, program)
     return prog.solve(plant, epsilon)
 
@@ -890,7 +910,7 @@ def _curve(points: Mapping[float, DesignAttempt]) -> EpsilonCurve:
 
 
 def epsilon_curve(
-    plant: PolytopicLPV,
+    plant: PolytopicLPV | AffineLPV,
     epsilons: Sequence[float] | np.ndarray,
     *,
     kind: str = KIND_PD,
@@ -909,6 +929,7 @@ def epsilon_curve(
     >>> c.gamma.shape
     (2,)
     """
+    plant = _setting(plant)
     prog = _program_for(plant, kind, solver, margin, solver_options, program)
     eps = np.asarray(epsilons, dtype=float).ravel()
     with prog.warm_starts():
@@ -922,7 +943,7 @@ def epsilon_curve(
 
 
 def search_epsilon(
-    plant: PolytopicLPV,
+    plant: PolytopicLPV | AffineLPV,
     *,
     kind: str = KIND_PD,
     n_grid: int = 24,
@@ -969,6 +990,7 @@ def search_epsilon(
     """
     if isinstance(n_grid, bool) or not isinstance(n_grid, int) or n_grid < 3:
         raise ArgumentError(f"n_grid must be an integer, at least 3; found {abbreviate(n_grid, 30)}")
+    plant = _setting(plant)
     prog = _program_for(plant, kind, solver, margin, solver_options, program)
     unstable = _instability(plant)
     if unstable is not None:  # no epsilon can help: say so at once

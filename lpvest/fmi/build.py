@@ -50,6 +50,7 @@ PosixPath('out/PeixotoEx1Plant.fmu')
 from __future__ import annotations
 
 import atexit
+import dataclasses
 import functools
 import hashlib
 import json
@@ -143,6 +144,10 @@ class FmuPlan:
     step_size: float = 1.0
     stop_time: float = 100.0
     design: Path | None = None
+    #: keyword arguments of the estimator's design function (``epsilon``, ``solver``)
+    design_options: tuple[tuple[str, Any], ...] = ()
+    #: folder of designs made at build time, reused by a rebuild (``None``: none kept)
+    design_cache: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -274,9 +279,10 @@ def plan_system(
 def _design_fits(path: Path, model: Any) -> bool:
     from ..design.result import HinfDesign
     from ..errors import ModelFileError
+    from ..systems.polytopic import hinf_setting
 
     try:
-        HinfDesign.from_json(path).check_model(model, source=str(path))
+        HinfDesign.from_json(path).check_model(hinf_setting(model), source=str(path))
     except ModelFileError:
         return False
     return True
@@ -371,14 +377,42 @@ def _design_text(plan: FmuPlan, progress: Callable[[str], None] | None) -> tuple
             text = plan.design.read_text(encoding="utf-8")
         except OSError as exc:
             raise BuildError(f"{plan.design}: cannot be read: {exc.strerror}") from exc
-        HinfDesign.from_json(text).check_model(model, source=str(plan.design), plant_name=plan.system_name)
+        from ..systems.polytopic import hinf_setting
+
+        HinfDesign.from_json(text).check_model(hinf_setting(model), source=str(plan.design),
+                                               plant_name=plan.system_name)
         return text, f"file {plan.design.name}"
+    options = dict(plan.design_options)
+    origin = f"designed at build time by {plan.estimator.design}" + "".join(
+        f", {k} = {v}" for k, v in sorted(options.items()))
+    cached = _design_cache_file(plan)
+    if cached is not None and cached.is_file():
+        if progress is not None:
+            progress(f"{plan.identifier}: design reused from {cached}")
+        return cached.read_text(encoding="utf-8"), origin
     if progress is not None:
-        progress(f"{plan.identifier}: designing ({plan.estimator.design})")
-    design = resolve(plan.estimator.design)(model)
-    if isinstance(design, str):
-        return design, f"designed at build time by {plan.estimator.design}"
-    return encode_state(design), f"designed at build time by {plan.estimator.design}"
+        progress(f"{plan.identifier}: designing ({plan.estimator.design}"
+                 + "".join(f", {k} = {v}" for k, v in sorted(options.items())) + ")")
+    design = resolve(plan.estimator.design)(model, progress=progress is not None, **options)
+    made: str | bytes = design if isinstance(design, str) else encode_state(design)
+    if cached is not None and isinstance(made, str):
+        cached.parent.mkdir(parents=True, exist_ok=True)
+        partial = cached.with_suffix(".part")
+        partial.write_text(made, encoding="utf-8")
+        partial.replace(cached)
+    return made, origin
+
+
+def _design_cache_file(plan: FmuPlan) -> Path | None:
+    """Where a design made at build time for ``plan`` is kept: named by the
+    SHA-256 of what determines it (the model file's bytes, the model, the
+    design function and its options, the lpvest version)."""
+    if plan.design_cache is None or plan.estimator is None:
+        return None
+    key = json.dumps({"model_file_sha256": _sha(Path(plan.system_path).read_bytes()), "model_key": plan.model_key,
+                      "design": plan.estimator.design, "options": sorted(map(list, plan.design_options)),
+                      "lpvest_version": __version__}, sort_keys=True, default=str)
+    return plan.design_cache / f"{plan.identifier}-{_sha(key.encode())[:16]}.json"
 
 
 def manifest_inputs_version() -> str:
@@ -402,6 +436,8 @@ def manifest_inputs(plan: FmuPlan, bundle: Bundle | None = None, design: str | b
     if plan.estimator is not None:
         est = plan.estimator.to_json() | {"design": plan.estimator.design, "models": list(plan.estimator.models),
                                            "requirements": list(plan.estimator.requirements)}
+        if plan.design_options:
+            est["design_options"] = {k: v for k, v in sorted(plan.design_options)}
     bridge = status_bridge()
     return {
         "identifier": plan.identifier,
@@ -594,6 +630,10 @@ def build_fmu(plan: FmuPlan, out_dir: str | Path, *, progress: Callable[[str], N
     return target
 
 
+#: Sub-folder of the output folder where designs made at build time are kept.
+DESIGN_CACHE = ".designs"
+
+
 def _systems(sources: Iterable[str | Path] | None) -> list[str | Path]:
     if sources is not None:
         return list(sources)
@@ -610,24 +650,44 @@ def build_fmus(
     roles: Iterable[str] | None = None,
     designs: Mapping[str, str | Path] | None = None,
     progress: Callable[[str], None] | None = None,
+    design_options: Mapping[str, Any] | None = None,
 ) -> tuple[list[BuildResult], list[str]]:
     """Build and validate the FMUs of the given system files (default: every
     example system). Returns the results and the planning notes.
 
     ``roles`` keeps only the FMUs of these roles (``Plant``, ``HinfPD``, ...);
-    ``designs`` maps a role to a design file to carry (see :func:`plan_system`)."""
+    ``designs`` maps a role to a design file to carry (see :func:`plan_system`);
+    ``design_options`` go to the design functions of filters designed at build
+    time (``epsilon``: design there instead of searching; ``solver``). Designs
+    made at build time are kept in ``out_dir/.designs`` and reused by a rebuild
+    with the same model file, options and lpvest version. An FMU that cannot
+    be built (no certified design, ...) is a result with the reason as its
+    problem; the others are built and validated."""
+    from ..errors import LpvestError
+
     results: list[BuildResult] = []
     notes: list[str] = []
     wanted = None if roles is None else set(roles)
+    options = tuple(sorted((design_options or {}).items()))
+    cache = Path(out_dir) / DESIGN_CACHE
     for source in _systems(sources):
         plans, more = plan_system(source, kinds=kinds, designs=designs)
         notes += more
         if wanted is not None:
             plans = [p for p in plans if p.role in wanted]
-        for plan in plans:
+        for n, plan in enumerate(plans, 1):
+            if plan.estimator is not None and plan.estimator.design and plan.design is None:
+                plan = dataclasses.replace(plan, design_options=options, design_cache=cache)
             if progress is not None:
-                progress(f"building {plan.identifier}")
-            path = build_fmu(plan, out_dir, progress=progress)
+                progress(f"building {plan.identifier} ({n}/{len(plans)})")
+            try:
+                path = build_fmu(plan, out_dir, progress=progress)
+            except LpvestError as exc:  # e.g. no certified design: the other FMUs are still built
+                text = " ".join(str(exc).split())
+                failed = ValidationResult(Path(out_dir) / f"{plan.identifier}.fmu", 0, 0, 0, 0,
+                                          [f"not built: {type(exc).__name__}: {text}"])
+                results.append(BuildResult(plan, failed))
+                continue
             results.append(BuildResult(plan, validate_fmus([path])[0]))
     return results, notes
 

@@ -13,22 +13,27 @@ from typing import Any
 __all__ = ["hinf_pd", "hinf_robust"]
 
 
-def _best(model: Any, kind: str) -> str:
-    """The best design over every epsilon (:func:`lpvest.design.hinf.search_epsilon`), as JSON."""
-    from ..design.hinf import search_epsilon
+def _best(model: Any, kind: str, *, epsilon: float | None = None, solver: str = "AUTO",
+          progress: bool = False) -> str:
+    """The design at ``epsilon``, or the best over every epsilon
+    (:func:`lpvest.design.hinf.search_epsilon`), as JSON. A model with general
+    noise is taken in its H-infinity setting."""
+    from ..design.hinf import design_hinf, search_epsilon
 
-    return search_epsilon(model, kind=kind).design.to_json()
+    if epsilon is not None:
+        return design_hinf(model, epsilon=float(epsilon), kind=kind, solver=solver).to_json()
+    return search_epsilon(model, kind=kind, solver=solver, progress=progress).design.to_json()
 
 
-def hinf_pd(model: Any) -> str:
-    """The parameter-dependent filter (Theorem 1), best epsilon."""
+def hinf_pd(model: Any, **options: Any) -> str:
+    """The parameter-dependent filter (Theorem 1), best epsilon (options: see ``_best``)."""
     from ..design.result import KIND_PD
 
-    return _best(model, KIND_PD)
+    return _best(model, KIND_PD, **options)
 
 
-def hinf_robust(model: Any) -> str:
-    """The robust filter (Corollary 1), best epsilon."""
+def hinf_robust(model: Any, **options: Any) -> str:
+    """The robust filter (Corollary 1), best epsilon (options: see ``_best``)."""
     from ..design.result import KIND_ROBUST
 
-    return _best(model, KIND_ROBUST)
+    return _best(model, KIND_ROBUST, **options)

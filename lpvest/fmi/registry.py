@@ -153,10 +153,10 @@ ESTIMATOR_KINDS: list[EstimatorKind] = [
                   requirements=("scipy",), sample_time="dt",
                   description="sliding-window B-spline joint parameter and state observer (Sridhar et al.)",
                   supports="lpvest.estimators.bspline:observer_supports"),
-    EstimatorKind("HinfPD", "lpvest.fmi.factories.hinf:build", models=("polytopic",),
+    EstimatorKind("HinfPD", "lpvest.fmi.factories.hinf:build", models=("polytopic", "affine"),
                   design="lpvest.fmi.designs:hinf_pd",
                   description="gain-scheduled H-infinity filter (Peixoto et al. Theorem 1), best epsilon"),
-    EstimatorKind("HinfRobust", "lpvest.fmi.factories.hinf:build", models=("polytopic",),
+    EstimatorKind("HinfRobust", "lpvest.fmi.factories.hinf:build", models=("polytopic", "affine"),
                   design="lpvest.fmi.designs:hinf_robust",
                   description="robust H-infinity filter (Peixoto et al. Corollary 1), best epsilon"),
 ]

@@ -586,8 +586,9 @@ class PolytopicLPV:
         return lines
 
 
-def hinf_setting(model: AffineLPV, *, z: object | None = None, name: str = "") -> PolytopicLPV:
-    r"""The H-infinity setting of Peixoto et al. for a model with general noise.
+def hinf_setting(model: object, *, z: object | None = None, name: str = "") -> PolytopicLPV:
+    r"""The H-infinity setting of Peixoto et al. for a model with general noise
+    (a :class:`PolytopicLPV` is in it already: returned unchanged).
 
     The model (Cox & Toth (1)-(3))::
 
@@ -611,7 +612,7 @@ def hinf_setting(model: AffineLPV, *, z: object | None = None, name: str = "") -
 
     Parameters
     ----------
-    model : AffineLPV
+    model : AffineLPV or PolytopicLPV
     z : array_like, shape (n_z, n_x), optional
         Which combination of states the filter estimates (default: the
         model's ``Cz``, model-file key ``Cz``; without one every state).
@@ -625,6 +626,8 @@ def hinf_setting(model: AffineLPV, *, z: object | None = None, name: str = "") -
     >>> plant.n_vertices, plant.nx, plant.nw, plant.nz, plant.ny, plant.nu
     (2, 2, 4, 1, 2, 1)
     """
+    if isinstance(model, PolytopicLPV) and z is None and not name:
+        return model
     if not isinstance(model, AffineLPV):
         raise ArgumentTypeError(f"hinf_setting converts an AffineLPV (general noise); found {type(model).__name__}")
     dep = model.dependence

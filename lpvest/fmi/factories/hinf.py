@@ -8,6 +8,7 @@ from typing import Any
 from ...design.result import HinfDesign
 from ...errors import LpvestError
 from ...estimators.hinf import HinfFilter
+from ...systems.polytopic import hinf_setting
 
 __all__ = ["build"]
 
@@ -15,11 +16,17 @@ __all__ = ["build"]
 def build(model: Any, *, design: Any) -> HinfFilter:
     """The H-infinity filter (2) of a design carried by the FMU (JSON text).
 
-    A parameter-dependent filter is scheduled by the plant's physical
+    A model with general noise (affine) is taken in its H-infinity setting
+    (:func:`~lpvest.systems.polytopic.hinf_setting`), and its known input
+    ``u`` becomes an input of the filter, compensated exactly. A
+    parameter-dependent filter is scheduled by the plant's physical
     scheduling ``p`` when the model has a map to ``alpha`` (range-checked),
-    else by ``alpha`` (checked on the simplex); a robust one takes only ``y``."""
+    else by ``alpha`` (checked on the simplex); a robust one takes ``y`` (and
+    ``u``), and the scheduling only where the response to ``u`` varies with it."""
     if design is None:
         raise LpvestError("this FMU carries no filter design (resources/design.json)")
     d = design if isinstance(design, HinfDesign) else HinfDesign.from_json(design)
-    mapping = getattr(model, "simplex_map", None) if d.scheduled else None
-    return HinfFilter(d, simplex_map=mapping)
+    plant = hinf_setting(model)
+    scheduled = d.scheduled or plant.input_path_varies()
+    mapping = plant.simplex_map if scheduled else None
+    return HinfFilter(d, simplex_map=mapping, plant=plant)
