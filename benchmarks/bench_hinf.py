@@ -1,6 +1,6 @@
 """Benchmark of the H-infinity LMI design (Peixoto et al.); a script, not a test.
 
-    .venv/bin/python benchmarks/bench_hinf.py [--repeat 5] [--dense 180] [--paper-grid] [--out FILE.json]
+    .venv/bin/python benchmarks/bench_hinf.py [--repeat 5] [--dense 180] [--paper-grid] [--own] [--out FILE.json]
 
 1. One Theorem 1 design for Example 1 at epsilon = 150, split into compile
    (build the cvxpy problem and canonicalize it, once per program) and solve
@@ -13,6 +13,10 @@
    ``--dense`` angles phi = atan(epsilon) (every sign and magnitude, and
    epsilon = inf), and with ``--paper-grid`` also the paper's grid
    epsilon in [0.1, 6] step 0.02. Target: search <= 1.005 x dense minimum.
+4. With ``--own``: a 3-state plant with two scheduling variables (4
+   vertices, examples/own_plant.toml in its H-infinity setting): one design
+   with Clarabel (0.1's default) and with AUTO (SCS at this size), and the
+   epsilon searches. Targets: one design <= 3 s, a search <= 30 s.
 
 Timings on a shared machine are noisy: compare numbers measured in one run.
 """
@@ -31,6 +35,9 @@ def main() -> int:
     parser.add_argument("--repeat", type=int, default=5, help="fresh programs for the single-design timing")
     parser.add_argument("--dense", type=int, default=180, help="angles in the dense epsilon grid (0 to skip)")
     parser.add_argument("--paper-grid", action="store_true", help="also epsilon in [0.1, 6] step 0.02")
+    parser.add_argument("--own", action="store_true",
+                        help="also the 3-state, 4-vertex plant of examples/own_plant.toml: one design with "
+                             "Clarabel (0.1's default) and AUTO, and the epsilon searches")
     parser.add_argument("--out", help="write the measurements as JSON")
     args = parser.parse_args()
 
@@ -113,6 +120,33 @@ def main() -> int:
         verdict = "within" if worst_ratio <= 1.005 else "NOT within"
         print(f"dense grid of {len(eps_grid)} epsilon values: worst search/dense ratio {worst_ratio:.5f} "
               f"({verdict} 0.5 %)")
+    # 4. a user's own plant: 3 states, 2 scheduling variables (4 vertices) -------
+    if args.own:
+        from pathlib import Path
+
+        from lpvest.systems.polytopic import hinf_setting
+
+        own = hinf_setting(lpvest.load_system(Path(__file__).parent.parent / "examples" / "own_plant.toml").model())
+        print(f"own plant: N = {own.n_vertices}, nx = {own.nx}, nz = {own.nz}, nw = {own.nw}")
+        rows_own = {}
+        for label, solver in (("0.1 default (Clarabel)", "CLARABEL"), ("AUTO", "AUTO")):
+            w0 = time.perf_counter()
+            prog = HinfProgram.for_plant(own, kind=KIND_PD, solver=solver)
+            d = prog.solve(own, 1.0)
+            rows_own[label] = {"solver": d.solver, "gamma": d.gamma, "wall_s": time.perf_counter() - w0,
+                               "compile_s": prog.compile_time, "solve_s": d.solve_time}
+            print(f"own plant, one design at epsilon = 1, {label}: {d.solver}, gamma = {d.gamma:.7f}, "
+                  f"compile {prog.compile_time:.2f} s + solve {d.solve_time:.2f} s")
+        for kind in (KIND_PD, "robust"):
+            w0 = time.perf_counter()
+            s = search_epsilon(own, kind=kind)
+            wall = time.perf_counter() - w0
+            rows_own[f"search {kind}"] = {"solver": s.design.solver, "gamma": s.design.gamma, "wall_s": wall,
+                                          "n_evaluations": s.n_evaluations}
+            clarabel_estimate = s.n_evaluations * rows_own["0.1 default (Clarabel)"]["solve_s"]
+            print(f"own plant, epsilon search ({kind}, AUTO): {wall:.1f} s, {s.n_evaluations} designs, "
+                  f"gamma = {s.design.gamma:.7f} (with Clarabel: about {clarabel_estimate:.0f} s)")
+        report["own_plant"] = rows_own
     if args.out:
         with open(args.out, "w", encoding="utf-8") as fh:
             json.dump(report, fh, indent=1)

@@ -290,7 +290,10 @@ file_formulas = st.one_of(grammar, grammar, edited(), st.sampled_from(FORMULA_BI
 
 # -- the tests -----------------------------------------------------------------------------------
 
+# the shipped model files, and the model files among examples/ (a [system] table)
 MODEL_SEEDS = {p.name: p.read_text() for p in sorted((ROOT / "models").glob("*.toml"))}
+MODEL_SEEDS |= {p.name: p.read_text() for p in sorted((ROOT / "examples").glob("*.toml"))
+                if "system" in tomllib.loads(p.read_text())}
 MODEL_SEEDS["multilinear.toml"] = """
 [system]
 name = "multilinear"
@@ -364,7 +367,7 @@ def test_model_files_are_accepted_or_refused_by_one_line_naming_the_file(scratch
 #: the co-simulation files among examples/*.toml (a sweep file, which names its co-simulation
 #: file with `cosim = ...` or an experiment, is another format: tests/test_sweep.py)
 COSIM_SEEDS = {p.name: p.read_text() for p in sorted((ROOT / "examples").glob("*.toml"))
-               if not {"cosim", "experiment"} & set(tomllib.loads(p.read_text()))}
+               if not {"cosim", "experiment", "system"} & set(tomllib.loads(p.read_text()))}
 
 
 @pytest.fixture(scope="module")
