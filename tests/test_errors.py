@@ -45,7 +45,8 @@ def test_the_new_classes_derive_from_the_builtins_callers_expect():
         (lambda p: design_hinf(p, epsilon=1.0, margin=float("nan")), ArgumentError,
          "^margin must be a positive finite number; found nan$"),
         (lambda p: design_hinf(np.eye(2), epsilon=1.0), ArgumentTypeError,
-         "^the plant must be a PolytopicLPV; found ndarray$"),
+         r"^the plant must be a PolytopicLPV or an AffineLPV \(general noise, converted by lpvest\.hinf_setting\); "
+         "found ndarray$"),
         (lambda p: design_hinf(p, epsilon=1.0, kind="robust", program=HinfProgram.for_plant(p)), ArgumentError,
          "^the program is for a parameter-dependent filter, not 'robust'$"),
         (lambda p: search_epsilon(p, n_grid=2), ArgumentError, "^n_grid must be an integer, at least 3; found 2$"),

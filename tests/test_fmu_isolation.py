@@ -196,9 +196,9 @@ def _copy_of_lpvest(tmp_path: Path, version: str) -> Path:
     init.write_text(text)
     polytopic = tree / "lpvest" / "systems" / "polytopic.py"
     code = polytopic.read_text()
-    old = 'return (m["Cy"] @ x + m["Dy"] @ w,'
+    old = 'y, z, nxt = m["Cy"] @ x + m["Dy"] @ w,'
     assert old in code
-    polytopic.write_text(code.replace(old, 'return (m["Cy"] @ x + m["Dy"] @ w + 1000.0,', 1))
+    polytopic.write_text(code.replace(old, 'y, z, nxt = m["Cy"] @ x + m["Dy"] @ w + 1000.0,', 1))
     return tree
 
 
@@ -338,14 +338,15 @@ def test_stored_designs_fit_their_plants():
     builder uses it instead of solving), and its certificate checks."""
     from lpvest.catalog import stored_design
     from lpvest.design.result import HinfDesign
+    from lpvest.systems.polytopic import hinf_setting
 
     found = sorted((ROOT / "models" / "designs").glob("*.json"))
-    assert len(found) == 8
+    assert len(found) == 10
     for path in found:
         system, role = path.stem.split(".")
         base, _, rho = system.partition("-rho")
         params = {"rho": float(rho)} if rho else None
-        plant = load_system(base if rho else system, parameters=params).model()
+        plant = hinf_setting(load_system(base if rho else system, parameters=params).model())
         d = HinfDesign.from_json(path)
         d.check_model(plant, source=str(path))
         assert d.lmi_margin > 0 and d.lyapunov_margin > 0 and np.isfinite(d.gamma)

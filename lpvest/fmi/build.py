@@ -676,13 +676,17 @@ def build_fmus(
         if wanted is not None:
             plans = [p for p in plans if p.role in wanted]
         for n, plan in enumerate(plans, 1):
-            if plan.estimator is not None and plan.estimator.design and plan.design is None:
+            solving = plan.estimator is not None and bool(plan.estimator.design) and plan.design is None
+            if solving:
                 plan = dataclasses.replace(plan, design_options=options, design_cache=cache)
             if progress is not None:
                 progress(f"building {plan.identifier} ({n}/{len(plans)})")
             try:
                 path = build_fmu(plan, out_dir, progress=progress)
-            except LpvestError as exc:  # e.g. no certified design: the other FMUs are still built
+            except LpvestError as exc:
+                if not solving:  # a bad input (a design file for another plant, ...): one error, as always
+                    raise
+                # the design failed (no certified solution, ...): the other FMUs are still built
                 text = " ".join(str(exc).split())
                 failed = ValidationResult(Path(out_dir) / f"{plan.identifier}.fmu", 0, 0, 0, 0,
                                           [f"not built: {type(exc).__name__}: {text}"])
