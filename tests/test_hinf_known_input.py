@@ -146,3 +146,25 @@ def test_model_files_choose_z_and_carry_known_input_matrices(tmp_path):
     bad.write_text(text.replace("Cz = [[1.0, 0.0]]", "Cz = [[1.0, 0.0, 0.0]]"), encoding="utf-8")
     with pytest.raises(ModelFileError, match=r"models\.plant.*Cz"):
         load_system(bad)
+
+
+def test_a_robust_filter_of_a_plant_whose_input_path_is_constant_takes_no_scheduling():
+    varying, _ = setup(KIND_ROBUST)
+    stacks = {n: np.broadcast_to(m[:1], m.shape).copy() for n, m in varying.vertex_stacks().items()}
+    plant = PolytopicLPV(stacks, name="frozen")  # every vertex equal: nothing depends on alpha
+    assert not plant.input_path_varies()
+    d = design_hinf(plant, epsilon=1.0, kind=KIND_ROBUST)
+    f = HinfFilter(d, plant=plant)
+    assert [q.name for q in f.input_ports] == ["u", "y"]
+    T = 60
+    rng = np.random.default_rng(2)
+    alpha = np.full((T, 2), 0.5)
+    w = rng.standard_normal((T, plant.nw))
+    u = 10.0 * rng.standard_normal((T, 1))
+    with_u, without = plant.simulate(alpha, w, u=u), plant.simulate(alpha, w)
+    e_u = with_u.z - run_streaming(f, {"u": u, "y": with_u.y})["zhat"]
+    f.reset()
+    e_0 = without.z - run_streaming(f, {"u": np.zeros_like(u), "y": without.y})["zhat"]
+    # as in the scheduled case: the u-driven parts cancel, T steps of sums of <= 7 products
+    size = float(np.max(np.abs(with_u.x)) + np.max(np.abs(with_u.y)) + np.max(np.abs(with_u.z)))
+    np.testing.assert_allclose(e_u, e_0, rtol=0, atol=roundoff(size, T, n=7))

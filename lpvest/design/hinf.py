@@ -488,7 +488,6 @@ class HinfProgram:
         """A program for the dimensions of ``plant`` (options as in the constructor;
         an :class:`~lpvest.systems.affine.AffineLPV` in its H-infinity setting)."""
         plant = _setting(plant)
-        _check_plant(plant)
         return cls(plant.n_vertices, plant.nx, plant.ny, plant.nz, plant.nw, **options)
 
     # -- parameters -----------------------------------------------------------------

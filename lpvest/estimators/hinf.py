@@ -70,13 +70,14 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from .._linalg import MatrixStack
 from ..design.result import HinfDesign
 from ..errors import ArgumentTypeError, DimensionError, NumericalError
 from ..protocol import Component, Port
-from ..systems.polytopic import PolytopicLPV, SimplexMap
+from ..systems.polytopic import POLYTOPIC_INPUT_MATRICES, PolytopicLPV, SimplexMap
 from ..validation import as_signal, as_vector, check_simplex
 
-__all__ = ["HinfFilter", "HinfStep", "HinfRun", "hinf_step", "hinf_filter_batch"]
+__all__ = ["HinfFilter", "HinfStep", "HinfRun", "hinf_step", "hinf_filter_batch", "needs_scheduling"]
 
 
 class HinfStep(NamedTuple):
@@ -153,6 +154,17 @@ def hinf_filter_batch(
     return HinfRun(Z, X)
 
 
+#: The plant matrices of the filter's copy of the response to a known input.
+_U_PATH = ("A", "Cz", "Cy", *POLYTOPIC_INPUT_MATRICES)
+
+
+def needs_scheduling(design: HinfDesign, plant: PolytopicLPV | None = None) -> bool:
+    """Whether the filter of ``design`` needs ``alpha`` (or ``p``): its gains
+    are scheduled, or it compensates the known input of ``plant``, whose
+    response varies with ``alpha``."""
+    return design.scheduled or (plant is not None and plant.known_input is not None and plant.input_path_varies())
+
+
 class HinfFilter(Component):
     """Streaming H-infinity filter (2), a streaming component (:mod:`lpvest.protocol`)
     over the pure step :func:`hinf_step`.
@@ -205,7 +217,16 @@ class HinfFilter(Component):
         #: the plant whose known input the filter compensates (None: no input)
         self.plant = plant
         #: the filter needs alpha: its gains are scheduled, or the input path varies
-        self.scheduled = design.scheduled or (plant is not None and plant.input_path_varies())
+        self.scheduled = needs_scheduling(design, plant)
+        # the plant's response to u: only the matrices it needs, evaluated once
+        # when they do not depend on alpha
+        self._u_path: MatrixStack | None = None
+        self._u_fixed: dict[str, np.ndarray] | None = None
+        if plant is not None:
+            stacks = plant.vertex_stacks()
+            self._u_path = MatrixStack({n: stacks[n] for n in _U_PATH})
+            if not plant.input_path_varies():
+                self._u_fixed = self._u_path.at(np.eye(1, design.n_vertices)[0])  # any vertex: all equal
         if simplex_map is not None:
             if not self.scheduled:
                 raise ArgumentTypeError("a robust filter takes no scheduling input: do not pass simplex_map")
@@ -269,8 +290,11 @@ class HinfFilter(Component):
         if self.plant is None:
             zhat = m.Cf @ self._xf + m.Df @ y
             return {"zhat": zhat, "xf": self._xf.copy()}, (m, alpha, y, zhat, None, None)
-        # without alpha the input path is the same at every vertex: the first one
-        a = self.plant.matrices(np.eye(1, self.design.n_vertices)[0] if alpha is None else alpha)
+        if self._u_fixed is not None:
+            a = self._u_fixed
+        else:  # the response to u varies with alpha: the filter is scheduled, alpha is given
+            assert self._u_path is not None and alpha is not None
+            a = self._u_path.at(alpha)
         y_w = y - a["Cy"] @ self._xu - a["Dyu"] @ u  # the measurement of the plant without input
         z_f = m.Cf @ self._xf + m.Df @ y_w
         zhat = a["Cz"] @ self._xu + a["Dzu"] @ u + z_f

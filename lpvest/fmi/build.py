@@ -383,16 +383,15 @@ def _design_text(plan: FmuPlan, progress: Callable[[str], None] | None) -> tuple
                                                plant_name=plan.system_name)
         return text, f"file {plan.design.name}"
     options = dict(plan.design_options)
-    origin = f"designed at build time by {plan.estimator.design}" + "".join(
-        f", {k} = {v}" for k, v in sorted(options.items()))
+    settings = "".join(f", {k} = {v}" for k, v in sorted(options.items()))
+    origin = f"designed at build time by {plan.estimator.design}{settings}"
     cached = _design_cache_file(plan)
     if cached is not None and cached.is_file():
         if progress is not None:
             progress(f"{plan.identifier}: design reused from {cached}")
         return cached.read_text(encoding="utf-8"), origin
     if progress is not None:
-        progress(f"{plan.identifier}: designing ({plan.estimator.design}"
-                 + "".join(f", {k} = {v}" for k, v in sorted(options.items())) + ")")
+        progress(f"{plan.identifier}: designing ({plan.estimator.design}{settings})")
     design = resolve(plan.estimator.design)(model, progress=progress is not None, **options)
     made: str | bytes = design if isinstance(design, str) else encode_state(design)
     if cached is not None and isinstance(made, str):

@@ -7,7 +7,7 @@ from typing import Any
 
 from ...design.result import HinfDesign
 from ...errors import LpvestError
-from ...estimators.hinf import HinfFilter
+from ...estimators.hinf import HinfFilter, needs_scheduling
 from ...systems.polytopic import hinf_setting
 
 __all__ = ["build"]
@@ -27,6 +27,5 @@ def build(model: Any, *, design: Any) -> HinfFilter:
         raise LpvestError("this FMU carries no filter design (resources/design.json)")
     d = design if isinstance(design, HinfDesign) else HinfDesign.from_json(design)
     plant = hinf_setting(model)
-    scheduled = d.scheduled or plant.input_path_varies()
-    mapping = plant.simplex_map if scheduled else None
+    mapping = plant.simplex_map if needs_scheduling(d, plant) else None
     return HinfFilter(d, simplex_map=mapping, plant=plant)
