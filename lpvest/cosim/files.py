@@ -95,7 +95,33 @@ _COMPONENT_KEYS = {"fmu", "parameters", "feedthrough"}
 
 @dataclass(frozen=True)
 class CoSimFile:
-    """A checked co-simulation description (see the module documentation)."""
+    """A checked co-simulation description (see the module documentation).
+
+    Build one with :func:`load_cosim`.
+
+    Parameters
+    ----------
+    path : Path
+        The file (for messages, the plot title, the SSP name).
+    title : str
+        The file's ``title`` (may be empty).
+    components : tuple of Component
+        The components, FMU paths resolved.
+    connections : tuple of str
+        The connections, ``"comp.output -> comp.input"``.
+    step_size : float
+        Communication step ``h``.
+    n_steps : int
+        Communication steps to run (``steps``, or from ``stop_time``).
+    start_time : float
+        Communication point ``t_0``.
+    record : tuple of str or None
+        Variables to record; ``None``: every output.
+    plots : tuple of tuple of str
+        Plot panels, each a tuple of variable names; empty: one per vector.
+    fmu_dir : Path
+        The folder FMUs given by name were looked up in.
+    """
 
     path: Path
     title: str
@@ -113,6 +139,20 @@ class CoSimFile:
         return self.start_time + self.n_steps * self.step_size
 
     def error(self, where: str, message: str) -> ModelFileError:
+        """The error to raise for a mistake in the field ``where`` of this file.
+
+        Parameters
+        ----------
+        where : str
+            The field (``"connections[2]"``); ``""`` for none.
+        message : str
+            What is wrong.
+
+        Returns
+        -------
+        ModelFileError
+            With the message ``"<path>: <where>: <message>"`` (not raised).
+        """
         return ModelFileError(f"{self.path}: {where}: {message}" if where else f"{self.path}: {message}")
 
     def _reword(self, exc: CoSimulationError) -> ModelFileError:
@@ -126,7 +166,19 @@ class CoSimFile:
 
     def simulation(self) -> CoSimulation:
         """The :class:`~lpvest.cosim.CoSimulation` of this file (instances
-        created; close it, or use it in a ``with`` block)."""
+        created; close it, or use it in a ``with`` block).
+
+        Returns
+        -------
+        CoSimulation
+            The instantiated co-simulation, not run yet.
+
+        Raises
+        ------
+        ModelFileError
+            A set-up error of the master or a plotted variable that is not
+            recorded, naming this file's field.
+        """
         try:
             sim = CoSimulation(self.components, self.connections, step_size=self.step_size,
                                start_time=self.start_time, record=self.record)
@@ -150,7 +202,18 @@ class CoSimFile:
         """Check this file against the FMUs' model descriptions (variables,
         connections, types, parameter values, plots) without instantiating an
         FMU: :meth:`run` then fails only if an FMU rejects a value at run time.
-        Returns the execution order."""
+        Returns the execution order.
+
+        Returns
+        -------
+        list of str
+            The per-step operations (:attr:`CoSimulation.execution_order`).
+
+        Raises
+        ------
+        ModelFileError
+            The first mistake found, naming this file's field.
+        """
         try:
             sim = CoSimulation.check(self.components, self.connections, step_size=self.step_size,
                                      start_time=self.start_time, record=self.record)
@@ -160,7 +223,23 @@ class CoSimFile:
         return sim.execution_order
 
     def run(self, *, progress: bool | None = None) -> CoSimResult:
-        """Co-simulate: ``n_steps`` steps from ``start_time``."""
+        """Co-simulate: ``n_steps`` steps from ``start_time``.
+
+        Parameters
+        ----------
+        progress : bool, optional
+            Show a progress bar; default: for more than 20,000 steps.
+
+        Returns
+        -------
+        CoSimResult
+            The recorded values, the run time and the execution order.
+
+        Raises
+        ------
+        ModelFileError
+            A set-up or run error of the master, naming this file's field.
+        """
         with self.simulation() as sim:
             order = sim.execution_order
             t0 = time.perf_counter()
@@ -172,7 +251,21 @@ class CoSimFile:
         return CoSimResult(self, data, elapsed, order)
 
     def to_ssp(self, path: str | Path) -> Path:
-        """Write this system as an SSP file (:func:`lpvest.cosim.ssp.write_ssp`)."""
+        """Write this system as an SSP file (:func:`lpvest.cosim.ssp.write_ssp`).
+
+        The SSP's name is the file's stem, its description the title, its
+        default experiment from ``start_time`` to :attr:`stop_time`.
+
+        Parameters
+        ----------
+        path : os.PathLike or str
+            The ``.ssp`` file to write (its folder is created).
+
+        Returns
+        -------
+        Path
+            ``path``.
+        """
         from .ssp import write_ssp
 
         try:
@@ -203,11 +296,23 @@ def _element_order(name: str) -> tuple:
 
 @dataclass(frozen=True)
 class CoSimResult:
-    """The recorded values of a run of a :class:`CoSimFile`."""
+    """The recorded values of a run of a :class:`CoSimFile`.
+
+    Parameters
+    ----------
+    spec : CoSimFile
+        The file that ran.
+    data : ndarray, shape (n_steps + 1,)
+        Structured array: ``"time"`` and ``"comp.var"`` columns.
+    elapsed : float
+        Seconds spent in the run (FMUs instantiated already).
+    execution_order : list of str
+        The per-step operations (:attr:`CoSimulation.execution_order`).
+    """
 
     spec: CoSimFile
-    data: np.ndarray  #: structured array: ``"time"`` and ``"comp.var"`` columns
-    elapsed: float  #: seconds spent in the run (FMUs instantiated already)
+    data: np.ndarray
+    elapsed: float
     execution_order: list[str]
 
     @property
@@ -215,7 +320,19 @@ class CoSimResult:
         return [n for n in self.data.dtype.names or () if n != "time"]
 
     def write_csv(self, path: str | Path) -> Path:
-        """``time`` and every recorded variable, full precision."""
+        """``time`` and every recorded variable, full precision.
+
+        Parameters
+        ----------
+        path : os.PathLike or str
+            The CSV file to write: a header row of column names, then one
+            row per communication point (``%.17g``).
+
+        Returns
+        -------
+        Path
+            ``path``.
+        """
         path = Path(path)
         cols = ["time", *self.names]
         table = np.column_stack([self.data[c] for c in cols])
@@ -224,7 +341,14 @@ class CoSimResult:
 
     def panels(self) -> list[tuple[str, list[str]]]:
         """(title, columns) of each plot panel: the file's ``plots``, else one per
-        recorded vector (``plant.z`` holds ``plant.z[1]``, ``plant.z[2]``)."""
+        recorded vector (``plant.z`` holds ``plant.z[1]``, ``plant.z[2]``).
+
+        Returns
+        -------
+        list of tuple of (str, list of str)
+            ``(title, columns)`` per panel: the panel's names joined by ``", "``
+            (or the vector's name) and the recorded columns it plots.
+        """
         recorded = set(self.names)
         if self.spec.plots:
             out = []
@@ -238,7 +362,19 @@ class CoSimResult:
         return list(groups.items())
 
     def plot(self, path: str | Path) -> Path:
-        """One panel per group of variables (see :meth:`panels`), against time."""
+        """One panel per group of variables (see :meth:`panels`), against time.
+
+        Parameters
+        ----------
+        path : os.PathLike or str
+            The figure file (PNG at 120 dpi; its folder is created), titled
+            with the file's title, else its name.
+
+        Returns
+        -------
+        Path
+            ``path``.
+        """
         import matplotlib
 
         matplotlib.use("Agg")
@@ -260,7 +396,13 @@ class CoSimResult:
         return save_figure(fig, path, title=spec.title or spec.path.name, title_size="medium")
 
     def summary(self) -> str:
-        """A few lines: what ran, how long, the execution order, each variable's range."""
+        """A few lines: what ran, how long, the execution order, each variable's range.
+
+        Returns
+        -------
+        str
+            The summary; one line per recorded variable with its min, max and rms.
+        """
         spec = self.spec
         n = len(spec.components)
         lines = [
@@ -327,6 +469,12 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
         Where FMUs given by name are looked up (overrides the file's
         ``fmu_dir``; relative to the current directory). Default: the file's
         ``fmu_dir`` (relative to the file), else ``fmu-build``.
+
+    Returns
+    -------
+    CoSimFile
+        The checked description; FMU files exist, names and connections are
+        well-formed (checked against the FMUs by :meth:`CoSimFile.check`).
 
     Raises
     ------

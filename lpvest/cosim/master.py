@@ -57,6 +57,13 @@ __all__ = [
 class CoSimulationError(LpvestError, RuntimeError):
     """A component failed, or the set-up is invalid (names, types, units).
 
+    Parameters
+    ----------
+    message : str
+        The error message.
+    where : str, default ""
+        The field the error is about (stored as :attr:`where`, see below).
+
     Attributes
     ----------
     where : str
@@ -72,7 +79,15 @@ class CoSimulationError(LpvestError, RuntimeError):
 
 
 class AlgebraicLoopError(CoSimulationError):
-    """The connections close a loop through direct-feedthrough paths."""
+    """The connections close a loop through direct-feedthrough paths.
+
+    Parameters
+    ----------
+    message : str
+        The error message (names the variables on the loop).
+    where : str, default ""
+        The field the error is about (``"connections"`` when raised by the master).
+    """
 
 
 @dataclass(frozen=True)
@@ -105,6 +120,13 @@ class Connection:
     """``source`` (``"comp.output"``) drives ``target`` (``"comp.input"``).
 
     A vector name (``"plant.y"``) connects every element ``y[1], y[2], ...``.
+
+    Parameters
+    ----------
+    source : str
+        The driving output, ``"comp.output"``.
+    target : str
+        The driven input, ``"comp.input"``.
     """
 
     source: str
@@ -112,6 +134,24 @@ class Connection:
 
     @classmethod
     def parse(cls, spec: str | tuple[str, str] | Connection) -> Connection:
+        """A connection from its text ``"comp.output -> comp.input"`` (or a pair).
+
+        Parameters
+        ----------
+        spec : str or tuple of (str, str) or Connection
+            ``"source -> target"`` (whitespace around the names is dropped),
+            a pair ``(source, target)``, or a connection (returned as is).
+
+        Returns
+        -------
+        Connection
+            The connection; the names are not checked against any FMU.
+
+        Raises
+        ------
+        CoSimulationError
+            If the text is not two non-empty names separated by ``->``.
+        """
         if isinstance(spec, Connection):
             return spec
         if isinstance(spec, tuple):
@@ -232,21 +272,31 @@ def _expand(names: Iterable[str], base: str) -> list[str]:
 class CoSimulation:
     """Fixed-step co-simulation of FMI 2.0 co-simulation FMUs.
 
+    The instances are created at construction and freed by :meth:`close`
+    (or a ``with`` block).
+
     Parameters
     ----------
     components : sequence of Component
+        The FMU instances; names unique Python identifiers.
     connections : sequence of str, (source, target) or Connection
         ``"plant.y -> filter.y"``; vectors connect element-wise.
     step_size : float
         Communication step ``h``; communication points are ``t_k = t_0 + k h``
         with an integer step counter (no accumulated round-off).
-    start_time : float, optional
+    start_time : float, default 0.0
+        Communication point ``t_0``.
     record : sequence of str, optional
         Variables to record (``"comp.var"``, vectors expand). Default: every
         output of every component.
 
-    The instances are created at construction and freed by :meth:`close`
-    (or a ``with`` block).
+    Raises
+    ------
+    CoSimulationError
+        An invalid set-up (with :attr:`CoSimulationError.where`), or an FMU
+        that cannot be loaded or instantiated.
+    AlgebraicLoopError
+        The connections close a loop through direct feedthrough.
     """
 
     def __init__(
@@ -291,7 +341,26 @@ class CoSimulation:
         description) without instantiating an FMU. Raises
         :class:`CoSimulationError` as the constructor would; returns the
         checked set-up for inspection (:attr:`execution_order`,
-        :attr:`recorded`), which cannot :meth:`run`."""
+        :attr:`recorded`), which cannot :meth:`run`.
+
+        Parameters
+        ----------
+        components : sequence of Component
+            As for the constructor.
+        connections : sequence of str, (source, target) or Connection
+            As for the constructor.
+        step_size : float
+            As for the constructor.
+        start_time : float, default 0.0
+            As for the constructor.
+        record : sequence of str, optional
+            As for the constructor.
+
+        Returns
+        -------
+        CoSimulation
+            The checked set-up, closed (no instance).
+        """
         if not step_size > 0:
             raise CoSimulationError(f"step_size must be positive; found {step_size}", where="step_size")
         sim = cls.__new__(cls)
@@ -602,6 +671,28 @@ class CoSimulation:
 
         A tqdm progress bar is shown when ``progress`` is true (default: for
         runs longer than 20,000 steps).
+
+        Parameters
+        ----------
+        n_steps : int, optional
+            Communication steps to run (``0``: initialise only, one row).
+        stop_time : float, optional
+            Run ``round((stop_time - start_time) / step_size)`` steps instead;
+            give exactly one of ``n_steps`` and ``stop_time``.
+        progress : bool, optional
+            Show a progress bar; default: for more than 20,000 steps.
+
+        Returns
+        -------
+        ndarray, shape (N + 1,)
+            Structured array of float fields: ``"time"`` (``t_0 + k h``), then
+            one per recorded element, ``"comp.var"`` (:attr:`recorded`).
+
+        Raises
+        ------
+        CoSimulationError
+            The co-simulation is closed or has run (:meth:`reset` first), the
+            step count is invalid, or a component failed.
         """
         if self._closed:
             raise CoSimulationError("the co-simulation is closed")
@@ -873,6 +964,32 @@ def simulate(
     record: Sequence[str] | None = None,
     progress: bool | None = None,
 ) -> np.ndarray:
-    """Build, run and close a :class:`CoSimulation` in one call."""
+    """Build, run and close a :class:`CoSimulation` in one call.
+
+    Parameters
+    ----------
+    components : sequence of Component
+        The FMU instances.
+    connections : sequence of str, (source, target) or Connection
+        ``"plant.y -> filter.y"``; vectors connect element-wise.
+    step_size : float
+        Communication step ``h``.
+    n_steps : int, optional
+        Communication steps to run; give exactly one of ``n_steps`` and
+        ``stop_time``.
+    stop_time : float, optional
+        Run up to this time instead (rounded to whole steps).
+    start_time : float, default 0.0
+        Communication point ``t_0``.
+    record : sequence of str, optional
+        Variables to record (``"comp.var"``); default: every output.
+    progress : bool, optional
+        Show a progress bar; default: for more than 20,000 steps.
+
+    Returns
+    -------
+    ndarray, shape (N + 1,)
+        The recorded values, as :meth:`CoSimulation.run` returns them.
+    """
     with CoSimulation(components, connections, step_size=step_size, start_time=start_time, record=record) as sim:
         return sim.run(n_steps, stop_time=stop_time, progress=progress)

@@ -122,6 +122,36 @@ def write_ssp(
     ``x0[1]`` and ``x0[2]``). Each component lists every input and output of
     its FMU as a connector; the communication step is declared as
     libcosim's ``FixedStepAlgorithm`` annotation of the default experiment.
+
+    Parameters
+    ----------
+    path : os.PathLike or str
+        The ``.ssp`` file to write (its folder is created).
+    components : sequence of Component
+        The FMU instances; each FMU file is stored once under ``resources/``.
+    connections : sequence of str, (source, target) or Connection, default ()
+        ``"plant.y -> filter.y"``; vectors connect element-wise.
+    step_size : float
+        Communication step, positive and finite.
+    start_time : float, default 0.0
+        Start time of the default experiment.
+    stop_time : float, optional
+        Stop time of the default experiment; ``None``: not declared.
+    name : str, default "lpvest-system"
+        Name of the system structure and of its system.
+    description : str, optional
+        The system's ``description`` attribute; ``None`` or empty: none.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    CoSimulationError
+        An invalid step size or set-up (as :class:`~lpvest.cosim.CoSimulation`
+        raises it).
     """
     from .._version import __version__
 
@@ -195,14 +225,34 @@ def write_ssp(
 @dataclass(frozen=True)
 class SspSystem:
     """What :func:`read_ssp` finds in an SSP file written by :func:`write_ssp`
-    (or any flat SSP 1.0 system of FMUs)."""
+    (or any flat SSP 1.0 system of FMUs).
+
+    Parameters
+    ----------
+    name : str
+        The system structure's name (``""`` if none).
+    components : dict of str to str
+        Component -> FMU inside the archive.
+    connections : list of tuple of (str, str)
+        ``("comp.var", "comp.var")``, source then target.
+    parameters : dict of str to list of tuple of (str, str, str)
+        Component -> ``[(variable, type, value text)]`` of its first parameter binding.
+    outputs : dict of str to list of str, default {}
+        Component -> output connectors.
+    step_size : float or None, default None
+        The OSP FixedStepAlgorithm's ``baseStepSize``; ``None``: not declared.
+    start_time : float, default 0.0
+        Start time of the default experiment.
+    stop_time : float or None, default None
+        Stop time of the default experiment; ``None``: not declared.
+    """
 
     name: str
-    components: dict[str, str]  #: component -> FMU inside the archive
-    connections: list[tuple[str, str]]  #: ("comp.var", "comp.var")
-    parameters: dict[str, list[tuple[str, str, str]]]  #: component -> [(variable, type, value text)]
-    outputs: dict[str, list[str]] = field(default_factory=dict)  #: component -> output connectors
-    step_size: float | None = None  #: the OSP FixedStepAlgorithm's baseStepSize
+    components: dict[str, str]
+    connections: list[tuple[str, str]]
+    parameters: dict[str, list[tuple[str, str, str]]]
+    outputs: dict[str, list[str]] = field(default_factory=dict)
+    step_size: float | None = None
     start_time: float = 0.0
     stop_time: float | None = None
 
@@ -259,6 +309,18 @@ def read_ssp(path: str | Path) -> SspSystem:
     it); numbers and parameter values must parse as their types. Anything
     else raises :class:`~lpvest.cosim.CoSimulationError` naming the file and
     the element.
+
+    Parameters
+    ----------
+    path : os.PathLike or str
+        The ``.ssp`` archive; its ``SystemStructure.ssd`` is read (at most
+        :data:`MAX_SSD_BYTES`).
+
+    Returns
+    -------
+    SspSystem
+        The components, connections, parameter values, output connectors and
+        default experiment.
     """
     path = Path(path)
     try:

@@ -30,15 +30,30 @@ __all__ = ["Experiment", "ExperimentResult", "registry", "write_results"]
 
 @dataclass(frozen=True)
 class ExperimentResult:
-    """What an experiment produced."""
+    """What an experiment produced.
+
+    Parameters
+    ----------
+    name : str
+        Name of the experiment (:attr:`Experiment.name`).
+    table : str
+        Text table, paper next to ours.
+    results : mapping
+        JSON-able numbers (written to ``results.json`` by :func:`write_results`).
+    figures : tuple of Path, default ()
+        The figure files the experiment wrote.
+    paper : tuple of (str, str, str), default ()
+        Rows ``(quantity, paper, ours)`` of the report's paper-versus-ours table.
+    fmu : FmuRun or None, default None
+        What ran through FMUs and how it agrees with the library (``None``: no
+        FMU part).
+    """
 
     name: str
-    table: str  #: text table, paper next to ours
-    results: Mapping[str, Any]  #: JSON-able numbers (written to results.json)
+    table: str
+    results: Mapping[str, Any]
     figures: tuple[Path, ...] = field(default_factory=tuple)
-    #: rows ``(quantity, paper, ours)`` of the report's paper-versus-ours table
     paper: tuple[tuple[str, str, str], ...] = field(default_factory=tuple)
-    #: what ran through FMUs and how it agrees with the library (None: no FMU part)
     fmu: FmuRun | None = None
 
 
@@ -48,6 +63,17 @@ class Experiment:
 
     ``run(out_dir, *, fmus=None, **options)``; ``reduced`` holds the options of a
     quicker configuration (``lpvest reproduce all --quick``, the tests).
+
+    Parameters
+    ----------
+    name : str
+        Name for ``lpvest reproduce NAME``, unique over :func:`registry`.
+    title : str
+        One-line title, printed when the experiment runs.
+    run : callable
+        ``run(out_dir, *, fmus=None, **options) -> ExperimentResult``.
+    reduced : mapping, default {}
+        Keyword options of the quicker configuration, passed to ``run``.
     """
 
     name: str
@@ -57,7 +83,21 @@ class Experiment:
 
 
 def registry() -> dict[str, Experiment]:
-    """Every experiment of every module in :mod:`lpvest.experiments`, by name."""
+    """Every experiment of every module in :mod:`lpvest.experiments`, by name.
+
+    Modules whose name starts with ``_`` are skipped; the others are imported
+    and their ``EXPERIMENTS`` collected, in module-name order.
+
+    Returns
+    -------
+    dict of str to Experiment
+        The experiments, keyed by :attr:`Experiment.name`.
+
+    Raises
+    ------
+    InternalError
+        If two experiments have the same name.
+    """
     out: dict[str, Experiment] = {}
     for info in sorted(pkgutil.iter_modules(__path__), key=lambda i: i.name):
         if info.name.startswith("_"):
@@ -87,7 +127,22 @@ def _jsonable(value: Any) -> Any:
 
 
 def write_results(result: ExperimentResult, out_dir: Path) -> Path:
-    """Write ``results.json`` for ``result`` into ``out_dir``."""
+    """Write ``results.json`` for ``result`` into ``out_dir``.
+
+    Parameters
+    ----------
+    result : ExperimentResult
+        Its :attr:`~ExperimentResult.results`, plus ``fmu_cosimulation`` (the
+        :attr:`~ExperimentResult.fmu` record) when it has an FMU part, are
+        written; numpy arrays and scalars and paths are converted to JSON.
+    out_dir : Path
+        Folder to write into; created (with parents) if missing.
+
+    Returns
+    -------
+    Path
+        The file written, ``out_dir / "results.json"``.
+    """
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / "results.json"
     data = dict(result.results)

@@ -95,15 +95,48 @@ class EstimatorKind:
     supports: str | None = None
 
     def applies_to(self, model: object) -> bool:
+        """Whether ``model`` is an instance of one of the model types in :attr:`models`.
+
+        Parameters
+        ----------
+        model : object
+            A loaded model (e.g. :class:`~lpvest.systems.AffineLPV`).
+
+        Returns
+        -------
+        bool
+            ``True`` if this kind applies to ``model``'s type; model types
+            unknown to ``lpvest.modelfile.MODEL_TYPES`` are ignored.
+        """
         from ..modelfile import MODEL_TYPES
 
         return any(isinstance(model, MODEL_TYPES[t]) for t in self.models if t in MODEL_TYPES)
 
     def unsupported(self, model: object) -> str | None:
-        """Why this estimator cannot be built for ``model`` (``None``: it can)."""
+        """Why this estimator cannot be built for ``model`` (``None``: it can).
+
+        Parameters
+        ----------
+        model : object
+            A model of a type the kind applies to.
+
+        Returns
+        -------
+        str or None
+            The reason given by the :attr:`supports` function; always ``None``
+            when the kind has no such function.
+        """
         return None if self.supports is None else resolve(self.supports)(model)
 
     def to_json(self) -> dict[str, Any]:
+        """The kind as written to the FMU spec (``estimator`` key).
+
+        Returns
+        -------
+        dict
+            ``role``, ``factory``, ``parameters`` (each :meth:`Parameter.to_json`),
+            ``description`` and ``sample_time``.
+        """
         return {
             "role": self.role,
             "factory": self.factory,
@@ -114,7 +147,25 @@ class EstimatorKind:
 
 
 def resolve(target: str) -> Callable[..., Any]:
-    """The function named ``"module:function"`` (``function`` may be dotted)."""
+    """The function named ``"module:function"`` (``function`` may be dotted).
+
+    Parameters
+    ----------
+    target : str
+        ``"module:function"``; the module is imported.
+
+    Returns
+    -------
+    callable
+        The object found.
+
+    Raises
+    ------
+    ArgumentError
+        If ``target`` is not of the form ``"module:function"``.
+    ArgumentTypeError
+        If the object found is not callable.
+    """
     module, sep, name = target.partition(":")
     if not sep or not module or not name:
         raise ArgumentError(f"{target!r} is not of the form 'module:function'")
@@ -163,5 +214,11 @@ ESTIMATOR_KINDS: list[EstimatorKind] = [
 
 
 def estimator_kinds() -> list[EstimatorKind]:
-    """The registered kinds (a copy of :data:`ESTIMATOR_KINDS`)."""
+    """The registered kinds (a copy of :data:`ESTIMATOR_KINDS`).
+
+    Returns
+    -------
+    list of EstimatorKind
+        A new list; changing it does not change the registry.
+    """
     return list(ESTIMATOR_KINDS)

@@ -43,11 +43,36 @@ SPEC_FORMAT = "lpvest-fmu-2"
 class ModelDefault:
     """A parameter start value that comes from the model the FMU is built for:
     ``"x0"`` (its initial mean), ``"P0"`` (its initial covariance) or
-    ``"scheduling-centre"`` (the centre of its scheduling box)."""
+    ``"scheduling-centre"`` (the centre of its scheduling box).
+
+    Parameters
+    ----------
+    what : str
+        ``"x0"``, ``"P0"`` or ``"scheduling-centre"``.
+    """
 
     what: str
 
     def value(self, model: Any) -> Any:
+        """The start value taken from ``model``.
+
+        Parameters
+        ----------
+        model : object
+            The model the FMU is built for (with ``x0``, ``P0`` or a
+            scheduling ``space``, as :attr:`what` needs).
+
+        Returns
+        -------
+        list
+            ``x0`` as a list of floats, ``P0`` as nested lists of floats, or
+            the scheduling box centre ``(lower + upper) / 2`` as a list of floats.
+
+        Raises
+        ------
+        ModelFileError
+            If :attr:`what` is none of the known defaults.
+        """
         if self.what == "x0":
             return [float(v) for v in np.asarray(model.x0, dtype=float)]
         if self.what == "P0":
@@ -75,6 +100,22 @@ class Parameter:
     Reals ``name[1] ... name[n]``. ``minimum``/``maximum`` (numbers) are
     declared in the model description and checked when the value is set.
 
+    Parameters
+    ----------
+    name : str
+        FMI variable name (the base name of a vector parameter).
+    start : bool or int or float or str or sequence of float or ModelDefault
+        Start value; its type sets the FMI type. A :class:`ModelDefault` is
+        replaced by the model's value when the FMU is built (:meth:`for_model`).
+    description : str, default ""
+        Description in the model description.
+    minimum : float, optional
+        Declared minimum of a numeric parameter; ``None``: none.
+    maximum : float, optional
+        Declared maximum of a numeric parameter; ``None``: none.
+
+    Examples
+    --------
     >>> Parameter("tau", 10, "memory length", minimum=1).fmi_type
     'Integer'
     """
@@ -86,7 +127,19 @@ class Parameter:
     maximum: float | None = None
 
     def for_model(self, model: Any) -> Parameter:
-        """This parameter with a :class:`ModelDefault` start replaced by the model's value."""
+        """This parameter with a :class:`ModelDefault` start replaced by the model's value.
+
+        Parameters
+        ----------
+        model : object
+            The model the FMU is built for (see :meth:`ModelDefault.value`).
+
+        Returns
+        -------
+        Parameter
+            A new parameter with the model's start value, or this parameter
+            itself when its start is not a :class:`ModelDefault`.
+        """
         if isinstance(self.start, ModelDefault):
             return Parameter(self.name, self.start.value(model), self.description, self.minimum, self.maximum)
         return self
@@ -111,6 +164,16 @@ class Parameter:
         return np.shape(self.start) if isinstance(self.start, list | tuple | np.ndarray) else ()
 
     def to_json(self) -> dict[str, Any]:
+        """The parameter as stored in the FMU spec (inverse of :meth:`from_json`).
+
+        Returns
+        -------
+        dict
+            ``name``, ``start``, ``description``, ``minimum``, ``maximum`` and
+            ``vector`` (whether ``start`` is an array). A vector start is a
+            (nested) list of floats; a :class:`ModelDefault` start is
+            ``{"model": what}`` (with ``vector`` true).
+        """
         if isinstance(self.start, ModelDefault):
             return {"name": self.name, "start": {"model": self.start.what}, "description": self.description,
                     "minimum": self.minimum, "maximum": self.maximum, "vector": True}
@@ -120,6 +183,21 @@ class Parameter:
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> Parameter:
+        """The parameter stored by :meth:`to_json`.
+
+        Parameters
+        ----------
+        data : dict
+            ``name`` and ``start`` (required); ``description``, ``minimum``,
+            ``maximum`` and ``vector`` (optional). A ``start`` that is a dict
+            becomes a :class:`ModelDefault`; with ``vector`` true, ``start``
+            becomes a float array.
+
+        Returns
+        -------
+        Parameter
+            The parameter.
+        """
         start = data["start"]
         if isinstance(start, dict):
             start = ModelDefault(str(start.get("model")))
@@ -129,7 +207,24 @@ class Parameter:
 
 
 def read_spec(resources: str | Path) -> dict[str, Any]:
-    """The spec of the FMU whose resources folder is ``resources``."""
+    """The spec of the FMU whose resources folder is ``resources``.
+
+    Parameters
+    ----------
+    resources : os.PathLike or str
+        The FMU's ``resources`` folder, holding :data:`SPEC_FILE`.
+
+    Returns
+    -------
+    dict
+        The parsed spec (keys: see the module docs).
+
+    Raises
+    ------
+    ModelFileError
+        If the spec file is missing, not valid JSON, or not of
+        :data:`SPEC_FORMAT`.
+    """
     path = Path(resources) / SPEC_FILE
     try:
         spec = json.loads(path.read_text(encoding="utf-8"))

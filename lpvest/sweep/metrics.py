@@ -51,15 +51,35 @@ METRIC_KINDS: dict[str, tuple[tuple[str, ...], bool]] = {
 
 @dataclass(frozen=True)
 class Metric:
-    """One summary metric (see the module documentation for the kinds)."""
+    """One summary metric (see the module documentation for the kinds).
+
+    Parameters
+    ----------
+    name : str
+        Metric name, its column in the summary table.
+    kind : str
+        One of :data:`METRIC_KINDS` (``rms_error``, ``final_trace`` ...).
+    variables : mapping of str to str
+        Role (``estimate``, ``truth``, ``input``, ``of``) -> recorded name
+        (``"comp.var"`` or one element ``"comp.var[i]"``).
+    start : int, default 0
+        First row used (rows ``k < start`` are a burn-in); ignored by
+        ``final_trace`` and ``final``.
+    """
 
     name: str
     kind: str
-    variables: Mapping[str, str]  #: role (``estimate``, ``truth``, ``input``, ``of``) -> recorded name
+    variables: Mapping[str, str]
     start: int = 0
 
     def names(self) -> tuple[str, ...]:
-        """The recorded variables it reads."""
+        """The recorded variables it reads.
+
+        Returns
+        -------
+        tuple of str
+            The values of :attr:`variables`, in role order.
+        """
         return tuple(self.variables.values())
 
 
@@ -70,7 +90,21 @@ def _element_key(name: str) -> tuple[int, ...]:
 
 def expand(name: str, columns: Iterable[str]) -> list[str]:
     """The columns ``name`` stands for: itself, or its elements ``name[i]`` /
-    ``name[i,j]`` in index order (row-major)."""
+    ``name[i,j]`` in index order (row-major).
+
+    Parameters
+    ----------
+    name : str
+        A recorded variable or element name (``"kalman.xhat"``, ``"kalman.xhat[1]"``).
+    columns : iterable of str
+        The recorded column names.
+
+    Returns
+    -------
+    list of str
+        ``[name]`` if it is a column, else its element columns sorted by
+        index; empty if there are none.
+    """
     columns = list(columns)
     if name in columns:
         return [name]
@@ -79,7 +113,25 @@ def expand(name: str, columns: Iterable[str]) -> list[str]:
 
 
 def select(data: np.ndarray, name: str) -> np.ndarray:
-    """The columns of ``name`` in a recorded run as an array ``(rows, elements)``."""
+    """The columns of ``name`` in a recorded run as an array ``(rows, elements)``.
+
+    Parameters
+    ----------
+    data : ndarray
+        A recorded run: structured array with one field per column.
+    name : str
+        A variable or element name (see :func:`expand`).
+
+    Returns
+    -------
+    ndarray, shape (rows, elements)
+        The columns as floats, in :func:`expand` order.
+
+    Raises
+    ------
+    KeyError
+        If ``name`` matches no column.
+    """
     cols = expand(name, data.dtype.names or ())
     if not cols:
         raise KeyError(f"no recorded variable {name!r}")
@@ -109,7 +161,20 @@ def check(metric: Metric, columns: Iterable[str]) -> str | None:
 
 
 def compute(metric: Metric, data: np.ndarray) -> float:
-    """The value of ``metric`` on one recorded run (see the module documentation)."""
+    """The value of ``metric`` on one recorded run (see the module documentation).
+
+    Parameters
+    ----------
+    metric : Metric
+        The metric; its variables must be recorded (see :func:`check`).
+    data : ndarray
+        A recorded run: structured array with one field per column.
+
+    Returns
+    -------
+    float
+        The metric's value.
+    """
     v = {role: select(data, name) for role, name in metric.variables.items()}
     rows = slice(metric.start, None)
     kind = metric.kind

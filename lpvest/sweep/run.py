@@ -30,10 +30,14 @@ class SweepInterrupted(KeyboardInterrupt):
     """``Ctrl-C`` stopped a sweep: pending tasks were cancelled, finished ones
     are on disk, and a rerun of the same spec resumes.
 
-    Attributes
+    Parameters
     ----------
     out : Path
-    finished, total : int
+        The sweep's output folder.
+    finished : int
+        Tasks finished and written (including earlier runs').
+    total : int
+        Tasks of the sweep.
     """
 
     def __init__(self, out: Path, finished: int, total: int) -> None:
@@ -44,15 +48,44 @@ class SweepInterrupted(KeyboardInterrupt):
 
 @dataclass(frozen=True)
 class SweepResult:
-    """What a sweep wrote and how it went."""
+    """What a sweep wrote and how it went.
+
+    Parameters
+    ----------
+    out : Path
+        The output folder.
+    spec : SweepSpec
+        The sweep that ran.
+    summary : pyarrow.Table
+        Task, axes, seed, metrics, status, error (``summary.parquet``).
+    metrics : tuple of str
+        Metric names, in column order.
+    n_tasks : int
+        Tasks of the sweep.
+    ran : int
+        Tasks run by this call.
+    resumed : int
+        Tasks finished by earlier runs (skipped).
+    complete : bool
+        Whether every task has finished (failed ones included).
+    seconds : float
+        Wall-clock time of this call, in seconds.
+    engine : str
+        Where the tasks ran (the engine's description, ``"in this process, no
+        Dask"`` or ``"nothing to run"``).
+    description : str
+        One line on what each task runs (from the study).
+    figures : tuple of Path, default ()
+        The metric figures written (``out/figures/<metric>.png``).
+    """
 
     out: Path
     spec: SweepSpec
-    summary: Any  #: pyarrow.Table: task, axes, seed, metrics, status, error (summary.parquet)
+    summary: Any
     metrics: tuple[str, ...]
     n_tasks: int
-    ran: int  #: tasks run by this call
-    resumed: int  #: tasks finished by earlier runs (skipped)
+    ran: int
+    resumed: int
     complete: bool
     seconds: float
     engine: str
@@ -66,14 +99,32 @@ class SweepResult:
                 if r["status"] != "ok"]
 
     def trajectories(self) -> Any:
-        """The kept signals (a ``zarr.Group``: one array per signal, first axis the task), or None."""
+        """The kept signals (a ``zarr.Group``: one array per signal, first axis the task), or None.
+
+        Returns
+        -------
+        zarr.Group or None
+            ``out/trajectories.zarr`` opened read-only; ``None`` if the sweep
+            kept no signals.
+        """
         import zarr
 
         path = self.out / "trajectories.zarr"
         return zarr.open_group(str(path), mode="r") if path.exists() else None
 
     def report(self, *, max_failures: int = 5) -> str:
-        """A few lines: what ran, where, each metric's mean and spread per point."""
+        """A few lines: what ran, where, each metric's mean and spread per point.
+
+        Parameters
+        ----------
+        max_failures : int, default 5
+            Failed tasks listed with their error; the rest are counted.
+
+        Returns
+        -------
+        str
+            The report, one string of several lines.
+        """
         from .plot import metric_statistics
 
         spec = self.spec
@@ -187,6 +238,11 @@ def run_sweep(
         Give up when no task finishes for this many seconds.
     flush_every, flush_seconds : int, float
         How often finished tasks are committed to disk.
+
+    Returns
+    -------
+    SweepResult
+        What was written and how it went (:meth:`SweepResult.report`).
 
     Raises
     ------

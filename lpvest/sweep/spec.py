@@ -71,7 +71,17 @@ _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 @dataclass(frozen=True)
 class Axis:
-    """A swept name and its values (scalars, or lists of numbers for a vector)."""
+    """A swept name and its values (scalars, or lists of numbers for a vector).
+
+    Parameters
+    ----------
+    name : str
+        An FMU parameter ``"component.variable"`` (co-simulation) or an axis
+        name of the experiment.
+    values : tuple
+        The values, all of one kind: numbers, strings, booleans, or tuples of
+        numbers (a vector parameter).
+    """
 
     name: str
     values: tuple[Any, ...]
@@ -79,7 +89,21 @@ class Axis:
 
 @dataclass(frozen=True)
 class Seeds:
-    """The seed axis: which keys, from which root, into which FMU parameters."""
+    """The seed axis: which keys, from which root, into which FMU parameters.
+
+    Parameters
+    ----------
+    keys : tuple of int
+        The seed keys (non-negative), one task per key and parameter point.
+    root : int, default 0
+        Entropy of the ``numpy.random.SeedSequence`` the seeds derive from.
+    parameters : tuple of str, default ()
+        FMU Integer parameters ``"component.variable"`` given per-task seeds
+        (empty for an experiment, which seeds itself).
+    common : bool, default True
+        Derive the seeds from the seed key (same noise at every parameter
+        point); ``False``: from the task index.
+    """
 
     keys: tuple[int, ...]
     root: int = 0
@@ -93,21 +117,60 @@ class SweepSpec:
 
     Build one with :func:`load_sweep` (a TOML file) or :func:`sweep_spec` (the
     same content as a dictionary).
+
+    Parameters
+    ----------
+    origin : str
+        The file (or ``"sweep spec"``), for messages.
+    title : str
+        The ``title`` of the file (may be empty).
+    cosim : CoSimFile or None
+        The co-simulation, or ``None`` for an experiment.
+    experiment : str or None
+        The registered experiment's name, or ``None`` for a co-simulation.
+    grid : tuple of Axis, default ()
+        The ``[parameters]`` axes, every combination swept (the last fastest).
+    zips : tuple of tuple of Axis, default ()
+        The ``[[zip]]`` groups: axes of equal length varied together.
+    seeds : Seeds or None, default None
+        The seed axis; ``None``: one task per parameter point.
+    keep : tuple of str, default ()
+        Trajectories to store.
+    metrics : tuple of Metric, default ()
+        Co-simulation metrics.
+    metric_names : tuple of str, default ()
+        Experiment metrics kept (empty: all).
+    options : mapping, default {}
+        Experiment options.
     """
 
-    origin: str  #: the file (or ``"sweep spec"``), for messages
+    origin: str
     title: str
-    cosim: CoSimFile | None  #: the co-simulation, or None for an experiment
+    cosim: CoSimFile | None
     experiment: str | None
     grid: tuple[Axis, ...] = ()
     zips: tuple[tuple[Axis, ...], ...] = ()
     seeds: Seeds | None = None
     keep: tuple[str, ...] = ()
-    metrics: tuple[Metric, ...] = ()  #: co-simulation metrics
-    metric_names: tuple[str, ...] = ()  #: experiment metrics kept (empty: all)
-    options: Mapping[str, Any] = field(default_factory=dict)  #: experiment options
+    metrics: tuple[Metric, ...] = ()
+    metric_names: tuple[str, ...] = ()
+    options: Mapping[str, Any] = field(default_factory=dict)
 
     def error(self, where: str, message: str) -> ModelFileError:
+        """The error to raise for a mistake in the field ``where``.
+
+        Parameters
+        ----------
+        where : str
+            The field (``"seeds.count"``, ``"metrics.rms_x"``).
+        message : str
+            What is wrong with it.
+
+        Returns
+        -------
+        ModelFileError
+            With the message ``"<origin>: <where>: <message>"`` (not raised).
+        """
         return ModelFileError(f"{self.origin}: {where}: {message}")
 
     @property
@@ -116,7 +179,14 @@ class SweepSpec:
         return self.grid + tuple(a for group in self.zips for a in group)
 
     def points(self) -> list[dict[str, Any]]:
-        """The parameter points in task order (the last grid axis fastest)."""
+        """The parameter points in task order (the last grid axis fastest).
+
+        Returns
+        -------
+        list of dict
+            One dict per point, axis name -> value: the product of the grid
+            axes and the zip groups (in that order); ``[{}]`` without axes.
+        """
         pools: list[list[dict[str, Any]]] = [[{a.name: v} for v in a.values] for a in self.grid]
         for group in self.zips:
             n = len(group[0].values)
@@ -130,7 +200,15 @@ class SweepSpec:
         return out
 
     def tasks(self) -> list[Task]:
-        """Every task: parameter points outer, seed keys inner."""
+        """Every task: parameter points outer, seed keys inner.
+
+        Returns
+        -------
+        list of Task
+            ``Task(index, point, seed key, seed values)``; the seed values are
+            :func:`~lpvest.sweep.tasks.task_seeds` ``(root, key)`` (``common``)
+            or ``(root, index)``, empty without seed parameters.
+        """
         points = self.points()
         keys: Sequence[int | None] = self.seeds.keys if self.seeds else (None,)
         names = self.seeds.parameters if self.seeds else ()
@@ -156,7 +234,14 @@ class SweepSpec:
 
     def identity(self) -> dict[str, Any]:
         """What the results depend on in the spec (not the title): axes, seeds,
-        metrics, kept signals, options (the study adds its own inputs)."""
+        metrics, kept signals, options (the study adds its own inputs).
+
+        Returns
+        -------
+        dict
+            JSON-able: ``grid``, ``zips``, ``seeds``, ``keep``, ``metrics``,
+            ``metric_names`` and ``options``.
+        """
         return {
             "grid": [[a.name, list(a.values)] for a in self.grid],
             "zips": [[[a.name, list(a.values)] for a in g] for g in self.zips],
@@ -293,6 +378,11 @@ def load_sweep(path: str | Path, *, fmu_dir: str | Path | None = None) -> SweepS
     fmu_dir : str or Path, optional
         Folder of the co-simulation's FMUs (overrides the files' ``fmu_dir``).
 
+    Returns
+    -------
+    SweepSpec
+        The checked sweep; relative paths in the file start from its folder.
+
     Raises
     ------
     ModelFileError
@@ -315,6 +405,29 @@ def sweep_spec(
 
     ``base`` is the folder that relative paths (``cosim``, ``fmu_dir``) start
     from; ``origin`` names the description in messages.
+
+    Parameters
+    ----------
+    data : mapping
+        The keys of a sweep file (see the module documentation).
+    origin : str, default "sweep spec"
+        Name of the description in error messages.
+    base : os.PathLike or str, default "."
+        Folder that the relative paths ``cosim`` and ``fmu_dir`` start from.
+    fmu_dir : os.PathLike or str or None, default None
+        Folder of the co-simulation's FMUs; overrides ``data["fmu_dir"]``
+        (which is relative to ``base``).
+
+    Returns
+    -------
+    SweepSpec
+        The checked sweep; for an experiment, with its default axes and
+        seeds where ``data`` gives none (:func:`with_defaults`).
+
+    Raises
+    ------
+    ModelFileError
+        One line naming ``origin`` and the field.
 
     Examples
     --------
@@ -462,7 +575,20 @@ def sweep_spec(
 
 
 def with_defaults(spec: SweepSpec) -> SweepSpec:
-    """An experiment's spec with its default axes and seeds where the file gives none."""
+    """An experiment's spec with its default axes and seeds where the file gives none.
+
+    Parameters
+    ----------
+    spec : SweepSpec
+        A checked spec.
+
+    Returns
+    -------
+    SweepSpec
+        ``spec`` with the experiment's default axes appended to the grid and
+        its default seed keys when it is seeded and ``spec`` has no seeds;
+        ``spec`` itself for a co-simulation.
+    """
     if spec.experiment is None:
         return spec
     from .studies import study

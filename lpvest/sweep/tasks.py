@@ -35,7 +35,18 @@ __all__ = ["Task", "TaskResult", "Outcome", "SweepError", "execute", "map_tasks"
 
 
 def digest(identity: Mapping[str, Any]) -> str:
-    """SHA-256 of a JSON-able identity (keys sorted)."""
+    """SHA-256 of a JSON-able identity (keys sorted).
+
+    Parameters
+    ----------
+    identity : mapping
+        JSON-able data; values JSON cannot hold are written as ``str(value)``.
+
+    Returns
+    -------
+    str
+        The hex digest (64 characters).
+    """
     return hashlib.sha256(json.dumps(identity, sort_keys=True, default=str).encode()).hexdigest()
 
 
@@ -48,15 +59,15 @@ class SweepError(LpvestError, RuntimeError):
 class Task:
     """One member of a sweep.
 
-    Attributes
+    Parameters
     ----------
     index : int
         Position in the sweep (0-based): parameter points outer, seeds inner.
-    point : mapping
+    point : mapping, default {}
         The swept values of this task, by axis name (``{"truncated.tau": 3}``).
-    seed : int or None
+    seed : int or None, default None
         The seed key (member of ``seeds``), ``None`` without a seed axis.
-    seed_values : mapping
+    seed_values : mapping of str to int, default {}
         The 32-bit seeds this task gives to FMU parameters (``{"plant.seed":
         1234567}``), derived from :func:`task_seeds`.
     """
@@ -71,11 +82,11 @@ class Task:
 class TaskResult:
     """What a task function returns.
 
-    Attributes
+    Parameters
     ----------
-    metrics : mapping of str to float
+    metrics : mapping of str to float, default {}
         Summary numbers (one column each in the summary table).
-    signals : mapping of str to ndarray
+    signals : mapping of str to ndarray, default {}
         Arrays to keep (trajectories), each of the shape the study declares.
     value : object, optional
         Anything else for an in-process caller (a design, a fit); not stored.
@@ -88,7 +99,21 @@ class TaskResult:
 
 @dataclass(frozen=True)
 class Outcome:
-    """A task's result or its failure, with where and how long it ran."""
+    """A task's result or its failure, with where and how long it ran.
+
+    Parameters
+    ----------
+    index : int
+        The task's :attr:`Task.index`.
+    result : TaskResult or None
+        What the task function returned; ``None`` if it failed.
+    error : str or None
+        ``"ExceptionType: message"`` (one line) if the task failed, else ``None``.
+    seconds : float
+        Wall-clock time of the task function, in seconds.
+    worker : str
+        Where it ran: the Dask worker's address, or ``host:pid`` in this process.
+    """
 
     index: int
     result: TaskResult | None
@@ -110,6 +135,20 @@ def task_seeds(root: int, spawn_index: int, names: Sequence[str]) -> dict[str, i
     value fits an FMI Integer (signed 32-bit, ``0 <= s < 2**31``). They depend
     on ``root``, ``spawn_index`` and the number of names only: never on the
     number of workers or on the order in which tasks run.
+
+    Parameters
+    ----------
+    root : int
+        Root entropy of the sweep's seed sequence.
+    spawn_index : int
+        The task's child of the root sequence.
+    names : sequence of str
+        The seeded FMU parameters (``"component.parameter"``).
+
+    Returns
+    -------
+    dict of str to int
+        One seed per name, ``0 <= s < 2**31``; empty if ``names`` is empty.
 
     Examples
     --------
@@ -148,6 +187,21 @@ def execute(fn: Callable[[Any, Task], TaskResult], shared: Any, task: Task) -> O
     task run in this process could differ from the same task on a worker in
     its last bits (a least-squares fit amplifies that). With it, a task gives
     the same numbers wherever it runs.
+
+    Parameters
+    ----------
+    fn : callable
+        Module-level task function ``fn(shared, task) -> TaskResult``; any other
+        return value is a failure (``TypeError``).
+    shared : object
+        Data every task reads, passed to ``fn`` as is.
+    task : Task
+        The task to run.
+
+    Returns
+    -------
+    Outcome
+        The result, or the failure's message, with the run time and worker name.
     """
     t0 = time.perf_counter()
     try:
@@ -177,6 +231,27 @@ def map_tasks(
 
     The experiments run their Monte Carlo members through this function: the
     same task function gives the same numbers either way.
+
+    Parameters
+    ----------
+    fn : callable
+        Module-level task function ``fn(shared, task) -> TaskResult``.
+    shared : object
+        Data every task reads, passed to ``fn`` as is.
+    points : sequence of (mapping or Task)
+        The tasks; a mapping (axis name -> value) becomes ``Task(i, point)``
+        with ``i`` its position.
+    engine : Engine or None, default None
+        Dask engine to run on; ``None`` runs serially in this process.
+    progress : bool, default False
+        Show a progress bar.
+    desc : str, default "tasks"
+        Label of the progress bar and of the error message.
+
+    Returns
+    -------
+    list of TaskResult
+        The results, in the order of ``points``.
 
     Raises
     ------
