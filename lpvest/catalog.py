@@ -20,7 +20,18 @@ __all__ = ["models_dir", "example_systems", "find_system", "stored_design", "Exa
 
 def models_dir() -> Path:
     """The folder holding the example model files: ``models/`` next to the
-    package in a source checkout, else the copy installed as ``lpvest._models``."""
+    package in a source checkout, else the copy installed as ``lpvest._models``.
+
+    Returns
+    -------
+    folder : pathlib.Path
+        The first of the two folders that holds a ``*.toml`` file.
+
+    Raises
+    ------
+    ModelFileError
+        Neither folder holds a model file.
+    """
     here = Path(__file__).resolve().parent
     for candidate in (here.parent / "models", here / "_models"):
         if candidate.is_dir() and any(candidate.glob("*.toml")):
@@ -30,7 +41,18 @@ def models_dir() -> Path:
 
 @dataclass(frozen=True)
 class ExampleEntry:
-    """One example system: its name, title and file (read without building it)."""
+    """One example system: its name, title and file (read without building it).
+
+    Parameters
+    ----------
+    name : str
+        The system's ``[system] name`` (the file's stem when it has none), by
+        which :func:`find_system` and ``lpvest systems`` find it.
+    title : str
+        The system's ``[system] title`` (empty when it has none).
+    path : pathlib.Path
+        The model file.
+    """
 
     name: str
     title: str
@@ -38,7 +60,14 @@ class ExampleEntry:
 
 
 def example_systems() -> list[ExampleEntry]:
-    """Every example system, sorted by name."""
+    """Every example system, sorted by name.
+
+    Returns
+    -------
+    list of ExampleEntry
+        One entry per ``*.toml`` file of :func:`models_dir`; only the
+        ``[system]`` table is read (the models are not built).
+    """
     from .tomlfiles import read_toml
 
     out = []
@@ -49,7 +78,26 @@ def example_systems() -> list[ExampleEntry]:
 
 
 def find_system(source: str | Path) -> Path:
-    """The file for ``source``: an existing path, or an example system's name."""
+    """The file for ``source``: an existing path, or an example system's name.
+
+    Parameters
+    ----------
+    source : str or pathlib.Path
+        A path to a model file (anything ending in ``.toml`` or naming an
+        existing file), else the name of an example system
+        (:attr:`ExampleEntry.name`).
+
+    Returns
+    -------
+    path : pathlib.Path
+        ``source`` as a path, or the example system's file.
+
+    Raises
+    ------
+    ModelFileError
+        ``source`` is not a string or path, a ``.toml`` path that does not exist
+        or is a folder, or no example system's name.
+    """
     if not isinstance(source, str | Path):
         raise ModelFileError(f"expected a model file or an example name, found {type(source).__name__}")
     path = Path(source)
@@ -79,6 +127,19 @@ def stored_design(system_name: str, role: str) -> Path | None:
     (``models/designs/<system>.<Role>.json``, written by ``lpvest design``), or
     ``None``. The FMU builder carries it instead of solving the LMIs again, so
     every machine builds the same filter; it checks that the design fits the
-    plant (:meth:`lpvest.design.result.HinfDesign.check_model`)."""
+    plant (:meth:`lpvest.design.result.HinfDesign.check_model`).
+
+    Parameters
+    ----------
+    system_name : str
+        The system's name (``[system] name``, e.g. ``"peixoto-ex1"``).
+    role : str
+        The FMU role the design is for, e.g. ``"HinfPD"`` or ``"HinfRobust"``.
+
+    Returns
+    -------
+    path : pathlib.Path or None
+        The design file, or ``None`` when there is none (the file is not read).
+    """
     path = models_dir() / "designs" / f"{system_name}.{role}.json"
     return path if path.is_file() else None

@@ -76,6 +76,15 @@ class NumericalError(LpvestError, ArithmeticError):
 class LMIInfeasibleError(LpvestError, RuntimeError):
     """An LMI problem is infeasible or the solver's answer fails the check.
 
+    Parameters
+    ----------
+    message : str
+        The error message.
+    status : str, default ""
+        The solver status string, kept as :attr:`status`.
+    detail : str, default ""
+        The record of every solve tried, kept as :attr:`detail`.
+
     Attributes
     ----------
     status : str
@@ -119,6 +128,22 @@ def abbreviate(value: object, limit: int = 40) -> str:
     longer one keeps its start and end and says how long it was, e.g.
     ``'1+1+1+1+1+1+1+...+1+1' (199,999 characters)``.
 
+    Parameters
+    ----------
+    value : object
+        The value to show; a string is quoted and, when too long, cut in the
+        middle, any other value cut at the end (``...``).
+    limit : int, default 40
+        The length aimed at (characters); the kept part is never shorter than
+        8 characters.
+
+    Returns
+    -------
+    text : str
+        ``repr(value)``, shortened when longer than ``limit``.
+
+    Examples
+    --------
     >>> abbreviate("x" * 100, 20)
     "'xxxxxxx...xx' (100 characters)"
     >>> abbreviate(0.5)
@@ -139,6 +164,22 @@ def shorten(text: str, limit: int = 80) -> str:
     """``text`` for a message without quotes (a path, a list of names, another
     error's message), on one line and at most about ``limit`` characters.
 
+    Parameters
+    ----------
+    text : str
+        The text; any object is converted with ``str``. Runs of whitespace
+        (newlines included) become one space.
+    limit : int, default 80
+        The length aimed at (characters); a longer text keeps its start and end
+        and says how long it was.
+
+    Returns
+    -------
+    shown : str
+        The one-line, possibly shortened text.
+
+    Examples
+    --------
     >>> shorten("a, b, c")
     'a, b, c'
     >>> shorten("x" * 100, 20)

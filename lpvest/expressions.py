@@ -74,7 +74,21 @@ _SHIFT_PREFIX = "__shift__"
 
 
 def shift_name(name: str, k: int) -> str:
-    """The variable name that stands for ``shift(name, k)`` (``name`` at ``t + k``)."""
+    """The variable name that stands for ``shift(name, k)`` (``name`` at ``t + k``).
+
+    Parameters
+    ----------
+    name : str
+        The variable, e.g. ``"p"``.
+    k : int
+        The shift in samples (negative: the past).
+
+    Returns
+    -------
+    var : str
+        The internal name, e.g. ``"__shift__p__p1"`` for ``k = 1``, the key under
+        which :meth:`Expression.evaluate` expects the shifted value.
+    """
     return f"{_SHIFT_PREFIX}{name}__{'m' if k < 0 else 'p'}{abs(k)}"
 
 
@@ -342,6 +356,23 @@ def _display_tree(tree: ast.AST) -> ast.AST:
 class Expression:
     """A validated formula, callable on numpy arrays.
 
+    Build one with :meth:`parse` (or :meth:`constant`, :meth:`derivative`),
+    not with the constructor.
+
+    Parameters
+    ----------
+    text : str
+        The formula as given (a number as its ``repr``; a derivative as
+        ``"d/dvar(text)"``), used in messages.
+    tree : ast.Expression
+        The validated syntax tree: numbers as floats, parameters and constants
+        (``pi``, ``e``) replaced by their values, operations on constants
+        folded, ``shift(p, k)`` as the name :func:`shift_name` ``(p, k)``.
+    _code : _Compiled
+        The compiled form of ``tree`` (internal).
+    _names : frozenset of str, default frozenset()
+        The free variable names of ``tree`` (internal; see :attr:`names`).
+
     Examples
     --------
     >>> f = Expression.parse("t**2 + 1")
@@ -378,6 +409,19 @@ class Expression:
             ``rho``).
         allowed : iterable of str, optional
             Variable names the formula may use; any other name is an error.
+
+        Returns
+        -------
+        Expression
+            The validated formula.
+
+        Raises
+        ------
+        ExpressionError
+            ``text`` is not a formula of the accepted kind (see the module
+            documentation), longer than :data:`MAX_FORMULA_LENGTH` or nested
+            deeper than :data:`MAX_FORMULA_DEPTH`, an operation on constants is
+            undefined or not finite, or it uses a name not ``allowed``.
         """
         if isinstance(text, bool) or not isinstance(text, str | int | float):
             raise ExpressionError(f"formula {abbreviate(text)} is neither text nor a number")
@@ -435,7 +479,18 @@ class Expression:
 
     @classmethod
     def constant(cls, value: float) -> Expression:
-        """The constant formula ``value``."""
+        """The constant formula ``value``.
+
+        Parameters
+        ----------
+        value : float
+            A finite number.
+
+        Returns
+        -------
+        Expression
+            The formula, with text ``repr(float(value))``.
+        """
         return cls.parse(float(value))
 
     # -- inspection -----------------------------------------------------------
@@ -481,6 +536,23 @@ class Expression:
         (Python numbers or numpy arrays): a division by zero gives ``inf``, an
         overflow ``inf``, a negative number to a fractional power ``nan``;
         callers that need finite values check them (:meth:`value` does).
+
+        Parameters
+        ----------
+        values : mapping of str to float or array_like
+            A value for every free name (a shifted variable under
+            :func:`shift_name`); arrays broadcast, extra names are ignored.
+
+        Returns
+        -------
+        value : float or ndarray
+            The formula's value, of the broadcast shape of the values it uses
+            (a float for a constant formula).
+
+        Raises
+        ------
+        ExpressionError
+            A free name has no value.
         """
         missing = self._names - values.keys()
         if missing:
@@ -489,7 +561,18 @@ class Expression:
         return _evaluate(self._code, values)
 
     def value(self) -> float:
-        """The value of a constant formula (finite: an error otherwise)."""
+        """The value of a constant formula (finite: an error otherwise).
+
+        Returns
+        -------
+        value : float
+            The formula's value.
+
+        Raises
+        ------
+        ExpressionError
+            The formula uses a variable.
+        """
         if not self.is_constant:
             shown = ", ".join(sorted(_shown(n) for n in self.names))
             raise ExpressionError(
@@ -501,7 +584,25 @@ class Expression:
 
     # -- calculus -------------------------------------------------------------
     def derivative(self, var: str) -> Expression:
-        """The symbolic derivative with respect to ``var``."""
+        """The symbolic derivative with respect to ``var``.
+
+        Parameters
+        ----------
+        var : str
+            The variable (a shifted one under its :func:`shift_name`); a name
+            the formula does not use gives the constant 0.
+
+        Returns
+        -------
+        Expression
+            The derivative, with text ``"d/dvar(text)"``.
+
+        Raises
+        ------
+        ExpressionError
+            The derivative, written out, has more than
+            :data:`MAX_DERIVATIVE_SIZE` operations.
+        """
         tree = ast.Expression(_diff(self.tree.body, var, {}))
         if _written_size(tree, MAX_DERIVATIVE_SIZE) > MAX_DERIVATIVE_SIZE:
             raise ExpressionError(
@@ -513,7 +614,18 @@ class Expression:
 
     def monomial_exponents(self, names: tuple[str, ...]) -> tuple[int, ...] | None:
         """If the formula is a product of ``names`` to non-negative integer
-        powers (coefficient 1), their exponents; otherwise ``None``."""
+        powers (coefficient 1), their exponents; otherwise ``None``.
+
+        Parameters
+        ----------
+        names : tuple of str
+            The variables, in the order of the exponents.
+
+        Returns
+        -------
+        exponents : tuple of int or None
+            One exponent per name (``x*x`` and ``x^2`` both give 2), or ``None``.
+        """
         exps = [0] * len(names)
         index = {n: i for i, n in enumerate(names)}
 
@@ -723,6 +835,12 @@ def _written_size(tree: ast.AST, limit: int) -> int:
 class FormulaMatrix:
     """A matrix whose entries are formulas (numbers are constant formulas).
 
+    Parameters
+    ----------
+    entries : tuple of tuple of Expression
+        The rows, all of the same non-zero length (build with :meth:`parse`,
+        which checks it).
+
     Examples
     --------
     >>> K = FormulaMatrix.parse([["(1 - shift(p, 1)) / shift(p, 1)"]], allowed=["p"])
@@ -743,7 +861,30 @@ class FormulaMatrix:
         parameters: Mapping[str, float] | None = None,
         allowed: Iterable[str] | None = None,
     ) -> FormulaMatrix:
-        """Parse a list of rows of formulas/numbers (a bare number or formula is 1x1)."""
+        """Parse a list of rows of formulas/numbers (a bare number or formula is 1x1).
+
+        Parameters
+        ----------
+        rows : list of list of (str or float), or str or float
+            The rows (lists or tuples) of equal, non-zero length.
+        name : str, default "matrix"
+            How errors call the matrix (an entry as ``name[i,j]``, 1-based).
+        parameters : mapping of str to float, optional
+            Named constants substituted at parse time (:meth:`Expression.parse`).
+        allowed : iterable of str, optional
+            Variable names the entries may use; ``None``: any.
+
+        Returns
+        -------
+        FormulaMatrix
+            The parsed matrix.
+
+        Raises
+        ------
+        ExpressionError
+            ``rows`` is not a list of rows of equal, non-zero length, or an entry
+            is not a valid formula (the message names the entry).
+        """
         if isinstance(rows, str | int | float):
             rows = [[rows]]
         if not isinstance(rows, list | tuple) or not rows or not all(
@@ -784,7 +925,20 @@ class FormulaMatrix:
         return all(e.is_constant for row in self.entries for e in row)
 
     def evaluate(self, values: Mapping[str, Any]) -> np.ndarray:
-        """Evaluate every entry; array values give a stacked ``(..., rows, cols)``."""
+        """Evaluate every entry; array values give a stacked ``(..., rows, cols)``.
+
+        Parameters
+        ----------
+        values : mapping of str to float or array_like
+            A value for every free name (a shifted variable under
+            :func:`shift_name`); arrays broadcast, extra names are ignored.
+
+        Returns
+        -------
+        matrix : ndarray, shape (..., rows, cols)
+            The matrix, ``...`` being the broadcast shape of the entries' values
+            (none for scalar values).
+        """
         vals = [[e.evaluate(values) for e in row] for row in self.entries]
         shape = np.broadcast_shapes(*(np.shape(v) for row in vals for v in row))
         out = np.empty((*shape, *self.shape))
@@ -794,10 +948,29 @@ class FormulaMatrix:
         return out
 
     def derivative(self, var: str) -> FormulaMatrix:
+        """The entry-wise symbolic derivative with respect to ``var``.
+
+        Parameters
+        ----------
+        var : str
+            The variable (see :meth:`Expression.derivative`).
+
+        Returns
+        -------
+        FormulaMatrix
+            The matrix of the entries' derivatives.
+        """
         return FormulaMatrix(tuple(tuple(e.derivative(var) for e in row) for row in self.entries))
 
     def to_list(self) -> list[list[float | str]]:
-        """Entries as numbers (constants) or formula text, for model files."""
+        """Entries as numbers (constants) or formula text, for model files.
+
+        Returns
+        -------
+        rows : list of list of (float or str)
+            The rows; a constant entry as its float, any other as its
+            canonical text (:attr:`Expression.source`).
+        """
         return [[e.value() if e.is_constant else e.source for e in row] for row in self.entries]
 
 
@@ -805,6 +978,13 @@ class FormulaVector:
     """Several formulas evaluated together by one compiled expression (the fast
     path for a per-sample evaluation, e.g. a simplex map inside an FMU).
 
+    Parameters
+    ----------
+    formulas : iterable of Expression
+        The formulas, in the order of the result's last axis.
+
+    Examples
+    --------
     >>> v = FormulaVector([Expression.parse("(1 - x)/2"), Expression.parse("(1 + x)/2")])
     >>> v.evaluate({"x": 0.5})
     array([0.25, 0.75])
@@ -817,7 +997,24 @@ class FormulaVector:
 
     def evaluate(self, values: Mapping[str, Any]) -> np.ndarray:
         """The formulas' values, shape ``(n,)`` for scalar values or
-        ``(*shape, n)`` for arrays of a common ``shape``."""
+        ``(*shape, n)`` for arrays of a common ``shape``.
+
+        Parameters
+        ----------
+        values : mapping of str to float or array_like
+            A value for every free name (a shifted variable under
+            :func:`shift_name`); arrays broadcast, extra names are ignored.
+
+        Returns
+        -------
+        values : ndarray, shape (n,) or (..., n)
+            The ``n`` formulas' values along the last axis.
+
+        Raises
+        ------
+        ExpressionError
+            A formula's free name has no value (the message names the formula).
+        """
         missing = self._names - values.keys()
         if missing:
             for f in self.formulas:

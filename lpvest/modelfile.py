@@ -100,18 +100,45 @@ MODEL_TYPES: dict[str, type] = {
 @dataclass(frozen=True)
 class ParameterRange:
     """The declared range and description of a model parameter (either
-    bound may be absent)."""
+    bound may be absent).
+
+    Parameters
+    ----------
+    lower : float or None, default None
+        The least value allowed; ``None``: no lower bound.
+    upper : float or None, default None
+        The greatest value allowed; ``None``: no upper bound.
+    description : str, default ""
+        What the parameter is (the ``description`` of its table).
+    """
 
     lower: float | None = None
     upper: float | None = None
     description: str = ""
 
     def contains(self, value: float) -> bool:
-        """Whether ``value`` lies within the declared bounds."""
+        """Whether ``value`` lies within the declared bounds.
+
+        Parameters
+        ----------
+        value : float
+            The parameter value.
+
+        Returns
+        -------
+        inside : bool
+            ``lower <= value <= upper`` for the bounds that are given.
+        """
         return (self.lower is None or value >= self.lower) and (self.upper is None or value <= self.upper)
 
     def text(self) -> str:
-        """``[lower, upper]`` with ``-inf``/``inf`` for a missing bound."""
+        """``[lower, upper]`` with ``-inf``/``inf`` for a missing bound.
+
+        Returns
+        -------
+        text : str
+            The range for a message, the bounds with up to 15 significant digits.
+        """
         lo = "-inf" if self.lower is None else f"{self.lower:.15g}"
         hi = "inf" if self.upper is None else f"{self.upper:.15g}"
         return f"[{lo}, {hi}]"
@@ -119,7 +146,33 @@ class ParameterRange:
 
 @dataclass(frozen=True, eq=False)
 class SystemFile:
-    """A loaded model file: metadata, scheduling box and the models."""
+    """A loaded model file: metadata, scheduling box and the models.
+
+    Parameters
+    ----------
+    name : str
+        The system's name (``[system] name``).
+    title : str
+        One line about the system (``[system] title``).
+    models : mapping of str to Model
+        The models by key (``[models.KEY]``), in file order.
+    default : str
+        The key of the model :meth:`model` gives when none is named.
+    scheduling : SchedulingSpace or None, default None
+        The scheduling box (``[scheduling]``); ``None`` when the file has none.
+    parameters : mapping of str to float, default {}
+        The parameter values the models were built with (the file's, with the
+        overrides applied).
+    source : str, default ""
+        Where the system comes from (``[system] source``, e.g. a paper's
+        equations).
+    description : str, default ""
+        The ``[system] description``.
+    path : pathlib.Path or None, default None
+        The file read; ``None`` for a system parsed from text.
+    parameter_ranges : mapping of str to ParameterRange, default {}
+        Declared ranges of the parameters that have one (``[parameters]`` tables).
+    """
 
     name: str
     title: str
@@ -130,7 +183,6 @@ class SystemFile:
     source: str = ""
     description: str = ""
     path: Path | None = None
-    #: declared ranges of the parameters that have one (``[parameters]`` tables)
     parameter_ranges: Mapping[str, ParameterRange] = field(default_factory=dict)
 
     @overload
@@ -150,6 +202,11 @@ class SystemFile:
             The model class the caller needs (e.g. :class:`~lpvest.systems.AffineLPV`):
             a model of another type is an error naming the file, the model and
             both types (and a type checker knows the result's type).
+
+        Returns
+        -------
+        Model
+            The model (an instance of ``kind`` when given).
 
         Raises
         ------
@@ -599,7 +656,28 @@ class _Reader:
 def loads_system(
     text: str, *, origin: str = "<string>", parameters: Mapping[str, float] | None = None
 ) -> SystemFile:
-    """Parse a model file from TOML text (``origin`` names it in errors)."""
+    """Parse a model file from TOML text (``origin`` names it in errors).
+
+    Parameters
+    ----------
+    text : str
+        The file's content.
+    origin : str, default "<string>"
+        What errors call the text (e.g. the file it came from).
+    parameters : mapping of str to float, optional
+        Values overriding the file's ``[parameters]``; an override outside a
+        parameter's declared range is an error.
+
+    Returns
+    -------
+    SystemFile
+        The system, with ``path`` ``None``.
+
+    Raises
+    ------
+    ModelFileError
+        ``text`` is not a string or not a valid model file.
+    """
     if not isinstance(text, str):
         raise ModelFileError(f"{origin}: expected the TOML text as a string, found {describe_value(text)}")
     return _build(parse_toml(text, origin), origin, parameters, None)
@@ -621,6 +699,16 @@ def load_system(
         Accept overrides outside a parameter's declared range (a study of what
         happens beyond it, such as where the plant loses stability); by default
         such an override is an error naming the parameter.
+
+    Returns
+    -------
+    SystemFile
+        The system, with its models built.
+
+    Raises
+    ------
+    ModelFileError
+        No such file or example, or the file is not a valid model file.
 
     Examples
     --------
@@ -728,7 +816,23 @@ def _parameter_out(value: float, rng: ParameterRange | None) -> Any:
 
 def dump_system(system: SystemFile) -> str:
     """The system as TOML text. Matrices are written with their values (model
-    parameters already applied); loading the text gives the same models."""
+    parameters already applied); loading the text gives the same models.
+
+    Parameters
+    ----------
+    system : SystemFile
+        The system; its ``path`` is not written.
+
+    Returns
+    -------
+    text : str
+        The TOML text.
+
+    Raises
+    ------
+    ModelFileError
+        A model cannot be written to a model file (it has no ``to_toml``).
+    """
     import tomli_w
 
     meta = {"name": system.name, "title": system.title, "default": system.default}
@@ -752,7 +856,20 @@ def dump_system(system: SystemFile) -> str:
 
 
 def save_system(system: SystemFile, path: str | Path) -> Path:
-    """Write :func:`dump_system` to ``path``."""
+    """Write :func:`dump_system` to ``path``.
+
+    Parameters
+    ----------
+    system : SystemFile
+        The system.
+    path : os.PathLike or str
+        The file to write (UTF-8); an existing file is replaced.
+
+    Returns
+    -------
+    path : pathlib.Path
+        ``path`` as a :class:`~pathlib.Path`.
+    """
     path = Path(path)
     path.write_text(dump_system(system), encoding="utf-8")
     return path

@@ -91,6 +91,18 @@ class Port:
     (direct feedthrough, e.g. a filtered estimate); ``False`` for a value fixed
     by the past alone (a state ``x_k``), which an FMU can report at ``t_k + h``
     right after the step.
+
+    Parameters
+    ----------
+    name : str
+        The port's name (the FMI variable name, and the key in the mappings of
+        inputs and outputs).
+    shape : tuple of int
+        ``(n,)``, ``(r, c)`` or ``()``, as above.
+    description : str, default ""
+        One line about the value (the FMI variable's description).
+    direct : bool, default True
+        Whether the output has direct feedthrough, as above.
     """
 
     name: str
@@ -105,7 +117,14 @@ class Port:
 
 @runtime_checkable
 class Sampled(Protocol):
-    """A discrete-time component: one ``step`` is one sample."""
+    """A discrete-time component: one ``step`` is one sample.
+
+    Parameters
+    ----------
+    *args, **kwargs
+        Not used: a Protocol cannot be instantiated. A class conforms by having
+        the members below (``isinstance`` checks that they exist).
+    """
 
     @property
     def input_ports(self) -> tuple[Port, ...]: ...
@@ -117,24 +136,68 @@ class Sampled(Protocol):
         """Back to the initial state."""
 
     def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
-        """Outputs at the current sample for these inputs; no state change."""
+        """Outputs at the current sample for these inputs; no state change.
+
+        Parameters
+        ----------
+        inputs : mapping of str to array_like
+            One sample's value of every input port, by port name (shape
+            ``port.shape``).
+
+        Returns
+        -------
+        outputs : dict of str to ndarray
+            The value of every output port, by port name (shape ``port.shape``).
+        """
         ...
 
     def step(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
-        """Consume the current sample: return :meth:`outputs` and advance."""
+        """Consume the current sample: return :meth:`outputs` and advance.
+
+        Parameters
+        ----------
+        inputs : mapping of str to array_like
+            One sample's value of every input port, by port name (shape
+            ``port.shape``).
+
+        Returns
+        -------
+        outputs : dict of str to ndarray
+            The value of every output port, by port name (shape ``port.shape``).
+        """
         ...
 
     def get_state(self) -> dict[str, Any]:
-        """A copy of the whole internal state (numpy arrays and scalars)."""
+        """A copy of the whole internal state (numpy arrays and scalars).
+
+        Returns
+        -------
+        state : dict of str to object
+            Names to numpy arrays or Python scalars, for :meth:`set_state`.
+        """
         ...
 
     def set_state(self, state: Mapping[str, Any]) -> None:
-        """Restore a state from :meth:`get_state`."""
+        """Restore a state from :meth:`get_state`.
+
+        Parameters
+        ----------
+        state : mapping of str to object
+            A state returned by :meth:`get_state` of a component of the same
+            kind and dimensions.
+        """
 
 
 @runtime_checkable
 class Timed(Protocol):
-    """A component that keeps time: ``reset(t0)``, ``step(inputs, dt=h, t_end=t + h)``."""
+    """A component that keeps time: ``reset(t0)``, ``step(inputs, dt=h, t_end=t + h)``.
+
+    Parameters
+    ----------
+    *args, **kwargs
+        Not used: a Protocol cannot be instantiated. A class conforms by having
+        the members below (``isinstance`` checks that they exist).
+    """
 
     timed: bool
 
@@ -145,19 +208,70 @@ class Timed(Protocol):
     def output_ports(self) -> tuple[Port, ...]: ...
 
     def reset(self, t0: float = 0.0) -> None:
-        """Back to the initial state at time ``t0``."""
+        """Back to the initial state at time ``t0``.
+
+        Parameters
+        ----------
+        t0 : float, default 0.0
+            The start time.
+        """
 
     def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
-        """Outputs at the current time for these inputs; no state change."""
+        """Outputs at the current time for these inputs; no state change.
+
+        Parameters
+        ----------
+        inputs : mapping of str to array_like
+            One sample's value of every input port, by port name (shape
+            ``port.shape``).
+
+        Returns
+        -------
+        outputs : dict of str to ndarray
+            The value of every output port, by port name (shape ``port.shape``).
+        """
         ...
 
     def step(self, inputs: Mapping[str, Any], *, dt: float, t_end: float | None = None) -> dict[str, np.ndarray]:
-        """Return :meth:`outputs` at the current time, then advance by ``dt`` (to ``t_end``)."""
+        """Return :meth:`outputs` at the current time, then advance by ``dt`` (to ``t_end``).
+
+        Parameters
+        ----------
+        inputs : mapping of str to array_like
+            One sample's value of every input port, by port name (shape
+            ``port.shape``).
+        dt : float
+            The step size ``h`` (> 0).
+        t_end : float or None, default None
+            The time reached, ``t + h`` exactly as the master computes it;
+            ``None``: the current time plus ``dt``.
+
+        Returns
+        -------
+        outputs : dict of str to ndarray
+            The value of every output port, by port name (shape ``port.shape``).
+        """
         ...
 
-    def get_state(self) -> dict[str, Any]: ...
+    def get_state(self) -> dict[str, Any]:
+        """A copy of the whole internal state, the time included.
 
-    def set_state(self, state: Mapping[str, Any]) -> None: ...
+        Returns
+        -------
+        state : dict of str to object
+            Names to numpy arrays or Python scalars, for :meth:`set_state`.
+        """
+        ...
+
+    def set_state(self, state: Mapping[str, Any]) -> None:
+        """Restore a state from :meth:`get_state`.
+
+        Parameters
+        ----------
+        state : mapping of str to object
+            A state returned by :meth:`get_state` of a component of the same
+            kind and dimensions.
+        """
 
 
 def input_key(inputs: Mapping[str, Any], names: tuple[str, ...] | None = None) -> tuple[Any, ...] | None:
@@ -170,6 +284,21 @@ def input_key(inputs: Mapping[str, Any], names: tuple[str, ...] | None = None) -
     a value is missing or not numeric (the caller then evaluates, and raises its
     usual error).
 
+    Parameters
+    ----------
+    inputs : mapping of str to array_like
+        One sample's inputs by name.
+    names : tuple of str or None, default None
+        The inputs to fingerprint, in this order (other items of ``inputs`` are
+        left out); ``None``: every item of ``inputs``, in its order.
+
+    Returns
+    -------
+    key : tuple or None
+        One ``(name, shape, bytes)`` triple per input, or ``None`` as above.
+
+    Examples
+    --------
     >>> input_key({"y": [1.0]}) == input_key({"y": np.array([1.0])})
     True
     >>> input_key({"y": [1.0]}) == input_key({"y": [[1.0]]})
@@ -193,6 +322,14 @@ class Component(ABC):
     ``_read``, ``_evaluate``, ``_commit``, ``get_state`` and ``_set_state``.
     ``__init__`` calls :meth:`reset` last, so a subclass sets what ``_reset``
     needs before calling it.
+
+    Parameters
+    ----------
+    inputs : tuple of Port
+        The input ports, in the order :meth:`outputs` fingerprints them
+        (:func:`input_key`).
+    outputs : tuple of Port
+        The output ports.
     """
 
     timed: ClassVar[bool] = False
@@ -232,7 +369,13 @@ class Component(ABC):
 
     @abstractmethod
     def get_state(self) -> dict[str, Any]:
-        """A copy of the whole internal state."""
+        """A copy of the whole internal state.
+
+        Returns
+        -------
+        state : dict of str to object
+            Names to numpy arrays or Python scalars, for :meth:`set_state`.
+        """
 
     @abstractmethod
     def _set_state(self, state: Mapping[str, Any]) -> None:
@@ -245,13 +388,33 @@ class Component(ABC):
         self._reset()
 
     def set_state(self, state: Mapping[str, Any]) -> None:
-        """Restore a state from :meth:`get_state`."""
+        """Restore a state from :meth:`get_state`; a kept evaluation is dropped.
+
+        Parameters
+        ----------
+        state : mapping of str to object
+            A state returned by :meth:`get_state` of a component of the same
+            kind and dimensions (checked by the subclass's ``_set_state``).
+        """
         self._set_state(state)
         self._memo = None
 
     def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
         """The outputs at the current sample for these inputs; no state change
-        (the evaluation is kept for a following :meth:`step` with the same inputs)."""
+        (the evaluation is kept for a following :meth:`step` with the same inputs).
+
+        Parameters
+        ----------
+        inputs : mapping of str to array_like
+            One sample's value of every input port, by port name (shape
+            ``port.shape``).
+
+        Returns
+        -------
+        outputs : dict of str to ndarray
+            The value of every output port, by port name (shape ``port.shape``);
+            copies, which the caller may modify.
+        """
         key = input_key(inputs, self._in_names)
         memo = self._memo
         if key is None or memo is None or memo[0] != key:
@@ -270,7 +433,22 @@ class Component(ABC):
         return self._evaluate(self._read(inputs))
 
     def step(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
-        """The outputs at the current sample; then advance to the next one."""
+        """The outputs at the current sample; then advance to the next one.
+
+        The evaluation kept by :meth:`outputs` is reused when ``inputs`` have the
+        same :func:`input_key`; otherwise the sample is read and evaluated.
+
+        Parameters
+        ----------
+        inputs : mapping of str to array_like
+            One sample's value of every input port, by port name (shape
+            ``port.shape``).
+
+        Returns
+        -------
+        outputs : dict of str to ndarray
+            The value of every output port, by port name (shape ``port.shape``).
+        """
         out, pending = self._take(inputs)
         self._commit(pending)
         return out
@@ -279,7 +457,19 @@ class Component(ABC):
         """Evaluate the current sample for a following :meth:`advance`, for a
         caller that guarantees these inputs stay unchanged (the FMU adapter):
         like :meth:`outputs`, without fingerprinting the inputs and without
-        copying the outputs (the component's own arrays: do not modify them)."""
+        copying the outputs (the component's own arrays: do not modify them).
+
+        Parameters
+        ----------
+        inputs : mapping of str to array_like
+            One sample's value of every input port, by port name (shape
+            ``port.shape``).
+
+        Returns
+        -------
+        outputs : dict of str to ndarray
+            The value of every output port, by port name (not copies).
+        """
         out, pending = self._evaluate(self._read(inputs))
         self._memo = (None, out, pending)  # only advance() takes it: step() compares keys, and None != a key
         return out
@@ -293,7 +483,14 @@ class Component(ABC):
         """:meth:`step` with the inputs of the last :meth:`outputs` call, which the
         caller guarantees unchanged (the FMU adapter: no input was set since), so
         they are neither read nor fingerprinted again; ``None`` (and no step)
-        when no evaluation is kept."""
+        when no evaluation is kept.
+
+        Returns
+        -------
+        outputs : dict of str to ndarray or None
+            The outputs of the kept evaluation (those :meth:`outputs` or
+            :meth:`prepare` gave), or ``None``.
+        """
         kept = self._kept()
         if kept is None:
             return None
@@ -305,7 +502,18 @@ class TimedComponent(Component):
     """The base of every streaming component that keeps time: ``reset(t0)``,
     ``step(inputs, dt=h, t_end=t + h)`` (``t_end``: the master's communication
     point, free of the round-off of summed steps). ``_commit`` receives
-    ``(pending, t_end)``."""
+    ``(pending, t_end)``.
+
+    Parameters
+    ----------
+    inputs : tuple of Port
+        The input ports, in the order :meth:`outputs` fingerprints them
+        (:func:`input_key`).
+    outputs : tuple of Port
+        The output ports.
+    t0 : float, default 0.0
+        The start time (:meth:`reset` without an argument goes back to it).
+    """
 
     timed: ClassVar[bool] = True
 
@@ -314,7 +522,13 @@ class TimedComponent(Component):
         super().__init__(inputs, outputs)
 
     def reset(self, t0: float | None = None) -> None:
-        """Back to the initial state at time ``t0`` (default: the last start time)."""
+        """Back to the initial state at time ``t0`` (default: the last start time).
+
+        Parameters
+        ----------
+        t0 : float or None, default None
+            The new start time, kept for later resets; ``None``: the last one.
+        """
         if t0 is not None:
             self.t0 = float(t0)
         self._memo = None
@@ -332,7 +546,29 @@ class TimedComponent(Component):
     def step(  # type: ignore[override]
         self, inputs: Mapping[str, Any], *, dt: float, t_end: float | None = None
     ) -> dict[str, np.ndarray]:
-        """The outputs at the current time; then advance by ``dt`` (to ``t_end`` when given)."""
+        """The outputs at the current time; then advance by ``dt`` (to ``t_end`` when given).
+
+        Parameters
+        ----------
+        inputs : mapping of str to array_like
+            One sample's value of every input port, by port name (shape
+            ``port.shape``).
+        dt : float
+            The step size ``h`` (> 0).
+        t_end : float or None, default None
+            The time reached, ``t + h`` exactly as the master computes it;
+            ``None``: the current time plus ``dt``.
+
+        Returns
+        -------
+        outputs : dict of str to ndarray
+            The value of every output port, by port name (shape ``port.shape``).
+
+        Raises
+        ------
+        DimensionError
+            ``dt`` is not positive and finite.
+        """
         dt = float(dt)
         if not dt > 0 or not np.isfinite(dt):
             raise DimensionError(f"the step size must be positive and finite; found {dt!r}")
@@ -342,7 +578,20 @@ class TimedComponent(Component):
 
     def advance(self, *, dt: float = 0.0, t_end: float | None = None) -> dict[str, np.ndarray] | None:
         """:meth:`step` with the inputs of the last :meth:`outputs` call (see
-        :meth:`Component.advance`); ``None`` (and no step) when none is kept."""
+        :meth:`Component.advance`); ``None`` (and no step) when none is kept.
+
+        Parameters
+        ----------
+        dt : float, default 0.0
+            The step size ``h``; unlike :meth:`step`, not checked.
+        t_end : float or None, default None
+            The time reached; ``None``: the current time plus ``dt``.
+
+        Returns
+        -------
+        outputs : dict of str to ndarray or None
+            The outputs of the kept evaluation, or ``None``.
+        """
         kept = self._kept()
         if kept is None:
             return None
@@ -352,7 +601,27 @@ class TimedComponent(Component):
 
 def run_streaming(estimator: Sampled, inputs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     """Run a sampled component over whole input sequences (row ``k`` = sample ``k``)
-    and stack its outputs, each of shape ``(T, *port.shape)``."""
+    and stack its outputs, each of shape ``(T, *port.shape)``.
+
+    Parameters
+    ----------
+    estimator : Sampled
+        The component, stepped from its current state with ``step(inputs)``
+        (no ``dt``: not a :class:`Timed` one).
+    inputs : mapping of str to ndarray, shape (T, ...)
+        Every input port's sequence by name, all of the same length ``T``.
+
+    Returns
+    -------
+    outputs : dict of str to ndarray, shape (T, ...)
+        Every output port's sequence by name; row ``k`` is the output of
+        sample ``k``.
+
+    Raises
+    ------
+    DimensionError
+        The sequences differ in length (or there are none).
+    """
     lengths = {name: np.shape(v)[0] for name, v in inputs.items()}
     if len(set(lengths.values())) != 1:
         raise DimensionError(f"input sequences have different lengths: {lengths}")

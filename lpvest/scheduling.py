@@ -86,7 +86,32 @@ class SchedulingSpace:
 
     def check(self, p: np.ndarray, *, what: str = "scheduling value") -> np.ndarray:
         """Return ``p`` as a float vector; raise if it is NaN, of the wrong
-        length or outside the box."""
+        length or outside the box.
+
+        Parameters
+        ----------
+        p : array_like
+            One scheduling value, ``n_p`` numbers (any shape of that size is
+            flattened).
+        what : str, default "scheduling value"
+            How the range error calls ``p`` (``"<what> <name> = <value> is
+            outside its declared range [lo, hi]"``).
+
+        Returns
+        -------
+        p : ndarray, shape (n_p,)
+            ``p`` as a float vector (values within a relative tolerance of
+            ``1e-12`` outside the box are accepted as they are, not clipped).
+
+        Raises
+        ------
+        DimensionError
+            ``p`` does not have ``n_p`` values.
+        NonFiniteError
+            ``p`` holds NaN or inf.
+        SchedulingRangeError
+            A component lies outside the box.
+        """
         p = np.asarray(p, dtype=float).reshape(-1)
         if p.shape != (self.dim,):
             raise DimensionError(f"p has shape {p.shape}; expected ({self.dim},)")
@@ -95,6 +120,19 @@ class SchedulingSpace:
         return p
 
     def contains(self, p: np.ndarray) -> bool:
+        """Whether ``p`` has ``n_p`` values inside the box (:meth:`check` passes).
+
+        Parameters
+        ----------
+        p : array_like
+            One scheduling value, ``n_p`` numbers.
+
+        Returns
+        -------
+        inside : bool
+            ``False`` for a value of the wrong length or outside the box; a
+            value holding NaN or inf raises :class:`~lpvest.errors.NonFiniteError`.
+        """
         try:
             self.check(p)
         except (SchedulingRangeError, DimensionError):
@@ -103,22 +141,60 @@ class SchedulingSpace:
 
     def corners(self) -> np.ndarray:
         """The ``2**n_p`` box corners, shape ``(2**n_p, n_p)``; corner ``v`` takes
-        the upper bound in component ``j`` when bit ``j`` of ``v`` is set."""
+        the upper bound in component ``j`` when bit ``j`` of ``v`` is set.
+
+        Returns
+        -------
+        corners : ndarray, shape (2**n_p, n_p)
+            The corners, row ``v`` being corner ``v``.
+        """
         return box_vertices(self.lower, self.upper)
 
     def sample(self, rng: np.random.Generator, size: int) -> np.ndarray:
-        """``size`` points drawn uniformly from the box, shape ``(size, n_p)``."""
+        """``size`` points drawn uniformly from the box, shape ``(size, n_p)``.
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+            The random generator drawn from (``rng.random``).
+        size : int
+            The number of points.
+
+        Returns
+        -------
+        points : ndarray, shape (size, n_p)
+            One point per row.
+        """
         return self.lower + (self.upper - self.lower) * rng.random((size, self.dim))
 
     def as_dict(self, p: np.ndarray) -> dict[str, np.ndarray]:
-        """Component values by name; ``p`` has shape ``(..., n_p)``."""
+        """Component values by name; ``p`` has shape ``(..., n_p)``.
+
+        Parameters
+        ----------
+        p : array_like, shape (..., n_p)
+            Scheduling values, one per row (the last axis holds the components).
+            Not checked against the box.
+
+        Returns
+        -------
+        values : dict of str to ndarray
+            Component name to ``p[..., j]``, of shape ``p.shape[:-1]``.
+        """
         p = np.asarray(p, dtype=float)
         return {n: p[..., j] for j, n in enumerate(self.names)}
 
 
 @runtime_checkable
 class BasisFunction(Protocol):
-    """A scalar function ``psi(p)`` of the scheduling vector."""
+    """A scalar function ``psi(p)`` of the scheduling vector.
+
+    Parameters
+    ----------
+    *args, **kwargs
+        Not used: a Protocol cannot be instantiated. :class:`Monomial`,
+        :class:`FormulaBasis` and :class:`CallableBasis` conform to it.
+    """
 
     @property
     def name(self) -> str:
@@ -128,11 +204,33 @@ class BasisFunction(Protocol):
     def __call__(self, p: np.ndarray) -> float: ...
 
     def evaluate(self, p: np.ndarray) -> np.ndarray:
-        """Vectorised evaluation, ``p`` of shape ``(T, n_p)`` -> ``(T,)``."""
+        """Vectorised evaluation, ``p`` of shape ``(T, n_p)`` -> ``(T,)``.
+
+        Parameters
+        ----------
+        p : ndarray, shape (T, n_p)
+            Scheduling values, one per row.
+
+        Returns
+        -------
+        psi : ndarray, shape (T,)
+            ``psi(p[k])`` for every row ``k``.
+        """
         ...
 
     def bounds(self, space: SchedulingSpace) -> tuple[float, float]:
-        """An interval that contains ``psi(p)`` for every ``p`` in ``space``."""
+        """An interval that contains ``psi(p)`` for every ``p`` in ``space``.
+
+        Parameters
+        ----------
+        space : SchedulingSpace
+            The box of the scheduling values.
+
+        Returns
+        -------
+        lower, upper : float
+            The interval's ends.
+        """
         ...
 
 
@@ -162,6 +260,27 @@ class Monomial:
 
     @classmethod
     def parse(cls, text: str, space: SchedulingSpace) -> Monomial:
+        """The monomial written as ``text``, e.g. ``"p1*p2"`` or ``"theta^2"``.
+
+        Parameters
+        ----------
+        text : str
+            A product of powers (non-negative whole numbers) of the components,
+            with coefficient 1; kept as the :attr:`name`.
+        space : SchedulingSpace
+            The scheduling components the formula may use.
+
+        Returns
+        -------
+        Monomial
+            The basis function, with one exponent per component of ``space``.
+
+        Raises
+        ------
+        ExpressionError
+            ``text`` is not a valid formula of the components, or not such a
+            product (a constant included).
+        """
         expr = Expression.parse(text, allowed=space.names)
         exps = expr.monomial_exponents(space.names)
         if exps is None or sum(exps) == 0:
@@ -173,7 +292,20 @@ class Monomial:
 
     @classmethod
     def component(cls, j: int, space: SchedulingSpace) -> Monomial:
-        """The basis function ``psi(p) = p_j`` (0-based ``j``)."""
+        """The basis function ``psi(p) = p_j`` (0-based ``j``).
+
+        Parameters
+        ----------
+        j : int
+            The component's index (0-based).
+        space : SchedulingSpace
+            The scheduling components; the name is ``space.names[j]``.
+
+        Returns
+        -------
+        Monomial
+            Exponent 1 for component ``j``, 0 for the others.
+        """
         exps = tuple(1 if i == j else 0 for i in range(space.dim))
         return cls(exps, space.names[j])
 
@@ -190,10 +322,35 @@ class Monomial:
         return float(out)
 
     def evaluate(self, p: np.ndarray) -> np.ndarray:
+        """Vectorised evaluation, ``p`` of shape ``(..., n_p)`` -> ``(...)``.
+
+        Parameters
+        ----------
+        p : array_like, shape (..., n_p)
+            Scheduling values, one per row (the last axis holds the components).
+
+        Returns
+        -------
+        psi : ndarray, shape (...)
+            ``prod_j p[..., j] ** exponents[j]``.
+        """
         p = np.asarray(p, dtype=float)
         return np.prod(p ** np.asarray(self.exponents, dtype=float), axis=-1)
 
     def bounds(self, space: SchedulingSpace) -> tuple[float, float]:
+        """The exact range of ``psi(p)`` over the box (interval arithmetic is
+        exact here: every component appears in one factor).
+
+        Parameters
+        ----------
+        space : SchedulingSpace
+            The box; its components are those of ``p``, in order.
+
+        Returns
+        -------
+        lower, upper : float
+            The least and the greatest value of ``psi`` over the box.
+        """
         lo, hi = 1.0, 1.0
         for j, e in enumerate(self.exponents):
             a, b = _interval_power(float(space.lower[j]), float(space.upper[j]), e)
@@ -208,6 +365,18 @@ class FormulaBasis:
 
     ``bounds`` (an interval containing the range over the box) is needed only
     for the conversion to polytopic form.
+
+    Parameters
+    ----------
+    expression : Expression
+        The formula, of the names in ``names``.
+    names : tuple of str, length n_p
+        The scheduling component names, in the order of the columns of ``p``.
+    declared_bounds : tuple of (float, float) or None, default None
+        An interval containing ``psi(p)`` over the box (not checked); ``None``:
+        unknown (:meth:`bounds` raises).
+    name : str, default ""
+        How the function is written; empty: the expression's text.
     """
 
     expression: Expression
@@ -223,11 +392,40 @@ class FormulaBasis:
         return float(self.evaluate(np.asarray(p, dtype=float)[None, :])[0])
 
     def evaluate(self, p: np.ndarray) -> np.ndarray:
+        """Vectorised evaluation, ``p`` of shape ``(..., n_p)`` -> ``(...)``.
+
+        Parameters
+        ----------
+        p : array_like, shape (..., n_p)
+            Scheduling values, one per row (the last axis holds the components).
+
+        Returns
+        -------
+        psi : ndarray, shape (...)
+            The formula's value at every row (a constant broadcast to that shape).
+        """
         p = np.asarray(p, dtype=float)
         vals = {n: p[..., j] for j, n in enumerate(self.names)}
         return np.broadcast_to(self.expression.evaluate(vals), p.shape[:-1]).astype(float)
 
     def bounds(self, space: SchedulingSpace) -> tuple[float, float]:
+        """The declared interval containing ``psi(p)`` over the box.
+
+        Parameters
+        ----------
+        space : SchedulingSpace
+            The box (not used: the declared bounds are returned as given).
+
+        Returns
+        -------
+        lower, upper : float
+            :attr:`declared_bounds`.
+
+        Raises
+        ------
+        ExpressionError
+            No bounds were declared.
+        """
         if self.declared_bounds is None:
             raise ExpressionError(
                 f"basis function {abbreviate(self.name)} is not a monomial: give its bounds over the "
@@ -242,6 +440,16 @@ class CallableBasis:
 
     Not storable in a model file. ``bounds`` is needed only for the conversion
     to polytopic form.
+
+    Parameters
+    ----------
+    fn : callable
+        ``fn(p) -> float`` for one scheduling value ``p`` of shape ``(n_p,)``.
+    name : str
+        How the function is called in messages and displays.
+    declared_bounds : tuple of (float, float) or None, default None
+        An interval containing ``fn(p)`` over the box (not checked); ``None``:
+        unknown (:meth:`bounds` raises).
     """
 
     fn: Callable[[np.ndarray], float]
@@ -252,10 +460,40 @@ class CallableBasis:
         return float(self.fn(np.asarray(p, dtype=float)))
 
     def evaluate(self, p: np.ndarray) -> np.ndarray:
+        """Evaluation row by row (one call of ``fn`` per row), ``p`` of shape
+        ``(..., n_p)`` -> ``(...)``.
+
+        Parameters
+        ----------
+        p : array_like, shape (..., n_p)
+            Scheduling values, one per row (the last axis holds the components).
+
+        Returns
+        -------
+        psi : ndarray, shape (...)
+            ``fn`` at every row, as float.
+        """
         p = np.asarray(p, dtype=float)
         return np.array([self(row) for row in p.reshape(-1, p.shape[-1])]).reshape(p.shape[:-1])
 
     def bounds(self, space: SchedulingSpace) -> tuple[float, float]:
+        """The declared interval containing ``psi(p)`` over the box.
+
+        Parameters
+        ----------
+        space : SchedulingSpace
+            The box (not used: the declared bounds are returned as given).
+
+        Returns
+        -------
+        lower, upper : float
+            :attr:`declared_bounds`.
+
+        Raises
+        ------
+        ExpressionError
+            No bounds were declared.
+        """
         if self.declared_bounds is None:
             raise ExpressionError(
                 f"basis function {abbreviate(self.name)} is a Python callable: give its bounds over "
@@ -269,7 +507,30 @@ def parse_basis(
 ) -> BasisFunction:
     """A basis function from its model-file text: a :class:`Monomial` when the
     formula is a product of powers of the components, else a
-    :class:`FormulaBasis` (with optional ``bounds``)."""
+    :class:`FormulaBasis` (with optional ``bounds``).
+
+    Parameters
+    ----------
+    text : str
+        The formula of the scheduling components; it may not use ``shift``.
+    space : SchedulingSpace
+        The scheduling components the formula may use.
+    bounds : tuple of (float, float) or None, default None
+        An interval containing the function's range over the box (from the
+        file's ``bounds`` table). Given, the result is a :class:`FormulaBasis`
+        with these bounds even for a product of powers.
+
+    Returns
+    -------
+    BasisFunction
+        A :class:`Monomial` or a :class:`FormulaBasis` named ``text``.
+
+    Raises
+    ------
+    ExpressionError
+        ``text`` is not a valid formula of the components, uses ``shift`` with
+        a non-zero shift, or is constant.
+    """
     expr = Expression.parse(text, allowed=space.names)
     if expr.shifts and any(k != 0 for ks in expr.shifts.values() for k in ks):
         raise ExpressionError(f"basis function {abbreviate(text)} may not use shift(); it depends on p_t only")
@@ -282,7 +543,19 @@ def parse_basis(
 
 
 def box_vertices(lower: Sequence[float] | np.ndarray, upper: Sequence[float] | np.ndarray) -> np.ndarray:
-    """Corners of a box in the bit order of :meth:`SchedulingSpace.corners`."""
+    """Corners of a box in the bit order of :meth:`SchedulingSpace.corners`.
+
+    Parameters
+    ----------
+    lower, upper : array_like, shape (n,)
+        The box ``lower <= p <= upper``.
+
+    Returns
+    -------
+    corners : ndarray, shape (2**n, n)
+        Corner ``v`` takes ``upper[j]`` where bit ``j`` of ``v`` is set, else
+        ``lower[j]``.
+    """
     n = len(lower)
     rows = []
     for bits in product((0, 1), repeat=n):

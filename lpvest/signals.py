@@ -69,6 +69,30 @@ def parse_table(text: str, n: int, *, name: str = "table") -> tuple[np.ndarray, 
     """Parse ``"t v_1 ... v_n; t v_1 ... v_n; ..."`` (rows separated by ``;`` or
     newlines, numbers by spaces or commas) into times ``(m,)`` and values ``(m, n)``.
 
+    Parameters
+    ----------
+    text : str
+        The rows, each a time and ``n`` values; empty rows are skipped.
+    n : int
+        The number of signal components (values per row).
+    name : str, default "table"
+        How errors call the table (e.g. the FMU parameter's name).
+
+    Returns
+    -------
+    times : ndarray, shape (m,)
+        The first column, strictly increasing.
+    values : ndarray, shape (m, n)
+        The other columns.
+
+    Raises
+    ------
+    SignalError
+        No rows, a row without ``n + 1`` numbers, a field that is not a number,
+        a non-finite number, or times not strictly increasing.
+
+    Examples
+    --------
     >>> parse_table("0 0.5; 10, -0.5", 1)
     (array([ 0., 10.]), array([[ 0.5],
            [-0.5]]))
@@ -105,6 +129,36 @@ class SignalSpec:
 
     Build it with :meth:`build`, which checks every parameter and names the
     culprit (``prefix`` + parameter name + 1-based index) in its error.
+
+    Parameters
+    ----------
+    kind : str
+        One of :data:`SIGNAL_KINDS`.
+    n : int
+        The number of components.
+    amplitude, omega, phase : ndarray, shape (n,)
+        Of the ``sinusoid`` and ``decaying`` kinds: ``amplitude sin(omega t + phase)``
+        (``omega`` in rad per unit of time, ``phase`` in rad).
+    offset : ndarray, shape (n,)
+        The value before ``onset``, the ``constant`` value, the centre of the
+        ``sinusoid``, ``decaying`` and ``gaussian`` kinds and the start of the
+        ``random`` walk.
+    decay : ndarray, shape (n,)
+        The rate of ``exp(-decay t)`` of the ``decaying`` kind.
+    std : ndarray, shape (n,)
+        The standard deviation of the ``gaussian`` kind (>= 0).
+    rate : ndarray, shape (n,)
+        The largest slope of the ``random`` walk (>= 0).
+    lower, upper : ndarray, shape (n,)
+        The bounds the ``random`` walk is clipped to (may be infinite).
+    onset : float, default 0.0
+        The time the signal starts at (``zero`` and ``table`` ignore it).
+    seed : int, default 0
+        The seed of ``numpy.random.default_rng`` (random kinds).
+    table_times : ndarray, shape (m,) or None, default None
+        The ``table`` kind's strictly increasing times; ``None`` for other kinds.
+    table_values : ndarray, shape (m, n) or None, default None
+        The ``table`` kind's values at ``table_times``; ``None`` for other kinds.
     """
 
     kind: str
@@ -148,6 +202,52 @@ class SignalSpec:
         ``lower``/``upper`` bound the ``random`` kind (it starts at ``offset``
         clipped into them); ``table`` is the text :func:`parse_table` reads or
         a pair ``(times, values)``.
+
+        Parameters
+        ----------
+        kind : str
+            One of :data:`SIGNAL_KINDS`.
+        n : int
+            The number of components (>= 0).
+        amplitude : array_like, shape (n,) or float, default 1.0
+            Amplitude of the ``sinusoid`` and ``decaying`` kinds.
+        omega : array_like, shape (n,) or float, default 1.0
+            Angular frequency (rad per unit of time) of those kinds.
+        phase : array_like, shape (n,) or float, default 0.0
+            Phase (rad) of those kinds.
+        offset : array_like, shape (n,) or float, default 0.0
+            The value before ``onset`` and the centre or start value (see
+            :class:`SignalSpec`).
+        decay : array_like, shape (n,) or float, default 0.0
+            Rate of ``exp(-decay t)`` of the ``decaying`` kind.
+        std : array_like, shape (n,) or float, default 1.0
+            Standard deviation of the ``gaussian`` kind (>= 0).
+        rate : array_like, shape (n,) or float, default 1.0
+            Largest slope of the ``random`` walk (>= 0).
+        lower : array_like, shape (n,) or float, default -inf
+            Lower bound of the ``random`` walk (may be ``-inf``; not NaN).
+        upper : array_like, shape (n,) or float, default inf
+            Upper bound of the ``random`` walk (may be ``inf``; not NaN); ``lower <= upper``.
+        onset : float, default 0.0
+            The time the signal starts at (finite).
+        seed : int, default 0
+            Seed of the random kinds (a non-negative integer).
+        table : str or tuple of (array_like, array_like) or None, default None
+            The rows of the ``table`` kind (required for it, ignored by the
+            others): text, or ``(times, values)`` of shapes ``(m,)`` and ``(m, n)``.
+        prefix : str, default ""
+            Put before every parameter name in error messages (how an FMU names
+            the parameters).
+
+        Returns
+        -------
+        SignalSpec
+            The checked specification; its arrays are read-only.
+
+        Raises
+        ------
+        SignalError
+            A parameter is invalid; the message names it.
         """
         if kind not in SIGNAL_KINDS:
             raise SignalError(
@@ -220,7 +320,15 @@ class SignalSpec:
         return self.kind in ("gaussian", "random")
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Per-component interval that holds every value the signal can take."""
+        """Per-component interval that holds every value the signal can take.
+
+        Returns
+        -------
+        lower, upper : ndarray, shape (n,)
+            The interval's ends; infinite for a ``gaussian`` component with
+            ``std > 0``, a ``random`` one with ``rate > 0`` and infinite bounds,
+            or a ``decaying`` one with ``decay < 0``.
+        """
         if self.kind == "zero":
             z = np.zeros(self.n)
             return z, z.copy()
@@ -245,7 +353,19 @@ class SignalSpec:
         return self.table_values.min(axis=0), self.table_values.max(axis=0)
 
     def deterministic_value(self, t: float) -> np.ndarray:
-        """The value at time ``t`` of a deterministic kind."""
+        """The value at time ``t`` of a deterministic kind.
+
+        Parameters
+        ----------
+        t : float
+            The time.
+
+        Returns
+        -------
+        value : ndarray, shape (n,)
+            The signal at ``t``. For the ``gaussian`` and ``random`` kinds (not
+            checked) this is not their value; use :class:`SignalGenerator`.
+        """
         if self.kind == "table":
             assert self.table_times is not None and self.table_values is not None
             return np.array([np.interp(t, self.table_times, self.table_values[:, j]) for j in range(self.n)])
@@ -266,6 +386,11 @@ class SignalGenerator:
     current time; ``advance(t)`` moves to the later time ``t``.
     ``get_state``/``set_state`` save and restore everything (time, value,
     generator state), so a restored generator continues identically.
+
+    Parameters
+    ----------
+    spec : SignalSpec
+        The signal; the generator starts at time 0.
     """
 
     def __init__(self, spec: SignalSpec) -> None:
@@ -273,6 +398,15 @@ class SignalGenerator:
         self.start(0.0)
 
     def start(self, t0: float) -> None:
+        """(Re)start at time ``t0``: the random generator is seeded again from
+        ``spec.seed`` and :attr:`value` set to the value at ``t0`` (the
+        ``random`` kind starts at ``offset`` clipped into ``[lower, upper]``).
+
+        Parameters
+        ----------
+        t0 : float
+            The start time.
+        """
         spec = self.spec
         self._rng = np.random.default_rng(spec.seed)
         self._t = float(t0)
@@ -298,7 +432,24 @@ class SignalGenerator:
         return self._value.copy()
 
     def advance(self, t: float) -> np.ndarray:
-        """Move to time ``t`` (>= the current time) and return the new value."""
+        """Move to time ``t`` (>= the current time) and return the new value.
+
+        Parameters
+        ----------
+        t : float
+            The new time; equal to the current time is allowed (a ``random``
+            walk then stays, a ``gaussian`` signal draws again).
+
+        Returns
+        -------
+        value : ndarray, shape (n,)
+            The value at ``t`` (a copy).
+
+        Raises
+        ------
+        SignalError
+            ``t`` is before the current time.
+        """
         spec = self.spec
         t = float(t)
         if not t >= self._t:
@@ -316,9 +467,31 @@ class SignalGenerator:
         return self.value
 
     def get_state(self) -> dict[str, Any]:
+        """A copy of the whole state, for :meth:`set_state`.
+
+        Returns
+        -------
+        state : dict
+            ``"t"``: the current time (float), ``"value"``: the current value
+            (ndarray, shape (n,)), ``"rng"``: the random generator's
+            ``bit_generator.state`` (dict).
+        """
         return {"t": self._t, "value": self._value.copy(), "rng": self._rng.bit_generator.state}
 
     def set_state(self, state: dict[str, Any]) -> None:
+        """Restore a state from :meth:`get_state`; the generator continues as the
+        one that gave it.
+
+        Parameters
+        ----------
+        state : dict
+            With the keys ``"t"``, ``"value"`` and ``"rng"`` of :meth:`get_state`.
+
+        Raises
+        ------
+        DimensionError
+            The value does not have ``spec.n`` components.
+        """
         value = np.asarray(state["value"], dtype=float)
         if value.shape != (self.spec.n,):
             raise DimensionError(f"signal state value has shape {value.shape}; expected ({self.spec.n},)")
@@ -331,7 +504,25 @@ class SignalGenerator:
 
 def sample_signal(spec: SignalSpec, times: Sequence[float] | np.ndarray) -> np.ndarray:
     """The signal at increasing ``times`` (shape ``(T,)``), as an array ``(T, n)``:
-    a :class:`SignalGenerator` started at ``times[0]`` and advanced to each time."""
+    a :class:`SignalGenerator` started at ``times[0]`` and advanced to each time.
+
+    Parameters
+    ----------
+    spec : SignalSpec
+        The signal.
+    times : array_like, shape (T,)
+        Non-decreasing times (flattened).
+
+    Returns
+    -------
+    values : ndarray, shape (T, n)
+        Row ``i`` is the signal at ``times[i]``.
+
+    Raises
+    ------
+    SignalError
+        The times decrease.
+    """
     t = np.asarray(times, dtype=float).reshape(-1)
     out = np.empty((t.size, spec.n))
     if t.size == 0:
@@ -355,6 +546,26 @@ class SchedulerComponent(TimedComponent):
     The signal must stay inside the scheduling box: a specification that can
     leave it is rejected with an error naming the parameter (``prefix``: how
     the FMU names the parameters).
+
+    Parameters
+    ----------
+    signal : SignalSpec
+        The scheduling signal, one component per scheduling variable; the
+        output ``p`` is its value clipped to the box.
+    space : SchedulingSpace
+        The model's scheduling box.
+    simplex_map : SimplexMap or None, default None
+        The map to the simplex of a polytopic model; given, the component also
+        outputs ``alpha = simplex_map(p)``.
+    prefix : str, default ""
+        Put before the parameter names in error messages.
+
+    Raises
+    ------
+    SignalError
+        The signal's number of components is not the box's, or the signal can
+        leave the box (for the ``random`` kind: its ``lower``/``upper`` do not
+        lie in the box).
 
     Examples
     --------
@@ -422,6 +633,13 @@ class SchedulerComponent(TimedComponent):
         self._gen.advance(t_end)
 
     def get_state(self) -> dict[str, Any]:
+        """A copy of the whole state (that of the signal's generator).
+
+        Returns
+        -------
+        state : dict
+            :meth:`SignalGenerator.get_state` of the signal.
+        """
         return self._gen.get_state()
 
     def _set_state(self, state: Any) -> None:
@@ -430,7 +648,16 @@ class SchedulerComponent(TimedComponent):
 
 class SourceComponent(TimedComponent):
     """Named signals (e.g. ``u`` and ``w``), each with its own specification,
-    as a timed streaming component (:mod:`lpvest.protocol`)."""
+    as a timed streaming component (:mod:`lpvest.protocol`).
+
+    Parameters
+    ----------
+    signals : dict of str to SignalSpec
+        The output ports' names and signals, in port order; all are advanced
+        together.
+    descriptions : dict of str to str or None, default None
+        The output ports' descriptions by name (empty for a name left out).
+    """
 
     def __init__(self, signals: dict[str, SignalSpec], descriptions: dict[str, str] | None = None) -> None:
         self.signals = dict(signals)
@@ -458,6 +685,13 @@ class SourceComponent(TimedComponent):
             gen.advance(t_end)
 
     def get_state(self) -> dict[str, Any]:
+        """A copy of the whole state (that of every signal's generator).
+
+        Returns
+        -------
+        state : dict of str to dict
+            Signal name to its :meth:`SignalGenerator.get_state`.
+        """
         return {name: gen.get_state() for name, gen in self._gens.items()}
 
     def _set_state(self, state: Any) -> None:
