@@ -19,6 +19,7 @@ from lpvest import LMIInfeasibleError, PolytopicLPV, load_system
 from lpvest.design import (
     KIND_PD,
     KIND_ROBUST,
+    DesignAttempt,
     HinfDesign,
     HinfProgram,
     design_hinf,
@@ -27,9 +28,10 @@ from lpvest.design import (
     multiplier,
     search_epsilon,
 )
+from lpvest.design.hinf import _canonical_phi, _search
 from lpvest.errors import DimensionError, NonFiniteError
 from tests import hinf_oracle as oracle
-from tests.tolerances import roundoff
+from tests.tolerances import LMI_RESOLVE_GAMMA_RTOL, roundoff
 
 
 # ---------------------------------------------------------------------------
@@ -279,6 +281,92 @@ def test_search_curve_is_exposed():
     assert math.isinf(c.epsilon[-1])
     assert c.best()[1] == s.design.gamma == min(c.gamma)
     assert np.any(c.epsilon < 0) and np.any(c.epsilon > 0)
+
+
+@pytest.mark.parametrize("kind", [KIND_PD, KIND_ROBUST])
+@pytest.mark.parametrize("epsilon", [150.0, -0.02, 1.0])
+def test_dual_bound_is_below_every_design_at_that_epsilon(kind, epsilon):
+    """gamma_lower (weak duality at the solver's dual point) is a lower bound of
+    the strict LMIs: no design at the same epsilon, whatever its margin, is
+    better. Checked against solves with margins 10 and 100 times smaller (whose
+    gamma moves down towards the bound by the margin's cost m sum tr Z)."""
+    plant = ex1()
+    at = HinfProgram.for_plant(plant, kind=kind).attempt(plant, epsilon)
+    assert at.design is not None and 0 < at.gamma_lower <= at.gamma
+    # the cost of the margin 1e-6 here: gamma - gamma_lower ~ 1e-6 sum tr Z / (2 gamma) ~ 1e-4 relative
+    assert at.gamma - at.gamma_lower < 1e-3 * at.gamma
+    for margin in (1e-7, 1e-8):
+        finer = HinfProgram.for_plant(plant, kind=kind, margin=margin).attempt(plant, epsilon)
+        assert finer.design is not None
+        # both are solver answers: each within Clarabel's accuracy (tests/tolerances.py)
+        assert at.gamma_lower <= finer.gamma * (1 + LMI_RESOLVE_GAMMA_RTOL)
+        assert finer.gamma <= at.gamma * (1 + LMI_RESOLVE_GAMMA_RTOL)
+
+
+def _fake_attempt(gamma, gamma_lower, status="optimal"):
+    design = None if math.isinf(gamma) else object()
+    return DesignAttempt(design, status, gamma, "", gamma_lower=gamma_lower)  # type: ignore[arg-type]
+
+
+def _search_on(curve, n_grid=12):
+    """_search on a synthetic gamma(phi): curve(phi) -> (gamma, gamma_lower)."""
+    points = {}
+
+    def evaluate(phi):
+        key = _canonical_phi(phi)
+        if key not in points:
+            points[key] = _fake_attempt(*curve(key))
+        return points[key].gamma
+
+    return _search(ex1(), None, evaluate, points, n_grid, 2, 1e-3)
+
+
+def test_a_curve_flat_within_the_solver_accuracy_is_not_refined():
+    # SCS-like noise: gamma scatters by 1e-4 above a flat optimum 1.0, each point's
+    # dual bound at the optimum: the grid is all the search evaluates
+    noise = np.random.default_rng(3)
+    s = _search_on(lambda phi: (1.0 + 1e-4 * noise.random(), 1.0 - 1e-9))
+    assert s.n_evaluations == 12
+    # the same scatter without the bounds (a solver without duals): refined as before
+    s = _search_on(lambda phi: (1.0 + 1e-4 * noise.random(), math.nan))
+    assert s.n_evaluations > 12
+
+
+def test_a_real_dip_is_refined_to_its_minimum():
+    # intervals 1e-8 wide (Clarabel-like) on a curve with its minimum between grid points
+    def curve(phi):
+        g = 2.0 + (phi - 0.3) ** 2
+        return g, g - 1e-8
+
+    s = _search_on(curve)
+    assert s.n_evaluations > 12
+    best_epsilon, best_gamma = s.curve.best()
+    assert math.atan(best_epsilon) == pytest.approx(0.3, abs=2e-3)  # xatol 1e-3 in phi
+    assert best_gamma < 2.0 + 1e-5
+
+
+@pytest.mark.parametrize(("status", "refined"), [("optimal; LMI check failed", False), ("infeasible", True)])
+def test_a_failed_neighbour_is_no_evidence_but_an_infeasible_one_is(status, refined):
+    # flat within accuracy except one grid point without a design: a failed solve says
+    # nothing about gamma there; an infeasible point is a real rise of the curve
+    step = math.pi / 12
+
+    def curve(phi):
+        if abs(phi - (-math.pi / 2 + 6 * step)) < 1e-12:
+            return math.inf, math.nan
+        return 1.0 + (1e-6 if abs(phi - (-math.pi / 2 + 5 * step)) < 1e-12 else 1e-5), 1.0
+
+    points = {}
+
+    def evaluate(phi):
+        key = _canonical_phi(phi)
+        if key not in points:
+            g, lo = curve(key)
+            points[key] = _fake_attempt(g, lo, status if math.isinf(g) else "optimal")
+        return points[key].gamma
+
+    s = _search(ex1(), None, evaluate, points, 12, 2, 1e-3)
+    assert (s.n_evaluations > 12) is refined
 
 
 # ---------------------------------------------------------------------------

@@ -61,6 +61,26 @@ Two further deviations, both sound:
   arbitrary switching this loses nothing: the LMIs then make ``V`` strictly
   decrease along every trajectory of a stable system, hence ``V > 0``.
 
+**Dual bound.** Every solve also gives a lower bound on the best ``gamma``
+at its ``epsilon`` (``gamma_lower`` of :class:`DesignAttempt` and
+:class:`EpsilonCurve`). The bound is for the strict LMIs themselves (margin
+0), which every certified design satisfies whatever margin it was solved
+with. Write them as ``G_i(x) <= 0``, ``G_i`` affine (``M_i(x)`` for the LMIs,
+``-P_j(x)`` for the Lyapunov matrices), and the program as ``min delta``. For
+duals ``Z_i >= 0`` the Lagrangian ``L(x, Z) = delta(x) + sum_i <Z_i, G_i(x)>``
+is affine in ``x``; at a dual-feasible ``Z`` (stationarity: its linear part
+vanishes) it is the same number for every ``x``, the dual function ``g(Z)``,
+and weak duality gives ``g(Z) <= delta`` at every feasible point. So
+``L(x_k, Z_k)`` at the solver's returned pair is the bound, up to the solver's
+dual residual. The solver's duals are those of the program with margin
+``m``, whose dual function is ``g(Z) + m sum_i tr Z_i``: ``delta_k - L(x_k,
+Z_k)`` is the complementarity gap plus ``m sum_i tr Z_i``, the first-order
+cost of the margin (on Peixoto et al.'s Example 1 with Clarabel about 1e-8 and
+1e-4 relative; on a 4-vertex plant with SCS about 1e-5 and 1e-6).
+``tests/test_hinf_design.py`` checks the bound against solves with margins
+10 and 100 times smaller. :func:`search_epsilon` uses it to tell a curve that
+is flat to the solver's accuracy from one that slopes.
+
 The Lemma 1 relaxation (``Phi_iil < 0``, ``Phi_ijl + Phi_jil < 0`` for
 ``i < j``) is applied for any number of vertices ``N``: ``N^2 (N + 1) / 2``
 LMIs of size ``4 nx + nz + nw``. Strict inequalities are ``M << -margin I``.
@@ -364,6 +384,9 @@ class DesignAttempt:
     status: str  #: final status: the solver's (cvxpy vocabulary), "...; LMI check failed", or "infeasible"
     gamma: float  #: inf when no certified design
     detail: str = ""  #: every solve tried and why it was rejected
+    #: the solver's dual bound on the best ``gamma`` at this epsilon and margin
+    #: (module documentation, "Dual bound"); nan without a certified design or duals
+    gamma_lower: float = math.nan
 
 
 class HinfProgram:
@@ -575,12 +598,12 @@ class HinfProgram:
 
     def _check(
         self, plant: PolytopicLPV, values: Mapping[str, Any], a: float, b: float
-    ) -> tuple[bool, float, float, str]:
-        """Eigenvalues of every LMI and of every P_i at ``values``."""
+    ) -> tuple[bool, float, float, str, list[LMIBlock]]:
+        """Eigenvalues of every LMI and of every P_i at ``values`` (and the LMIs evaluated there)."""
         if not all(np.all(np.isfinite(m)) for k, v in values.items() if k != "delta" for m in v) or not np.isfinite(
             values["delta"]
         ):
-            return False, -math.inf, -math.inf, "the solver returned non-finite values"
+            return False, -math.inf, -math.inf, "the solver returned non-finite values", []
         lmis = lmi_matrices(
             plant, values, multiplier_ab=(a, b), robust=(self.kind == KIND_ROBUST), printed_phi21=self.printed_phi21
         )
@@ -605,7 +628,22 @@ class HinfProgram:
         why = "" if ok else (
             f"largest LMI eigenvalue {worst:.3g} ({worst_label}), smallest Lyapunov eigenvalue {lyap_min:.3g}"
         )
-        return ok, -worst, lyap_min, why
+        return ok, -worst, lyap_min, why, lmis
+
+    def _dual_bound(self, values: Mapping[str, Any], lmis: Sequence[LMIBlock]) -> float:
+        """Weak duality at the last solve's primal and dual points: a lower bound
+        on ``delta`` of every design at the present ``epsilon`` (module
+        documentation, "Dual bound"); nan when the solver gave no dual point."""
+        duals = [c.dual_value for c in self._problem.constraints]
+        if any(d is None for d in duals):
+            return math.nan
+        total = float(values["delta"])
+        for blk, Z in zip(lmis, duals[: len(lmis)], strict=True):
+            total += float(np.vdot(np.asarray(Z, dtype=float), np.asarray(blk.matrix, dtype=float)))
+        for j, W in enumerate(duals[len(lmis):]):
+            P = np.block([[values["P1"][j], values["P3"][j]], [values["P3"][j].T, values["P2"][j]]])
+            total -= float(np.vdot(np.asarray(W, dtype=float), P))
+        return total
 
     def attempt(self, plant: PolytopicLPV, epsilon: float | None = None, *, phi: float | None = None) -> DesignAttempt:
         """Solve at ``epsilon`` (or the angle ``phi = atan(epsilon)``) without
@@ -643,11 +681,13 @@ class HinfProgram:
             label = f"{solver} margin {margin:.1e}: {status}{message}"
             if status in _ACCEPTED:
                 values = self._values()
-                ok, lmi_margin, lyap_margin, why = self._check(plant, values, a, b)
+                ok, lmi_margin, lyap_margin, why, lmis = self._check(plant, values, a, b)
                 if ok:
                     design = self._design(plant, values, eps, a, b, status, elapsed, lmi_margin, lyap_margin,
                                           solver)
-                    return DesignAttempt(design, status, design.gamma, "; ".join([*attempts, label]))
+                    lower = self._dual_bound(values, lmis)
+                    return DesignAttempt(design, status, design.gamma, "; ".join([*attempts, label]),
+                                         gamma_lower=math.sqrt(max(lower, 0.0)) if math.isfinite(lower) else math.nan)
                 label += f", but the LMI check failed: {why}"
                 status += "; LMI check failed"
             attempts.append(label)
@@ -876,12 +916,18 @@ class EpsilonCurve:
 
     ``gamma`` is ``inf`` where no certified design exists (``status`` says why).
     ``phi = atan(epsilon)`` in ``(-pi/2, pi/2]`` (``epsilon = inf`` at ``pi/2``).
+    ``gamma_lower`` is the solver's dual bound on the best ``gamma`` at each
+    ``epsilon`` (module documentation, "Dual bound"): the best design at that
+    ``epsilon`` lies in ``[gamma_lower, gamma]``, up to the solver's dual
+    residual, so ``gamma - gamma_lower`` is how far each point may be from its
+    own optimum (about 1e-8 relative with Clarabel, 1e-5 with SCS).
     """
 
     epsilon: np.ndarray  #: shape (M,)
     phi: np.ndarray  #: shape (M,)
     gamma: np.ndarray  #: shape (M,)
     status: tuple[str, ...]
+    gamma_lower: np.ndarray  #: shape (M,); nan where ``gamma`` is inf
 
     def best(self) -> tuple[float, float]:
         """``(epsilon, gamma)`` of the smallest sampled ``gamma``."""
@@ -905,6 +951,7 @@ def _curve(points: Mapping[float, DesignAttempt]) -> EpsilonCurve:
         phi=np.array([_canonical_phi(p) for p in phis]),
         gamma=np.array([points[p].gamma for p in phis]),
         status=tuple(points[p].status for p in phis),
+        gamma_lower=np.array([points[p].gamma_lower for p in phis]),
     )
 
 
@@ -938,6 +985,7 @@ def epsilon_curve(
         phi=np.array([math.pi / 2 if math.isinf(e) else math.atan(e) for e in eps]),
         gamma=np.array([r.gamma for r in out]),
         status=tuple(r.status for r in out),
+        gamma_lower=np.array([r.gamma_lower for r in out]),
     )
 
 
@@ -963,7 +1011,10 @@ def search_epsilon(
     magnitudes from ``~pi/(2 n_grid)`` up to infinity), then refines the
     ``n_refine`` best local minima of the grid by a bounded Brent search
     (``scipy.optimize.minimize_scalar``) between their grid neighbours, to
-    ``xatol`` in ``phi``. Every evaluation reuses the compiled program (and,
+    ``xatol`` in ``phi``. A minimum whose two neighbours are equal to it within
+    the solver's accuracy (their intervals ``[gamma_lower, gamma]``, see
+    :class:`EpsilonCurve`, share a point) is not refined: the curve is flat
+    there to what the solver can tell. Every evaluation reuses the compiled program (and,
     with SCS, starts from the previous evaluation's point: the search starts
     cold, so its result depends on the plant and the settings alone).
     ``progress=True`` shows a progress bar (tqdm) of the designs solved.
@@ -1052,7 +1103,24 @@ def _search(
         if math.isfinite(gam[k]) and gam[k] <= gam[k - 1] and gam[k] <= gam[(k + 1) % n_grid]
     ]
     minima.sort(key=lambda k: gam[k])
-    for k in minima[: max(0, n_refine)]:
+
+    def flat(k: int) -> bool:
+        # the grid points k-1, k, k+1 are consistent with one constant gamma:
+        # the intervals [gamma_lower, gamma] that hold each point's optimum share
+        # a point. Refining there would chase the solver's tolerance (SCS's
+        # 1e-5 makes a flat curve look rugged), not a better epsilon. A
+        # neighbour whose solve failed (no certified design, but not proved
+        # infeasible) tells nothing about the curve and is left out; an
+        # infeasible neighbour is a real rise of the curve.
+        tried = [points[_canonical_phi(grid[i % n_grid])] for i in (k - 1, k, k + 1)]
+        if any(t.status.startswith("infeasible") for t in tried):
+            return False
+        known = [t for t in tried if math.isfinite(t.gamma)]
+        if len(known) < 2 or not all(math.isfinite(t.gamma_lower) for t in known):
+            return False
+        return max(min(t.gamma, t.gamma_lower) for t in known) <= min(max(t.gamma, t.gamma_lower) for t in known)
+
+    for k in [k for k in minima if not flat(k)][: max(0, n_refine)]:
         minimize_scalar(
             lambda p: min(evaluate(p), penalty),
             bounds=(grid[k] - step, grid[k] + step),
