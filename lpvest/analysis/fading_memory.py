@@ -58,19 +58,41 @@ class TruncationErrors(NamedTuple):
 
     For ``t <= tau`` the truncated recursion starts from the true ``P0`` and is
     exact (error 0).
+
+    Parameters
+    ----------
+    taus : ndarray of int, shape (n_tau,)
+        Memories, increasing.
+    P_error : ndarray, shape (n_tau, T)
+        ``||P_{t|t-1} - P^(tau)_{t|t-1}||_2``.
+    K_error : ndarray, shape (n_tau, T)
+        ``||K_t - K^(tau)_t||_2``.
+    max_P_error : ndarray, shape (n_tau,)
+        Max of ``P_error`` over t.
+    max_K_error : ndarray, shape (n_tau,)
+        Max of ``K_error`` over t.
+    min_ordering_eigenvalue : ndarray, shape (n_tau,)
+        Min over t of ``lambda_min(P_{t|t-1} - P^(tau)_{t|t-1})`` (Lemma 2: >= 0).
+    exact_gains : ndarray, shape (T, n_x, n_y)
+        ``K_t``.
+    exact_covariances : ndarray, shape (T, n_x, n_x)
+        ``P_{t|t-1}``.
+    truncated_gains : ndarray, shape (n_tau, T, n_x, n_y)
+        ``K^(tau)_t``.
+    start : ndarray, shape (n_x, n_x)
+        ``P^_0`` of (6a).
     """
 
-    taus: np.ndarray  #: (n_tau,) memories, increasing
-    P_error: np.ndarray  #: (n_tau, T) ``||P_{t|t-1} - P^(tau)_{t|t-1}||_2``
-    K_error: np.ndarray  #: (n_tau, T) ``||K_t - K^(tau)_t||_2``
-    max_P_error: np.ndarray  #: (n_tau,) max over t
-    max_K_error: np.ndarray  #: (n_tau,) max over t
-    #: (n_tau,) min over t of lambda_min(P_{t|t-1} - P^(tau)_{t|t-1}) (Lemma 2: >= 0)
+    taus: np.ndarray
+    P_error: np.ndarray
+    K_error: np.ndarray
+    max_P_error: np.ndarray
+    max_K_error: np.ndarray
     min_ordering_eigenvalue: np.ndarray
-    exact_gains: np.ndarray  #: (T, n_x, n_y) ``K_t``
-    exact_covariances: np.ndarray  #: (T, n_x, n_x) ``P_{t|t-1}``
-    truncated_gains: np.ndarray  #: (n_tau, T, n_x, n_y) ``K^(tau)_t``
-    start: np.ndarray  #: (n_x, n_x) ``P^_0`` of (6a)
+    exact_gains: np.ndarray
+    exact_covariances: np.ndarray
+    truncated_gains: np.ndarray
+    start: np.ndarray
 
 
 def truncation_errors(
@@ -89,6 +111,7 @@ def truncation_errors(
     Parameters
     ----------
     model : AffineLPV or KalmanModel
+        The model (a :class:`KalmanModel` brings its noise covariance).
     p : array_like, shape (T, n_p)
         Scheduling trajectory.
     taus : sequence of int
@@ -103,6 +126,8 @@ def truncation_errors(
     Returns
     -------
     TruncationErrors
+        The errors for every ``t`` and every listed ``tau`` (sorted, repeats removed), the exact and
+        truncated gains and ``P^_0``.
 
     Examples
     --------
@@ -172,14 +197,33 @@ def truncation_errors(
 
 
 class Monotonicity(NamedTuple):
-    """Is the truncation error decreasing in ``tau``?"""
+    """Is the truncation error decreasing in ``tau``?
 
-    sup_monotone: bool  #: max_t error never increases from one tau to the next listed one
-    sup_increases: tuple[tuple[int, int], ...]  #: (tau, tau') pairs where it increases
-    pairs: int  #: (t, tau) pairs compared for Conjecture 1 (tau and tau + 1 both listed, both errors above floor)
-    violations: int  #: pairs with error(tau + 1) >= error(tau) (Conjecture 1's strict decrease fails)
-    worst: tuple[int, int, float] | None  #: (t, tau, error(tau + 1) / error(tau)) of the largest ratio among violations
-    floor: float  #: errors at or below this are round-off and not compared
+    Parameters
+    ----------
+    sup_monotone : bool
+        ``max_t`` error never increases from one tau to the next listed one.
+    sup_increases : tuple of (int, int)
+        ``(tau, tau')`` pairs where it increases.
+    pairs : int
+        ``(t, tau)`` pairs compared for Conjecture 1 (tau and tau + 1 both
+        listed, both errors above ``floor``).
+    violations : int
+        Pairs with ``error(tau + 1) >= error(tau)`` (Conjecture 1's strict
+        decrease fails).
+    worst : tuple of (int, int, float) or None
+        ``(t, tau, error(tau + 1) / error(tau))`` of the largest ratio among
+        violations; None without violations.
+    floor : float
+        Errors at or below this are round-off and not compared.
+    """
+
+    sup_monotone: bool
+    sup_increases: tuple[tuple[int, int], ...]
+    pairs: int
+    violations: int
+    worst: tuple[int, int, float] | None
+    floor: float
 
 
 def monotonicity(errors: TruncationErrors, *, which: str = "K", floor: float = 1e-12) -> Monotonicity:
@@ -189,6 +233,26 @@ def monotonicity(errors: TruncationErrors, *, which: str = "K", floor: float = 1
 
     Errors at or below ``floor`` are round-off; pairs involving them are not
     compared.
+
+    Parameters
+    ----------
+    errors : TruncationErrors
+        From :func:`truncation_errors`.
+    which : {"K", "P"}, default "K"
+        The gain error ``||K_t - K^(tau)_t||`` or the covariance error
+        ``||P_{t|t-1} - P^(tau)_{t|t-1}||``.
+    floor : float, default 1e-12
+        Errors at or below this are not compared.
+
+    Returns
+    -------
+    Monotonicity
+        The sup-over-``t`` check and Conjecture 1's pointwise count.
+
+    Raises
+    ------
+    DimensionError
+        ``which`` is neither ``"K"`` nor ``"P"``.
 
     Examples
     --------
@@ -231,6 +295,20 @@ def tau_needed(errors: TruncationErrors, tol: float, *, which: str = "K") -> int
     """Smallest listed ``tau`` from which ``max_t`` error stays below ``tol``
     for every larger listed ``tau`` (``None`` if never).
 
+    Parameters
+    ----------
+    errors : TruncationErrors
+        From :func:`truncation_errors`.
+    tol : float
+        Tolerance on ``max_t`` error (strict: below ``tol``).
+    which : {"K", "P"}, default "K"
+        The gain errors; any other value selects the covariance errors.
+
+    Returns
+    -------
+    int or None
+        The smallest such ``tau``, or None.
+
     Examples
     --------
     >>> from lpvest import load_system
@@ -251,6 +329,21 @@ def decay_rate(errors: TruncationErrors, *, which: str = "K", floor: float = 1e-
     """Geometric rate ``rho`` of ``max_t error ~ c rho^tau`` (least squares on
     the logarithm over the listed ``tau`` with errors above ``floor``).
 
+    Parameters
+    ----------
+    errors : TruncationErrors
+        From :func:`truncation_errors`.
+    which : {"K", "P"}, default "K"
+        The gain errors; any other value selects the covariance errors.
+    floor : float, default 1e-13
+        Errors at or below this (round-off) are left out of the fit.
+
+    Returns
+    -------
+    rho : float
+        ``exp`` of the fitted slope; NaN when fewer than two errors are above
+        ``floor``.
+
     Examples
     --------
     >>> from lpvest import load_system
@@ -268,11 +361,22 @@ def decay_rate(errors: TruncationErrors, *, which: str = "K", floor: float = 1e-
 
 
 class PredictionError(NamedTuple):
-    """Second moments of the one-step prediction error of a filter with given gains."""
+    """Second moments of the one-step prediction error of a filter with given gains.
 
-    output: np.ndarray  #: (T, n_y, n_y) covariance of ``y_t - yhat_t``
-    state: np.ndarray  #: (T + 1, n_x, n_x) covariance of ``x_t - x^_{t|t-1}``
-    mean_trace: float  #: mean over ``t >= burn_in`` of ``trace(output[t])``
+    Parameters
+    ----------
+    output : ndarray, shape (T, n_y, n_y)
+        Covariance of ``y_t - yhat_t``.
+    state : ndarray, shape (T + 1, n_x, n_x)
+        Covariance of ``x_t - x^_{t|t-1}``.
+    mean_trace : float
+        Mean over ``t >= burn_in`` of ``trace(output[t])`` (NaN if no sample
+        is left).
+    """
+
+    output: np.ndarray
+    state: np.ndarray
+    mean_trace: float
 
 
 def prediction_error_covariance(
@@ -292,12 +396,20 @@ def prediction_error_covariance(
     Parameters
     ----------
     model : AffineLPV or KalmanModel
+        The model (a :class:`KalmanModel` brings its noise covariance).
     p : array_like, shape (T, n_p)
+        Scheduling trajectory (range-checked).
     gains : ndarray, shape (T, n_x, n_y)
+        The predictor gains ``K_t``.
     P0 : array_like, optional
         Covariance of ``x_0`` (default: the model's).
     burn_in : int
         Samples left out of :attr:`PredictionError.mean_trace`.
+
+    Returns
+    -------
+    PredictionError
+        The output and state error covariances and their mean trace.
 
     Examples
     --------
@@ -346,6 +458,27 @@ def empirical_prediction_error(
     model (1) (initial state drawn from ``N(x0, P0)``), filtered together.
 
     Returns the sample covariances ``E[e_t e_t^T]``, shape (T, n_y, n_y).
+
+    Parameters
+    ----------
+    model : AffineLPV
+        The model simulated (its noise covariance, ``x0`` and ``P0``).
+    p : array_like, shape (T, n_p)
+        Scheduling trajectory.
+    u : array_like, shape (T, n_u), or None
+        Known input (None: zero).
+    gains : ndarray, shape (T, n_x, n_y)
+        The predictor gains ``K_t``; the predictor starts at ``x0``.
+    runs : int
+        Number of independent trajectories.
+    rng : numpy.random.Generator or int or None, optional
+        Random source or seed.
+
+    Returns
+    -------
+    ndarray, shape (T, n_y, n_y)
+        ``sum_runs e_t e_t^T / runs`` with ``e_t = y_t - yhat_t`` (the
+        prediction error has mean zero, so this is its covariance).
 
     Examples
     --------
@@ -399,6 +532,23 @@ def frozen_gains(
     is the solution of the discrete Riccati equation with the cross term,
     which :func:`~lpvest.estimators.truncated.steady_state` gets from scipy).
 
+    Parameters
+    ----------
+    model : AffineLPV or KalmanModel
+        The model (a :class:`KalmanModel` brings its noise covariance).
+    p : array_like, shape (T, n_p)
+        Scheduling values (range-checked); repeated values are iterated once.
+    tol : float, default 1e-13
+        Relative tolerance on the change of ``P`` per step (relative to
+        ``max(1, max |P|)``).
+    max_iter : int, default 20000
+        Largest number of steps of the recursion.
+
+    Returns
+    -------
+    ndarray, shape (T, n_x, n_y)
+        ``K_inf(p_t)`` for every row of ``p``.
+
     Raises
     ------
     NumericalError
@@ -437,13 +587,28 @@ def frozen_gains(
 
 
 class FilterComparison(NamedTuple):
-    """One-step prediction-error variances of several filters on one trajectory."""
+    """One-step prediction-error variances of several filters on one trajectory.
 
-    names: tuple[str, ...]  #: ``"exact"``, ``"truncated tau=..."``, ``"frozen K_inf(p_t)"``, ``"constant K_inf(p*)"``
-    gains: dict[str, np.ndarray]  #: name -> (T, n_x, n_y) gain sequence
-    errors: dict[str, PredictionError]  #: name -> exact second moments
-    mean_trace: dict[str, float]  #: name -> mean over t >= burn_in of trace var(y - yhat)
-    excess: dict[str, float]  #: name -> mean_trace / mean_trace["exact"] - 1
+    Parameters
+    ----------
+    names : tuple of str
+        ``"exact"``, ``"truncated tau=..."``, ``"frozen K_inf(p_t)"``,
+        ``"constant K_inf(p*)"``.
+    gains : dict of str to ndarray, shape (T, n_x, n_y)
+        Name -> gain sequence.
+    errors : dict of str to PredictionError
+        Name -> exact second moments.
+    mean_trace : dict of str to float
+        Name -> mean over ``t >= burn_in`` of ``trace var(y - yhat)``.
+    excess : dict of str to float
+        Name -> ``mean_trace / mean_trace["exact"] - 1``.
+    """
+
+    names: tuple[str, ...]
+    gains: dict[str, np.ndarray]
+    errors: dict[str, PredictionError]
+    mean_trace: dict[str, float]
+    excess: dict[str, float]
 
 
 def compare_filters(
@@ -459,6 +624,28 @@ def compare_filters(
     """Prediction-error variances of the exact filter, the truncated filters
     ``K^(tau)`` for each ``tau``, the frozen-gain filter ``K_inf(p_t)`` and
     (with ``constant_p``) the constant gain ``K_inf(constant_p)``.
+
+    Parameters
+    ----------
+    model : AffineLPV or KalmanModel
+        The model (a :class:`KalmanModel` brings its noise covariance).
+    p : array_like, shape (T, n_p)
+        Scheduling trajectory.
+    taus : sequence of int, default (0, 1, 2, 5, 10)
+        Memories of the truncated filters.
+    start, start_p
+        ``P^_0`` of the truncated filters
+        (see :func:`~lpvest.estimators.truncated.start_covariance`).
+    constant_p : array_like, shape (n_p,), optional
+        Frozen scheduling value of a constant-gain filter (default: none).
+    burn_in : int, default 0
+        Samples left out of the mean traces.
+
+    Returns
+    -------
+    FilterComparison
+        Gains, exact prediction-error moments, mean traces and excess over
+        the exact filter, per filter.
 
     Examples
     --------

@@ -81,17 +81,33 @@ __all__ = ["HinfFilter", "HinfStep", "HinfRun", "hinf_step", "hinf_filter_batch"
 
 
 class HinfStep(NamedTuple):
-    """One step of filter (2)."""
+    """One step of filter (2).
 
-    zhat: np.ndarray  #: ``z_{f,k}``, shape (n_z,)
-    xf_next: np.ndarray  #: ``x_{f,k+1}``, shape (n_x,)
+    Parameters
+    ----------
+    zhat : ndarray, shape (n_z,)
+        ``z_{f,k}``.
+    xf_next : ndarray, shape (n_x,)
+        ``x_{f,k+1}``.
+    """
+
+    zhat: np.ndarray
+    xf_next: np.ndarray
 
 
 class HinfRun(NamedTuple):
-    """Filter (2) over a whole record; row ``k`` is sample ``k``."""
+    """Filter (2) over a whole record; row ``k`` is sample ``k``.
 
-    zhat: np.ndarray  #: shape (T, n_z)
-    xf: np.ndarray  #: ``x_{f,k}`` (before the update with ``y_k``), shape (T, n_x)
+    Parameters
+    ----------
+    zhat : ndarray, shape (T, n_z)
+        ``z_{f,k}``, the estimates of ``z_k``.
+    xf : ndarray, shape (T, n_x)
+        ``x_{f,k}`` (before the update with ``y_k``).
+    """
+
+    zhat: np.ndarray
+    xf: np.ndarray
 
 
 def hinf_step(design: HinfDesign, xf: np.ndarray, alpha: np.ndarray | None, y: np.ndarray) -> HinfStep:
@@ -100,6 +116,28 @@ def hinf_step(design: HinfDesign, xf: np.ndarray, alpha: np.ndarray | None, y: n
 
     Raises :class:`~lpvest.errors.NumericalError` if ``H(alpha)`` is singular
     (it cannot be for a certified design: ``H + H^T > P_2 > 0``).
+
+    Parameters
+    ----------
+    design : HinfDesign
+        The filter design (its matrices at ``alpha``).
+    xf : ndarray, shape (n_x,)
+        Filter state ``x_{f,k}``.
+    alpha : ndarray, shape (N,), or None
+        Scheduling weights ``alpha_k`` on the unit simplex; None (or ignored)
+        for a robust design.
+    y : ndarray, shape (n_y,)
+        Measurement ``y_k``.
+
+    Returns
+    -------
+    HinfStep
+        ``z_{f,k}`` and ``x_{f,k+1}``.
+
+    Raises
+    ------
+    NumericalError
+        ``H(alpha)`` is singular, or the new state is not finite.
     """
     return _step_with(design.matrices_at(alpha), xf, alpha, y)
 
@@ -124,6 +162,32 @@ def hinf_filter_batch(
 ) -> HinfRun:
     """Run filter (2) over a record ``y`` (T, n_y) with ``alpha`` (T, N)
     (``None`` for a robust design), from ``xf0`` (default zero).
+
+    Parameters
+    ----------
+    design : HinfDesign
+        The filter design.
+    y : array_like, shape (T, n_y)
+        Measurements ``y_k``.
+    alpha : array_like, shape (T, N), optional
+        Scheduling weights, each row on the unit simplex (checked); required
+        by a parameter-dependent design, ignored by a robust one.
+    xf0 : array_like, shape (n_x,), optional
+        Initial filter state ``x_{f,0}`` (default zero).
+
+    Returns
+    -------
+    HinfRun
+        ``z_{f,k}`` and ``x_{f,k}`` for every sample.
+
+    Raises
+    ------
+    DimensionError
+        Wrong shapes, or ``alpha`` missing for a parameter-dependent design.
+    SchedulingRangeError
+        A row of ``alpha`` is not on the simplex.
+    NumericalError
+        ``H(alpha_k)`` is singular, or the state becomes non-finite.
 
     Examples
     --------
@@ -161,7 +225,20 @@ _U_PATH = ("A", "Cz", "Cy", *POLYTOPIC_INPUT_MATRICES)
 def needs_scheduling(design: HinfDesign, plant: PolytopicLPV | None = None) -> bool:
     """Whether the filter of ``design`` needs ``alpha`` (or ``p``): its gains
     are scheduled, or it compensates the known input of ``plant``, whose
-    response varies with ``alpha``."""
+    response varies with ``alpha``.
+
+    Parameters
+    ----------
+    design : HinfDesign
+        The filter design.
+    plant : PolytopicLPV, optional
+        The plant whose known input the filter compensates (None: no input).
+
+    Returns
+    -------
+    bool
+        True when the filter takes a scheduling input.
+    """
     return design.scheduled or (plant is not None and plant.known_input is not None and plant.input_path_varies())
 
 
@@ -309,7 +386,14 @@ class HinfFilter(Component):
 
     def get_state(self) -> dict[str, Any]:
         """``{"xf": x_f,k, "k": k}`` and, with a known input, ``"xu"``: the
-        state of the filter's copy of the plant driven by ``u`` (copies)."""
+        state of the filter's copy of the plant driven by ``u`` (copies).
+
+        Returns
+        -------
+        dict
+            ``"xf"`` (n_x,) the filter state, ``"k"`` (int) the sample
+            counter and, with a known input, ``"xu"`` (the plant's n_x,).
+        """
         out: dict[str, Any] = {"xf": self._xf.copy(), "k": self._k}
         if self.plant is not None:
             out["xu"] = self._xu.copy()

@@ -93,16 +93,40 @@ __all__ = [
 
 
 class Decorrelated(NamedTuple):
-    """The decorrelated form (5c), (5e) at one sample or stacked (general ``H``)."""
+    """The decorrelated form (5c), (5e) at one sample or stacked (general ``H``).
 
-    Abar: np.ndarray  #: (n_x, n_x) ``A - J C``
-    GQbarG: np.ndarray  #: (n_x, n_x) ``G Qbar G^T``
-    J: np.ndarray  #: (n_x, n_y) ``G S H^T (H R H^T)^-1``
+    Stacked matrices give every field a leading axis ``T``.
+
+    Parameters
+    ----------
+    Abar : ndarray, shape (n_x, n_x)
+        ``A - J C``, (5c).
+    GQbarG : ndarray, shape (n_x, n_x)
+        ``G Qbar G^T``, (5e), symmetrised.
+    J : ndarray, shape (n_x, n_y)
+        ``G S H^T (H R H^T)^-1``.
+    """
+
+    Abar: np.ndarray
+    GQbarG: np.ndarray
+    J: np.ndarray
 
 
 def decorrelate(m: KalmanMatrices, *, where: str = "") -> Decorrelated:
     """``Abar``, ``G Qbar G^T`` and ``J`` of (5c), (5e) in the general form
     (module notes); works on one sample or a stack.
+
+    Parameters
+    ----------
+    m : KalmanMatrices
+        The matrices at one ``p`` or stacked along time.
+    where : str, default ""
+        Appended to the error message (e.g. ``" at t=5"``).
+
+    Returns
+    -------
+    Decorrelated
+        ``Abar``, ``G Qbar G^T`` and ``J``, stacked like ``m``.
 
     Raises
     ------
@@ -142,15 +166,33 @@ def decorrelate(m: KalmanMatrices, *, where: str = "") -> Decorrelated:
 class AssumptionBounds(NamedTuple):
     """The constants of (5f)-(5h) over a set of scheduling values, with
     ERRATA.md's reading: ``alpha_2, beta_1, delta_2`` lower bounds,
-    ``alpha_1, beta_2, delta_1`` upper bounds."""
+    ``alpha_1, beta_2, delta_1`` upper bounds.
 
-    alpha1: float  #: max eigenvalue of ``G Qbar G^T``
-    alpha2: float  #: min eigenvalue of ``G Qbar G^T``
-    beta1: float  #: min eigenvalue of ``C^T (H R H^T)^-1 C``
-    beta2: float  #: max eigenvalue of ``C^T (H R H^T)^-1 C``
-    delta1: float  #: max eigenvalue of ``Abar^T Abar``
-    delta2: float  #: min eigenvalue of ``Abar^T Abar``
-    points: int  #: number of scheduling values examined
+    Parameters
+    ----------
+    alpha1 : float
+        Max eigenvalue of ``G Qbar G^T``.
+    alpha2 : float
+        Min eigenvalue of ``G Qbar G^T``.
+    beta1 : float
+        Min eigenvalue of ``C^T (H R H^T)^-1 C``.
+    beta2 : float
+        Max eigenvalue of ``C^T (H R H^T)^-1 C``.
+    delta1 : float
+        Max eigenvalue of ``Abar^T Abar``.
+    delta2 : float
+        Min eigenvalue of ``Abar^T Abar``.
+    points : int
+        Number of scheduling values examined.
+    """
+
+    alpha1: float
+    alpha2: float
+    beta1: float
+    beta2: float
+    delta1: float
+    delta2: float
+    points: int
 
     @property
     def hold(self) -> bool:
@@ -178,6 +220,28 @@ def assumption_bounds(
 
     A grid can miss an extreme between its points; ``p`` = the trajectory
     gives the theorem's constants for that trajectory exactly.
+
+    Parameters
+    ----------
+    model : AffineLPV or KalmanModel
+        The model (a :class:`KalmanModel` brings its noise covariance).
+    p : array_like, shape (N, n_p), optional
+        Scheduling values to examine (range-checked); default: the grid.
+    grid : int, default 21
+        Points per scheduling axis of the grid (``grid ** n_p`` values), used
+        when ``p`` is None.
+
+    Returns
+    -------
+    AssumptionBounds
+        The extreme eigenvalues over the values examined.
+
+    Raises
+    ------
+    SchedulingRangeError
+        A value of ``p`` lies outside the scheduling box.
+    NotPositiveDefiniteError
+        ``H R H^T`` is singular at some value (``H`` not of full row rank).
 
     Examples
     --------
@@ -212,8 +276,27 @@ def theorem_start_covariance(
     """The theorem's start ``P^_0 = fraction * alpha_2 / (alpha_2 beta_2 + 1) I``,
     strictly inside (6b) for ``0 < fraction < 1``.
 
+    Parameters
+    ----------
+    model : AffineLPV or KalmanModel
+        The model (a :class:`KalmanModel` brings its noise covariance).
+    p : array_like, shape (N, n_p), optional
+        Scheduling values for the constants ``alpha_2``, ``beta_2``
+        (:func:`assumption_bounds`); default: a grid of the box.
+    fraction : float, default 0.5
+        Fraction of the bound (6b), in ``(0, 1)``.
+    grid : int, default 21
+        Grid points per scheduling axis, when ``p`` is None.
+
+    Returns
+    -------
+    P_start : ndarray, shape (n_x, n_x)
+        ``P^_0``, a positive multiple of the identity.
+
     Raises
     ------
+    DimensionError
+        ``fraction`` is not in ``(0, 1)``.
     NotPositiveDefiniteError
         ``G Qbar G^T`` is singular somewhere (``alpha_2 <= 0``, (5f) fails):
         the bound (6b) admits no positive definite ``P^_0``.
@@ -239,18 +322,44 @@ def theorem_start_covariance(
 
 
 class SteadyState(NamedTuple):
-    """The stationary Kalman filter of the model frozen at one ``p``."""
+    """The stationary Kalman filter of the model frozen at one ``p``.
 
-    P_pred: np.ndarray  #: (n_x, n_x) prior ``P_inf`` (the DARE solution)
-    P_filt: np.ndarray  #: (n_x, n_x) posterior ``P_inf - L Omega L^T`` (Joseph form)
-    K: np.ndarray  #: (n_x, n_y) predictor gain (4c)
-    L: np.ndarray  #: (n_x, n_y) filter gain
-    Omega: np.ndarray  #: (n_y, n_y)
+    Parameters
+    ----------
+    P_pred : ndarray, shape (n_x, n_x)
+        Prior ``P_inf`` (the DARE solution).
+    P_filt : ndarray, shape (n_x, n_x)
+        Posterior ``P_inf - L Omega L^T`` (Joseph form).
+    K : ndarray, shape (n_x, n_y)
+        Predictor gain (4c).
+    L : ndarray, shape (n_x, n_y)
+        Filter gain.
+    Omega : ndarray, shape (n_y, n_y)
+        Innovation covariance (4e) at ``P_inf``.
+    """
+
+    P_pred: np.ndarray
+    P_filt: np.ndarray
+    K: np.ndarray
+    L: np.ndarray
+    Omega: np.ndarray
 
 
 def steady_state(model: AffineLPV | KalmanModel, p: object) -> SteadyState:
     """Steady state of (4c)-(4e) for the model frozen at ``p`` (scipy's
     ``solve_discrete_are`` with the cross term ``s = G S H^T``).
+
+    Parameters
+    ----------
+    model : AffineLPV or KalmanModel
+        The model (a :class:`KalmanModel` brings its noise covariance).
+    p : array_like, shape (n_p,)
+        The frozen scheduling value (range-checked).
+
+    Returns
+    -------
+    SteadyState
+        ``P_inf``, the posterior covariance, the gains and ``Omega``.
 
     Raises
     ------
@@ -292,6 +401,34 @@ def start_covariance(
     """``P^_0`` for (6a): ``"theorem"``, ``"steady-state"`` (at ``start_p``)
     or a positive semidefinite matrix (module notes).
 
+    Parameters
+    ----------
+    model : AffineLPV or KalmanModel
+        The model (a :class:`KalmanModel` brings its noise covariance).
+    start : {"theorem", "steady-state"} or array_like, shape (n_x, n_x), default "theorem"
+        How ``P^_0`` is chosen: :func:`theorem_start_covariance` on a grid,
+        the posterior covariance of :func:`steady_state` at ``start_p``, or
+        this matrix (positive semidefinite).
+    start_p : array_like, shape (n_p,), optional
+        Frozen scheduling value; required for ``start="steady-state"``.
+    start_fraction : float, default 0.5
+        ``fraction`` of :func:`theorem_start_covariance`.
+    start_grid : int, default 21
+        ``grid`` of :func:`theorem_start_covariance`.
+
+    Returns
+    -------
+    P_start : ndarray, shape (n_x, n_x)
+        ``P^_0``.
+
+    Raises
+    ------
+    DimensionError
+        ``start`` is an unknown name, ``"steady-state"`` without ``start_p``,
+        or a matrix of the wrong shape.
+    NotPositiveDefiniteError
+        The matrix is not positive semidefinite, or (``"theorem"``) (5f) fails.
+
     Examples
     --------
     >>> from lpvest import load_system
@@ -315,6 +452,25 @@ def start_covariance(
 def restart_covariance(m: KalmanMatrices, P_start: np.ndarray, *, where: str = "") -> np.ndarray:
     """(6a) with ERRATA: ``Abar P^_0 Abar^T + G Qbar G^T`` at ``p_{s-1}``
     (``m`` may be a stack).
+
+    Parameters
+    ----------
+    m : KalmanMatrices
+        The matrices at ``p_{s-1}`` (or stacked along time).
+    P_start : ndarray, shape (n_x, n_x)
+        ``P^_0``.
+    where : str, default ""
+        Appended to the error message of :func:`decorrelate`.
+
+    Returns
+    -------
+    ndarray, shape (n_x, n_x) or (T, n_x, n_x)
+        ``P^_{s|s-1}``, symmetrised.
+
+    Raises
+    ------
+    NotPositiveDefiniteError
+        ``H R H^T`` is singular.
 
     Examples
     --------
@@ -347,8 +503,15 @@ def truncated_prior(
     P_start : ndarray, shape (n_x, n_x)
         ``P^_0`` of (6a).
     P0 : ndarray, shape (n_x, n_x), optional
+        ``P_{0|-1}``, the true initial covariance; given for ``t <= tau``
+        (the recursion is then exact).
     t : int, optional
         Time of the prior (named in errors).
+
+    Returns
+    -------
+    ndarray, shape (n_x, n_x)
+        ``P^(tau)_{t|t-1}`` (with ``P0``: the exact ``P_{t|t-1}``).
 
     Examples
     --------
@@ -393,6 +556,7 @@ class TruncatedKalmanFilter(Component):
     Parameters
     ----------
     model : AffineLPV
+        The affine LPV model (1).
     tau : int
         Memory, ``tau >= 0``.
     start : "theorem", "steady-state" or array_like (n_x, n_x)
@@ -515,19 +679,59 @@ class TruncatedKalmanFilter(Component):
         return {"p": p, "y": y} if not self._km.nu else {"p": p, "u": u, "y": y}
 
     def process(self, p: object, u: object | None, y: object) -> KalmanStep:
-        """Consume sample ``t`` and advance; the full step (``K^(tau)_t``, ...)."""
+        """Consume sample ``t`` and advance; the full step (``K^(tau)_t``, ...).
+
+        Parameters
+        ----------
+        p : array_like, shape (n_p,)
+            Scheduling ``p_t`` (range-checked).
+        u : array_like, shape (n_u,), or None
+            Input ``u_t``; ignored (may be None) when ``n_u = 0``.
+        y : array_like, shape (n_y,)
+            Measurement ``y_t``.
+
+        Returns
+        -------
+        KalmanStep
+            The step with the truncated gains ``K^(tau)_t``, ``L^(tau)_t``;
+            its ``P_filt``, ``Omega`` and ``next.P`` are the truncated
+            recursion's.
+        """
         _, pending = self._take(self._inputs(p, u, y))
         self._commit(pending)
         return pending[0]
 
     def peek(self, p: object, u: object | None, y: object) -> KalmanStep:
-        """Like :meth:`process` without changing the filter."""
+        """Like :meth:`process` without changing the filter.
+
+        Parameters
+        ----------
+        p : array_like, shape (n_p,)
+            Scheduling ``p_t`` (range-checked).
+        u : array_like, shape (n_u,), or None
+            Input ``u_t``; ignored (may be None) when ``n_u = 0``.
+        y : array_like, shape (n_y,)
+            Measurement ``y_t``.
+
+        Returns
+        -------
+        KalmanStep
+            What :meth:`process` would return for this sample.
+        """
         return self._evaluate(self._read(self._inputs(p, u, y)))[1][0]
 
     def get_state(self) -> dict[str, Any]:
         """``x``, ``t``, ``log_likelihood`` and the window of the last
         ``window_length <= tau + 1`` scheduling values (``window_p``, padded
-        with zeros to ``(tau + 1, n_p)``, oldest first)."""
+        with zeros to ``(tau + 1, n_p)``, oldest first).
+
+        Returns
+        -------
+        dict
+            ``"x"`` (n_x,) ``x^_{t|t-1}`` (a copy), ``"t"`` (int),
+            ``"log_likelihood"`` (float), ``"window_p"`` (tau + 1, n_p) and
+            ``"window_length"`` (int).
+        """
         wp = np.zeros((self._tau + 1, self._km.n_p))
         for i, (p, _) in enumerate(self._window):
             wp[i] = p

@@ -25,6 +25,23 @@ def spline_knots(spec: UnknownSpline, length: float) -> np.ndarray:
     ``delta = length / (n_basis - order + 1)``, so that ``[t_{order-1}, t_{n_basis}]
     = [0, length]``.
 
+    Parameters
+    ----------
+    spec : UnknownSpline
+        The spline declaration: ``n_basis``, ``order`` and the knot rule.
+    length : float
+        Window length ``b - a``.
+
+    Returns
+    -------
+    knots : ndarray, shape (n_basis + order,)
+        Non-decreasing knots, relative to the window start.
+
+    Raises
+    ------
+    DimensionError
+        Explicit knots that do not cover ``[0, length]``.
+
     Examples
     --------
     >>> spline_knots(UnknownSpline(5, order=3), 3.0)
@@ -49,7 +66,22 @@ def spline_knots(spec: UnknownSpline, length: float) -> np.ndarray:
 
 def knot_span(x: np.ndarray, knots: np.ndarray, order: int) -> np.ndarray:
     """Knot span ``mu`` of each ``x`` (``knots[mu] <= x < knots[mu + 1]``, clipped
-    to the spans of the basis): the non-zero B-splines there are ``mu - order + 1 .. mu``."""
+    to the spans of the basis): the non-zero B-splines there are ``mu - order + 1 .. mu``.
+
+    Parameters
+    ----------
+    x : ndarray
+        Points (any shape).
+    knots : ndarray, shape (n_basis + order,)
+        Non-decreasing knot vector.
+    order : int
+        B-spline order (degree + 1).
+
+    Returns
+    -------
+    mu : ndarray of int, shape like ``x``
+        Span indices, in ``[order - 1, n_basis - 1]``.
+    """
     return np.clip(np.searchsorted(knots, x, side="right") - 1, order - 1, knots.size - order - 1)
 
 
@@ -75,7 +107,26 @@ def basis_rows(
 ) -> np.ndarray:
     """The ``order`` B-splines non-zero in the spans ``mu`` (or their derivatives
     (22)) at ``x``: row ``r`` holds ``B_{mu - order + 1 + r}``, shape (order, *x.shape)
-    (``mu`` broadcasts against ``x``)."""
+    (``mu`` broadcasts against ``x``).
+
+    Parameters
+    ----------
+    x : ndarray
+        Points (any shape).
+    knots : ndarray, shape (n_basis + order,)
+        Non-decreasing knot vector.
+    order : int
+        B-spline order (degree + 1).
+    mu : ndarray of int
+        Knot span of each point (:func:`knot_span`), broadcasting against ``x``.
+    derivative : bool, default False
+        Return the derivatives ``B_i'`` (zero for order 1).
+
+    Returns
+    -------
+    ndarray, shape (order, *x.shape)
+        Row ``r``: ``B_{mu - order + 1 + r}(x)`` (or its derivative).
+    """
     degree = order - 1
     if not derivative:
         return _nonzero_basis(x, knots, mu, degree)
@@ -106,7 +157,9 @@ def bspline_basis(
     x : ndarray, shape (N,)
         Points inside ``[knots[order-1], knots[-order]]``.
     knots : ndarray, shape (n_basis + order,)
+        Non-decreasing knot vector.
     order : int
+        B-spline order (degree + 1).
     derivative : bool, optional
         Return ``B_i'`` instead of ``B_i``.
 

@@ -56,7 +56,7 @@ __all__ = [
 class KernelFit:
     """The result of :func:`fit_kernel_model` on one window ``[a, b]``.
 
-    Attributes
+    Parameters
     ----------
     t : ndarray, shape (m,)
         Sample times.
@@ -330,6 +330,41 @@ def fit_window(
     instants: np.ndarray,
     rank_rtol: float,
 ) -> KernelFit:
+    """Fit one window with a prepared plan: (28)-(32) for validated data.
+
+    The work of :func:`fit_kernel_model` after validation; the sliding
+    observer calls it for every refit with one plan.
+
+    Parameters
+    ----------
+    plan : RegressionPlan
+        From :func:`~lpvest.estimators.bspline.regression.build_plan` for ``m`` samples.
+    a : float
+        Time of the window's first sample.
+    u, y : ndarray, shape (m,)
+        Input and output samples (finite).
+    penalty : None, float or str
+        None or 0: plain least squares; a number: ``lambda``; a string
+        (``"gcv"``, checked by :func:`check_options`): ``lambda`` by GCV.
+    instants : ndarray of int
+        Sorted, distinct sample indices of the regression instants.
+    rank_rtol : float
+        Relative singular-value threshold of the rank test.
+
+    Returns
+    -------
+    KernelFit
+        The estimates on ``[a, a + (m - 1) h]``.
+
+    Raises
+    ------
+    IdentifiabilityError
+        A signal is zero away from the window's ends, fewer instants than
+        unknowns, zero columns or ``rank P`` below the number of unknowns.
+    NonFiniteError
+        The regression holds non-finite values (a known coefficient with a
+        pole in the window).
+    """
     from scipy.linalg import qr
 
     _check_excitation(plan, u, y)
@@ -393,6 +428,22 @@ def fit_window(
 
 
 def check_options(penalty: object, difference_order: int, rank_rtol: float) -> None:
+    """Validate the solver options of :func:`fit_kernel_model` and :class:`BSplineObserver`.
+
+    Parameters
+    ----------
+    penalty : object
+        Must be None, ``"gcv"`` or a finite number ``>= 0``.
+    difference_order : int
+        Must be an integer ``>= 1``.
+    rank_rtol : float
+        Must lie in ``(0, 1)``.
+
+    Raises
+    ------
+    DimensionError
+        An option is out of range or of the wrong type.
+    """
     if penalty is not None and not (isinstance(penalty, str) and penalty == "gcv"):
         if isinstance(penalty, bool) or not isinstance(penalty, int | float) or not np.isfinite(penalty) or penalty < 0:
             raise DimensionError(f"penalty must be None, 'gcv' or a finite lambda >= 0; found "
@@ -446,6 +497,7 @@ def fit_kernel_model(
     Returns
     -------
     KernelFit
+        The estimates, the fitted output and state, and the fit diagnostics.
 
     Raises
     ------
@@ -484,7 +536,19 @@ def fit_kernel_model(
 
 def observer_supports(model: object) -> str | None:
     """Why :class:`BSplineObserver` cannot estimate ``model`` (``None`` when
-    it can): the kernel identity (9) is for second-order input-output models."""
+    it can): the kernel identity (9) is for second-order input-output models.
+
+    Parameters
+    ----------
+    model : object
+        A system model (e.g. from :func:`lpvest.load_system`).
+
+    Returns
+    -------
+    str or None
+        The reason, or None when ``model`` is a second-order
+        :class:`~lpvest.systems.ltv.LTVInputOutput`.
+    """
     if not isinstance(model, LTVInputOutput):
         return f"the B-spline observer needs an ltv-io model, not a {type(model).__name__}"
     if model.order != 2:
@@ -493,12 +557,24 @@ def observer_supports(model: object) -> str | None:
 
 
 class KernelRegression(NamedTuple):
-    """The linear system (29)-(30) ``q = P beta`` at every sample."""
+    """The linear system (29)-(30) ``q = P beta`` at every sample.
 
-    t: np.ndarray  #: sample times, shape (m,)
-    P: np.ndarray  #: shape (m, s): kernel integrals of the basis functions, divided by C
-    q: np.ndarray  #: shape (m,): ``y - r_0 / C`` (known part on the left-hand side)
-    labels: tuple[str, ...]  #: the unknown each column multiplies
+    Parameters
+    ----------
+    t : ndarray, shape (m,)
+        Sample times.
+    P : ndarray, shape (m, s)
+        Kernel integrals of the basis functions, divided by C.
+    q : ndarray, shape (m,)
+        ``y - r_0 / C`` (known part on the left-hand side).
+    labels : tuple of str, length s
+        The unknown each column multiplies (``"a0[k]"``, ``"a1"``, ...).
+    """
+
+    t: np.ndarray
+    P: np.ndarray
+    q: np.ndarray
+    labels: tuple[str, ...]
 
 
 def kernel_regression(
@@ -508,6 +584,28 @@ def kernel_regression(
 
     :func:`fit_kernel_model` never forms ``P`` (it reduces it segment by
     segment); this is for inspection and for checking the solve.
+
+    Parameters
+    ----------
+    model : KernelModel
+        Which coefficients are known, constant or B-splines (at least one unknown).
+    t : array_like, shape (m,)
+        Uniformly spaced sample times; the window is ``[t[0], t[-1]]``.
+    u, y : array_like, shape (m,)
+        Known input and measured output at ``t``.
+    points : int, default 6
+        Order of the cumulative product quadrature (even; see
+        :mod:`lpvest.estimators.bspline.kernels`).
+
+    Returns
+    -------
+    KernelRegression
+        ``t``, the dense ``P``, ``q`` and the column labels.
+
+    Raises
+    ------
+    IdentifiabilityError
+        The model has no unknown coefficient.
 
     Examples
     --------

@@ -122,7 +122,7 @@ class ProductQuadrature:
     piece, then the second, ...: node ``g = i P + p`` is node ``i`` of piece
     ``p`` (they reshape to ``(q, P)``).
 
-    Attributes
+    Parameters
     ----------
     a, h : float
         First sample time and sample spacing; the window is ``[a, b]``,
@@ -200,11 +200,33 @@ class ProductQuadrature:
 
     def shifted(self, a: float) -> ProductQuadrature:
         """The same rule on the window starting at ``a`` (same ``h`` and ``m``;
-        every weight is invariant under the shift)."""
+        every weight is invariant under the shift).
+
+        Parameters
+        ----------
+        a : float
+            The new first sample time.
+
+        Returns
+        -------
+        ProductQuadrature
+            A copy with ``a`` and the nodes ``x`` shifted.
+        """
         return replace(self, a=float(a), x=self.x + (float(a) - self.a))
 
     def interpolate(self, v: np.ndarray) -> np.ndarray:
-        """Samples ``v`` (shape (m,)) interpolated at the nodes, shape (N,)."""
+        """Samples ``v`` (shape (m,)) interpolated at the nodes, shape (N,).
+
+        Parameters
+        ----------
+        v : ndarray, shape (m,)
+            Signal samples at ``a + j h``.
+
+        Returns
+        -------
+        ndarray, shape (N,)
+            The Lagrange interpolant of each piece's stencil at its nodes.
+        """
         q, points = self.nodes_per_piece, self.points
         out = np.empty((q, self.piece_interval.size))
         # the regular pieces among the whole intervals c .. m - points + c
@@ -226,7 +248,21 @@ class ProductQuadrature:
     def piece_moments(self, f: np.ndarray, moments: range = range(MOMENTS)) -> np.ndarray:
         """Integrals of ``f`` (given at the nodes) times ``(x - a)^k`` and
         ``(b - x)^k`` over each piece, ``k`` in ``moments`` (a range):
-        shape (2, len(moments), ..., P) for ``f`` of shape (..., N)."""
+        shape (2, len(moments), ..., P) for ``f`` of shape (..., N).
+
+        Parameters
+        ----------
+        f : ndarray, shape (..., N)
+            Integrand at the nodes.
+        moments : range, default range(4)
+            The powers ``k`` (within ``0..3``).
+
+        Returns
+        -------
+        ndarray, shape (2, len(moments), ..., P)
+            ``[0, kk]``: forward moments (``(x - a)^k``), ``[1, kk]``: backward
+            (``(b - x)^k``), for ``k = moments[kk]``, per piece.
+        """
         q = self.nodes_per_piece
         fq = f.reshape(-1, q, f.shape[-1] // q)  # (rows, q, P)
         P = fq.shape[-1]
@@ -248,6 +284,18 @@ class ProductQuadrature:
         Returns ``F, B``, each of shape (4, m):
         ``F[k, j] = int_a^{t_j} (x - a)^k f dx``,
         ``B[k, j] = int_{t_j}^b (b - x)^k f dx``.
+
+        Parameters
+        ----------
+        f : ndarray, shape (N,)
+            Integrand at the nodes.
+
+        Returns
+        -------
+        F : ndarray, shape (4, m)
+            Forward moments at the samples.
+        B : ndarray, shape (4, m)
+            Backward moments at the samples.
         """
         per_interval = self.interval_sums(self.piece_moments(f))
         return cumulate(per_interval[0], per_interval[1])
@@ -255,14 +303,40 @@ class ProductQuadrature:
     def cumulative_rows(self, f: np.ndarray, moments: range) -> tuple[list[Any], list[Any]]:
         """:meth:`cumulative` for the moments ``k`` in ``moments`` only (a range):
         ``F, B`` are lists indexed by ``k = 0..3`` holding the rows, shape (m,),
-        and ``None`` for the moments not computed."""
+        and ``None`` for the moments not computed.
+
+        Parameters
+        ----------
+        f : ndarray, shape (N,)
+            Integrand at the nodes.
+        moments : range
+            The powers ``k`` to compute (within ``0..3``).
+
+        Returns
+        -------
+        F : list of (ndarray, shape (m,), or None), length 4
+            Forward moments by ``k``.
+        B : list of (ndarray, shape (m,), or None), length 4
+            Backward moments by ``k``.
+        """
         per_interval = self.interval_sums(self.piece_moments(f, moments))
         F, B = cumulate(per_interval[0], per_interval[1])
         return moment_rows(moments, F), moment_rows(moments, B)
 
     def interval_sums(self, pieces: np.ndarray) -> np.ndarray:
         """Per-piece values (..., P) summed per sample interval, (..., m - 1);
-        ``pieces`` is overwritten."""
+        ``pieces`` is overwritten.
+
+        Parameters
+        ----------
+        pieces : ndarray, shape (..., P)
+            Per-piece values; pieces ``0 .. m - 2`` are the sample intervals.
+
+        Returns
+        -------
+        ndarray, shape (..., m - 1)
+            A view of ``pieces`` with the split pieces added to their intervals.
+        """
         J = self.m - 1
         out = pieces[..., :J]
         if pieces.shape[-1] > J:
@@ -273,14 +347,42 @@ class ProductQuadrature:
 def moment_rows(moments: range, values: np.ndarray) -> list[Any]:
     """The moments ``k`` in ``moments`` (``values``, shape (len(moments), ...)) as a
     list indexed by ``k = 0..3``, ``None`` for the others (what :func:`slot_identity`
-    and the other kernel combinations read)."""
+    and the other kernel combinations read).
+
+    Parameters
+    ----------
+    moments : range
+        The powers ``k`` held by ``values`` (within ``0..3``).
+    values : ndarray, shape (len(moments), ...)
+        Row ``k - moments.start`` is moment ``k``.
+
+    Returns
+    -------
+    list of (ndarray or None), length 4
+        Entry ``k``: the moment ``k`` (a view) or None.
+    """
     return [values[k - moments.start] if k in moments else None for k in range(MOMENTS)]
 
 
 def cumulate(IF: np.ndarray, IB: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-interval integrals (..., L) to moments at the ``L + 1`` bounding
     points: ``F`` sums the intervals to the left of a point, ``B`` those to
-    its right. Returns arrays of shape (..., L + 1)."""
+    its right. Returns arrays of shape (..., L + 1).
+
+    Parameters
+    ----------
+    IF : ndarray, shape (..., L)
+        Per-interval integrals of the forward moments.
+    IB : ndarray, shape (..., L)
+        Per-interval integrals of the backward moments.
+
+    Returns
+    -------
+    F : ndarray, shape (..., L + 1)
+        Cumulative sums from the left (``F[..., 0] = 0``).
+    B : ndarray, shape (..., L + 1)
+        Cumulative sums from the right (``B[..., -1] = 0``).
+    """
     shape = (*IF.shape[:-1], IF.shape[-1] + 1)
     F = np.empty(shape)
     B = np.empty(shape)
@@ -317,6 +419,17 @@ def product_quadrature(
     points : int, optional
         Interpolation stencil, even, ``2 <= points <= 12``; the rule is of
         order ``points`` (default 6).
+
+    Returns
+    -------
+    ProductQuadrature
+        The nodes, weights and interpolation stencils of the rule.
+
+    Raises
+    ------
+    DimensionError
+        ``points`` is not an even integer in ``[2, 12]``, ``h`` is not
+        positive and finite, or ``m < points``.
 
     Examples
     --------
@@ -402,6 +515,20 @@ def check_uniform_samples(t: object, name: str = "t") -> tuple[np.ndarray, float
     :class:`~lpvest.errors.DimensionError` (fewer than 2 samples) or
     :class:`~lpvest.errors.SamplingError` (not increasing, or a step deviating
     from the mean step by more than ``SAMPLING_RTOL`` relative).
+
+    Parameters
+    ----------
+    t : array_like, shape (m,)
+        Sample times.
+    name : str, default "t"
+        Name of ``t`` in error messages.
+
+    Returns
+    -------
+    t : ndarray, shape (m,)
+        The times as floats.
+    h : float
+        The mean step ``(t[-1] - t[0]) / (m - 1)``.
     """
     times = as_vector(t, name)
     if times.size < 2:
@@ -428,13 +555,37 @@ def check_uniform_samples(t: object, name: str = "t") -> tuple[np.ndarray, float
 def free_identity(F: Moments, B: Moments, T: Span, R: Span) -> np.ndarray:
     """Kernel part depending on no coefficient (ERRATA: missing from (24)/(28)):
     ``int_a^t [4 s - 2 (t - xi)] y + int_t^b [4 r + 2 (t - zeta)] y``;
-    ``F, B`` are the moments of ``y``."""
+    ``F, B`` are the moments of ``y``.
+
+    Parameters
+    ----------
+    F, B : sequence of ndarray or ndarray
+        Forward and backward moments of ``y``, indexed by ``k``; ``k = 0, 1`` are read.
+    T, R : ndarray or float
+        ``t - a`` and ``b - t``.
+
+    Returns
+    -------
+    ndarray
+        ``6 F_1 - 2 T F_0 + 6 B_1 - 2 R B_0`` (not divided by ``C``).
+    """
     return 6.0 * F[1] - 2.0 * T * F[0] + 6.0 * B[1] - 2.0 * R * B[0]
 
 
 def free_derivative(F: Moments, B: Moments) -> np.ndarray:
     """``t``-derivative of the integrals of :func:`free_identity` without the
-    boundary terms (those are ``(2T - 2R) y(t)``)."""
+    boundary terms (those are ``(2T - 2R) y(t)``).
+
+    Parameters
+    ----------
+    F, B : sequence of ndarray or ndarray
+        Forward and backward moments of ``y``, indexed by ``k``; ``k = 0`` is read.
+
+    Returns
+    -------
+    ndarray
+        ``-2 F_0 + 2 B_0``.
+    """
     return -2.0 * F[0] + 2.0 * B[0]
 
 
@@ -444,7 +595,24 @@ def slot_identity(
 ) -> np.ndarray:
     """Kernel integrals of one coefficient: ``order`` 0 (``a_0``/``b_0``) or 1
     (``a_1``/``b_1``); ``F, B`` moments of ``phi v``, ``Fd, Bd`` of ``phi' v``
-    (``None``: ``phi' = 0``). Works elementwise on broadcastable arrays."""
+    (``None``: ``phi' = 0``). Works elementwise on broadcastable arrays.
+
+    Parameters
+    ----------
+    order : {0, 1}
+        The derivative of the signal the coefficient multiplies.
+    F, B : sequence of ndarray or ndarray
+        Forward and backward moments of ``phi v``, indexed by ``k``.
+    T, R : ndarray or float
+        ``t - a`` and ``b - t``.
+    Fd, Bd : sequence of ndarray or ndarray, optional
+        Moments of ``phi' v`` (order 1 only).
+
+    Returns
+    -------
+    ndarray
+        The kernel integrals (module notes), not divided by ``C``.
+    """
     if order == 0:
         return -T * F[2] + F[3] + B[3] - R * B[2]
     out = -3.0 * F[2] + 2.0 * T * F[1] + 3.0 * B[2] - 2.0 * R * B[1]
@@ -457,7 +625,22 @@ def slot_derivative(
     order: int, F: Moments, B: Moments, Fd: Moments | None = None, Bd: Moments | None = None
 ) -> np.ndarray:
     """``t``-derivative of the integrals of :func:`slot_identity` without the
-    boundary terms (those are ``-C phi(t) v(t)`` for order 1, none for 0)."""
+    boundary terms (those are ``-C phi(t) v(t)`` for order 1, none for 0).
+
+    Parameters
+    ----------
+    order : {0, 1}
+        The derivative of the signal the coefficient multiplies.
+    F, B : sequence of ndarray or ndarray
+        Forward and backward moments of ``phi v``, indexed by ``k``.
+    Fd, Bd : sequence of ndarray or ndarray, optional
+        Moments of ``phi' v`` (order 1 only; ``None``: ``phi' = 0``).
+
+    Returns
+    -------
+    ndarray
+        The derivative part, not divided by ``C``.
+    """
     if order == 0:
         return -F[2] + B[2]
     out = 2.0 * F[1] + 2.0 * B[1]
@@ -467,7 +650,20 @@ def slot_derivative(
 
 
 def window_weight(t: np.ndarray, a: float, b: float) -> np.ndarray:
-    """``C_[a,b](t) = (t - a)^2 + (b - t)^2`` of (18), (19)."""
+    """``C_[a,b](t) = (t - a)^2 + (b - t)^2`` of (18), (19).
+
+    Parameters
+    ----------
+    t : ndarray
+        Times.
+    a, b : float
+        The window ``[a, b]``.
+
+    Returns
+    -------
+    ndarray, shape like ``t``
+        ``C_[a,b](t)``, positive for ``a < b``.
+    """
     return (t - a) ** 2 + (b - t) ** 2
 
 
@@ -475,11 +671,21 @@ def window_weight(t: np.ndarray, a: float, b: float) -> np.ndarray:
 
 
 class KernelIdentity(NamedTuple):
-    """Right-hand sides of (9) and (10) at the samples."""
+    """Right-hand sides of (9) and (10) at the samples.
 
-    t: np.ndarray  #: sample times, shape (m,)
-    y: np.ndarray  #: ``int K_y y + int K_u u``, (9), shape (m,)
-    dy: np.ndarray  #: the derivative identity (10) with ``y(t)`` from ``y`` above, shape (m,)
+    Parameters
+    ----------
+    t : ndarray, shape (m,)
+        Sample times.
+    y : ndarray, shape (m,)
+        ``int K_y y + int K_u u``, (9).
+    dy : ndarray, shape (m,)
+        The derivative identity (10) with ``y(t)`` from ``y`` above.
+    """
+
+    t: np.ndarray
+    y: np.ndarray
+    dy: np.ndarray
 
 
 CoefficientLike = object  # a TimeFunction, a formula, a number or a callable
@@ -491,7 +697,28 @@ def coefficient_terms(
     """Kernel integrals of one coefficient ``phi`` (values at the nodes; its
     derivative ``dphi`` for order 1, ``None`` if zero) acting on the signal
     ``v``: the identity part and the derivative part (without boundary terms),
-    each of shape (m,), not yet divided by ``C``."""
+    each of shape (m,), not yet divided by ``C``.
+
+    Parameters
+    ----------
+    quad : ProductQuadrature
+        The rule on the window.
+    order : {0, 1}
+        0 for ``a_0``/``b_0``, 1 for ``a_1``/``b_1``.
+    phi : ndarray, shape (N,)
+        The coefficient at the nodes.
+    dphi : ndarray, shape (N,), or None
+        Its derivative at the nodes (order 1; None or all zero: ``phi' = 0``).
+    v_nodes : ndarray, shape (N,)
+        The signal (``y`` or ``u``) at the nodes.
+
+    Returns
+    -------
+    ident : ndarray, shape (m,)
+        Identity part, (9).
+    deriv : ndarray, shape (m,)
+        Derivative part, (10), without boundary terms.
+    """
     t = quad.samples
     T, R = t - quad.a, quad.b - t
     F, B = quad.cumulative_rows(phi * v_nodes, SLOT_MOMENTS[order])
@@ -510,7 +737,28 @@ def finish_identity(
     u: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``y_E = ident / C`` (9) and ``y_E' = deriv / C + ((2T - 2R) / C - a_1) y_E
-    - b_1 u`` (10), with ``a_1, b_1, u`` at the samples."""
+    - b_1 u`` (10), with ``a_1, b_1, u`` at the samples.
+
+    Parameters
+    ----------
+    quad : ProductQuadrature
+        The rule on the window.
+    ident : ndarray, shape (m,)
+        Sum of the identity parts (free part and every coefficient), times ``C``.
+    deriv : ndarray, shape (m,)
+        Sum of the derivative parts without boundary terms.
+    a1, b1 : ndarray, shape (m,)
+        ``a_1``, ``b_1`` at the samples.
+    u : ndarray, shape (m,)
+        The input at the samples.
+
+    Returns
+    -------
+    y_e : ndarray, shape (m,)
+        ``y_E``, (9).
+    dy_e : ndarray, shape (m,)
+        ``y_E'``, (10).
+    """
     t = quad.samples
     T, R = t - quad.a, quad.b - t
     C = window_weight(t, quad.a, quad.b)
@@ -598,13 +846,27 @@ def kernel_identity(
 
 
 class KernelFunctions(NamedTuple):
-    """The kernels (13)-(19) and their ``t``-derivatives at points ``(t, tau)``."""
+    """The kernels (13)-(19) and their ``t``-derivatives at points ``(t, tau)``.
 
-    Ky: np.ndarray  #: (18)
-    Ku: np.ndarray  #: (19)
-    dKy: np.ndarray  #: d/dt of (18) without the jump at tau = t
-    dKu: np.ndarray  #: d/dt of (19)
-    C: np.ndarray  #: C_[a,b](t)
+    Parameters
+    ----------
+    Ky : ndarray
+        (18).
+    Ku : ndarray
+        (19).
+    dKy : ndarray
+        d/dt of (18) without the jump at tau = t.
+    dKu : ndarray
+        d/dt of (19).
+    C : ndarray
+        ``C_[a,b](t)``.
+    """
+
+    Ky: np.ndarray
+    Ku: np.ndarray
+    dKy: np.ndarray
+    dKu: np.ndarray
+    C: np.ndarray
 
 
 def kernel_functions(
@@ -620,6 +882,22 @@ def kernel_functions(
     (missing ones are zero). The kernels are the paper's full ones, including
     the part that depends on no coefficient. Not used by the estimator (which
     works with moments); a reference implementation for checks.
+
+    Parameters
+    ----------
+    t : array_like
+        Times ``t`` (broadcast against ``tau``).
+    tau : array_like
+        Integration variable ``xi`` (for ``tau <= t``) or ``zeta`` (``tau > t``).
+    a, b : float
+        The window ``[a, b]``.
+    coefficients : dict of str to callable
+        ``a0, a1, da1, b0, b1, db1`` as callables of time (missing ones are zero).
+
+    Returns
+    -------
+    KernelFunctions
+        The kernels divided by ``C``, and ``C``, broadcast over ``t`` and ``tau``.
     """
     t = np.asarray(t, dtype=float)
     tau = np.asarray(tau, dtype=float)

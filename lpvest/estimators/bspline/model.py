@@ -33,7 +33,19 @@ COEFFICIENTS = ("a0", "a1", "b0", "b1")
 class Known:
     """A known coefficient: a :class:`~lpvest.systems.ltv.TimeFunction`, a
     formula of ``t``, a number or a callable. Its derivative (needed for
-    ``a_1``, ``b_1``) comes from :meth:`TimeFunction.derivative`."""
+    ``a_1``, ``b_1``) comes from :meth:`TimeFunction.derivative`.
+
+    Parameters
+    ----------
+    value : TimeFunction, str, float or callable
+        The coefficient as a function of ``t`` (:meth:`TimeFunction.of`):
+        a formula of ``t`` (``"-1/(t + 1000)"``), a number or a callable.
+
+    Raises
+    ------
+    ExpressionError
+        ``value`` is none of these, or a formula that does not parse.
+    """
 
     function: TimeFunction
 
@@ -126,6 +138,24 @@ class KernelModel:
     :class:`UnknownConstant` or :class:`UnknownSpline`. ``b1`` defaults to 0
     (no input derivative) and ``b0`` to 0 (no input).
 
+    Parameters
+    ----------
+    a0 : Known, UnknownConstant, UnknownSpline, str, float or callable
+        ``a_0(t)``, the coefficient of ``y``.
+    a1 : Known, UnknownConstant, UnknownSpline, str, float or callable
+        ``a_1(t)``, the coefficient of ``y'``; a spline needs order >= 2.
+    b0 : Known, UnknownConstant, UnknownSpline, str, float or callable, default 0.0
+        ``b_0(t)``, the coefficient of ``u``.
+    b1 : Known, UnknownConstant, UnknownSpline, str, float or callable, default 0.0
+        ``b_1(t)``, the coefficient of ``u'``; a spline needs order >= 2.
+
+    Raises
+    ------
+    ExpressionError
+        A value is not a coefficient declaration, formula, number or callable.
+    DimensionError
+        ``a1`` or ``b1`` is a B-spline of order 1 (no derivative for (10)).
+
     Examples
     --------
     >>> KernelModel(a0=UnknownSpline(86), a1=UnknownConstant(), b0="-1/(t + 1000)").unknowns
@@ -150,7 +180,27 @@ class KernelModel:
     @classmethod
     def from_io(cls, io: LTVInputOutput, **unknown: Coefficient) -> KernelModel:
         """The coefficients of a second-order :class:`LTVInputOutput` as known,
-        except those given as keywords (``a0=UnknownSpline(86)``, ...)."""
+        except those given as keywords (``a0=UnknownSpline(86)``, ...).
+
+        Parameters
+        ----------
+        io : LTVInputOutput
+            A second-order input-output model (11); ``b`` coefficients it
+            lacks are zero.
+        **unknown : Coefficient
+            Declarations replacing the model's coefficients, by name
+            (``a0``, ``a1``, ``b0``, ``b1``).
+
+        Returns
+        -------
+        KernelModel
+            The model with ``io``'s coefficients as :class:`Known`, except those given.
+
+        Raises
+        ------
+        DimensionError
+            ``io`` is not of order 2, or a keyword is not a coefficient name.
+        """
         if io.order != 2:
             raise DimensionError(
                 f"the kernel estimator is for second-order systems (11); the model has order {io.order}"
@@ -165,6 +215,18 @@ class KernelModel:
         return cls(**known)
 
     def coefficient(self, name: str) -> Coefficient:
+        """The declaration of one coefficient.
+
+        Parameters
+        ----------
+        name : {"a0", "a1", "b0", "b1"}
+            The coefficient of (11).
+
+        Returns
+        -------
+        Known, UnknownConstant or UnknownSpline
+            Its declaration.
+        """
         return getattr(self, name)
 
     @property
@@ -173,7 +235,14 @@ class KernelModel:
         return tuple(n for n in COEFFICIENTS if not isinstance(getattr(self, n), Known))
 
     def n_unknowns(self) -> int:
-        """Number of unknown scalar coefficients (the paper's ``2n`` in ``rank P = 2n``)."""
+        """Number of unknown scalar coefficients (the paper's ``2n`` in ``rank P = 2n``).
+
+        Returns
+        -------
+        int
+            ``n_basis`` per unknown spline plus one per unknown constant (the
+            number of columns of ``P``).
+        """
         total = 0
         for n in self.unknowns:
             c = getattr(self, n)

@@ -280,7 +280,16 @@ class BSplineObserver(Component):
     # -- state ---------------------------------------------------------------------------------
     def get_state(self) -> dict[str, Any]:
         """The whole state: sample counter, the window buffer (ring and head),
-        the last fit's reporting arrays and the held outputs."""
+        the last fit's reporting arrays and the held outputs.
+
+        Returns
+        -------
+        dict
+            ``"k"``, ``"head"``, ``"last_fit"`` (int), ``"valid"`` (float),
+            ``"ring_u"``, ``"ring_y"`` (L,), ``"fit_<n>"`` for ``n`` in ``y, dy,
+            x, a0, a1, b0, b1`` (hop,) or (hop, 2) for ``x`` (zeros before the
+            first fit), and ``"held_<port>"`` for every output port (copies).
+        """
         state: dict[str, Any] = {
             "k": self._k,
             "head": self._head,

@@ -75,13 +75,28 @@ class _Block:
 @dataclass(frozen=True, eq=False)
 class RegressionPlan:
     """What :func:`build_plan` prepares for a window of ``m`` samples: the
-    quadrature, the columns of each unknown and the difference penalty."""
+    quadrature, the columns of each unknown and the difference penalty.
+
+    Parameters
+    ----------
+    model : KernelModel
+        The coefficient declarations.
+    quad : ProductQuadrature
+        The rule on the window, in window coordinates (a = 0).
+    blocks : tuple
+        The columns of ``P`` of each unknown coefficient, in column order
+        (the knots and basis values of a spline block).
+    labels : tuple of str, length s
+        The unknown each column multiplies (``"a0[k]"``, ``"a1"``, ...).
+    penalty_matrix : ndarray, shape (rows, s)
+        Difference penalty on the spline blocks (zero columns for constants).
+    """
 
     model: KernelModel
-    quad: ProductQuadrature  #: window coordinates (a = 0)
+    quad: ProductQuadrature
     blocks: tuple[_Block, ...]
     labels: tuple[str, ...]
-    penalty_matrix: np.ndarray  #: (rows, s) difference penalty on the spline blocks
+    penalty_matrix: np.ndarray
 
     @property
     def m(self) -> int:
@@ -157,6 +172,7 @@ def build_plan(model: KernelModel, m: int, h: float, *, points: int, difference_
     Returns
     -------
     RegressionPlan
+        The quadrature, the columns of each unknown and their labels, and the penalty matrix.
 
     Examples
     --------
@@ -315,18 +331,46 @@ def _known_functions(model: KernelModel) -> dict[str, TimeFunction]:
 
 @dataclass(frozen=True, eq=False)
 class KernelParts:
-    """The regression (29)-(30) on one window, in factored form."""
+    """The regression (29)-(30) on one window, in factored form.
+
+    Parameters
+    ----------
+    quad : ProductQuadrature
+        The rule on the window (absolute time).
+    C : ndarray, shape (m,)
+        ``C_[a,b](t)`` at the samples.
+    y_nodes : ndarray, shape (N,)
+        The output interpolated at the quadrature nodes.
+    u_nodes : ndarray, shape (N,)
+        The input interpolated at the quadrature nodes.
+    moments : dict of str to (list, list)
+        ``"y"``, ``"u"``: (F, B) rows of the signal (:func:`moment_rows`);
+        ``"u"`` only when an unknown constant ``b`` coefficient needs it.
+    known_ident : ndarray, shape (m,)
+        Free part + known coefficients, identity (9), times C.
+    known_deriv : ndarray, shape (m,)
+        The same for the derivative identity (10).
+    functions : dict of str to TimeFunction
+        The known coefficients.
+    dense : ndarray, shape (m, nd)
+        Columns of the unknown constants, then q; divided by C.
+    dense_cols : ndarray of int, shape (nd,)
+        Their column index in [P, q].
+    bands : tuple
+        Kernel integrals of the basis functions of each spline block, in
+        banded form (not divided by C).
+    """
 
     quad: ProductQuadrature
-    C: np.ndarray  #: (m,) C_[a,b](t)
+    C: np.ndarray
     y_nodes: np.ndarray
     u_nodes: np.ndarray
-    moments: dict[str, tuple[list[Any], list[Any]]]  #: "y", "u": (F, B) rows of the signal (moment_rows)
-    known_ident: np.ndarray  #: free part + known coefficients, identity (9), times C
-    known_deriv: np.ndarray  #: the same for the derivative identity (10)
-    functions: dict[str, TimeFunction]  #: the known coefficients
-    dense: np.ndarray  #: (m, nd) columns of the unknown constants, then q; divided by C
-    dense_cols: np.ndarray  #: (nd,) their column index in [P, q]
+    moments: dict[str, tuple[list[Any], list[Any]]]
+    known_ident: np.ndarray
+    known_deriv: np.ndarray
+    functions: dict[str, TimeFunction]
+    dense: np.ndarray
+    dense_cols: np.ndarray
     bands: tuple[_Band, ...]
 
 
@@ -355,6 +399,28 @@ def _hull(*moments: range) -> range:
 
 
 def kernel_parts(plan: RegressionPlan, a: float, u: np.ndarray, y: np.ndarray) -> KernelParts:
+    """The data-dependent parts of the regression (29)-(30) on the window starting at ``a``.
+
+    Parameters
+    ----------
+    plan : RegressionPlan
+        From :func:`build_plan` for ``m`` samples.
+    a : float
+        Time of the window's first sample.
+    u, y : ndarray, shape (m,)
+        Input and output samples.
+
+    Returns
+    -------
+    KernelParts
+        The moments, the known part, the dense columns and the bands.
+
+    Raises
+    ------
+    NonFiniteError
+        A known coefficient (or its derivative) is not finite at a sample or
+        node of the window.
+    """
     quad = plan.quad.shifted(a)
     t = quad.samples
     T = t - a
@@ -394,7 +460,20 @@ def kernel_parts(plan: RegressionPlan, a: float, u: np.ndarray, y: np.ndarray) -
 
 
 def dense_system(plan: RegressionPlan, parts: KernelParts) -> np.ndarray:
-    """``[P, q]`` as one Fortran-ordered array of shape (m, s + 1)."""
+    """``[P, q]`` as one Fortran-ordered array of shape (m, s + 1).
+
+    Parameters
+    ----------
+    plan : RegressionPlan
+        The plan of the window.
+    parts : KernelParts
+        From :func:`kernel_parts` with ``plan``.
+
+    Returns
+    -------
+    ndarray, shape (m, s + 1)
+        ``P`` (every row divided by ``C``) and ``q`` as the last column.
+    """
     quad = parts.quad
     t = quad.samples
     A = np.empty((quad.m, plan.n_unknowns + 1), order="F")
@@ -407,7 +486,24 @@ def dense_system(plan: RegressionPlan, parts: KernelParts) -> np.ndarray:
 
 def compressed_system(plan: RegressionPlan, parts: KernelParts, rows: np.ndarray | None) -> np.ndarray:
     """A matrix ``K`` with ``K^T K = A^T A`` for ``A = [P, q]`` restricted to the
-    rows ``rows`` (``None``: all), by a QR of each segment's rows (see above)."""
+    rows ``rows`` (``None``: all), by a QR of each segment's rows (see above).
+
+    Parameters
+    ----------
+    plan : RegressionPlan
+        The plan of the window.
+    parts : KernelParts
+        From :func:`kernel_parts` with ``plan``.
+    rows : ndarray of int, or None
+        The regression instants (sample indices); None: every sample.
+
+    Returns
+    -------
+    K : ndarray, shape (rows_K, s + 1)
+        The stacked triangular factors of the segments: per segment at most
+        ``r`` rows, ``r`` about 10 (2 + the basis functions meeting it + the
+        dense columns).
+    """
     quad = parts.quad
     m = quad.m
     s = plan.n_unknowns

@@ -34,10 +34,12 @@ def reconstruct_state(
         complex step for callables; a callable that returns the same real
         matrix at nearby times (a constant map) has ``C' = 0``.
     t, y, dy, u : array_like, shape (m,)
+        Times, the output ``y``, its derivative ``y'`` and the input ``u`` at those times.
 
     Returns
     -------
     ndarray, shape (m, 2)
+        The state ``x(t_k)``, one row per time.
 
     Examples
     --------

@@ -29,19 +29,45 @@ __all__ = [
 _LOG_2PI = math.log(2.0 * math.pi)
 
 class KalmanResult(NamedTuple):
-    """The exact filter over a trajectory of ``T`` samples; row ``t`` is time ``t``."""
+    """The exact filter over a trajectory of ``T`` samples; row ``t`` is time ``t``.
 
-    predicted_means: np.ndarray  #: (T + 1, n_x) ``x^_{t|t-1}``, t = 0..T
-    predicted_covariances: np.ndarray  #: (T + 1, n_x, n_x) ``P_{t|t-1}``
-    filtered_means: np.ndarray  #: (T, n_x) ``x^_{t|t}``
-    filtered_covariances: np.ndarray  #: (T, n_x, n_x) ``P_{t|t}``
-    predicted_outputs: np.ndarray  #: (T, n_y) ``C x^_{t|t-1} + D u_t``
-    innovations: np.ndarray  #: (T, n_y) ``xi_t``
-    innovation_covariances: np.ndarray  #: (T, n_y, n_y) ``Omega_t``
-    gains: np.ndarray  #: (T, n_x, n_y) ``K_t``
-    filter_gains: np.ndarray  #: (T, n_x, n_y) ``L_t``
-    log_likelihood_terms: np.ndarray  #: (T,) ``log N(y_t; y^_t, Omega_t)``
-    log_likelihood: float  #: ``log p(y_0, ..., y_{T-1})``
+    Parameters
+    ----------
+    predicted_means : ndarray, shape (T + 1, n_x)
+        ``x^_{t|t-1}``, t = 0..T.
+    predicted_covariances : ndarray, shape (T + 1, n_x, n_x)
+        ``P_{t|t-1}``.
+    filtered_means : ndarray, shape (T, n_x)
+        ``x^_{t|t}``.
+    filtered_covariances : ndarray, shape (T, n_x, n_x)
+        ``P_{t|t}``.
+    predicted_outputs : ndarray, shape (T, n_y)
+        ``C x^_{t|t-1} + D u_t``.
+    innovations : ndarray, shape (T, n_y)
+        ``xi_t``, (4b).
+    innovation_covariances : ndarray, shape (T, n_y, n_y)
+        ``Omega_t``, (4e).
+    gains : ndarray, shape (T, n_x, n_y)
+        Predictor gains ``K_t``, (4c).
+    filter_gains : ndarray, shape (T, n_x, n_y)
+        Filter gains ``L_t`` (ERRATA (7)).
+    log_likelihood_terms : ndarray, shape (T,)
+        ``log N(y_t; y^_t, Omega_t)``.
+    log_likelihood : float
+        ``log p(y_0, ..., y_{T-1})``, the sum of the terms.
+    """
+
+    predicted_means: np.ndarray
+    predicted_covariances: np.ndarray
+    filtered_means: np.ndarray
+    filtered_covariances: np.ndarray
+    predicted_outputs: np.ndarray
+    innovations: np.ndarray
+    innovation_covariances: np.ndarray
+    gains: np.ndarray
+    filter_gains: np.ndarray
+    log_likelihood_terms: np.ndarray
+    log_likelihood: float
 
 
 
@@ -109,10 +135,13 @@ def kalman_filter(
     Parameters
     ----------
     model : AffineLPV or KalmanModel
+        The model (a :class:`KalmanModel` brings its noise covariance unless ``noise`` is given).
     p : array_like, shape (T, n_p)
         Scheduling trajectory (range-checked).
     u : array_like, shape (T, n_u), or None when n_u = 0
+        Known input.
     y : array_like, shape (T, n_y)
+        Measurements.
     x0, P0 : array_like, optional
         Initial mean and covariance (default: the model's). ``P0`` may be
         singular.
@@ -124,6 +153,7 @@ def kalman_filter(
     Returns
     -------
     KalmanResult
+        Predicted and filtered moments, innovations, gains and the log-likelihood.
 
     Raises
     ------
@@ -292,13 +322,27 @@ def _loglik_terms(xi: np.ndarray, Omega: np.ndarray) -> np.ndarray:
 # innovation-form simulator
 # ---------------------------------------------------------------------------
 class InnovationFormData(NamedTuple):
-    """Data generated from the innovation form (4); row ``t`` is time ``t``."""
+    """Data generated from the innovation form (4); row ``t`` is time ``t``.
 
-    x: np.ndarray  #: (T, n_x) the innovation-form state ``x^_t`` of (4a)
-    y: np.ndarray  #: (T, n_y)
-    innovations: np.ndarray  #: (T, n_y) ``xi_t ~ N(0, Omega_t)``
-    gains: np.ndarray  #: (T, n_x, n_y) ``K_t``
-    innovation_covariances: np.ndarray  #: (T, n_y, n_y) ``Omega_t``
+    Parameters
+    ----------
+    x : ndarray, shape (T, n_x)
+        The innovation-form state ``x^_t`` of (4a).
+    y : ndarray, shape (T, n_y)
+        The outputs, (4b): ``y_t = C x^_t + D u_t + xi_t``.
+    innovations : ndarray, shape (T, n_y)
+        ``xi_t ~ N(0, Omega_t)``.
+    gains : ndarray, shape (T, n_x, n_y)
+        ``K_t``, (4c).
+    innovation_covariances : ndarray, shape (T, n_y, n_y)
+        ``Omega_t``, (4e).
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    innovations: np.ndarray
+    gains: np.ndarray
+    innovation_covariances: np.ndarray
 
 
 def simulate_innovation_form(
@@ -320,12 +364,20 @@ def simulate_innovation_form(
     Parameters
     ----------
     model : AffineLPV or KalmanModel
+        The model (a :class:`KalmanModel` brings its noise covariance).
     p : array_like, shape (T, n_p)
+        Scheduling trajectory (range-checked).
     u : array_like, shape (T, n_u), optional (zero when omitted)
+        Known input.
     rng : numpy.random.Generator or int, optional
         Random source or seed.
     x0, P0 : array_like, optional
         Initial mean and covariance (default: the model's).
+
+    Returns
+    -------
+    InnovationFormData
+        The states, outputs, innovations, gains ``K_t`` and ``Omega_t``.
 
     Examples
     --------

@@ -24,6 +24,23 @@ class KalmanMatrices(NamedTuple):
 
     ``GQG = G Q G^T`` (n_x, n_x), ``GSH = G S H^T`` (n_x, n_y),
     ``HRH = H R H^T`` (n_y, n_y); ``A, B, C, D`` as in (1).
+
+    Parameters
+    ----------
+    A : ndarray, shape (n_x, n_x) or (T, n_x, n_x)
+        ``A(p)`` of (1).
+    B : ndarray, shape (n_x, n_u) or (T, n_x, n_u)
+        ``B(p)`` of (1).
+    C : ndarray, shape (n_y, n_x) or (T, n_y, n_x)
+        ``C(p)`` of (1).
+    D : ndarray, shape (n_y, n_u) or (T, n_y, n_u)
+        ``D(p)`` of (1).
+    GQG : ndarray, shape (n_x, n_x) or (T, n_x, n_x)
+        ``G Q G^T``, the state noise covariance of (4d).
+    GSH : ndarray, shape (n_x, n_y) or (T, n_x, n_y)
+        ``G S H^T``, the cross-covariance of (4c).
+    HRH : ndarray, shape (n_y, n_y) or (T, n_y, n_y)
+        ``H R H^T``, the measurement noise covariance of (4e).
     """
 
     A: np.ndarray
@@ -44,6 +61,17 @@ class StepMatrices(NamedTuple):
              [C, D, GSH^T, 0, HRH]]     shape (2n + m, n + n_u + 2n + m)
 
     i.e. ``F = [E, [B; 0; D], W]``.
+
+    Parameters
+    ----------
+    F : ndarray, shape (2 n_x + n_y, 3 n_x + n_u + n_y) or (T, 2 n_x + n_y, 3 n_x + n_u + n_y)
+        The packed matrix above (one sample, or a stack along time).
+    nx : int
+        ``n_x``, the state dimension.
+    nu : int
+        ``n_u``, the input dimension (0: no input; ``B``, ``D`` have no columns).
+    ny : int
+        ``n_y``, the output dimension.
     """
 
     F: np.ndarray
@@ -52,7 +80,13 @@ class StepMatrices(NamedTuple):
     ny: int
 
     def readable(self) -> KalmanMatrices:
-        """The same matrices as :class:`KalmanMatrices` (views)."""
+        """The same matrices as :class:`KalmanMatrices` (views).
+
+        Returns
+        -------
+        KalmanMatrices
+            Views into :attr:`F`, stacked like it (no copy).
+        """
         n, nu = self.nx, self.nu
         F, w = self.F, n + nu
         return KalmanMatrices(
@@ -66,11 +100,35 @@ class StepMatrices(NamedTuple):
         )
 
     def at(self, t: int) -> StepMatrices:
-        """Sample ``t`` of a stack."""
+        """Sample ``t`` of a stack.
+
+        Parameters
+        ----------
+        t : int
+            Index along the leading (time) axis of the stack.
+
+        Returns
+        -------
+        StepMatrices
+            The matrices of that sample (``F`` a view, unstacked).
+        """
         return StepMatrices(self.F[t], self.nx, self.nu, self.ny)
 
     def window(self, start: int, stop: int) -> StepMatrices:
-        """Samples ``start..stop-1`` of a stack."""
+        """Samples ``start..stop-1`` of a stack.
+
+        Parameters
+        ----------
+        start : int
+            First sample (index along the leading axis).
+        stop : int
+            One past the last sample.
+
+        Returns
+        -------
+        StepMatrices
+            A stack of ``stop - start`` samples (``F`` a view).
+        """
         return StepMatrices(self.F[start:stop], self.nx, self.nu, self.ny)
 
 
@@ -91,6 +149,7 @@ class KalmanModel:
     Parameters
     ----------
     model : AffineLPV
+        The affine LPV model (1)-(3) to compile.
     noise : NoiseCovariance or array_like, shape (n_w + n_v, n_w + n_v), optional
         The noise covariance the filter assumes (default: the model's), e.g.
         for tuning; a joint matrix ``[[Q, S], [S^T, R]]`` is checked to be
@@ -235,7 +294,23 @@ class KalmanModel:
     # -- evaluation -----------------------------------------------------------
     def check_p(self, p: np.ndarray, t: int | None = None) -> None:
         """Raise :class:`~lpvest.errors.SchedulingRangeError` if ``p`` (a finite
-        float vector of the right length) lies outside the box."""
+        float vector of the right length) lies outside the box.
+
+        Each bound is widened by ``1e-12 max(1, |lower|, |upper|)`` (rounding),
+        as in the scheduling space's own check, which raises the error.
+
+        Parameters
+        ----------
+        p : ndarray, shape (n_p,)
+            Scheduling vector ``p_t``, already validated (finite floats).
+        t : int, optional
+            Time index, named in the error message (default: none named).
+
+        Raises
+        ------
+        SchedulingRangeError
+            ``p`` lies outside the scheduling box.
+        """
         c = self._c  # type: ignore[attr-defined]
         for v, lo, hi in zip(p.tolist(), c["lo"], c["hi"], strict=True):
             if v < lo or v > hi:
@@ -243,7 +318,18 @@ class KalmanModel:
                 self.model.space.check(p, what=what)  # raises with the standard message
 
     def z(self, p: np.ndarray) -> list[float]:
-        """``z(p) = [1, psi_1, ..., psi_k, psi_i psi_j (i <= j)]``."""
+        """``z(p) = [1, psi_1, ..., psi_k, psi_i psi_j (i <= j)]``.
+
+        Parameters
+        ----------
+        p : ndarray, shape (n_p,)
+            Scheduling vector (floats; not checked).
+
+        Returns
+        -------
+        z : list of float, length n_z
+            ``n_z = 1 + k + k (k + 1) / 2`` for ``k`` basis functions ``psi_i``.
+        """
         c = self._c  # type: ignore[attr-defined]
         comps = c["components"]
         exps = c["exponents"]
@@ -264,7 +350,18 @@ class KalmanModel:
         return [1.0, *psi, *[psi[i - 1] * psi[j - 1] for i, j in c["pairs"]]]
 
     def z_batch(self, p: np.ndarray) -> np.ndarray:
-        """``z`` along a trajectory ``p`` (T, n_p): shape (T, n_z)."""
+        """``z`` along a trajectory ``p`` (T, n_p): shape (T, n_z).
+
+        Parameters
+        ----------
+        p : ndarray, shape (T, n_p)
+            Scheduling trajectory (floats; not checked).
+
+        Returns
+        -------
+        z : ndarray, shape (T, n_z)
+            Row ``t`` is :meth:`z` at ``p[t]``.
+        """
         c = self._c  # type: ignore[attr-defined]
         T = p.shape[0]
         psi = np.empty((T, c["k"]))
@@ -274,19 +371,56 @@ class KalmanModel:
         return np.concatenate(cols, axis=1)
 
     def step_matrices(self, p: object, *, check: bool = True) -> StepMatrices:
-        """:class:`StepMatrices` at one scheduling vector ``p`` (n_p,)."""
+        """:class:`StepMatrices` at one scheduling vector ``p`` (n_p,).
+
+        Parameters
+        ----------
+        p : array_like, shape (n_p,)
+            Scheduling vector ``p_t`` (validated: finite, right length).
+        check : bool, default True
+            Range-check ``p`` against the scheduling box (:meth:`check_p`).
+
+        Returns
+        -------
+        StepMatrices
+            The packed matrices of the recursion at ``p``.
+        """
         pv = as_vector(p, "p", self.n_p)
         if check:
             self.check_p(pv)
         return self.step_matrices_unchecked(pv)
 
     def step_matrices_unchecked(self, p: np.ndarray) -> StepMatrices:
-        """:class:`StepMatrices` at a ``p`` (n_p,) float array already checked (the streaming filters)."""
+        """:class:`StepMatrices` at a ``p`` (n_p,) float array already checked (the streaming filters).
+
+        Parameters
+        ----------
+        p : ndarray, shape (n_p,)
+            Scheduling vector, already validated and range-checked.
+
+        Returns
+        -------
+        StepMatrices
+            The packed matrices of the recursion at ``p``.
+        """
         c = self._c  # type: ignore[attr-defined]
         return StepMatrices(np.dot(self.z(p), c["packed"]).reshape(c["shape"]), self.nx, self.nu, self.ny)
 
     def step_matrices_batch(self, p: np.ndarray, *, check: bool = True) -> StepMatrices:
-        """:class:`StepMatrices` stacked along a trajectory ``p`` (T, n_p)."""
+        """:class:`StepMatrices` stacked along a trajectory ``p`` (T, n_p).
+
+        Parameters
+        ----------
+        p : array_like, shape (T, n_p)
+            Scheduling trajectory (validated: finite, ``n_p`` columns).
+        check : bool, default True
+            Range-check every sample (:meth:`check_box_batch`).
+
+        Returns
+        -------
+        StepMatrices
+            ``F`` of shape (T, 2 n_x + n_y, 3 n_x + n_u + n_y).
+        """
         p = as_signal(p, "p", self.n_p)
         if check:
             self.check_box_batch(p)
@@ -295,7 +429,19 @@ class KalmanModel:
         return StepMatrices(F, self.nx, self.nu, self.ny)
 
     def check_box_batch(self, p: np.ndarray) -> None:
-        """Range-check a trajectory (T, n_p); the error names the first bad ``t``."""
+        """Range-check a trajectory (T, n_p); the error names the first bad ``t``.
+
+        Parameters
+        ----------
+        p : ndarray, shape (T, n_p)
+            Scheduling trajectory, already validated (finite floats).
+
+        Raises
+        ------
+        SchedulingRangeError
+            Some ``p[t]`` lies outside the scheduling box (widened as in
+            :meth:`check_p`).
+        """
         c = self._c  # type: ignore[attr-defined]
         bad = np.any((p < np.asarray(c["lo"])) | (p > np.asarray(c["hi"])), axis=1)
         if np.any(bad):
@@ -303,7 +449,20 @@ class KalmanModel:
             self.model.space.check(p[t], what=f"scheduling value at t={t}:")
 
     def matrices(self, p: object, *, check: bool = True) -> KalmanMatrices:
-        """:class:`KalmanMatrices` at one scheduling vector ``p``."""
+        """:class:`KalmanMatrices` at one scheduling vector ``p``.
+
+        Parameters
+        ----------
+        p : array_like, shape (n_p,)
+            Scheduling vector ``p_t`` (validated: finite, right length).
+        check : bool, default True
+            Range-check ``p`` against the scheduling box (:meth:`check_p`).
+
+        Returns
+        -------
+        KalmanMatrices
+            ``A, B, C, D, G Q G^T, G S H^T, H R H^T`` at ``p``.
+        """
         pv = as_vector(p, "p", self.n_p)
         if check:
             self.check_p(pv)
@@ -330,7 +489,20 @@ class KalmanModel:
         return KalmanMatrices(*out[:-1]), out[-1]
 
     def matrices_batch(self, p: object, *, check: bool = True) -> KalmanMatrices:
-        """:class:`KalmanMatrices` stacked along a trajectory ``p`` (T, n_p)."""
+        """:class:`KalmanMatrices` stacked along a trajectory ``p`` (T, n_p).
+
+        Parameters
+        ----------
+        p : array_like, shape (T, n_p)
+            Scheduling trajectory (validated: finite, ``n_p`` columns).
+        check : bool, default True
+            Range-check every sample (:meth:`check_box_batch`).
+
+        Returns
+        -------
+        KalmanMatrices
+            Every matrix stacked along time (leading axis ``T``).
+        """
         p = as_signal(p, "p", self.n_p)
         if check:
             self.check_box_batch(p)

@@ -32,13 +32,30 @@ _LOG_2PI = math.log(2.0 * math.pi)
 # the kernel
 # ---------------------------------------------------------------------------
 class CovarianceStep(NamedTuple):
-    """What :func:`covariance_step` computes at one sample (or a stack)."""
+    """What :func:`covariance_step` computes at one sample (or a stack).
 
-    Omega: np.ndarray  #: (n_y, n_y) ``Omega_t``, (4e)
-    gains: np.ndarray  #: (2 n_x, n_y) ``[K_t; L_t]``, (4c) and ERRATA (7)
-    joint: np.ndarray  #: (2 n_x, 2 n_x) symmetric; blocks ``[:n, :n] = P_{t+1|t}``, ``[n:, n:] = P_{t|t}``
-    whitened: np.ndarray | None  #: ``chol(Omega)^-1 rhs`` when ``rhs`` was given
-    logdet: float | np.ndarray  #: ``log det Omega_t``
+    For a stack the arrays and ``logdet`` have a leading axis ``N`` (``whitened`` is None).
+
+    Parameters
+    ----------
+    Omega : ndarray, shape (n_y, n_y)
+        ``Omega_t``, (4e).
+    gains : ndarray, shape (2 n_x, n_y)
+        ``[K_t; L_t]``, (4c) and ERRATA (7) (or the gains given to
+        :func:`covariance_step`).
+    joint : ndarray, shape (2 n_x, 2 n_x)
+        Symmetric; blocks ``[:n, :n] = P_{t+1|t}``, ``[n:, n:] = P_{t|t}``.
+    whitened : ndarray, shape (n_y,), or None
+        ``chol(Omega)^-1 rhs`` when ``rhs`` was given, else None.
+    logdet : float or ndarray, shape (N,)
+        ``log det Omega_t``.
+    """
+
+    Omega: np.ndarray
+    gains: np.ndarray
+    joint: np.ndarray
+    whitened: np.ndarray | None
+    logdet: float | np.ndarray
 
 
 def _singular(t: int | None, detail: str) -> NumericalError:
@@ -64,7 +81,30 @@ SMALL_NY = 3  #: largest n_y handled by :func:`small_chol_inverse`
 def small_chol_inverse(Omega: np.ndarray, t: int | None) -> tuple[np.ndarray, float]:
     """``chol^-1`` and ``log det`` of a small symmetric positive definite
     matrix: the Cholesky factor by the textbook recurrence, its inverse by
-    forward substitution on the identity, in Python floats."""
+    forward substitution on the identity, in Python floats.
+
+    Meant for ``n_y <= SMALL_NY``, where this beats two LAPACK calls.
+
+    Parameters
+    ----------
+    Omega : ndarray, shape (m, m)
+        Symmetric positive definite matrix (only its lower triangle is read).
+    t : int or None
+        Time index, named in errors (None: none named).
+
+    Returns
+    -------
+    Ci : ndarray, shape (m, m)
+        ``chol(Omega)^-1``, lower triangular.
+    logdet : float
+        ``log det Omega``.
+
+    Raises
+    ------
+    NumericalError
+        A Cholesky pivot is not positive and finite (``Omega`` not positive
+        definite, or non-finite).
+    """
     a = Omega.tolist()
     m = len(a)
     L = [[0.0] * m for _ in range(m)]
@@ -124,6 +164,13 @@ def covariance_step(
     rhs : ndarray, shape (n_y,), optional
         A vector to whiten, ``chol(Omega)^-1 rhs`` (one solve shared with
         the gains); unstacked use only.
+
+    Returns
+    -------
+    CovarianceStep
+        ``Omega_t``, the gains, the joint covariance of ``P_{t+1|t}`` and
+        ``P_{t|t}``, the whitened ``rhs`` and ``log det Omega_t``, stacked
+        like ``P``.
 
     Raises
     ------
@@ -221,26 +268,60 @@ def _covariance_step_stack(
 # one sample
 # ---------------------------------------------------------------------------
 class KalmanState(NamedTuple):
-    """The predictor's state before sample ``t``: ``x^_{t|t-1}``, ``P_{t|t-1}``."""
+    """The predictor's state before sample ``t``: ``x^_{t|t-1}``, ``P_{t|t-1}``.
 
-    x: np.ndarray  #: (n_x,)
-    P: np.ndarray  #: (n_x, n_x)
+    Parameters
+    ----------
+    x : ndarray, shape (n_x,)
+        ``x^_{t|t-1}``.
+    P : ndarray, shape (n_x, n_x)
+        ``P_{t|t-1}``.
+    t : int, default 0
+        Index of the next sample.
+    """
+
+    x: np.ndarray
+    P: np.ndarray
     t: int = 0
 
 
 class KalmanStep(NamedTuple):
-    """Everything the filter computes from sample ``t``."""
+    """Everything the filter computes from sample ``t``.
+
+    Parameters
+    ----------
+    t : int
+        The sample's time index.
+    y_pred : ndarray, shape (n_y,)
+        ``C x^_{t|t-1} + D u_t``.
+    innovation : ndarray, shape (n_y,)
+        ``xi_t``, (4b).
+    Omega : ndarray, shape (n_y, n_y)
+        ``Omega_t``, (4e).
+    K : ndarray, shape (n_x, n_y)
+        Predictor gain ``K_t``, (4c).
+    L : ndarray, shape (n_x, n_y)
+        Filter gain ``L_t = P C^T Omega^-1``.
+    x_filt : ndarray, shape (n_x,)
+        ``x^_{t|t}``.
+    P_filt : ndarray, shape (n_x, n_x)
+        ``P_{t|t}``.
+    next : KalmanState
+        ``x^_{t+1|t}``, ``P_{t+1|t}`` ((4a), (4d)), ``t + 1``.
+    log_likelihood : float
+        ``log N(y_t; y_pred, Omega_t)``.
+    """
 
     t: int
-    y_pred: np.ndarray  #: (n_y,) ``C x^_{t|t-1} + D u_t``
-    innovation: np.ndarray  #: (n_y,) ``xi_t``, (4b)
-    Omega: np.ndarray  #: (n_y, n_y) ``Omega_t``, (4e)
-    K: np.ndarray  #: (n_x, n_y) predictor gain ``K_t``, (4c)
-    L: np.ndarray  #: (n_x, n_y) filter gain ``L_t = P C^T Omega^-1``
-    x_filt: np.ndarray  #: (n_x,) ``x^_{t|t}``
-    P_filt: np.ndarray  #: (n_x, n_x) ``P_{t|t}``
-    next: KalmanState  #: ``x^_{t+1|t}``, ``P_{t+1|t}`` ((4a), (4d)), ``t + 1``
-    log_likelihood: float  #: ``log N(y_t; y_pred, Omega_t)``
+    y_pred: np.ndarray
+    innovation: np.ndarray
+    Omega: np.ndarray
+    K: np.ndarray
+    L: np.ndarray
+    x_filt: np.ndarray
+    P_filt: np.ndarray
+    next: KalmanState
+    log_likelihood: float
 
 
 def kalman_step(
@@ -260,13 +341,17 @@ def kalman_step(
     sm : StepMatrices
         Matrices at ``p_t`` (:meth:`KalmanModel.step_matrices`).
     u : ndarray, shape (n_u,)
+        Input ``u_t`` (empty when ``n_u = 0``).
     y : ndarray, shape (n_y,)
+        Measurement ``y_t``.
     gains : ndarray, shape (2 n_x, n_y), optional
         ``[K; L]`` to use instead of the optimal gains from ``state.P``.
 
     Returns
     -------
     KalmanStep
+        The prediction, innovation, gains, filtered estimate, next state and
+        the sample's log-likelihood term.
 
     Examples
     --------
@@ -313,6 +398,31 @@ def kalman_step(
 
 
 def initial_moments(km: KalmanModel, x0: object | None, P0: object | None) -> tuple[np.ndarray, np.ndarray]:
+    """The initial mean and covariance of ``x_0``, validated (the model's when not given).
+
+    Parameters
+    ----------
+    km : KalmanModel
+        The compiled model (its ``model.x0``, ``model.P0`` are the defaults).
+    x0 : array_like, shape (n_x,), or None
+        Initial mean ``x^_{0|-1}``; None: the model's ``x0``.
+    P0 : array_like, shape (n_x, n_x), or None
+        Initial covariance ``P_{0|-1}``, positive semidefinite (may be
+        singular); None: the model's ``P0``.
+
+    Returns
+    -------
+    x : ndarray, shape (n_x,)
+        The initial mean (the model's is copied).
+    P : ndarray, shape (n_x, n_x)
+        The initial covariance (a copy).
+
+    Raises
+    ------
+    DimensionError, NonFiniteError, NotPositiveDefiniteError
+        ``x0`` or ``P0`` has the wrong shape, non-finite values, or ``P0`` is
+        not symmetric positive semidefinite.
+    """
     n = km.nx
     x = km.model.x0.copy() if x0 is None else as_vector(x0, "x0", n)
     if P0 is None:
@@ -327,7 +437,35 @@ def riccati_sweep(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The covariance recursion alone along stacked matrices (the only part
     of the filter that must run sample by sample): returns ``P_{t|t-1}``
-    (T + 1), ``P_{t|t}`` (T), ``Omega_t`` (T), ``[K_t; L_t]`` (T)."""
+    (T + 1), ``P_{t|t}`` (T), ``Omega_t`` (T), ``[K_t; L_t]`` (T).
+
+    Parameters
+    ----------
+    km : KalmanModel
+        The compiled model (for the dimensions).
+    sms : StepMatrices
+        The matrices of ``T`` samples, stacked (:meth:`KalmanModel.step_matrices_batch`).
+    P0 : ndarray, shape (n_x, n_x)
+        ``P_{t0|t0-1}``, the prior covariance of the first sample.
+    t0 : int, default 0
+        Time index of the first sample (named in errors).
+
+    Returns
+    -------
+    P_pred : ndarray, shape (T + 1, n_x, n_x)
+        ``P_{t|t-1}`` (row 0 is ``P0``).
+    P_filt : ndarray, shape (T, n_x, n_x)
+        ``P_{t|t}``.
+    Omega : ndarray, shape (T, n_y, n_y)
+        ``Omega_t``, (4e).
+    gains : ndarray, shape (T, 2 n_x, n_y)
+        ``[K_t; L_t]``, (4c) and ERRATA (7).
+
+    Raises
+    ------
+    NumericalError
+        ``Omega_t`` is not positive definite at some ``t`` (named).
+    """
     T = sms.F.shape[0]
     n, nu, m = km.nx, km.nu, km.ny
     Pp = np.empty((T + 1, n, n))

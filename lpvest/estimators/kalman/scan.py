@@ -204,6 +204,20 @@ def scan_error_bound(amp: float, kappa: float = 1.0) -> float:
     problem itself (two backward-stable computations of the gains
     ``P C^T Omega^-1`` differ by about ``eps kappa``, whatever the algorithm).
 
+    Parameters
+    ----------
+    amp : float
+        The error amplification of :func:`scan_amplification`.
+    kappa : float, default 1.0
+        ``max_t cond(Omega_t)``.
+
+    Returns
+    -------
+    float
+        The relative error bound.
+
+    Examples
+    --------
     >>> f"{scan_error_bound(0.0):.1e}", f"{scan_error_bound(30.0):.1e}", f"{scan_error_bound(30.0, 1e3):.1e}"
     ('4.4e-14', '2.1e-11', '4.4e-11')
     """
@@ -222,13 +236,27 @@ def _mv(M: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 class Decorrelation(NamedTuple):
-    """The decorrelated model along a trajectory (module notes), stacked over ``t``."""
+    """The decorrelated model along a trajectory (module notes), stacked over ``t``.
 
-    AbarT: np.ndarray  #: (T, n_x, n_x) ``Abar^T = (A - J C)^T`` (transposed: see :func:`scan_filter`)
-    GQbarG: np.ndarray  #: (T, n_x, n_x) ``G Q G^T - J H S^T G^T``
-    J: np.ndarray  #: (T, n_x, n_y) ``G S H^T (H R H^T)^-1``
-    c: np.ndarray  #: (T, n_x) ``B u + J (y - D u)``
-    y: np.ndarray  #: (T, n_y) ``y - D u``
+    Parameters
+    ----------
+    AbarT : ndarray, shape (T, n_x, n_x)
+        ``Abar^T = (A - J C)^T`` (transposed: see :func:`scan_filter`).
+    GQbarG : ndarray, shape (T, n_x, n_x)
+        ``G Q G^T - J H S^T G^T``.
+    J : ndarray, shape (T, n_x, n_y)
+        ``G S H^T (H R H^T)^-1``.
+    c : ndarray, shape (T, n_x)
+        ``B u + J (y - D u)``, the known input of the decorrelated state equation.
+    y : ndarray, shape (T, n_y)
+        ``y - D u``.
+    """
+
+    AbarT: np.ndarray
+    GQbarG: np.ndarray
+    J: np.ndarray
+    c: np.ndarray
+    y: np.ndarray
 
 
 def _first_not_pd(M: np.ndarray) -> int:
@@ -334,6 +362,29 @@ def decorrelate_stack(
     ``S = 0`` (``G S H^T = 0`` at every sample) ``J = 0`` and nothing is
     computed: ``Abar = A``, ``G Qbar G^T = G Q G^T``.
 
+    Parameters
+    ----------
+    A, B, C, D : ndarray, shape (T, n_x, n_x), (T, n_x, n_u), (T, n_y, n_x), (T, n_y, n_u)
+        The model matrices of (1) at every sample.
+    GQG : ndarray, shape (T, n_x, n_x)
+        ``G Q G^T``.
+    GSH : ndarray, shape (T, n_x, n_y)
+        ``G S H^T``.
+    HRH : ndarray, shape (T, n_y, n_y)
+        ``H R H^T``.
+    u : ndarray, shape (T, n_u)
+        Inputs (``n_u = 0``: no input).
+    y : ndarray, shape (T, n_y)
+        Measurements.
+    AT : ndarray, shape (T, n_x, n_x), optional
+        ``A^T`` stored contiguously (default: computed from ``A``).
+
+    Returns
+    -------
+    Decorrelation or int
+        The decorrelated model, or the first ``t`` at which ``H R H^T`` is
+        not positive definite (or not finite).
+
     Examples
     --------
     >>> from lpvest import load_system
@@ -373,7 +424,20 @@ def decorrelate_stack(
 def scan_amplification(dec: Decorrelation, C: np.ndarray) -> float:
     """``max_t ||J_t||_F ||C_t||_F``, an upper bound of ``max_t ||J_t C_t||_F``
     (equal for ``n_y = 1``): how much the decorrelated form amplifies
-    rounding errors (module notes, "Accuracy"). Two passes over the data."""
+    rounding errors (module notes, "Accuracy"). Two passes over the data.
+
+    Parameters
+    ----------
+    dec : Decorrelation
+        From :func:`decorrelate_stack`.
+    C : ndarray, shape (T, n_y, n_x)
+        ``C(p_t)`` along the trajectory.
+
+    Returns
+    -------
+    amp : float
+        The bound; 0 when ``J = 0`` (``S = 0``) or ``T = 0``.
+    """
     J = dec.J
     if not C.shape[0] or not np.any(J):  # S = 0: J = 0
         return 0.0
@@ -382,17 +446,39 @@ def scan_amplification(dec: Decorrelation, C: np.ndarray) -> float:
 
 
 class ScanMoments(NamedTuple):
-    """Every quantity of the sequential filter, from :func:`scan_filter`."""
+    """Every quantity of the sequential filter, from :func:`scan_filter`.
 
-    xp: np.ndarray  #: (T + 1, n_x) ``x^_{t|t-1}``
-    Pp: np.ndarray  #: (T + 1, n_x, n_x) ``P_{t|t-1}``
-    xf: np.ndarray  #: (T, n_x) ``x^_{t|t}``
-    Pf: np.ndarray  #: (T, n_x, n_x) ``P_{t|t}``
-    xi: np.ndarray  #: (T, n_y) innovations
-    Omega: np.ndarray  #: (T, n_y, n_y)
-    K: np.ndarray  #: (T, n_x, n_y)
-    L: np.ndarray  #: (T, n_x, n_y)
-    log_likelihood_terms: np.ndarray  #: (T,) ``log N(xi_t; 0, Omega_t)``
+    Parameters
+    ----------
+    xp : ndarray, shape (T + 1, n_x)
+        ``x^_{t|t-1}``.
+    Pp : ndarray, shape (T + 1, n_x, n_x)
+        ``P_{t|t-1}``.
+    xf : ndarray, shape (T, n_x)
+        ``x^_{t|t}``.
+    Pf : ndarray, shape (T, n_x, n_x)
+        ``P_{t|t}``.
+    xi : ndarray, shape (T, n_y)
+        Innovations ``xi_t``, (4b).
+    Omega : ndarray, shape (T, n_y, n_y)
+        Innovation covariances ``Omega_t``, (4e).
+    K : ndarray, shape (T, n_x, n_y)
+        Predictor gains ``K_t``, (4c).
+    L : ndarray, shape (T, n_x, n_y)
+        Filter gains ``L_t`` (ERRATA (7)).
+    log_likelihood_terms : ndarray, shape (T,)
+        ``log N(xi_t; 0, Omega_t)``.
+    """
+
+    xp: np.ndarray
+    Pp: np.ndarray
+    xf: np.ndarray
+    Pf: np.ndarray
+    xi: np.ndarray
+    Omega: np.ndarray
+    K: np.ndarray
+    L: np.ndarray
+    log_likelihood_terms: np.ndarray
 
 
 #: The shortest block of :func:`block_length` (when ``T`` allows): blocks of
@@ -413,6 +499,18 @@ def block_length(T: int, nx: int) -> int:
     constants were measured with ``benchmarks/bench_kalman.py``. Never
     shorter than :data:`MIN_BLOCK` (accuracy; it costs at most ~0.4 ms at
     ``T = 64``, measured with the same benchmark).
+
+    Parameters
+    ----------
+    T : int
+        Number of samples.
+    nx : int
+        State dimension ``n_x``.
+
+    Returns
+    -------
+    ell : int
+        Samples per block, ``1 <= ell <= max(1, T)``.
     """
     w = 0.02 + 0.001 * nx * nx  # relative cost of a general combination
     return max(1, min(T, max(MIN_BLOCK, round(math.sqrt(T * w)))))
@@ -581,6 +679,7 @@ def scan_filter(
     dec : Decorrelation
         From :func:`decorrelate_stack`.
     C : ndarray, shape (T, n_y, n_x)
+        ``C(p_t)`` along the trajectory.
     HRH : ndarray, shape (T, n_y, n_y)
         ``H R H^T`` (positive definite: :func:`decorrelate_stack` succeeded).
     x0, P0 : ndarray
@@ -588,6 +687,12 @@ def scan_filter(
     block : int, optional
         Samples per block (default :func:`block_length`); 1 is the plain
         scan.
+
+    Returns
+    -------
+    ScanMoments
+        The predicted and filtered moments, innovations, ``Omega_t``, the
+        gains and the log-likelihood terms.
 
     Raises
     ------

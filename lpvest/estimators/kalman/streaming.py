@@ -22,7 +22,14 @@ __all__ = ["LPVKalmanFilter", "InputReader", "input_ports"]
 # streaming
 # ---------------------------------------------------------------------------
 class InputReader:
-    """Fast validation of one sample's inputs (p, u, y) for a streaming filter."""
+    """Fast validation of one sample's inputs (p, u, y) for a streaming filter.
+
+    Parameters
+    ----------
+    km : KalmanModel
+        The compiled model: its dimensions and scheduling box. The input
+        ``u`` is expected only when ``n_u > 0``.
+    """
 
     def __init__(self, km: KalmanModel) -> None:
         self.km = km
@@ -48,6 +55,33 @@ class InputReader:
         return a
 
     def read(self, inputs: Mapping[str, Any], t: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Validate one sample's inputs: names, shapes, finite values and the scheduling range.
+
+        Parameters
+        ----------
+        inputs : mapping of str to array_like
+            ``"p"`` (n_p,), ``"y"`` (n_y,) and, when ``n_u > 0``, ``"u"`` (n_u,).
+        t : int
+            Time index of the sample, named in errors.
+
+        Returns
+        -------
+        p : ndarray, shape (n_p,)
+            Scheduling vector, inside the box.
+        u : ndarray, shape (n_u,)
+            Input (a shared read-only empty array when ``n_u = 0``).
+        y : ndarray, shape (n_y,)
+            Measurement.
+
+        Raises
+        ------
+        DimensionError
+            An input is missing or unknown, or has the wrong shape.
+        NonFiniteError
+            An input holds NaN or inf.
+        SchedulingRangeError
+            ``p`` lies outside the scheduling box.
+        """
         if len(inputs) != len(self.names) or not self._keys.issuperset(inputs):
             extra = sorted(set(inputs) - self._keys)
             if extra:
@@ -69,6 +103,18 @@ _EMPTY.setflags(write=False)
 
 
 def input_ports(km: KalmanModel) -> tuple[Port, ...]:
+    """The input ports of a streaming Kalman filter of ``km``.
+
+    Parameters
+    ----------
+    km : KalmanModel
+        The compiled model (its dimensions).
+
+    Returns
+    -------
+    tuple of Port
+        ``p`` (n_p,), ``u`` (n_u,) only if ``n_u > 0``, and ``y`` (n_y,).
+    """
     ports = [Port("p", (km.n_p,), "scheduling p_t")]
     if km.nu:
         ports.append(Port("u", (km.nu,), "input u_t"))
@@ -94,6 +140,7 @@ class LPVKalmanFilter(Component):
     Parameters
     ----------
     model : AffineLPV
+        The affine LPV model (1).
     x0, P0 : array_like, optional
         Initial mean and covariance of ``x_0`` (default: the model's ``x0``,
         ``P0``).
@@ -191,17 +238,56 @@ class LPVKalmanFilter(Component):
 
     def process(self, p: object, u: object | None, y: object) -> KalmanStep:
         """Consume sample ``t`` and advance; returns every quantity of the step
-        (``K_t``, ``Omega_t``, ``L_t``, ...)."""
+        (``K_t``, ``Omega_t``, ``L_t``, ...).
+
+        Parameters
+        ----------
+        p : array_like, shape (n_p,)
+            Scheduling ``p_t`` (range-checked).
+        u : array_like, shape (n_u,), or None
+            Input ``u_t``; ignored (may be None) when ``n_u = 0``.
+        y : array_like, shape (n_y,)
+            Measurement ``y_t``.
+
+        Returns
+        -------
+        KalmanStep
+            The step's quantities; ``next`` is the filter's new :attr:`state`.
+        """
         _, res = self._take(self._inputs(p, u, y))
         self._commit(res)
         return res
 
     def peek(self, p: object, u: object | None, y: object) -> KalmanStep:
-        """Like :meth:`process` without changing the filter."""
+        """Like :meth:`process` without changing the filter.
+
+        Parameters
+        ----------
+        p : array_like, shape (n_p,)
+            Scheduling ``p_t`` (range-checked).
+        u : array_like, shape (n_u,), or None
+            Input ``u_t``; ignored (may be None) when ``n_u = 0``.
+        y : array_like, shape (n_y,)
+            Measurement ``y_t``.
+
+        Returns
+        -------
+        KalmanStep
+            What :meth:`process` would return for this sample.
+        """
         return self._evaluate(self._read(self._inputs(p, u, y)))[1]
 
     # -- state -----------------------------------------------------------------------
     def get_state(self) -> dict[str, Any]:
+        """A copy of the whole internal state (for :meth:`set_state`).
+
+        Returns
+        -------
+        dict
+            ``"x"`` (n_x,) ``x^_{t|t-1}``, ``"P"`` (n_x, n_x) ``P_{t|t-1}``
+            (copies), ``"t"`` (int) the next sample's index and
+            ``"log_likelihood"`` (float) of the samples consumed so far.
+        """
         st = self._state
         return {"x": st.x.copy(), "P": st.P.copy(), "t": int(st.t), "log_likelihood": float(self._loglik)}
 
