@@ -133,7 +133,19 @@ class Engine:
         return self._client
 
     def start(self) -> Engine:
-        """Start the local cluster (or connect to the scheduler)."""
+        """Start the local cluster (or connect to the scheduler); nothing if started already.
+
+        Returns
+        -------
+        Engine
+            This engine, started (so that ``Engine(...).start()`` chains).
+
+        Raises
+        ------
+        SweepError
+            The cluster did not start, or the scheduler cannot be reached, within
+            ``start_timeout``; or dask.distributed is not installed.
+        """
         if self._client is not None:
             return self
         require_sweep_extra("distributed")
@@ -187,7 +199,14 @@ class Engine:
         self.close()
 
     def describe(self) -> str:
-        """``"LocalCluster, 2 worker processes"`` or ``"scheduler tcp://...: 8 workers"``."""
+        """Where the tasks run, in a few words (the cluster is started if it is not yet).
+
+        Returns
+        -------
+        str
+            ``"Dask LocalCluster, 2 worker process(es)"`` or
+            ``"Dask scheduler tcp://...: 8 worker(s)"``.
+        """
         if self.scheduler is None:
             return f"Dask LocalCluster, {self.n_workers} worker process(es)"
         return f"Dask scheduler {self.scheduler}, {self.n_workers} worker(s)"
@@ -205,9 +224,37 @@ class Engine:
     ) -> dict[int, Outcome]:
         """Run ``fn(shared, task)`` for every task; return the outcomes by task index.
 
-        ``fn`` must be a module-level function importable on the workers.
-        ``on_outcome`` is called in this process once per task, in the order
-        they finish (an exception from it cancels the rest and propagates).
+        Parameters
+        ----------
+        fn : callable ``(shared, Task) -> TaskResult``
+            The task function: a module-level function importable on the
+            workers. An exception it raises becomes the task's failed outcome.
+        shared : object
+            Data every task reads (picklable); sent to each worker once.
+        tasks : sequence of Task
+            The tasks to run (their ``index`` keys the result).
+        on_outcome : callable ``(Outcome) -> None``, optional
+            Called in this process once per task, in the order they finish (an
+            exception from it cancels the rest and propagates); a sweep writes
+            each outcome here.
+        progress : bool, default False
+            Show a progress bar (tqdm) of the finished tasks, with the failed count.
+        desc : str, default "tasks"
+            The progress bar's label.
+
+        Returns
+        -------
+        dict of int to Outcome
+            Every task's outcome, by task index: its result, or the error that
+            stopped it (its own exception, or ``KilledWorker`` when its workers
+            died too often).
+
+        Raises
+        ------
+        KeyboardInterrupt
+            ``Ctrl-C``: the pending tasks are cancelled first.
+        SweepError
+            No task finished within ``idle_timeout``.
         """
         from distributed import as_completed
         from tqdm import tqdm

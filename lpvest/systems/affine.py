@@ -51,6 +51,15 @@ class AffineDependence:
     term first, then one matrix per basis function (zeros where a matrix does
     not depend on that function).
 
+    Parameters
+    ----------
+    space : SchedulingSpace
+        The box of scheduling vectors ``p`` the matrices are defined on.
+    basis : tuple of BasisFunction, length n_psi
+        The basis functions ``psi_i(p)``, with distinct names.
+    coefficients : mapping of str to ndarray, shape (1 + n_psi, rows, cols)
+        The coefficient stack of each named matrix, as above (made read-only).
+
     Examples
     --------
     >>> from lpvest.scheduling import SchedulingSpace, Monomial
@@ -94,13 +103,20 @@ class AffineDependence:
         Parameters
         ----------
         space : SchedulingSpace
+            The box of scheduling vectors ``p``.
         basis : sequence of BasisFunction, length n_psi
+            The basis functions ``psi_i(p)``, with distinct names.
         matrices : mapping of str to array_like or mapping
             Each matrix is either an array (constant in ``p``) or a mapping from
             term names (``"1"`` for the constant term, or a basis function's
             name) to coefficient matrices; absent terms are zero.
         shapes : mapping of str to (rows, cols), optional
             Expected shapes (``None`` = any) checked with the matrix's name.
+
+        Returns
+        -------
+        AffineDependence
+            Every matrix as a stack of ``1 + n_psi`` coefficient matrices.
         """
         basis = tuple(basis)
         index = {CONSTANT_TERM: 0}
@@ -150,10 +166,36 @@ class AffineDependence:
         return (CONSTANT_TERM, *(b.name for b in self.basis))
 
     def shape(self, name: str) -> tuple[int, int]:
+        """The shape of one matrix.
+
+        Parameters
+        ----------
+        name : str
+            A key of :attr:`coefficients`.
+
+        Returns
+        -------
+        tuple of int
+            ``(rows, cols)`` of the matrix ``name``.
+        """
         return self._stack.shapes[name]  # type: ignore[attr-defined]  # set in __post_init__ (frozen)
 
     def psi(self, p: np.ndarray, *, check: bool = True) -> np.ndarray:
-        """``[1, psi_1(p), ..., psi_n(p)]`` for one scheduling vector."""
+        """``[1, psi_1(p), ..., psi_n(p)]`` for one scheduling vector.
+
+        Parameters
+        ----------
+        p : array_like, shape (n_p,)
+            The scheduling vector.
+        check : bool, default True
+            Check ``p`` first (``n_p`` finite values inside the box,
+            :meth:`SchedulingSpace.check`); ``False`` uses it as given.
+
+        Returns
+        -------
+        psi : ndarray, shape (1 + n_psi,)
+            The constant 1, then the value of each basis function at ``p``.
+        """
         p = self.space.check(p) if check else np.asarray(p, dtype=float)
         out = np.empty(1 + len(self.basis))
         out[0] = 1.0
@@ -162,7 +204,21 @@ class AffineDependence:
         return out
 
     def psi_batch(self, p: np.ndarray, *, check: bool = True) -> np.ndarray:
-        """``psi`` for a trajectory ``p`` of shape ``(T, n_p)``, shape ``(T, 1 + n_psi)``."""
+        """``psi`` for a trajectory ``p`` of shape ``(T, n_p)``, shape ``(T, 1 + n_psi)``.
+
+        Parameters
+        ----------
+        p : array_like, shape (T, n_p)
+            The scheduling trajectory (shape (T,) when ``n_p = 1``); its shape
+            and finiteness are always checked.
+        check : bool, default True
+            Also check that every sample lies in the box.
+
+        Returns
+        -------
+        psi : ndarray, shape (T, 1 + n_psi)
+            Row ``t`` is :meth:`psi` of ``p[t]``.
+        """
         p = as_signal(p, "p", self.space.dim)
         if check:
             for t in range(p.shape[0]):
@@ -174,25 +230,91 @@ class AffineDependence:
         return out
 
     def evaluate(self, p: np.ndarray, *, check: bool = True) -> dict[str, np.ndarray]:
-        """Every matrix at one scheduling vector ``p`` (all at once, :class:`~lpvest._linalg.MatrixStack`)."""
+        """Every matrix at one scheduling vector ``p`` (all at once, :class:`~lpvest._linalg.MatrixStack`).
+
+        Parameters
+        ----------
+        p : array_like, shape (n_p,)
+            The scheduling vector.
+        check : bool, default True
+            Check ``p`` first, as :meth:`psi` does.
+
+        Returns
+        -------
+        dict of str to ndarray, shape (rows, cols)
+            ``M(p)`` for every name of :attr:`coefficients` (fresh arrays).
+        """
         return self.at_psi(self.psi(p, check=check))
 
     def at_psi(self, psi: np.ndarray) -> dict[str, np.ndarray]:
-        """Every matrix for given basis values ``psi = [1, psi_1(p), ...]`` (:meth:`psi`)."""
+        """Every matrix for given basis values ``psi = [1, psi_1(p), ...]`` (:meth:`psi`).
+
+        Parameters
+        ----------
+        psi : ndarray, shape (1 + n_psi,)
+            The weights of the coefficient matrices (not checked; entry 0 is
+            the constant term's).
+
+        Returns
+        -------
+        dict of str to ndarray, shape (rows, cols)
+            ``sum_i psi[i] M_i`` for every name of :attr:`coefficients` (fresh arrays).
+        """
         return self._stack.at(psi)  # type: ignore[attr-defined]  # set in __post_init__ (frozen)
 
     def evaluate_batch(self, p: np.ndarray, *, check: bool = True) -> dict[str, np.ndarray]:
         """Every matrix along a trajectory ``p`` (T, n_p): arrays ``(T, rows, cols)``;
-        row ``t`` is :meth:`evaluate` of ``p[t]`` to the bit."""
+        row ``t`` is :meth:`evaluate` of ``p[t]`` to the bit.
+
+        Parameters
+        ----------
+        p : array_like, shape (T, n_p)
+            The scheduling trajectory.
+        check : bool, default True
+            Check that every sample lies in the box (:meth:`psi_batch`).
+
+        Returns
+        -------
+        dict of str to ndarray, shape (T, rows, cols)
+            Every matrix of :attr:`coefficients` along ``p``.
+        """
         return self._stack.at_batch(self.psi_batch(p, check=check))  # type: ignore[attr-defined]  # set in __post_init__ (frozen)
 
     def subset(self, names: Sequence[str]) -> AffineDependence:
-        """The dependence restricted to ``names``."""
+        """The dependence restricted to ``names``.
+
+        Parameters
+        ----------
+        names : sequence of str
+            Keys of :attr:`coefficients` to keep, in this order.
+
+        Returns
+        -------
+        AffineDependence
+            The same space and basis with only those matrices (their
+            coefficient arrays shared, not copied).
+        """
         return AffineDependence(self.space, self.basis, {n: self.coefficients[n] for n in names})
 
 
 class StateSpaceMatrices(NamedTuple):
-    """The matrices of (1) at one scheduling value (or stacked along time)."""
+    """The matrices of (1) at one scheduling value (or stacked along time).
+
+    Parameters
+    ----------
+    A : ndarray, shape (n_x, n_x) or (T, n_x, n_x)
+        State matrix ``A(p)``.
+    B : ndarray, shape (n_x, n_u) or (T, n_x, n_u)
+        Input matrix ``B(p)`` (no columns without an input).
+    C : ndarray, shape (n_y, n_x) or (T, n_y, n_x)
+        Output matrix ``C(p)``.
+    D : ndarray, shape (n_y, n_u) or (T, n_y, n_u)
+        Feedthrough matrix ``D(p)``.
+    G : ndarray, shape (n_x, n_w) or (T, n_x, n_w)
+        Process-noise matrix ``G(p)``.
+    H : ndarray, shape (n_y, n_v) or (T, n_y, n_v)
+        Measurement-noise matrix ``H(p)``.
+    """
 
     A: np.ndarray
     B: np.ndarray
@@ -203,12 +325,24 @@ class StateSpaceMatrices(NamedTuple):
 
 
 class LPVTrajectory(NamedTuple):
-    """A simulated trajectory; row ``t`` holds time ``t``."""
+    """A simulated trajectory; row ``t`` holds time ``t``.
 
-    x: np.ndarray  #: states, shape (T, n_x)
-    y: np.ndarray  #: outputs, shape (T, n_y)
-    w: np.ndarray  #: process noise, shape (T, n_w)
-    v: np.ndarray  #: measurement noise, shape (T, n_v)
+    Parameters
+    ----------
+    x : ndarray, shape (T, n_x)
+        States ``x_t``.
+    y : ndarray, shape (T, n_y)
+        Outputs ``y_t``.
+    w : ndarray, shape (T, n_w)
+        Process noise ``w_t``.
+    v : ndarray, shape (T, n_v)
+        Measurement noise ``v_t``.
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    w: np.ndarray
+    v: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -217,6 +351,15 @@ class NoiseCovariance:
 
     The joint matrix must be symmetric positive definite (checked with a
     tolerance relative to its scale).
+
+    Parameters
+    ----------
+    Q : array_like, shape (n_w, n_w)
+        Covariance of the process noise ``w_t`` (positive definite).
+    R : array_like, shape (n_v, n_v)
+        Covariance of the measurement noise ``v_t`` (positive definite).
+    S : array_like, shape (n_w, n_v), optional
+        Cross-covariance ``E[w_t v_t^T]`` (default zero).
     """
 
     Q: np.ndarray
@@ -244,7 +387,26 @@ class NoiseCovariance:
         return np.block([[self.Q, self.S], [self.S.T, self.R]])
 
     def sample(self, rng: np.random.Generator, size: int) -> tuple[np.ndarray, np.ndarray]:
-        """Draw ``size`` samples of ``(w, v)``."""
+        """Draw ``size`` samples of ``(w, v)``.
+
+        Each sample is ``[w; v] = L z`` with ``L L^T = [[Q, S], [S^T, R]]``
+        (Cholesky) and ``z ~ N(0, I)``.
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+            The random source (``size`` standard normal vectors of length
+            ``n_w + n_v`` are drawn from it).
+        size : int
+            The number of samples.
+
+        Returns
+        -------
+        w : ndarray, shape (size, n_w)
+            Process noise samples.
+        v : ndarray, shape (size, n_v)
+            Measurement noise samples.
+        """
         L = np.linalg.cholesky(self.joint)
         z = rng.standard_normal((size, L.shape[0])) @ L.T
         nw = self.Q.shape[0]
@@ -262,6 +424,23 @@ class AffineLPV:
     Build one with :meth:`from_matrices`. ``x0`` and ``P0`` are the mean and
     covariance of the initial state (default: known zero state, as the paper
     assumes).
+
+    Parameters
+    ----------
+    dependence : AffineDependence
+        ``A, B, C, D, G, H`` affine in the basis functions of ``p`` (all six,
+        of consistent shapes).
+    noise : NoiseCovariance
+        The joint covariance of ``(w_t, v_t)``, eq. (2).
+    x0 : ndarray, shape (n_x,)
+        Mean of the initial state.
+    P0 : ndarray, shape (n_x, n_x)
+        Covariance of the initial state.
+    name : str, default ""
+        The model's name in error messages (a model file gives ``system/key``).
+    Cz : ndarray, shape (n_z, n_x) or None, default None
+        ``Cz`` of the signal ``z = Cz x`` the H-infinity filters estimate
+        (:func:`lpvest.systems.polytopic.hinf_setting`); ``None``: every state.
 
     Examples
     --------
@@ -281,8 +460,6 @@ class AffineLPV:
     x0: np.ndarray
     P0: np.ndarray
     name: str = ""
-    #: ``Cz`` of the signal ``z = Cz x`` the H-infinity filters estimate
-    #: (:func:`lpvest.systems.polytopic.hinf_setting`); ``None``: every state
     Cz: np.ndarray | None = None
 
     def __post_init__(self) -> None:
@@ -338,6 +515,48 @@ class AffineLPV:
         Defaults: no input (``B``, ``D`` with zero columns), ``G = I``,
         ``H = I``, ``S = 0``, ``x0 = 0``, ``P0 = 0``, ``Cz``: every state is
         what an H-infinity filter estimates.
+
+        Parameters
+        ----------
+        space : SchedulingSpace
+            The box of scheduling vectors ``p``.
+        basis : sequence of BasisFunction, length n_psi
+            The basis functions ``psi_i(p)`` the matrices are affine in.
+        A : array_like or mapping, shape (n_x, n_x)
+            State matrix ``A(p)``.
+        C : array_like or mapping, shape (n_y, n_x)
+            Output matrix ``C(p)``.
+        Q : array_like, shape (n_w, n_w)
+            Process noise covariance, eq. (2).
+        R : array_like, shape (n_v, n_v)
+            Measurement noise covariance, eq. (2).
+        B : array_like or mapping, shape (n_x, n_u), optional
+            Input matrix ``B(p)``; ``n_u`` is its number of columns (else that
+            of ``D``, else 0).
+        D : array_like or mapping, shape (n_y, n_u), optional
+            Feedthrough matrix ``D(p)`` (default zero).
+        G : array_like or mapping, shape (n_x, n_w), optional
+            Process-noise matrix ``G(p)`` (default the identity, which needs
+            ``n_w = n_x``).
+        H : array_like or mapping, shape (n_y, n_v), optional
+            Measurement-noise matrix ``H(p)`` (default the identity, which
+            needs ``n_v = n_y``).
+        S : array_like, shape (n_w, n_v), optional
+            Cross-covariance of ``w_t`` and ``v_t`` (default zero).
+        x0 : array_like, shape (n_x,), optional
+            Mean of the initial state (default zero).
+        P0 : array_like, shape (n_x, n_x), optional
+            Covariance of the initial state, positive semidefinite (default
+            zero: a known initial state).
+        name : str, default ""
+            The model's name in error messages.
+        Cz : array_like, shape (n_z, n_x), optional
+            The signal ``z = Cz x`` the H-infinity filters estimate.
+
+        Returns
+        -------
+        AffineLPV
+            The checked model.
         """
         noise = NoiseCovariance(Q, R, S)
         nw, nv = noise.Q.shape[0], noise.R.shape[0]
@@ -412,13 +631,40 @@ class AffineLPV:
 
     # -- evaluation -----------------------------------------------------------
     def at(self, p: object, *, check: bool = True) -> StateSpaceMatrices:
-        """The matrices at one scheduling vector ``p`` (range-checked)."""
+        """The matrices at one scheduling vector ``p`` (range-checked).
+
+        Parameters
+        ----------
+        p : array_like, shape (n_p,)
+            The scheduling vector.
+        check : bool, default True
+            Check ``p`` (``n_p`` finite values inside the box); ``False``
+            skips every check.
+
+        Returns
+        -------
+        StateSpaceMatrices
+            ``A, B, C, D, G, H`` at ``p``.
+        """
         m = self.dependence.evaluate(np.asarray(p, dtype=float), check=check)
         return StateSpaceMatrices(*(m[n] for n in _MATRIX_NAMES))
 
     def at_batch(self, p: object, *, check: bool = True) -> StateSpaceMatrices:
         """The matrices along a scheduling trajectory ``p`` of shape (T, n_p),
-        each stacked to shape ``(T, rows, cols)``."""
+        each stacked to shape ``(T, rows, cols)``.
+
+        Parameters
+        ----------
+        p : array_like, shape (T, n_p)
+            The scheduling trajectory (its shape and finiteness always checked).
+        check : bool, default True
+            Also check that every sample lies in the box.
+
+        Returns
+        -------
+        StateSpaceMatrices
+            ``A, B, C, D, G, H`` along ``p``, each of shape ``(T, rows, cols)``.
+        """
         m = self.dependence.evaluate_batch(np.asarray(p, dtype=float), check=check)
         return StateSpaceMatrices(*(m[n] for n in _MATRIX_NAMES))
 
@@ -448,7 +694,14 @@ class AffineLPV:
             Initial state. Default: the model's mean ``x0`` when the noise is
             given, a draw from ``N(x0, P0)`` when the noise is drawn.
         rng : numpy.random.Generator or int, optional
-            Random source (or its seed) for the noise and the initial state.
+            Random source (or its seed) for the noise and the initial state;
+            not used when ``w`` and ``v`` are given. ``None``: fresh entropy.
+
+        Returns
+        -------
+        LPVTrajectory
+            The states and outputs at ``t = 0..T-1`` and the noise that
+            drove them (given or drawn).
         """
         p = as_signal(p, "p", self.n_p)
         T = p.shape[0]
@@ -483,6 +736,26 @@ class AffineLPV:
         ``v_t``.
 
         :meth:`simulate`, the streaming plant and the Plant FMU all call it.
+
+        Parameters
+        ----------
+        x : ndarray, shape (n_x,)
+            The state ``x_t``.
+        psi : ndarray, shape (1 + n_psi,)
+            The basis values ``psi_t`` (not checked).
+        u : ndarray, shape (n_u,)
+            The input ``u_t``.
+        w : ndarray, shape (n_w,)
+            The process noise ``w_t``.
+        v : ndarray, shape (n_v,)
+            The measurement noise ``v_t``.
+
+        Returns
+        -------
+        y : ndarray, shape (n_y,)
+            The output ``y_t``.
+        x_next : ndarray, shape (n_x,)
+            The next state ``x_{t+1}``.
         """
         m = self.dependence.at_psi(psi)
         return m["C"] @ x + m["D"] @ u + m["H"] @ v, m["A"] @ x + m["B"] @ u + m["G"] @ w
@@ -490,7 +763,15 @@ class AffineLPV:
 
     # -- text forms ---------------------------------------------------------------------
     def to_toml(self) -> dict[str, Any]:
-        """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.modelfile`)."""
+        """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.modelfile`).
+
+        Returns
+        -------
+        dict of str to object
+            ``type = "affine"``, the basis and matrices
+            (:func:`~lpvest.systems.text.dependence_table`), ``Q``, ``R``,
+            ``S``, ``x0``, ``P0`` and, when set, ``Cz``.
+        """
         out: dict[str, Any] = {"type": "affine", **dependence_table(self.dependence)}
         out.update(Q=matrix_table(self.noise.Q), R=matrix_table(self.noise.R), S=matrix_table(self.noise.S))
         out.update(x0=[number(v) for v in self.x0], P0=matrix_table(self.P0))
@@ -499,7 +780,18 @@ class AffineLPV:
         return out
 
     def describe(self, key: str) -> list[str]:
-        """Lines for a person (``lpvest systems show``): type, dimensions, matrices."""
+        """Lines for a person (``lpvest systems show``): type, dimensions, matrices.
+
+        Parameters
+        ----------
+        key : str
+            The model's key in its model file, named in the first line.
+
+        Returns
+        -------
+        list of str
+            The lines, indented, without line ends.
+        """
         lines = [f"  model {key}: affine LPV with general noise (Cox & Toth (1)-(3))",
                  f"    n_x={self.nx} n_u={self.nu} n_y={self.ny} n_w={self.nw} n_v={self.nv} n_p={self.n_p}"]
         lines += describe_dependence(self.dependence)

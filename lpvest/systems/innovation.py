@@ -42,16 +42,40 @@ __all__ = [
 
 
 class InnovationTrajectory(NamedTuple):
-    """A simulated trajectory; row ``t`` holds time ``t``."""
+    """A simulated trajectory; row ``t`` holds time ``t``.
 
-    x: np.ndarray  #: states, shape (T, n_x) (empty for input-output models)
-    y: np.ndarray  #: outputs, shape (T, n_y)
-    e: np.ndarray  #: innovations, shape (T, n_y)
+    Parameters
+    ----------
+    x : ndarray, shape (T, n_x)
+        States ``x_t`` (shape (T, 0) for input-output models).
+    y : ndarray, shape (T, n_y)
+        Outputs ``y_t``.
+    e : ndarray, shape (T, n_y)
+        Innovations ``e_t``.
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    e: np.ndarray
 
 
 def scheduling_window(shifts: dict[str, set[int]]) -> tuple[int, int]:
     """``(lookback, lookahead)``: how many scheduling samples before ``t`` and
-    after ``t`` a set of formulas needs."""
+    after ``t`` a set of formulas needs.
+
+    Parameters
+    ----------
+    shifts : dict of str to set of int
+        For each variable, the time shifts ``k`` it is used with (``p_{t+k}``;
+        ``FormulaMatrix.shifts``).
+
+    Returns
+    -------
+    lookback : int
+        ``max(0, -min k)`` (0 when no shift is negative).
+    lookahead : int
+        ``max(0, max k)`` (0 when no shift is positive).
+    """
     ks = [k for s in shifts.values() for k in s] or [0]
     return max(0, -min(ks)), max(0, max(ks))
 
@@ -67,6 +91,26 @@ def innovation_step(
     The one place the recursion is written: :meth:`InnovationLPV.simulate`,
     the streaming plant, the Plant FMU and the Kalman filter's innovation-form
     simulation call it.
+
+    Parameters
+    ----------
+    m : mapping of str to ndarray
+        ``A`` (n_x, n_x), ``B`` (n_x, n_u), ``C`` (n_y, n_x) and ``D`` (n_y, n_u) at ``p_t``.
+    K : ndarray, shape (n_x, n_y)
+        The gain ``K_t``.
+    x : ndarray, shape (n_x,)
+        The state ``x_t``.
+    u : ndarray, shape (n_u,)
+        The input ``u_t``.
+    e : ndarray, shape (n_y,)
+        The innovation ``e_t``.
+
+    Returns
+    -------
+    y : ndarray, shape (n_y,)
+        The output ``y_t``.
+    x_next : ndarray, shape (n_x,)
+        The next state ``x_{t+1}``.
     """
     return m["C"] @ x + m["D"] @ u + e, m["A"] @ x + m["B"] @ u + K @ e
 
@@ -76,7 +120,28 @@ def innovation_inverse_step(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The innovation form run on data, a pure function: ``(e_t, x_{t+1})`` with
     ``e_t = y_t - C x_t - D u_t`` and ``x_{t+1} = A x_t + B u_t + K_t e_t``
-    (the same recursion as :func:`innovation_step`, solved for ``e_t``)."""
+    (the same recursion as :func:`innovation_step`, solved for ``e_t``).
+
+    Parameters
+    ----------
+    m : mapping of str to ndarray
+        ``A`` (n_x, n_x), ``B`` (n_x, n_u), ``C`` (n_y, n_x) and ``D`` (n_y, n_u) at ``p_t``.
+    K : ndarray, shape (n_x, n_y)
+        The gain ``K_t``.
+    x : ndarray, shape (n_x,)
+        The state ``x_t``.
+    u : ndarray, shape (n_u,)
+        The input ``u_t``.
+    y : ndarray, shape (n_y,)
+        The measured output ``y_t``.
+
+    Returns
+    -------
+    e : ndarray, shape (n_y,)
+        The innovation ``e_t``.
+    x_next : ndarray, shape (n_x,)
+        The next state ``x_{t+1}``.
+    """
     e = y - m["C"] @ x - m["D"] @ u
     return e, m["A"] @ x + m["B"] @ u + K @ e
 
@@ -106,6 +171,8 @@ class InnovationLPV:
         ``Omega``, positive definite.
     x0 : array_like, shape (n_x,), optional
         Initial state (default zero).
+    name : str, default ""
+        The model's name (a model file gives ``system/key``).
     """
 
     dependence: AffineDependence
@@ -189,10 +256,21 @@ class InnovationLPV:
         p : array_like, shape (lookback + T + lookahead, n_p)
             Scheduling trajectory, with the samples the gain needs before
             ``t = 0`` and after ``t = T - 1`` (see :attr:`window`; for (21b)
-            one extra sample at the end).
+            one extra sample at the end). Every sample is range-checked.
         u : array_like, shape (T, n_u), optional
+            Input (zero when omitted).
         e : array_like, shape (T, n_y), optional
             Innovations; drawn from ``N(0, Omega)`` with ``rng`` when omitted.
+        x0 : array_like, shape (n_x,), optional
+            Initial state (default: the model's ``x0``).
+        rng : numpy.random.Generator or int, optional
+            Random source (or its seed) for the innovations; not used when
+            ``e`` is given. ``None``: fresh entropy.
+
+        Returns
+        -------
+        InnovationTrajectory
+            The states, outputs and innovations at ``t = 0..T-1``.
         """
         back, ahead = self.window
         p = as_signal(p, "p", self.n_p)
@@ -221,7 +299,23 @@ class InnovationLPV:
 
     def innovations(self, p: object, u: object | None, y: object) -> np.ndarray:
         """The innovations ``e_t`` that give the outputs ``y`` (T, n_y) from
-        ``x_0 = x0`` (:func:`innovation_inverse_step`); ``p`` as in :meth:`simulate`."""
+        ``x_0 = x0`` (:func:`innovation_inverse_step`); ``p`` as in :meth:`simulate`.
+
+        Parameters
+        ----------
+        p : array_like, shape (lookback + T + lookahead, n_p)
+            Scheduling trajectory with the gain's window (shape and finiteness
+            checked; the range is not).
+        u : array_like, shape (T, n_u) or None
+            Input (``None``: zero).
+        y : array_like, shape (T, n_y)
+            The measured outputs.
+
+        Returns
+        -------
+        e : ndarray, shape (T, n_y)
+            The innovations ``e_t``.
+        """
         back, ahead = self.window
         p = as_signal(p, "p", self.n_p)
         y = np.asarray(y, dtype=float)
@@ -255,7 +349,15 @@ class InnovationLPV:
 
     # -- text forms ---------------------------------------------------------------------
     def to_toml(self) -> dict[str, Any]:
-        """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.modelfile`)."""
+        """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.modelfile`).
+
+        Returns
+        -------
+        dict of str to object
+            ``type = "innovation"``, the basis and matrices
+            (:func:`~lpvest.systems.text.dependence_table`), ``K`` (numbers
+            and formula text), ``innovation_covariance`` and ``x0``.
+        """
         out: dict[str, Any] = {"type": "innovation", **dependence_table(self.dependence)}
         out["K"] = self.K.to_list()
         out["innovation_covariance"] = matrix_table(self.innovation_covariance)
@@ -263,7 +365,18 @@ class InnovationLPV:
         return out
 
     def describe(self, key: str) -> list[str]:
-        """Lines for a person (``lpvest systems show``)."""
+        """Lines for a person (``lpvest systems show``).
+
+        Parameters
+        ----------
+        key : str
+            The model's key in its model file, named in the first line.
+
+        Returns
+        -------
+        list of str
+            The lines, indented, without line ends.
+        """
         back, ahead = self.window
         lines = [f"  model {key}: LPV innovation form with given gain",
                  f"    n_x={self.nx} n_u={self.nu} n_y={self.ny}; gain uses p_(t-{back})..p_(t+{ahead})"]
@@ -281,14 +394,19 @@ class LPVInputOutput:
     Parameters
     ----------
     space : SchedulingSpace
+        The box of scheduling vectors ``p``; the coefficients are formulas of
+        its component names at time ``t`` (no shifts).
     y_coefficients : sequence of formula
         ``a_1, a_2, ...``: coefficients of ``y_{t-1}, y_{t-2}, ...``.
     u_coefficients : sequence of formula
         ``b_0, b_1, ...``: coefficients of ``u_t, u_{t-1}, ...``.
-    e_coefficients : sequence of formula
-        ``c_1, c_2, ...``: coefficients of ``e_{t-1}, ...`` (``e_t`` has 1).
-    noise_variance : float
-        Variance of the white noise ``e_t``.
+    e_coefficients : sequence of formula, optional
+        ``c_1, c_2, ...``: coefficients of ``e_{t-1}, ...`` (``e_t`` has 1;
+        default none).
+    noise_variance : float, default 1.0
+        Variance of the white noise ``e_t`` (positive).
+    name : str, default ""
+        The model's name (a model file gives ``system/key``).
     """
 
     space: SchedulingSpace
@@ -338,6 +456,23 @@ class LPVInputOutput:
 
         ``p`` (T, n_p), ``u`` (T,) or (T, 1), ``e`` (T,) or (T, 1) (drawn from
         ``N(0, noise_variance)`` with ``rng`` when omitted).
+
+        Parameters
+        ----------
+        p : array_like, shape (T, n_p)
+            Scheduling trajectory (every sample range-checked).
+        u : array_like, shape (T,) or (T, 1)
+            Input ``u_t``.
+        e : array_like, shape (T,) or (T, 1), optional
+            Noise ``e_t``.
+        rng : numpy.random.Generator or int, optional
+            Random source (or its seed) for ``e``; not used when ``e`` is
+            given. ``None``: fresh entropy.
+
+        Returns
+        -------
+        InnovationTrajectory
+            ``x`` of shape (T, 0) (no state), ``y`` and ``e`` of shape (T, 1).
         """
         p = as_signal(p, "p", self.space.dim)
         T = p.shape[0]
@@ -370,7 +505,14 @@ class LPVInputOutput:
 
     # -- text forms ---------------------------------------------------------------------
     def to_toml(self) -> dict[str, Any]:
-        """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.modelfile`)."""
+        """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.modelfile`).
+
+        Returns
+        -------
+        dict of str to object
+            ``type = "lpv-io"``, the coefficient lists ``y``, ``u`` and ``e``
+            (numbers or formula text) and ``noise_variance``.
+        """
         return {
             "type": "lpv-io",
             "y": [formula_value(c) for c in self.y_coefficients],
@@ -380,7 +522,18 @@ class LPVInputOutput:
         }
 
     def describe(self, key: str) -> list[str]:
-        """Lines for a person (``lpvest systems show``): the difference equation."""
+        """Lines for a person (``lpvest systems show``): the difference equation.
+
+        Parameters
+        ----------
+        key : str
+            The model's key in its model file, named in the first line.
+
+        Returns
+        -------
+        list of str
+            The lines, indented, without line ends.
+        """
         terms = [f"({c.text}) y[t-{i + 1}]" for i, c in enumerate(self.y_coefficients)]
         terms += [f"({c.text}) u[t-{i}]" for i, c in enumerate(self.u_coefficients)]
         terms += ["e[t]"] + [f"({c.text}) e[t-{i + 1}]" for i, c in enumerate(self.e_coefficients)]

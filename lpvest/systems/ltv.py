@@ -48,6 +48,19 @@ class TimeFunction:
     Formulas carry exact derivatives; a callable may be given its derivative,
     otherwise it is differentiated by the complex step (exact to round-off for
     functions built from analytic numpy operations).
+
+    Build one with :meth:`of` or :meth:`from_callable`.
+
+    Parameters
+    ----------
+    fn : callable
+        ``t -> value``, called with a float array of times.
+    text : str
+        How the function is written (the formula, or ``<name>`` for a callable).
+    expression : Expression or None, default None
+        The formula of ``t`` when there is one (it gives exact derivatives).
+    _derivative : callable or None, default None
+        The derivative of a callable ``fn``, when known.
     """
 
     fn: Callable[[np.ndarray], np.ndarray]
@@ -58,7 +71,25 @@ class TimeFunction:
     @classmethod
     def of(cls, value: object) -> TimeFunction:
         """A :class:`TimeFunction` from a formula (``"t**2 + 1"``), a number, a
-        callable of ``t`` or a :class:`TimeFunction`."""
+        callable of ``t`` or a :class:`TimeFunction`.
+
+        Parameters
+        ----------
+        value : str, float, int, Expression, callable or TimeFunction
+            A formula of ``t``, a constant, a callable of ``t``, or a
+            :class:`TimeFunction` (returned as it is).
+
+        Returns
+        -------
+        TimeFunction
+            The function; a callable gets no derivative (see :meth:`derivative`).
+
+        Raises
+        ------
+        ExpressionError
+            ``value`` is none of these (e.g. a bool), or a formula uses a name
+            other than ``t``.
+        """
         if isinstance(value, TimeFunction):
             return value
         if isinstance(value, Expression):
@@ -76,6 +107,22 @@ class TimeFunction:
     def from_callable(
         cls, fn: Callable, *, derivative: Callable | None = None, name: str = ""
     ) -> TimeFunction:
+        """A :class:`TimeFunction` from a Python callable, with its derivative when known.
+
+        Parameters
+        ----------
+        fn : callable
+            ``t -> value`` for a float array of times.
+        derivative : callable, optional
+            ``t -> fn'(t)``; without it :meth:`derivative` uses the complex step.
+        name : str, default ""
+            The text of the function (default ``<fn.__name__>``).
+
+        Returns
+        -------
+        TimeFunction
+            The function, without a formula.
+        """
         return cls(fn, name or f"<{getattr(fn, '__name__', 'callable')}>", None, derivative)
 
     @property
@@ -87,7 +134,16 @@ class TimeFunction:
         return np.broadcast_to(np.asarray(self.fn(t_arr), dtype=float), t_arr.shape).copy()
 
     def derivative(self) -> TimeFunction:
-        """The time derivative as a :class:`TimeFunction`."""
+        """The time derivative as a :class:`TimeFunction`.
+
+        Returns
+        -------
+        TimeFunction
+            The exact symbolic derivative of a formula; for a callable, the
+            given derivative, else its complex-step derivative (which raises
+            :class:`~lpvest.errors.ExpressionError` when called if the callable
+            does not take complex times).
+        """
         if self.expression is not None:
             d = self.expression.derivative("t")
             return TimeFunction(_of_t(d), d.source, d)
@@ -133,12 +189,24 @@ def _input_and_x0_lines(u: TimeFunction | None, x0: np.ndarray | None) -> list[s
 
 
 class LTVTrajectory(NamedTuple):
-    """A simulated continuous-time trajectory at the sample times ``t``."""
+    """A simulated continuous-time trajectory at the sample times ``t``.
 
-    t: np.ndarray  #: sample times, shape (T,)
-    x: np.ndarray  #: states, shape (T, n)
-    y: np.ndarray  #: output, shape (T,)
-    u: np.ndarray  #: input, shape (T,)
+    Parameters
+    ----------
+    t : ndarray, shape (T,)
+        Sample times.
+    x : ndarray, shape (T, n)
+        States ``x(t)``.
+    y : ndarray, shape (T,)
+        Output ``y(t)``.
+    u : ndarray, shape (T,)
+        Input ``u(t)``.
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    u: np.ndarray
 
 
 MatrixFunction = Callable[[float], np.ndarray]
@@ -158,6 +226,21 @@ class LTVStateSpace:
     ``A``, ``B``, ``C`` are matrices of formulas of ``t`` (lists of rows) or
     callables ``t -> array``. ``input`` (a :class:`TimeFunction`) and ``x0``
     are the default input and initial state for :meth:`simulate`.
+
+    Parameters
+    ----------
+    A : sequence of sequence of formula, FormulaMatrix or callable
+        ``A(t)``, shape (n, n); ``n`` is read from ``A(0)``.
+    B : sequence of sequence of formula, FormulaMatrix or callable
+        ``B(t)``, shape (n, 1).
+    C : sequence of sequence of formula, FormulaMatrix or callable
+        ``C(t)``, shape (1, n).
+    input : formula, number or callable, optional
+        Default input ``u(t)`` of :meth:`simulate` (default: none, zero input).
+    x0 : array_like, shape (n,), optional
+        Default initial state of :meth:`simulate` (default: none, zero state).
+    name : str, default ""
+        The model's name (a model file gives ``system/key``).
     """
 
     A: MatrixFunction
@@ -216,6 +299,22 @@ class LTVStateSpace:
             Input ``u(t)`` (default: the model's ``input``, else zero).
         x0 : array_like, shape (n,), optional
             State at ``t[0]`` (default: the model's ``x0``, else zero).
+        rtol : float, default 1e-12
+            Relative tolerance of the integrator.
+        atol : float, default 1e-14
+            Absolute tolerance of the integrator.
+
+        Returns
+        -------
+        LTVTrajectory
+            ``t``, the states, ``y = C(t) x`` and ``u(t)`` at the sample times.
+
+        Raises
+        ------
+        DimensionError
+            ``t`` has fewer than two samples or is not strictly increasing.
+        ExpressionError
+            The integration fails.
         """
         from scipy.integrate import solve_ivp
 
@@ -244,7 +343,19 @@ class LTVStateSpace:
 
     # -- text forms ---------------------------------------------------------------------
     def to_toml(self) -> dict[str, Any]:
-        """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.modelfile`)."""
+        """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.modelfile`).
+
+        Returns
+        -------
+        dict of str to object
+            ``type = "ltv-ss"``, ``A``, ``B`` and ``C`` as rows of numbers and
+            formula text and, when set, ``input`` and ``x0``.
+
+        Raises
+        ------
+        ModelFileError
+            A matrix or the input is a Python callable.
+        """
         out: dict[str, Any] = {"type": "ltv-ss"}
         for n in ("A", "B", "C"):
             fm = self.formulas[n]
@@ -254,7 +365,18 @@ class LTVStateSpace:
         return out | _input_and_x0_table(self.input, self.x0)
 
     def describe(self, key: str) -> list[str]:
-        """Lines for a person (``lpvest systems show``)."""
+        """Lines for a person (``lpvest systems show``).
+
+        Parameters
+        ----------
+        key : str
+            The model's key in its model file, named in the first line.
+
+        Returns
+        -------
+        list of str
+            The lines, indented, without line ends.
+        """
         lines = [f"  model {key}: continuous-time LTV state space, n = {self.n}"]
         for name, fm in self.formulas.items():
             lines.append(f"    {name}(t) = {fm.to_list() if fm is not None else '<callable>'}")
@@ -273,8 +395,10 @@ class LTVInputOutput:
         ``b_0(t), ..., b_m(t)``.
     input : formula or callable, optional
         Default input for simulation (Sridhar: ``"120*sin(t)"``).
-    x0 : array_like, optional
+    x0 : array_like, shape (n,), optional
         Default initial state of the realization :meth:`to_state_space`.
+    name : str, default ""
+        The model's name (a model file gives ``system/key``).
     """
 
     a: tuple[TimeFunction, ...]
@@ -319,6 +443,17 @@ class LTVInputOutput:
         - Order 2 with ``b_1``: ``x_2 = y' + b_1 u``, so that
           ``x_1' = x_2 - b_1 u`` and
           ``x_2' = -a_0 x_1 - a_1 x_2 + (a_1 b_1 + b_1' - b_0) u``.
+
+        Returns
+        -------
+        LTVStateSpace
+            The realization, with this model's ``input``, ``x0`` and ``name``.
+
+        Raises
+        ------
+        DimensionError
+            The input has derivatives beyond these cases (``b_1`` with an order
+            other than 2, or ``b_2`` and higher).
         """
         n = self.order
         a = self.a
@@ -359,13 +494,38 @@ class LTVInputOutput:
 
     def simulate(self, t: object, **kwargs: object) -> LTVTrajectory:
         """Simulate through :meth:`to_state_space` (same arguments as
-        :meth:`LTVStateSpace.simulate`)."""
+        :meth:`LTVStateSpace.simulate`).
+
+        Parameters
+        ----------
+        t : array_like, shape (T,)
+            Increasing sample times.
+        **kwargs
+            ``u``, ``x0``, ``rtol``, ``atol`` of :meth:`LTVStateSpace.simulate`.
+
+        Returns
+        -------
+        LTVTrajectory
+            The trajectory; ``x`` holds the realization's states (``x_1 = y``).
+        """
         return self.to_state_space().simulate(t, **kwargs)  # type: ignore[arg-type]
 
 
     # -- text forms ---------------------------------------------------------------------
     def to_toml(self) -> dict[str, Any]:
-        """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.modelfile`)."""
+        """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.modelfile`).
+
+        Returns
+        -------
+        dict of str to object
+            ``type = "ltv-io"``, the coefficients ``a`` and ``b`` (numbers or
+            formula text) and, when set, ``input`` and ``x0``.
+
+        Raises
+        ------
+        ModelFileError
+            A coefficient or the input is a Python callable.
+        """
         out: dict[str, Any] = {
             "type": "ltv-io",
             "a": [time_value(f, f"a[{i}]") for i, f in enumerate(self.a)],
@@ -374,7 +534,18 @@ class LTVInputOutput:
         return out | _input_and_x0_table(self.input, self.x0)
 
     def describe(self, key: str) -> list[str]:
-        """Lines for a person (``lpvest systems show``): the differential equation."""
+        """Lines for a person (``lpvest systems show``): the differential equation.
+
+        Parameters
+        ----------
+        key : str
+            The model's key in its model file, named in the first line.
+
+        Returns
+        -------
+        list of str
+            The lines, indented, without line ends.
+        """
         n = self.order
         lines = [f"  model {key}: continuous-time LTV input-output, order {n}",
                  "    y^(" + str(n) + ") + " + " + ".join(f"({f.text}) y^({i})" for i, f in enumerate(self.a))

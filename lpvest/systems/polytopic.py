@@ -58,7 +58,25 @@ POLYTOPIC_INPUT_MATRICES = ("Bu", "Dzu", "Dyu")
 
 
 class PolytopicMatrices(NamedTuple):
-    """The matrices of (1) at one ``alpha`` (or the vertex stacks, shape (N, r, c))."""
+    """The matrices of (1) at one ``alpha`` (or the vertex stacks, shape (N, r, c)).
+
+    Stacked along a trajectory by :meth:`PolytopicLPV.at_batch` (shape (T, r, c)).
+
+    Parameters
+    ----------
+    A : ndarray, shape (n_x, n_x)
+        State matrix ``A(alpha)``.
+    Bw : ndarray, shape (n_x, n_w)
+        Disturbance matrix ``Bw(alpha)``.
+    Cz : ndarray, shape (n_z, n_x)
+        Matrix ``Cz(alpha)`` of the signal to be estimated ``z``.
+    Dz : ndarray, shape (n_z, n_w)
+        Disturbance feedthrough ``Dz(alpha)`` to ``z``.
+    Cy : ndarray, shape (n_y, n_x)
+        Matrix ``Cy(alpha)`` of the measured output ``y``.
+    Dy : ndarray, shape (n_y, n_w)
+        Disturbance feedthrough ``Dy(alpha)`` to ``y``.
+    """
 
     A: np.ndarray
     Bw: np.ndarray
@@ -69,7 +87,17 @@ class PolytopicMatrices(NamedTuple):
 
 
 class PolytopicInput(NamedTuple):
-    """The vertex stacks of a known input's matrices, shape (N, rows, n_u)."""
+    """The vertex stacks of a known input's matrices, shape (N, rows, n_u).
+
+    Parameters
+    ----------
+    Bu : ndarray, shape (N, n_x, n_u)
+        Input matrix of the state, ``x+ = ... + Bu u``.
+    Dzu : ndarray, shape (N, n_z, n_u)
+        Input feedthrough to ``z``.
+    Dyu : ndarray, shape (N, n_y, n_u)
+        Input feedthrough to ``y``.
+    """
 
     Bu: np.ndarray
     Dzu: np.ndarray
@@ -77,16 +105,33 @@ class PolytopicInput(NamedTuple):
 
 
 class PolytopicTrajectory(NamedTuple):
-    """A simulated trajectory; row ``k`` holds time ``k``."""
+    """A simulated trajectory; row ``k`` holds time ``k``.
 
-    x: np.ndarray  #: states, shape (T, n_x)
-    z: np.ndarray  #: signal to be estimated, shape (T, n_z)
-    y: np.ndarray  #: measured output, shape (T, n_y)
+    Parameters
+    ----------
+    x : ndarray, shape (T, n_x)
+        States ``x_k``.
+    z : ndarray, shape (T, n_z)
+        Signal to be estimated ``z_k``.
+    y : ndarray, shape (T, n_y)
+        Measured output ``y_k``.
+    """
+
+    x: np.ndarray
+    z: np.ndarray
+    y: np.ndarray
 
 
 @runtime_checkable
 class SimplexMap(Protocol):
-    """Maps the physical scheduling vector to ``alpha`` on the unit simplex."""
+    """Maps the physical scheduling vector to ``alpha`` on the unit simplex.
+
+    Parameters
+    ----------
+    *args, **kwargs
+        Not used: a Protocol cannot be instantiated. A class conforms by having
+        the members below (``isinstance`` checks that they exist).
+    """
 
     @property
     def space(self) -> SchedulingSpace: ...
@@ -97,7 +142,18 @@ class SimplexMap(Protocol):
     def __call__(self, p: np.ndarray) -> np.ndarray: ...
 
     def evaluate(self, p: np.ndarray) -> np.ndarray:
-        """Vectorised: ``p`` of shape ``(T, n_p)`` -> ``alpha`` of shape ``(T, N)``."""
+        """Vectorised: ``p`` of shape ``(T, n_p)`` -> ``alpha`` of shape ``(T, N)``.
+
+        Parameters
+        ----------
+        p : ndarray, shape (T, n_p)
+            Scheduling vectors, one per row.
+
+        Returns
+        -------
+        alpha : ndarray, shape (T, N)
+            The vertex weights of each row.
+        """
         ...
 
 
@@ -115,6 +171,13 @@ class FormulaSimplexMap:
 
     Checked at construction on the box corners and a grid: ``alpha >= 0`` and
     ``sum(alpha) == 1`` (exact for formulas affine in ``p``).
+
+    Parameters
+    ----------
+    space : SchedulingSpace
+        The box of scheduling vectors ``p``; the formulas use its component names.
+    formulas : sequence of str or Expression, length N
+        ``f_1, ..., f_N``, at least one (text is parsed with the names of ``space``).
 
     Examples
     --------
@@ -164,17 +227,42 @@ class FormulaSimplexMap:
         return alpha.copy()
 
     def evaluate(self, p: np.ndarray) -> np.ndarray:
+        """Vectorised: ``alpha`` for every scheduling vector of ``p`` (not range-checked).
+
+        Parameters
+        ----------
+        p : array_like, shape (..., n_p)
+            Scheduling vectors along the last axis, e.g. a trajectory (T, n_p).
+
+        Returns
+        -------
+        alpha : ndarray, shape (..., N)
+            The weights ``f_i(p)``.
+        """
         p = np.asarray(p, dtype=float)
         out = self._vector.evaluate(self.space.as_dict(p))  # type: ignore[attr-defined]
         return np.broadcast_to(out, (*p.shape[:-1], self.n_vertices)).astype(float)
 
 
     def to_toml(self) -> dict[str, Any]:
-        """The ``map`` table of a model file."""
+        """The ``map`` table of a model file.
+
+        Returns
+        -------
+        dict of str to object
+            ``kind = "formulas"`` and ``alpha``, one formula per weight (a
+            number for a constant one).
+        """
         return {"kind": "formulas", "alpha": [formula_value(f) for f in self.formulas]}
 
     def describe(self) -> list[str]:
-        """Lines for a person: one formula per weight."""
+        """Lines for a person: one formula per weight.
+
+        Returns
+        -------
+        list of str
+            The lines, indented, without line ends.
+        """
         return [f"    alpha_{i + 1} = {f.text}" for i, f in enumerate(self.formulas)]
 
 
@@ -186,6 +274,16 @@ class MultilinearSimplexMap:
     ``alpha_v = prod_j (lambda_j if bit j of v else 1 - lambda_j)``: vertex 0
     is the all-lower corner. The coordinates are basis functions of ``p``
     (components for a multi-affine model).
+
+    Parameters
+    ----------
+    space : SchedulingSpace
+        The box of scheduling vectors ``p``.
+    coordinates : sequence of BasisFunction, length n_c
+        The coordinates ``c_j(p)``.
+    lower, upper : array_like, shape (n_c,)
+        The box of the coordinates, ``lower_j < upper_j``; ``alpha`` is on the
+        simplex while ``c(p)`` stays in it.
     """
 
     space: SchedulingSpace
@@ -220,13 +318,33 @@ class MultilinearSimplexMap:
         return 2 ** len(self.coordinates)
 
     def vertex_coordinates(self) -> np.ndarray:
-        """Coordinates of each vertex, shape ``(N, n_c)``."""
+        """Coordinates of each vertex, shape ``(N, n_c)``.
+
+        Returns
+        -------
+        ndarray, shape (2**n_c, n_c)
+            Row ``v`` takes ``upper[j]`` where bit ``j`` of ``v`` is set, else
+            ``lower[j]`` (:func:`~lpvest.scheduling.box_vertices`).
+        """
         return box_vertices(self.lower, self.upper)
 
     def __call__(self, p: np.ndarray) -> np.ndarray:
         return self.evaluate(np.asarray(p, dtype=float).reshape(1, -1))[0]
 
     def evaluate(self, p: np.ndarray) -> np.ndarray:
+        """Vectorised: ``alpha`` for every row of ``p`` (not range-checked: a
+        coordinate outside ``[lower, upper]`` gives negative weights).
+
+        Parameters
+        ----------
+        p : array_like, shape (T, n_p)
+            Scheduling vectors, one per row.
+
+        Returns
+        -------
+        alpha : ndarray, shape (T, 2**n_c)
+            The multilinear weights of each row.
+        """
         p = np.asarray(p, dtype=float)
         lam = np.stack([c.evaluate(p) for c in self.coordinates], axis=-1)
         lam = (lam - self.lower) / (self.upper - self.lower)
@@ -239,7 +357,14 @@ class MultilinearSimplexMap:
 
 
     def to_toml(self) -> dict[str, Any]:
-        """The ``map`` table of a model file."""
+        """The ``map`` table of a model file.
+
+        Returns
+        -------
+        dict of str to object
+            ``kind = "multilinear"``, ``over`` (the coordinates' names),
+            ``lower`` and ``upper``.
+        """
         return {
             "kind": "multilinear",
             "over": [basis_name(c) for c in self.coordinates],
@@ -248,7 +373,13 @@ class MultilinearSimplexMap:
         }
 
     def describe(self) -> list[str]:
-        """Lines for a person: the coordinates the weights are multilinear in."""
+        """Lines for a person: the coordinates the weights are multilinear in.
+
+        Returns
+        -------
+        list of str
+            The lines, indented, without line ends.
+        """
         return [f"    alpha: multilinear weights over ({', '.join(c.name for c in self.coordinates)})"]
 
 
@@ -268,10 +399,17 @@ def affine_to_polytopic(
     In both cases ``M(p) == sum_v alpha_v(p) M_v`` holds exactly (to
     round-off) for every ``p`` in the box and ``alpha(p)`` is on the simplex.
 
+    Parameters
+    ----------
+    dependence : AffineDependence
+        The matrices, with at least one basis function.
+
     Returns
     -------
     vertices : dict of str to ndarray, shape (N, rows, cols)
+        Every matrix of ``dependence`` at each vertex ``v``.
     simplex_map : MultilinearSimplexMap
+        The weights ``alpha(p)`` of the vertices.
     """
     space, basis = dependence.space, dependence.basis
     if not basis:
@@ -319,6 +457,8 @@ class PolytopicLPV:
         system (10)), kept for reference and checks.
     parameters : mapping, optional
         Named model parameters the matrices were built with (e.g. ``rho``).
+    name : str, default ""
+        The model's name in error messages (a model file gives ``system/key``).
 
     Examples
     --------
@@ -415,7 +555,25 @@ class PolytopicLPV:
         name: str = "",
     ) -> PolytopicLPV:
         """The exact polytopic form of a system stated as affine in ``p``
-        (see :func:`affine_to_polytopic`); keeps the affine form."""
+        (see :func:`affine_to_polytopic`); keeps the affine form.
+
+        Parameters
+        ----------
+        dependence : AffineDependence
+            ``A, Bw, Cz, Dz, Cy, Dy`` (and optionally ``Bu``, ``Dzu``, ``Dyu``)
+            affine in at least one basis function of ``p``; other matrices are
+            kept in the affine form only.
+        parameters : mapping of str to float, optional
+            Named model parameters the matrices were built with.
+        name : str, default ""
+            The model's name in error messages.
+
+        Returns
+        -------
+        PolytopicLPV
+            With a :class:`MultilinearSimplexMap` and ``dependence`` as its
+            affine form.
+        """
         names = [n for n in (*POLYTOPIC_MATRICES, *POLYTOPIC_INPUT_MATRICES) if n in dependence.coefficients]
         vertices, mapping = affine_to_polytopic(dependence.subset(names))
         return cls(vertices, mapping, dependence, parameters, name)
@@ -448,12 +606,25 @@ class PolytopicLPV:
 
     def vertex_stacks(self) -> dict[str, np.ndarray]:
         """Every vertex stack by name, the known input's included (the
-        ``vertices`` argument that rebuilds this model)."""
+        ``vertices`` argument that rebuilds this model).
+
+        Returns
+        -------
+        dict of str to ndarray, shape (N, rows, cols)
+            ``A, Bw, Cz, Dz, Cy, Dy`` and, with a known input, ``Bu, Dzu, Dyu``.
+        """
         return {**self.vertices._asdict(), **({} if self.known_input is None else self.known_input._asdict())}
 
     def input_path_varies(self) -> bool:
         """True when the response to ``u`` depends on ``alpha``: a filter
-        that compensates ``u`` then needs ``alpha`` (even a robust one)."""
+        that compensates ``u`` then needs ``alpha`` (even a robust one).
+
+        Returns
+        -------
+        bool
+            ``False`` without a known input; else whether any of ``A, Cz, Cy,
+            Bu, Dzu, Dyu`` differs between the vertices.
+        """
         if self.known_input is None:
             return False
         stacks = (self.vertices.A, self.vertices.Cz, self.vertices.Cy, *self.known_input)
@@ -461,7 +632,18 @@ class PolytopicLPV:
 
     def matrices(self, alpha: np.ndarray) -> dict[str, np.ndarray]:
         """Every matrix at ``alpha`` (validated: on the simplex), the known
-        input's included: ``A, Bw, Cz, Dz, Cy, Dy[, Bu, Dzu, Dyu]``."""
+        input's included: ``A, Bw, Cz, Dz, Cy, Dy[, Bu, Dzu, Dyu]``.
+
+        Parameters
+        ----------
+        alpha : ndarray, shape (N,)
+            The vertex weights, used as given (not checked here).
+
+        Returns
+        -------
+        dict of str to ndarray, shape (rows, cols)
+            ``sum_i alpha_i M_i`` for every matrix (fresh arrays).
+        """
         return self._stack.at(alpha)
 
     @property
@@ -470,7 +652,23 @@ class PolytopicLPV:
 
     # -- evaluation -----------------------------------------------------------
     def alpha(self, p: object) -> np.ndarray:
-        """``alpha`` for the physical scheduling ``p`` (range-checked)."""
+        """``alpha`` for the physical scheduling ``p`` (range-checked).
+
+        Parameters
+        ----------
+        p : array_like, shape (n_p,)
+            The physical scheduling vector.
+
+        Returns
+        -------
+        alpha : ndarray, shape (N,)
+            The vertex weights of the simplex map.
+
+        Raises
+        ------
+        SchedulingRangeError
+            The model has no simplex map, or ``p`` is outside the box.
+        """
         if self.simplex_map is None:
             raise SchedulingRangeError(
                 f"model {self.name or '(unnamed)'} has no map from a physical scheduling to alpha"
@@ -479,7 +677,23 @@ class PolytopicLPV:
         return self.simplex_map(pv)
 
     def alpha_batch(self, p: object) -> np.ndarray:
-        """``alpha`` along a scheduling trajectory ``p`` of shape (T, n_p)."""
+        """``alpha`` along a scheduling trajectory ``p`` of shape (T, n_p).
+
+        Parameters
+        ----------
+        p : array_like, shape (T, n_p)
+            The physical scheduling trajectory (every sample range-checked).
+
+        Returns
+        -------
+        alpha : ndarray, shape (T, N)
+            The vertex weights of each sample.
+
+        Raises
+        ------
+        SchedulingRangeError
+            The model has no simplex map, or a sample is outside the box.
+        """
         if self.simplex_map is None:
             raise SchedulingRangeError(
                 f"model {self.name or '(unnamed)'} has no map from a physical scheduling to alpha"
@@ -491,7 +705,20 @@ class PolytopicLPV:
         return self.simplex_map.evaluate(pt)
 
     def at(self, alpha: object, *, check: bool = True) -> PolytopicMatrices:
-        """The matrices at one ``alpha`` (checked to lie on the simplex)."""
+        """The matrices at one ``alpha`` (checked to lie on the simplex).
+
+        Parameters
+        ----------
+        alpha : array_like, shape (N,)
+            The vertex weights (length and finiteness always checked).
+        check : bool, default True
+            Check that ``alpha`` is on the unit simplex.
+
+        Returns
+        -------
+        PolytopicMatrices
+            ``A, Bw, Cz, Dz, Cy, Dy`` at ``alpha``.
+        """
         a = as_vector(alpha, "alpha", self.n_vertices)
         if check:
             check_simplex(a, "alpha")
@@ -499,7 +726,20 @@ class PolytopicLPV:
 
     def at_batch(self, alpha: object, *, check: bool = True) -> PolytopicMatrices:
         """The matrices along ``alpha`` of shape (T, N), stacked (T, rows, cols);
-        row ``k`` is :meth:`at` of ``alpha[k]`` to the bit."""
+        row ``k`` is :meth:`at` of ``alpha[k]`` to the bit.
+
+        Parameters
+        ----------
+        alpha : array_like, shape (T, N)
+            The vertex weights along time (shape and finiteness always checked).
+        check : bool, default True
+            Check that every row is on the unit simplex.
+
+        Returns
+        -------
+        PolytopicMatrices
+            ``A, Bw, Cz, Dz, Cy, Dy`` along ``alpha``, each of shape ``(T, rows, cols)``.
+        """
         a = as_signal(alpha, "alpha", self.n_vertices)
         if check:
             for t in range(a.shape[0]):
@@ -515,6 +755,27 @@ class PolytopicLPV:
         input, ``u_k`` (n_u,).
 
         :meth:`simulate`, the streaming plant and the Plant FMU all call it.
+
+        Parameters
+        ----------
+        x : ndarray, shape (n_x,)
+            The state ``x_k``.
+        alpha : ndarray, shape (N,)
+            The vertex weights ``alpha_k`` (not checked).
+        w : ndarray, shape (n_w,)
+            The disturbance ``w_k``.
+        u : ndarray, shape (n_u,), optional
+            The known input ``u_k``; ``None`` (or a model without a known
+            input) leaves the input terms out.
+
+        Returns
+        -------
+        y : ndarray, shape (n_y,)
+            The measured output ``y_k``.
+        z : ndarray, shape (n_z,)
+            The signal to be estimated ``z_k``.
+        x_next : ndarray, shape (n_x,)
+            The next state ``x_{k+1}``.
         """
         m = self._stack.at(alpha)
         y, z, nxt = m["Cy"] @ x + m["Dy"] @ w, m["Cz"] @ x + m["Dz"] @ w, m["A"] @ x + m["Bw"] @ w
@@ -527,7 +788,29 @@ class PolytopicLPV:
     ) -> PolytopicTrajectory:
         """Simulate (1) for ``alpha`` (T, N), disturbance ``w`` (T, n_w) and,
         for a model with a known input, ``u`` (T, n_u; default zero), from
-        ``x0`` (default zero): :meth:`step` sample by sample."""
+        ``x0`` (default zero): :meth:`step` sample by sample.
+
+        Parameters
+        ----------
+        alpha : array_like, shape (T, N)
+            The vertex weights (every row checked to lie on the simplex).
+        w : array_like, shape (T, n_w)
+            The disturbance.
+        x0 : array_like, shape (n_x,), optional
+            The initial state (default zero).
+        u : array_like, shape (T, n_u), optional
+            The known input (default zero); only for a model with one.
+
+        Returns
+        -------
+        PolytopicTrajectory
+            ``x``, ``z`` and ``y`` at ``k = 0..T-1``.
+
+        Raises
+        ------
+        DimensionError
+            ``u`` is given for a model without a known input, or a shape is wrong.
+        """
         a = as_signal(alpha, "alpha", self.n_vertices)
         for t in range(a.shape[0]):
             check_simplex(a[t], f"alpha at k={t}")
@@ -548,7 +831,21 @@ class PolytopicLPV:
 
     # -- text forms ---------------------------------------------------------------------
     def to_toml(self) -> dict[str, Any]:
-        """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.modelfile`)."""
+        """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.modelfile`).
+
+        Returns
+        -------
+        dict of str to object
+            ``type = "polytopic"``, the simplex map's ``map`` table (when there
+            is a map), one ``vertex`` table per vertex and, when kept, the
+            ``affine`` form.
+
+        Raises
+        ------
+        ModelFileError
+            The simplex map (or a basis function of the affine form) has no
+            text form.
+        """
         out: dict[str, Any] = {"type": "polytopic"}
         if self.simplex_map is not None:
             to_toml = getattr(self.simplex_map, "to_toml", None)
@@ -563,7 +860,18 @@ class PolytopicLPV:
         return out
 
     def describe(self, key: str) -> list[str]:
-        """Lines for a person (``lpvest systems show``): vertices, map, affine form."""
+        """Lines for a person (``lpvest systems show``): vertices, map, affine form.
+
+        Parameters
+        ----------
+        key : str
+            The model's key in its model file, named in the first line.
+
+        Returns
+        -------
+        list of str
+            The lines, indented, without line ends.
+        """
         lines = [f"  model {key}: polytopic LPV (Peixoto et al. (1)), N={self.n_vertices} vertices",
                  f"    n_x={self.nx} n_w={self.nw} n_z={self.nz} n_y={self.ny}"
                  + (f" n_u={self.nu} (known input)" if self.nu else "")]
@@ -613,11 +921,25 @@ def hinf_setting(model: object, *, z: object | None = None, name: str = "") -> P
     Parameters
     ----------
     model : AffineLPV or PolytopicLPV
+        The model; a :class:`PolytopicLPV` only without ``z`` and ``name``.
     z : array_like, shape (n_z, n_x), optional
         Which combination of states the filter estimates (default: the
         model's ``Cz``, model-file key ``Cz``; without one every state).
     name : str, optional
         Name of the polytopic model (default: the model's).
+
+    Returns
+    -------
+    PolytopicLPV
+        The model in the H-infinity setting, with ``w~`` as its disturbance
+        (``n_w + n_v`` components) and ``u`` as its known input (when
+        ``n_u > 0``); without a basis function, one vertex and no simplex map.
+
+    Raises
+    ------
+    ArgumentTypeError
+        ``model`` is not an :class:`AffineLPV` (nor a :class:`PolytopicLPV`
+        without ``z`` and ``name``).
 
     Examples
     --------

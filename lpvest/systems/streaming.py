@@ -198,7 +198,19 @@ def _rules_for(model: object) -> _Rules | None:
 
 def plant_supports(model: object) -> str | None:
     """``None`` when :class:`DiscretePlant` or :class:`LTVPlant` can run ``model``,
-    else the reason why not."""
+    else the reason why not.
+
+    Parameters
+    ----------
+    model : object
+        A model of :mod:`lpvest.systems`.
+
+    Returns
+    -------
+    str or None
+        ``None``, or why neither plant streams ``model`` (e.g. an innovation
+        form whose gain uses shifted scheduling, an input-output model).
+    """
     rules = _rules_for(model)
     if rules is not None:
         return rules.unsupported()
@@ -314,6 +326,16 @@ class DiscretePlant(Component):
         return self._k
 
     def get_state(self) -> dict[str, Any]:
+        """A copy of the whole state, for :meth:`set_state`.
+
+        Returns
+        -------
+        state : dict of str to object
+            ``"x"``: the state (ndarray, shape (n_x,)), ``"k"``: the sample
+            index (int), ``"noise"``: the model noise drawn for the current
+            sample (ndarray), ``"rng"``: the generator's ``bit_generator.state``
+            (dict).
+        """
         return {
             "x": self._x.copy(),
             "k": self._k,
@@ -345,6 +367,23 @@ class LTVPlant(TimedComponent):
 
     Ports: input ``u`` (1,); outputs ``y`` (1,) = ``C(t) x``, ``x`` (n,) and
     ``u_applied`` (1,), the input at the current time.
+
+    Parameters
+    ----------
+    model : LTVStateSpace or LTVInputOutput
+        The plant; an input-output model is realized by
+        :meth:`~lpvest.systems.LTVInputOutput.to_state_space`.
+    use_model_input : bool, optional
+        Apply the model's input function rather than the port ``u`` (default:
+        when the model declares one; ``True`` needs one).
+    x0 : array_like, shape (n,), optional
+        Initial state (default: the model's ``x0``, else zero).
+    t0 : float, default 0.0
+        Initial time.
+    rtol : float, default 1e-12
+        Relative tolerance of the integrator.
+    atol : float, default 1e-14
+        Absolute tolerance of the integrator.
     """
 
     def __init__(
@@ -419,6 +458,14 @@ class LTVPlant(TimedComponent):
         self._t = t_end
 
     def get_state(self) -> dict[str, Any]:
+        """A copy of the whole state, for :meth:`set_state`.
+
+        Returns
+        -------
+        state : dict of str to object
+            ``"t"``: the current time (float), ``"x"``: the state (ndarray,
+            shape (n,)).
+        """
         return {"t": self._t, "x": self._x.copy()}
 
     def _set_state(self, state: Mapping[str, Any]) -> None:

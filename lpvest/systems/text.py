@@ -44,17 +44,55 @@ __all__ = [
 
 
 def number(x: float) -> float:
-    """A number as a model file writes it (a Python float)."""
+    """A number as a model file writes it (a Python float).
+
+    Parameters
+    ----------
+    x : float
+        A number (a numpy scalar included).
+
+    Returns
+    -------
+    float
+        ``float(x)``.
+    """
     return float(x)
 
 
 def matrix_table(m: np.ndarray) -> list[list[float]]:
-    """A matrix as a list of rows of floats."""
+    """A matrix as a list of rows of floats.
+
+    Parameters
+    ----------
+    m : array_like, shape (rows, cols)
+        The matrix.
+
+    Returns
+    -------
+    list of list of float
+        Its rows.
+    """
     return [[number(v) for v in row] for row in np.asarray(m)]
 
 
 def basis_name(b: BasisFunction) -> str:
-    """The name (a formula) of a basis function; a Python callable has none."""
+    """The name (a formula) of a basis function; a Python callable has none.
+
+    Parameters
+    ----------
+    b : BasisFunction
+        The basis function.
+
+    Returns
+    -------
+    str
+        Its name.
+
+    Raises
+    ------
+    ModelFileError
+        ``b`` is a Python callable.
+    """
     if isinstance(b, CallableBasis):
         raise ModelFileError(
             f"basis function {b.name!r} is a Python callable and cannot be written to a model file"
@@ -64,7 +102,25 @@ def basis_name(b: BasisFunction) -> str:
 
 def dependence_table(dep: AffineDependence) -> dict[str, Any]:
     """``basis``, ``bounds`` and one entry per matrix (a plain matrix when only
-    the constant term is nonzero, else a table by basis function)."""
+    the constant term is nonzero, else a table by basis function).
+
+    Parameters
+    ----------
+    dep : AffineDependence
+        The matrices and their basis.
+
+    Returns
+    -------
+    dict of str to object
+        ``basis`` (if any), ``bounds`` (declared bounds of formula basis
+        functions, if any) and the matrices; a matrix with no columns (``B``,
+        ``D`` without an input) is left out.
+
+    Raises
+    ------
+    ModelFileError
+        A basis function is a Python callable.
+    """
     out: dict[str, Any] = {}
     names = [basis_name(b) for b in dep.basis]
     if names:
@@ -88,25 +144,79 @@ def dependence_table(dep: AffineDependence) -> dict[str, Any]:
 
 
 def formula_value(e: Expression) -> float | str:
-    """A constant formula as its value, any other as its source text."""
+    """A constant formula as its value, any other as its source text.
+
+    Parameters
+    ----------
+    e : Expression
+        The formula.
+
+    Returns
+    -------
+    float or str
+        Its value or its source text.
+    """
     return e.value() if e.is_constant else e.source
 
 
 def time_value(f: TimeFunction, what: str) -> float | str:
-    """A function of time as a formula; a Python callable has none."""
+    """A function of time as a formula; a Python callable has none.
+
+    Parameters
+    ----------
+    f : TimeFunction
+        The function.
+    what : str
+        How the error message calls it (e.g. ``"input"``, ``"a[0]"``).
+
+    Returns
+    -------
+    float or str
+        :func:`formula_value` of its formula.
+
+    Raises
+    ------
+    ModelFileError
+        ``f`` is a Python callable.
+    """
     if f.expression is None:
         raise ModelFileError(f"{what} is a Python callable and cannot be written to a model file")
     return formula_value(f.expression)
 
 
 def format_matrix(m: np.ndarray, indent: str = "      ") -> str:
-    """A matrix printed for a person, indented."""
+    """A matrix printed for a person, indented.
+
+    Parameters
+    ----------
+    m : array_like
+        The matrix (printed with 6 digits, small values suppressed).
+    indent : str, default "      "
+        Put before every line.
+
+    Returns
+    -------
+    str
+        The lines, joined by newlines.
+    """
     text = np.array2string(np.asarray(m), precision=6, suppress_small=True, max_line_width=100)
     return "\n".join(indent + line for line in text.splitlines())
 
 
 def describe_dependence(dep: AffineDependence) -> list[str]:
-    """The basis and each nonzero coefficient matrix, for ``describe``."""
+    """The basis and each nonzero coefficient matrix, for ``describe``.
+
+    Parameters
+    ----------
+    dep : AffineDependence
+        The matrices and their basis.
+
+    Returns
+    -------
+    list of str
+        The lines (a printed matrix is one item of several lines); the
+        constant term of every matrix is always shown.
+    """
     lines = [f"    basis: {', '.join(dep.term_names)}"]
     for name, stack in dep.coefficients.items():
         for i, term in enumerate(dep.term_names):
