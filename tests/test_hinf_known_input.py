@@ -12,7 +12,7 @@ import pytest
 from lpvest import load_system
 from lpvest.design import KIND_PD, KIND_ROBUST, design_hinf
 from lpvest.errors import ArgumentTypeError, DimensionError, ModelFileError
-from lpvest.estimators.hinf import HinfFilter
+from lpvest.estimators.hinf import HinfFilter, hinf_filter_batch
 from lpvest.modelfile import save_system
 from lpvest.protocol import run_streaming
 from lpvest.systems.polytopic import PolytopicLPV, hinf_setting
@@ -88,6 +88,29 @@ def test_the_estimation_error_does_not_depend_on_the_known_input(kind):
     np.testing.assert_allclose(e_0, err, rtol=0, atol=roundoff(size, T, n=7))
     # the certified bound holds with the input: ||e||_2 < gamma ||w||_2 from zero initial state
     assert np.linalg.norm(e_u) < d.gamma * np.linalg.norm(w)
+
+
+@pytest.mark.parametrize("kind", [KIND_PD, KIND_ROBUST])
+def test_the_batch_filter_compensates_u_as_the_streaming_filter_does(kind):
+    plant, d = setup(kind)
+    T = 60
+    rng = np.random.default_rng(11)
+    p = rng.uniform(-1.0, 1.0, (T, 1))
+    alpha = plant.alpha_batch(p)
+    u = 3.0 * rng.standard_normal((T, 1))
+    y = plant.simulate(alpha, rng.standard_normal((T, plant.nw)), u=u).y
+    streamed = run_streaming(HinfFilter(d, simplex_map=plant.simplex_map, plant=plant), {"p": p, "u": u, "y": y})
+    batch = hinf_filter_batch(d, y, alpha, plant=plant, u=u)
+    np.testing.assert_array_equal(batch.zhat, streamed["zhat"])  # one computation, sample by sample
+    np.testing.assert_array_equal(batch.xf, streamed["xf"])
+    # without the plant, u is not compensated: another estimate (the old silent behaviour)
+    assert not np.allclose(hinf_filter_batch(d, y, alpha).zhat, batch.zhat)
+    with pytest.raises(DimensionError, match="has a known input: pass u"):
+        hinf_filter_batch(d, y, alpha, plant=plant)
+    with pytest.raises(DimensionError, match="pass the plant too"):
+        hinf_filter_batch(d, y, alpha, u=u)
+    with pytest.raises(DimensionError, match="needs alpha"):
+        hinf_filter_batch(d, y, plant=plant, u=u)  # the response to u varies with p here, robust too
 
 
 @pytest.mark.slow
@@ -168,3 +191,28 @@ def test_a_robust_filter_of_a_plant_whose_input_path_is_constant_takes_no_schedu
     # as in the scheduled case: the u-driven parts cancel, T steps of sums of <= 7 products
     size = float(np.max(np.abs(with_u.x)) + np.max(np.abs(with_u.y)) + np.max(np.abs(with_u.z)))
     np.testing.assert_allclose(e_u, e_0, rtol=0, atol=roundoff(size, T, n=7))
+
+
+def test_a_polytopic_model_with_a_known_input_streams_and_evaluates_like_its_simulation(rng):
+    from lpvest.systems.streaming import DiscretePlant
+
+    plant = hinf_setting(model())
+    # at / at_batch: the six matrices of (1), equal to the same entries of matrices()
+    alpha = plant.alpha([0.4])
+    at = plant.at(alpha)
+    full = plant.matrices(alpha)
+    for name in at._fields:
+        np.testing.assert_array_equal(getattr(at, name), full[name])
+    batch = plant.at_batch(np.stack([alpha, plant.alpha([-0.2])]))
+    np.testing.assert_array_equal(batch.A[0], at.A)
+    # the streaming plant (and so the Plant FMU) takes u, and reproduces simulate(u=...) to the bit
+    T = 30
+    p = rng.uniform(-1.0, 1.0, (T, 1))
+    w, u = rng.standard_normal((T, plant.nw)), rng.standard_normal((T, plant.nu))
+    sim = plant.simulate(plant.alpha_batch(p), w, u=u)
+    streaming = DiscretePlant(plant)
+    assert [q.name for q in streaming.input_ports] == ["p", "u", "w"]
+    out = run_streaming(streaming, {"p": p, "u": u, "w": w})
+    np.testing.assert_array_equal(out["y"], sim.y)
+    np.testing.assert_array_equal(out["z"], sim.z)
+    np.testing.assert_array_equal(out["x"], sim.x)

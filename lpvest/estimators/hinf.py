@@ -158,10 +158,18 @@ def _step_with(
 
 
 def hinf_filter_batch(
-    design: HinfDesign, y: object, alpha: object | None = None, *, xf0: object | None = None
+    design: HinfDesign,
+    y: object,
+    alpha: object | None = None,
+    *,
+    xf0: object | None = None,
+    plant: PolytopicLPV | None = None,
+    u: object | None = None,
 ) -> HinfRun:
     """Run filter (2) over a record ``y`` (T, n_y) with ``alpha`` (T, N)
-    (``None`` for a robust design), from ``xf0`` (default zero).
+    (``None`` for a robust design), from ``xf0`` (default zero); with the
+    ``plant`` and its known input ``u``, the response to ``u`` is compensated
+    exactly as :class:`HinfFilter` does (same numbers to the bit).
 
     Parameters
     ----------
@@ -171,19 +179,30 @@ def hinf_filter_batch(
         Measurements ``y_k``.
     alpha : array_like, shape (T, N), optional
         Scheduling weights, each row on the unit simplex (checked); required
-        by a parameter-dependent design, ignored by a robust one.
+        by a parameter-dependent design, or when the plant's response to ``u``
+        varies with ``alpha`` (:func:`needs_scheduling`); otherwise ignored.
     xf0 : array_like, shape (n_x,), optional
         Initial filter state ``x_{f,0}`` (default zero).
+    plant : PolytopicLPV, optional
+        The plant of the design, when it has a known input (module
+        documentation: the filter runs the plant's response to ``u`` beside
+        (2), so that its error does not depend on ``u``).
+    u : array_like, shape (T, n_u), optional
+        The known input; required with a ``plant`` that has one.
 
     Returns
     -------
     HinfRun
-        ``z_{f,k}`` and ``x_{f,k}`` for every sample.
+        ``z^_k`` (``z_{f,k}`` plus, with a known input, the response to ``u``)
+        and ``x_{f,k}`` for every sample.
 
     Raises
     ------
     DimensionError
-        Wrong shapes, or ``alpha`` missing for a parameter-dependent design.
+        Wrong shapes, ``alpha`` missing where it is needed, ``u`` missing for a
+        plant with a known input or given without one.
+    ArgumentTypeError
+        ``plant`` is not a PolytopicLPV, or not the design's plant.
     SchedulingRangeError
         A row of ``alpha`` is not on the simplex.
     NumericalError
@@ -201,21 +220,68 @@ def hinf_filter_batch(
     """
     yy = as_signal(y, "y", design.ny)
     T = yy.shape[0]
-    if design.scheduled:
+    plant = _input_plant(design, plant)
+    if plant is None and u is not None:
+        raise DimensionError("u is the known input of a plant: pass the plant too (plant=...), "
+                             "or leave u out for a plant without one")
+    uu = None
+    if plant is not None:
+        if u is None:
+            raise DimensionError(f"plant {plant.name or '(unnamed)'} has a known input: pass u of shape ({T}, "
+                                 f"{plant.nu})")
+        uu = as_signal(u, "u", plant.nu, T)
+    aa = None
+    if needs_scheduling(design, plant):
         if alpha is None:
             raise DimensionError(f"a {design.kind} filter needs alpha of shape ({T}, {design.n_vertices})")
         aa = as_signal(alpha, "alpha", design.n_vertices, T)
         for k in range(T):
             check_simplex(aa[k], f"alpha at k={k}")
-    else:
-        aa = None
     x = np.zeros(design.nx) if xf0 is None else as_vector(xf0, "xf0", design.nx)
     Z = np.empty((T, design.nz))
     X = np.empty((T, design.nx))
+    if plant is None or uu is None:
+        gains = None if not design.scheduled else aa
+        for k in range(T):
+            X[k] = x
+            Z[k], x = hinf_step(design, x, None if gains is None else gains[k], yy[k])
+        return HinfRun(Z, X)
+    path = _InputPath(plant, design.n_vertices)
+    xu = np.zeros(plant.nx)
     for k in range(T):
         X[k] = x
-        Z[k], x = hinf_step(design, x, None if aa is None else aa[k], yy[k])
+        a = path.at(None if aa is None else aa[k])
+        y_w = yy[k] - a["Cy"] @ xu - a["Dyu"] @ uu[k]  # the measurement of the plant without input
+        z_f, x = hinf_step(design, x, aa[k] if design.scheduled and aa is not None else None, y_w)
+        Z[k] = a["Cz"] @ xu + a["Dzu"] @ uu[k] + z_f
+        xu = a["A"] @ xu + a["Bu"] @ uu[k]
     return HinfRun(Z, X)
+
+
+def _input_plant(design: HinfDesign, plant: object) -> PolytopicLPV | None:
+    """``plant`` checked against ``design``; None when it has no known input."""
+    if plant is None:
+        return None
+    if not isinstance(plant, PolytopicLPV):
+        raise ArgumentTypeError(f"plant must be a PolytopicLPV; found {type(plant).__name__}")
+    design.check_model(plant, source=f"{design.kind} design")
+    return plant if plant.known_input is not None else None
+
+
+class _InputPath:
+    """The plant matrices of the filter's copy of the response to a known input
+    (only those it needs), evaluated once when they do not depend on alpha."""
+
+    def __init__(self, plant: PolytopicLPV, n_vertices: int) -> None:
+        stacks = plant.vertex_stacks()
+        self._stack = MatrixStack({n: stacks[n] for n in _U_PATH})
+        self._fixed = None if plant.input_path_varies() else self._stack.at(np.eye(1, n_vertices)[0])
+
+    def at(self, alpha: np.ndarray | None) -> dict[str, np.ndarray]:
+        if self._fixed is not None:
+            return self._fixed
+        assert alpha is not None  # the path varies: the filter is scheduled (needs_scheduling)
+        return self._stack.at(alpha)
 
 
 #: The plant matrices of the filter's copy of the response to a known input.
@@ -285,25 +351,13 @@ class HinfFilter(Component):
     ) -> None:
         if not isinstance(design, HinfDesign):
             raise ArgumentTypeError(f"design must be an HinfDesign; found {type(design).__name__}")
-        if plant is not None:
-            if not isinstance(plant, PolytopicLPV):
-                raise ArgumentTypeError(f"plant must be a PolytopicLPV; found {type(plant).__name__}")
-            design.check_model(plant, source=f"{design.kind} design")
-            if plant.known_input is None:
-                plant = None  # nothing to compensate
+        plant = _input_plant(design, plant)
         #: the plant whose known input the filter compensates (None: no input)
         self.plant = plant
         #: the filter needs alpha: its gains are scheduled, or the input path varies
         self.scheduled = needs_scheduling(design, plant)
-        # the plant's response to u: only the matrices it needs, evaluated once
-        # when they do not depend on alpha
-        self._u_path: MatrixStack | None = None
-        self._u_fixed: dict[str, np.ndarray] | None = None
-        if plant is not None:
-            stacks = plant.vertex_stacks()
-            self._u_path = MatrixStack({n: stacks[n] for n in _U_PATH})
-            if not plant.input_path_varies():
-                self._u_fixed = self._u_path.at(np.eye(1, design.n_vertices)[0])  # any vertex: all equal
+        # the plant's response to u: only the matrices it needs
+        self._u_path = None if plant is None else _InputPath(plant, design.n_vertices)
         if simplex_map is not None:
             if not self.scheduled:
                 raise ArgumentTypeError("a robust filter takes no scheduling input: do not pass simplex_map")
@@ -367,11 +421,8 @@ class HinfFilter(Component):
         if self.plant is None:
             zhat = m.Cf @ self._xf + m.Df @ y
             return {"zhat": zhat, "xf": self._xf.copy()}, (m, alpha, y, zhat, None, None)
-        if self._u_fixed is not None:
-            a = self._u_fixed
-        else:  # the response to u varies with alpha: the filter is scheduled, alpha is given
-            assert self._u_path is not None and alpha is not None
-            a = self._u_path.at(alpha)
+        assert self._u_path is not None
+        a = self._u_path.at(alpha)
         y_w = y - a["Cy"] @ self._xu - a["Dyu"] @ u  # the measurement of the plant without input
         z_f = m.Cf @ self._xf + m.Df @ y_w
         zhat = a["Cz"] @ self._xu + a["Dzu"] @ u + z_f

@@ -631,8 +631,8 @@ class PolytopicLPV:
         return any(not np.array_equal(s, np.broadcast_to(s[0], s.shape)) for s in stacks)
 
     def matrices(self, alpha: np.ndarray) -> dict[str, np.ndarray]:
-        """Every matrix at ``alpha`` (validated: on the simplex), the known
-        input's included: ``A, Bw, Cz, Dz, Cy, Dy[, Bu, Dzu, Dyu]``.
+        """Every matrix at ``alpha`` (not checked to lie on the simplex: see
+        :meth:`at`), the known input's included: ``A, Bw, Cz, Dz, Cy, Dy[, Bu, Dzu, Dyu]``.
 
         Parameters
         ----------
@@ -717,12 +717,13 @@ class PolytopicLPV:
         Returns
         -------
         PolytopicMatrices
-            ``A, Bw, Cz, Dz, Cy, Dy`` at ``alpha``.
+            ``A, Bw, Cz, Dz, Cy, Dy`` at ``alpha`` (the known-input matrices: :meth:`matrices`).
         """
         a = as_vector(alpha, "alpha", self.n_vertices)
         if check:
             check_simplex(a, "alpha")
-        return PolytopicMatrices(**self._stack.at(a))
+        m = self._stack.at(a)
+        return PolytopicMatrices(*(m[k] for k in PolytopicMatrices._fields))
 
     def at_batch(self, alpha: object, *, check: bool = True) -> PolytopicMatrices:
         """The matrices along ``alpha`` of shape (T, N), stacked (T, rows, cols);
@@ -744,7 +745,8 @@ class PolytopicLPV:
         if check:
             for t in range(a.shape[0]):
                 check_simplex(a[t], f"alpha at k={t}")
-        return PolytopicMatrices(**self._stack.at_batch(a))
+        m = self._stack.at_batch(a)
+        return PolytopicMatrices(*(m[k] for k in PolytopicMatrices._fields))
 
     def step(
         self, x: np.ndarray, alpha: np.ndarray, w: np.ndarray, u: np.ndarray | None = None

@@ -102,7 +102,8 @@ class _PolytopicRules(_Rules):
             sched = Port("alpha", (m.n_vertices,), "vertex weights")
         else:
             sched = Port("p", (m.simplex_map.space.dim,), "scheduling")
-        return ([sched, Port("w", (m.nw,), "disturbance")],
+        ins = [sched] + ([Port("u", (m.nu,), "known input")] if m.known_input is not None else [])
+        return (ins + [Port("w", (m.nw,), "disturbance")],
                 [Port("y", (m.ny,), "measured output"), Port("z", (m.nz,), "signal to be estimated")])
 
     def check(self, val: dict[str, np.ndarray]) -> None:
@@ -113,7 +114,7 @@ class _PolytopicRules(_Rules):
 
     def evaluate(self, x: np.ndarray, val: dict[str, np.ndarray], noise: np.ndarray,
                  no_u: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        y, z, nxt = self.model.step(x, val["alpha"], val["w"])
+        y, z, nxt = self.model.step(x, val["alpha"], val["w"], val.get("u"))
         return {"y": y, "z": z, "x": x.copy()}, nxt
 
 
