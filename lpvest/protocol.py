@@ -428,7 +428,9 @@ class Component(ABC):
         memo = self._memo
         if memo is not None:
             self._memo = None
-            if memo[0] == input_key(inputs, self._in_names):
+            # a key of None (kept by prepare(), or inputs that are missing or not
+            # numeric) matches nothing: such inputs are read, and refused, as usual
+            if memo[0] is not None and memo[0] == input_key(inputs, self._in_names):
                 return memo[1], memo[2]
         return self._evaluate(self._read(inputs))
 
@@ -471,7 +473,7 @@ class Component(ABC):
             The value of every output port, by port name (not copies).
         """
         out, pending = self._evaluate(self._read(inputs))
-        self._memo = (None, out, pending)  # only advance() takes it: step() compares keys, and None != a key
+        self._memo = (None, out, pending)  # only advance() takes it: step() never reuses a None key
         return out
 
     def _kept(self) -> tuple[dict[str, np.ndarray], Any] | None:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from lpvest import load_system
-from lpvest.errors import NonFiniteError, SchedulingRangeError
+from lpvest.errors import DimensionError, NonFiniteError, SchedulingRangeError
 from lpvest.estimators.hinf import HinfFilter
 from lpvest.protocol import input_key
 from lpvest.signals import SchedulerComponent, SignalSpec
@@ -121,6 +121,20 @@ def test_a_read_never_lets_a_bad_input_through_and_state_changes_drop_the_memo(p
     y1 = plant.outputs({"p": [0.3], "w": [1.0]})["y"]
     plant.reset()
     assert not np.array_equal(plant.outputs({"p": [0.3], "w": [1.0]})["y"], y1)
+
+
+def test_a_step_after_prepare_reads_its_own_inputs(plant_model, design):
+    # prepare() keeps its evaluation under no key: step() with missing or
+    # non-numeric inputs (whose key is None as well) must read them and refuse them
+    f = HinfFilter(design, simplex_map=plant_model.simplex_map)
+    f.prepare({"p": [0.3], "y": [1.0]})
+    with pytest.raises(DimensionError, match="missing"):
+        f.step({})
+    with pytest.raises(DimensionError):
+        f.step({"p": [0.3], "y": ["one"]})
+    assert f.get_state()["k"] == 0
+    out = f.step({"p": [0.3], "y": [1.0]})
+    assert f.get_state()["k"] == 1 and out["zhat"].shape == (design.nz,)
 
 
 def test_scheduler_outputs_then_step_reports_the_same_values(plant_model):
