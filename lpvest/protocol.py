@@ -601,7 +601,9 @@ class TimedComponent(Component):
         return kept[0]
 
 
-def run_streaming(estimator: Sampled, inputs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+def run_streaming(
+    estimator: Sampled, inputs: Mapping[str, np.ndarray], *, steps: int | None = None
+) -> dict[str, np.ndarray]:
     """Run a sampled component over whole input sequences (row ``k`` = sample ``k``)
     and stack its outputs, each of shape ``(T, *port.shape)``.
 
@@ -612,6 +614,9 @@ def run_streaming(estimator: Sampled, inputs: Mapping[str, np.ndarray]) -> dict[
         (no ``dt``: not a :class:`Timed` one).
     inputs : mapping of str to ndarray, shape (T, ...)
         Every input port's sequence by name, all of the same length ``T``.
+    steps : int, optional
+        ``T``, for a component without inputs (a source); when given with
+        inputs it must equal their length.
 
     Returns
     -------
@@ -622,12 +627,32 @@ def run_streaming(estimator: Sampled, inputs: Mapping[str, np.ndarray]) -> dict[
     Raises
     ------
     DimensionError
-        The sequences differ in length (or there are none).
+        The sequences differ in length or from ``steps``, or there are none
+        and no ``steps``.
+    TypeError
+        ``estimator`` is a timed component (:class:`TimedComponent`: it steps
+        by a ``dt``, call its ``step(inputs, dt=...)``).
     """
-    lengths = {name: np.shape(v)[0] for name, v in inputs.items()}
-    if len(set(lengths.values())) != 1:
-        raise DimensionError(f"input sequences have different lengths: {lengths}")
-    T = next(iter(lengths.values()))
+    if isinstance(estimator, TimedComponent):
+        raise TypeError(f"run_streaming runs sampled components; {type(estimator).__name__} is timed "
+                        "(it advances by a step size): call its step(inputs, dt=...) in a loop")
+    if steps is not None and (isinstance(steps, bool) or not isinstance(steps, int) or steps < 0):
+        raise DimensionError(f"steps must be a non-negative integer; found {steps!r}")
+    lengths = {name: np.shape(v)[0] if np.ndim(v) else None for name, v in inputs.items()}
+    if any(n is None for n in lengths.values()):
+        raise DimensionError(f"every input needs a sequence (first axis: the sample); found scalars for "
+                             f"{sorted(n for n, v in lengths.items() if v is None)}")
+    if not lengths:
+        if steps is None:
+            raise DimensionError("no input sequences: give steps=T for a component without inputs")
+        T = steps
+    else:
+        found = set(lengths.values())
+        if len(found) != 1:
+            raise DimensionError(f"input sequences have different lengths: {lengths}")
+        T = int(found.pop())  # type: ignore[arg-type]
+        if steps is not None and steps != T:
+            raise DimensionError(f"steps = {steps}, but the input sequences have {T} samples")
     out = {p.name: np.empty((T, *p.shape)) for p in estimator.output_ports}
     for k in range(T):
         res = estimator.step({name: np.asarray(v[k]) for name, v in inputs.items()})

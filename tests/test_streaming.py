@@ -102,3 +102,21 @@ def test_library_simulation_and_streaming_plant_draw_the_same_realization():
           for t in range(50)]
     # the same recursion in two arrangements (as above), 50 steps
     np.testing.assert_allclose(np.array(ys), ref.y, rtol=0, atol=roundoff(np.max(np.abs(ref.y)), 2 * 50, n=6))
+
+
+def test_run_streaming_names_what_is_wrong_with_its_sequences():
+    from lpvest.signals import SignalSpec, SourceComponent
+
+    plant = DiscretePlant(load_system("peixoto-ex1").model())
+    with pytest.raises(DimensionError, match="different lengths"):
+        run_streaming(plant, {"p": np.zeros((3, 1)), "w": np.zeros((4, 1))})
+    with pytest.raises(DimensionError, match="give steps=T"):
+        run_streaming(plant, {})
+    with pytest.raises(DimensionError, match="steps = 5, but the input sequences have 3 samples"):
+        run_streaming(plant, {"p": np.zeros((3, 1)), "w": np.zeros((3, 1))}, steps=5)
+    with pytest.raises(DimensionError, match=r"found scalars for \['w'\]"):
+        run_streaming(plant, {"p": np.zeros((3, 1)), "w": 0.0})
+    with pytest.raises(TypeError, match="SourceComponent is timed"):
+        run_streaming(SourceComponent({"w": SignalSpec.build("gaussian", 1, seed=2)}), {}, steps=3)
+    out = run_streaming(plant, {"p": np.zeros((3, 1)), "w": np.ones((3, 1))}, steps=3)
+    assert out["y"].shape == (3, plant.model.ny)
