@@ -19,6 +19,7 @@ from lpvest import (
 )
 from lpvest.analysis import fading_memory
 from lpvest.analysis.fading_memory import (
+    decay_rate,
     empirical_prediction_error,
     frozen_gains,
     monotonicity,
@@ -465,6 +466,10 @@ def test_monotonicity_and_tau_needed(model, data):
     assert err.max_K_error[n1] < 1e-3 <= err.max_K_error[n1 - 1]
     assert err.max_K_error[n6] < 1e-6 <= err.max_K_error[n6 - 1]
     assert tau_needed(err, 1e-30) is None
+    for fn in (tau_needed, decay_rate, monotonicity):  # "k" is not "K": an error, not the P errors
+        args = (err, 1e-3) if fn is tau_needed else (err,)
+        with pytest.raises(DimensionError, match="which must be 'K' or 'P'; found 'k'"):
+            fn(*args, which="k")
 
 
 def test_monotonicity_on_a_made_up_curve():

@@ -226,6 +226,11 @@ class Monotonicity(NamedTuple):
     floor: float
 
 
+def _check_which(which: object) -> None:
+    if which not in ("K", "P"):
+        raise DimensionError(f"which must be 'K' or 'P'; found {abbreviate(which, 30)}")
+
+
 def monotonicity(errors: TruncationErrors, *, which: str = "K", floor: float = 1e-12) -> Monotonicity:
     """Check the decrease of ``||K_t - K^(tau)_t||`` (or of ``P``, ``which="P"``)
     in ``tau``: for the max over ``t``, and pointwise for every ``t`` where
@@ -263,8 +268,7 @@ def monotonicity(errors: TruncationErrors, *, which: str = "K", floor: float = 1
     >>> m.sup_monotone, m.violations
     (True, 0)
     """
-    if which not in ("K", "P"):
-        raise DimensionError(f"which must be 'K' or 'P'; found {abbreviate(which, 30)}")
+    _check_which(which)
     E = errors.K_error if which == "K" else errors.P_error
     sup = errors.max_K_error if which == "K" else errors.max_P_error
     taus = errors.taus
@@ -302,7 +306,8 @@ def tau_needed(errors: TruncationErrors, tol: float, *, which: str = "K") -> int
     tol : float
         Tolerance on ``max_t`` error (strict: below ``tol``).
     which : {"K", "P"}, default "K"
-        The gain errors; any other value selects the covariance errors.
+        The gain errors (``"K"``) or the covariance errors (``"P"``); anything
+        else raises :class:`~lpvest.errors.DimensionError`.
 
     Returns
     -------
@@ -317,6 +322,7 @@ def tau_needed(errors: TruncationErrors, tol: float, *, which: str = "K") -> int
     >>> tau_needed(err, 1e-3), tau_needed(err, 1e-30)
     (11, None)
     """
+    _check_which(which)
     sup = errors.max_K_error if which == "K" else errors.max_P_error
     below = sup < tol
     for i in range(len(below)):
@@ -334,7 +340,8 @@ def decay_rate(errors: TruncationErrors, *, which: str = "K", floor: float = 1e-
     errors : TruncationErrors
         From :func:`truncation_errors`.
     which : {"K", "P"}, default "K"
-        The gain errors; any other value selects the covariance errors.
+        The gain errors (``"K"``) or the covariance errors (``"P"``); anything
+        else raises :class:`~lpvest.errors.DimensionError`.
     floor : float, default 1e-13
         Errors at or below this (round-off) are left out of the fit.
 
@@ -352,6 +359,7 @@ def decay_rate(errors: TruncationErrors, *, which: str = "K", floor: float = 1e-
     >>> round(decay_rate(err), 2)
     0.55
     """
+    _check_which(which)
     sup = errors.max_K_error if which == "K" else errors.max_P_error
     ok = sup > floor
     if np.count_nonzero(ok) < 2:
