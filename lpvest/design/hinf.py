@@ -172,6 +172,22 @@ def choose_solver(n_vertices: int, nx: int, nz: int, nw: int, kind: str = KIND_P
     on with its other points). Every design is certified by the eigenvalue
     check whichever solver made it.
 
+    Parameters
+    ----------
+    n_vertices, nx, nz, nw : int
+        Plant dimensions ``N, nx, nz, nw``: ``N^2 (N + 1) / 2`` LMIs of size ``s = 4 nx + nz + nw``
+        (``ny`` does not enter).
+    kind : {"parameter-dependent", "robust"}, default "parameter-dependent"
+        Filter kind; it does not change the choice (Theorem 1 and Corollary 1 have the same LMIs).
+
+    Returns
+    -------
+    str
+        ``"CLARABEL"`` when the LMIs have at most ``AUTO_CLARABEL_MAX_ROWS`` (4000) scalar rows
+        ``s (s + 1) / 2`` in all, ``"SCS"`` above.
+
+    Examples
+    --------
     >>> choose_solver(2, 2, 2, 1)   # Peixoto Example 1: 6 LMIs of size 11
     'CLARABEL'
     >>> choose_solver(4, 3, 3, 5)   # 3 states, 4 vertices: 40 LMIs of size 20
@@ -190,6 +206,23 @@ def multiplier(epsilon: float) -> tuple[float, float]:
     """The normalized multiplier ``(a, b) = (sin phi, cos phi)``, ``phi = atan(epsilon)``.
 
     ``epsilon = a / b``; ``epsilon = +-inf`` gives ``(1, 0)``.
+
+    Parameters
+    ----------
+    epsilon : float
+        The paper's scalar: any real number, or ``+-math.inf``.
+
+    Returns
+    -------
+    a : float
+        ``sin phi = epsilon / sqrt(1 + epsilon^2)``.
+    b : float
+        ``cos phi = 1 / sqrt(1 + epsilon^2)``, in ``[0, 1]`` (0 for an infinite ``epsilon``).
+
+    Raises
+    ------
+    NonFiniteError
+        ``epsilon`` is NaN.
 
     Examples
     --------
@@ -274,7 +307,22 @@ def _q_now(P1: Any, P2: Any, P3: Any, delta: Any, nz: int, nw: int, bmat: Callab
 
 class LMIBlock(NamedTuple):
     """One LMI of (6)-(7): ``matrix < 0`` with ``matrix = Phi_iil`` (``i == j``)
-    or ``Phi_ijl + Phi_jil`` (``i < j``); indices are 0-based."""
+    or ``Phi_ijl + Phi_jil`` (``i < j``); indices are 0-based.
+
+    Parameters
+    ----------
+    label : str
+        ``"Phi_iil"`` or ``"Phi_ijl + Phi_jil"`` with the paper's 1-based indices (e.g. ``"Phi_121 + Phi_211"``).
+    i, j : int
+        Vertices (``i <= j``) of ``alpha_k`` in Lemma 1's products ``alpha_i alpha_j``; in ``Phi_ijl`` the
+        plant's matrices are those of vertex ``i`` and the decision variables (``X``, ``P(alpha_k)``, the
+        filter's) those of vertex ``j``.
+    l : int
+        Vertex of ``alpha_{k+1}``: ``P(alpha_{k+1})`` is ``P_l``.
+    matrix : ndarray or cvxpy expression, shape (4 nx + nz + nw, 4 nx + nz + nw)
+        The symmetric matrix required to be negative definite (numpy for :func:`lmi_matrices`, cvxpy
+        inside :class:`HinfProgram`).
+    """
 
     label: str
     i: int
@@ -364,6 +412,36 @@ def lmi_matrices(
     ``P1, P2, P3, X1..X6, H, Af, Bf, Cf, Df`` to per-vertex sequences and
     ``delta`` to a float. Give ``epsilon`` for the paper's form
     ``(a, b) = (epsilon, 1)``, or ``multiplier_ab`` for the rescaled form.
+
+    Parameters
+    ----------
+    plant : PolytopicLPV
+        The plant (1): its vertex matrices ``A, Bw, Cz, Dz, Cy, Dy``.
+    variables : mapping
+        ``P1, P2, P3, X1..X6`` -> ``N`` arrays each (vertex ``j`` at index ``j``); ``H, Af, Bf, Cf, Df`` ->
+        ``N`` arrays each (only index 0 is used when ``robust``); ``delta`` -> float (``gamma^2``).
+        :meth:`HinfProgram.last_variables` gives this mapping (in the rescaled coordinates).
+    epsilon : float, optional
+        The paper's scalar (finite), for the LMIs as printed, ``(a, b) = (epsilon, 1)``.
+    multiplier_ab : (float, float), optional
+        The rescaled multiplier ``(a, b) = (sin phi, cos phi)`` (:func:`multiplier`), for variables in the
+        rescaled coordinates of the module documentation.
+    robust : bool, default False
+        Corollary 1: one set of filter matrices (index 0) at every vertex.
+    printed_phi21 : bool, default False
+        Use the paper's misprinted ``P_{3,j}`` in ``Phi_21`` instead of ``P_{3,l}`` (for tests documenting
+        the trap).
+
+    Returns
+    -------
+    list of LMIBlock
+        The ``N^2 (N + 1) / 2`` LMIs, numpy matrices of size ``4 nx + nz + nw``, ordered by ``l``, then
+        ``i``, then ``j``; each must be negative definite.
+
+    Raises
+    ------
+    ArgumentError
+        Both or neither of ``epsilon`` and ``multiplier_ab`` are given.
     """
     if (epsilon is None) == (multiplier_ab is None):
         raise ArgumentError("give exactly one of epsilon and multiplier_ab")
@@ -378,14 +456,28 @@ def lmi_matrices(
 @dataclass(frozen=True)
 class DesignAttempt:
     """One solve of the LMIs at one ``epsilon`` (:meth:`HinfProgram.attempt`),
-    which does not raise when no certified design is found."""
+    which does not raise when no certified design is found.
+
+    Parameters
+    ----------
+    design : HinfDesign or None
+        The certified design; ``None`` when no solve gave one.
+    status : str
+        Final status: the solver's (cvxpy vocabulary; ``"solver_error"`` when the solver raised),
+        ``"...; LMI check failed"``, or ``"infeasible"``.
+    gamma : float
+        The design's certified bound; ``inf`` when no certified design.
+    detail : str, default ""
+        Every solve tried and why it was rejected.
+    gamma_lower : float, default nan
+        The solver's dual bound on the best ``gamma`` at this epsilon and margin (module documentation,
+        "Dual bound"); nan without a certified design or duals.
+    """
 
     design: HinfDesign | None
-    status: str  #: final status: the solver's (cvxpy vocabulary), "...; LMI check failed", or "infeasible"
-    gamma: float  #: inf when no certified design
-    detail: str = ""  #: every solve tried and why it was rejected
-    #: the solver's dual bound on the best ``gamma`` at this epsilon and margin
-    #: (module documentation, "Dual bound"); nan without a certified design or duals
+    status: str
+    gamma: float
+    detail: str = ""
     gamma_lower: float = math.nan
 
 
@@ -402,7 +494,8 @@ class HinfProgram:
     ----------
     n_vertices, nx, ny, nz, nw : int
         Plant dimensions.
-    kind : {"parameter-dependent", "robust"}
+    kind : {"parameter-dependent", "robust"}, default "parameter-dependent"
+        Theorem 1 (gain-scheduled filter) or Corollary 1 (robust filter).
     solver : str
         ``"AUTO"`` (default: :func:`choose_solver`) or a cvxpy solver name
         able to handle semidefinite constraints (``"CLARABEL"``, ``"SCS"``,
@@ -509,7 +602,21 @@ class HinfProgram:
     @classmethod
     def for_plant(cls, plant: PolytopicLPV | AffineLPV, **options: Any) -> HinfProgram:
         """A program for the dimensions of ``plant`` (options as in the constructor;
-        an :class:`~lpvest.systems.affine.AffineLPV` in its H-infinity setting)."""
+        an :class:`~lpvest.systems.affine.AffineLPV` in its H-infinity setting).
+
+        Parameters
+        ----------
+        plant : PolytopicLPV or AffineLPV
+            The plant whose ``(N, nx, ny, nz, nw)`` the program is compiled for.
+        **options
+            Keyword arguments of the constructor: ``kind``, ``solver``, ``margin``, ``solver_options``,
+            ``printed_phi21``.
+
+        Returns
+        -------
+        HinfProgram
+            A newly compiled program (not the cache that :func:`design_hinf` uses).
+        """
         plant = _setting(plant)
         return cls(plant.n_vertices, plant.nx, plant.ny, plant.nz, plant.nw, **options)
 
@@ -547,7 +654,20 @@ class HinfProgram:
     def last_variables(self) -> dict[str, Any]:
         """Every decision variable of the last solve (``P1, P2, P3, X1..X6``
         per vertex, the filter matrices, ``delta``), in the rescaled
-        coordinates of the module documentation; raises if none is available."""
+        coordinates of the module documentation; raises if none is available.
+
+        Returns
+        -------
+        dict
+            ``P1, P2, P3, X1..X6`` -> lists of ``N`` ndarrays; ``H, Af, Bf, Cf, Df`` -> lists of ``N``
+            ndarrays (1 for a robust program); ``delta`` -> float (``gamma^2``). The point the solver
+            returned, whether or not it passed the eigenvalue check; the mapping :func:`lmi_matrices` takes.
+
+        Raises
+        ------
+        LMIInfeasibleError
+            No solve has returned a point (none yet, or the last one found the LMIs infeasible).
+        """
         if self._var["delta"].value is None:
             raise LMIInfeasibleError("the program has no solution yet", status=str(self._problem.status))
         return self._values()
@@ -647,7 +767,25 @@ class HinfProgram:
 
     def attempt(self, plant: PolytopicLPV, epsilon: float | None = None, *, phi: float | None = None) -> DesignAttempt:
         """Solve at ``epsilon`` (or the angle ``phi = atan(epsilon)``) without
-        raising on failure: the certified design or ``None`` and the status."""
+        raising on failure: the certified design or ``None`` and the status.
+
+        Parameters
+        ----------
+        plant : PolytopicLPV
+            The plant (1), of the program's dimensions.
+        epsilon : float, optional
+            The paper's scalar: any real number, or ``+-math.inf`` (both give ``(a, b) = (1, 0)``;
+            the design records ``inf``).
+        phi : float, optional
+            The angle ``atan(epsilon)``, any real number (taken modulo pi); give exactly one of
+            ``epsilon`` and ``phi``.
+
+        Returns
+        -------
+        DesignAttempt
+            The certified design and its ``gamma``, or ``None`` and ``gamma = inf``; status ``"infeasible"``
+            without a solve when ``A(alpha)`` is not Schur somewhere on the simplex.
+        """
         self._check_dims(plant)
         if (epsilon is None) == (phi is None):
             raise ArgumentError("give exactly one of epsilon and phi")
@@ -699,7 +837,20 @@ class HinfProgram:
         """The design at ``epsilon`` (``math.inf`` allowed); raises
         :class:`~lpvest.errors.LMIInfeasibleError` (``.status`` = the final
         solver status) when the LMIs are infeasible or the returned point fails
-        the check even after the retry."""
+        the check even after the retry.
+
+        Parameters
+        ----------
+        plant : PolytopicLPV
+            The plant (1), of the program's dimensions.
+        epsilon : float
+            The paper's scalar: any real number, or ``+-math.inf``.
+
+        Returns
+        -------
+        HinfDesign
+            Certified: every LMI was checked by its eigenvalues at the returned point.
+        """
         res = self.attempt(plant, epsilon)
         if res.design is None:
             raise LMIInfeasibleError(
@@ -874,7 +1025,8 @@ def design_hinf(
         (:func:`lpvest.systems.polytopic.hinf_setting`).
     epsilon : float
         The paper's scalar; any real number, or ``math.inf``.
-    kind : {"parameter-dependent", "robust"}
+    kind : {"parameter-dependent", "robust"}, default "parameter-dependent"
+        Theorem 1 (gain-scheduled filter) or Corollary 1 (robust filter).
     solver : str
         ``"AUTO"`` (default: Clarabel or SCS by size, :func:`choose_solver`) or a cvxpy solver.
     margin : float
@@ -883,7 +1035,8 @@ def design_hinf(
         Passed to the solver.
     program : HinfProgram, optional
         A compiled program to reuse (by default one is compiled for the plant's
-        dimensions and cached for the process).
+        dimensions and cached for the process). Its ``kind`` must be ``kind``;
+        its own solver, margin and options are used.
 
     Returns
     -------
@@ -921,27 +1074,58 @@ class EpsilonCurve:
     ``epsilon`` lies in ``[gamma_lower, gamma]``, up to the solver's dual
     residual, so ``gamma - gamma_lower`` is how far each point may be from its
     own optimum (about 1e-8 relative with Clarabel, 1e-5 with SCS).
+
+    Parameters
+    ----------
+    epsilon : ndarray, shape (M,)
+        The sampled values of the paper's scalar.
+    phi : ndarray, shape (M,)
+        ``atan(epsilon)``.
+    gamma : ndarray, shape (M,)
+        The certified bound at each ``epsilon``; ``inf`` where no certified design exists.
+    status : tuple of str, length M
+        The final status of each solve (:attr:`DesignAttempt.status`).
+    gamma_lower : ndarray, shape (M,)
+        The dual bound at each ``epsilon``; nan where ``gamma`` is inf.
     """
 
-    epsilon: np.ndarray  #: shape (M,)
-    phi: np.ndarray  #: shape (M,)
-    gamma: np.ndarray  #: shape (M,)
+    epsilon: np.ndarray
+    phi: np.ndarray
+    gamma: np.ndarray
     status: tuple[str, ...]
-    gamma_lower: np.ndarray  #: shape (M,); nan where ``gamma`` is inf
+    gamma_lower: np.ndarray
 
     def best(self) -> tuple[float, float]:
-        """``(epsilon, gamma)`` of the smallest sampled ``gamma``."""
+        """``(epsilon, gamma)`` of the smallest sampled ``gamma``.
+
+        Returns
+        -------
+        epsilon : float
+            The ``epsilon`` of the first smallest ``gamma`` (of the first sample when every ``gamma`` is inf).
+        gamma : float
+            That ``gamma``.
+        """
         k = int(np.argmin(self.gamma))
         return float(self.epsilon[k]), float(self.gamma[k])
 
 
 @dataclass(frozen=True, eq=False)
 class EpsilonSearch:
-    """Result of :func:`search_epsilon`: the best design and every point tried."""
+    """Result of :func:`search_epsilon`: the best design and every point tried.
+
+    Parameters
+    ----------
+    design : HinfDesign
+        The design at the evaluated ``epsilon`` with the smallest ``gamma``.
+    curve : EpsilonCurve
+        Every evaluated point, sorted by ``phi``.
+    n_evaluations : int
+        Epsilon values evaluated (a retry with a larger margin counts once).
+    """
 
     design: HinfDesign
-    curve: EpsilonCurve  #: every evaluated point, sorted by ``phi``
-    n_evaluations: int  #: epsilon values evaluated (a retry with a larger margin counts once)
+    curve: EpsilonCurve
+    n_evaluations: int
 
 
 def _curve(points: Mapping[float, DesignAttempt]) -> EpsilonCurve:
@@ -966,6 +1150,31 @@ def epsilon_curve(
     program: HinfProgram | None = None,
 ) -> EpsilonCurve:
     """``gamma(epsilon)`` at the given ``epsilons`` (one compiled program).
+
+    Parameters
+    ----------
+    plant : PolytopicLPV or AffineLPV
+        The plant (1); a model with general noise is taken in its H-infinity setting
+        (:func:`lpvest.systems.polytopic.hinf_setting`).
+    epsilons : sequence of float or ndarray
+        The values of ``epsilon`` (flattened, shape (M,)); any real number or ``+-math.inf``.
+    kind : {"parameter-dependent", "robust"}, default "parameter-dependent"
+        Theorem 1 (gain-scheduled filter) or Corollary 1 (robust filter).
+    solver : str, default DEFAULT_SOLVER ("AUTO")
+        ``"AUTO"`` (Clarabel or SCS by size, :func:`choose_solver`) or a cvxpy solver name.
+    margin : float, default DEFAULT_MARGIN (1e-6)
+        Strictness margin of the LMIs: ``M << -margin I``, ``P_i >> margin I``.
+    solver_options : mapping, optional
+        Extra keyword arguments for the solver.
+    program : HinfProgram, optional
+        A compiled program to reuse (by default one is compiled for the plant's dimensions and cached for
+        the process). Its ``kind`` must be ``kind``; its own solver, margin and options are used.
+
+    Returns
+    -------
+    EpsilonCurve
+        One point per ``epsilon``, in the given order; a point without a certified design has
+        ``gamma = inf`` (no error is raised).
 
     Examples
     --------
@@ -1019,6 +1228,33 @@ def search_epsilon(
     cold, so its result depends on the plant and the settings alone).
     ``progress=True`` shows a progress bar (tqdm) of the designs solved.
 
+    Parameters
+    ----------
+    plant : PolytopicLPV or AffineLPV
+        The plant (1); a model with general noise is taken in its H-infinity setting
+        (:func:`lpvest.systems.polytopic.hinf_setting`).
+    kind : {"parameter-dependent", "robust"}, default "parameter-dependent"
+        Theorem 1 (gain-scheduled filter) or Corollary 1 (robust filter).
+    n_grid : int, default 24
+        Number of grid angles ``phi`` (at least 3), spaced ``pi / n_grid`` and ending at ``pi/2``
+        (``epsilon = inf``).
+    n_refine : int, default 2
+        How many of the best local minima of the grid are refined (a minimum where the curve is flat to
+        the solver's accuracy is skipped); 0: none.
+    xatol : float, default 1e-3
+        Absolute tolerance of the Brent search, in ``phi`` (radians).
+    solver : str, default DEFAULT_SOLVER ("AUTO")
+        ``"AUTO"`` (Clarabel or SCS by size, :func:`choose_solver`) or a cvxpy solver name.
+    margin : float, default DEFAULT_MARGIN (1e-6)
+        Strictness margin of the LMIs: ``M << -margin I``, ``P_i >> margin I``.
+    solver_options : mapping, optional
+        Extra keyword arguments for the solver.
+    program : HinfProgram, optional
+        A compiled program to reuse (by default one is compiled for the plant's dimensions and cached for
+        the process). Its ``kind`` must be ``kind``; its own solver, margin and options are used.
+    progress : bool, default False
+        Show a tqdm progress bar.
+
     Returns
     -------
     EpsilonSearch
@@ -1028,7 +1264,8 @@ def search_epsilon(
     Raises
     ------
     LMIInfeasibleError
-        No grid point gives a certified design.
+        No grid point gives a certified design. Also raised at once, before any
+        solve, when ``A(alpha)`` is not Schur somewhere on the simplex.
 
     Examples
     --------

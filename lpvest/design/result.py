@@ -78,7 +78,18 @@ def model_digest(plant: Any) -> str:
     """SHA-256 of a polytopic plant's vertex matrices (their float64 values,
     shapes and names): a design made for the plant records it, and a filter is
     built from the design only for a plant with the same digest. Model files
-    are parsed exactly, so the same file gives the same digest on every machine."""
+    are parsed exactly, so the same file gives the same digest on every machine.
+
+    Parameters
+    ----------
+    plant : PolytopicLPV
+        The plant; its ``vertices`` ``A, Bw, Cz, Dz, Cy, Dy`` (shape ``(N, rows, cols)`` each) enter the digest.
+
+    Returns
+    -------
+    str
+        The SHA-256 digest, 64 hexadecimal digits.
+    """
     h = hashlib.sha256(b"lpvest.polytopic-vertices/1\0")
     for name in _PLANT_NAMES:
         arr = np.ascontiguousarray(getattr(plant.vertices, name), dtype="<f8")
@@ -87,13 +98,27 @@ def model_digest(plant: Any) -> str:
 
 
 class FilterMatrices(NamedTuple):
-    """The filter matrices of eq. (2) at one ``alpha``."""
+    """The filter matrices of eq. (2) at one ``alpha``.
 
-    H: np.ndarray  #: shape (nx, nx)
-    Af: np.ndarray  #: shape (nx, nx)
-    Bf: np.ndarray  #: shape (nx, ny)
-    Cf: np.ndarray  #: shape (nz, nx)
-    Df: np.ndarray  #: shape (nz, ny)
+    Parameters
+    ----------
+    H : ndarray, shape (nx, nx)
+        ``H(alpha)``, which multiplies ``x_{f,k+1}``.
+    Af : ndarray, shape (nx, nx)
+        ``A_f(alpha)``, which multiplies ``x_{f,k}``.
+    Bf : ndarray, shape (nx, ny)
+        ``B_f(alpha)``, which multiplies the measurement ``y_k`` in the state equation.
+    Cf : ndarray, shape (nz, nx)
+        ``C_f(alpha)``: the estimate ``z_{f,k}`` from ``x_{f,k}``.
+    Df : ndarray, shape (nz, ny)
+        ``D_f(alpha)``: the estimate ``z_{f,k}`` from ``y_k`` (feedthrough).
+    """
+
+    H: np.ndarray
+    Af: np.ndarray
+    Bf: np.ndarray
+    Cf: np.ndarray
+    Df: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,6 +128,7 @@ class HinfDesign:
     Parameters
     ----------
     kind : {"parameter-dependent", "robust"}
+        Theorem 1 (gain-scheduled filter, ``KIND_PD``) or Corollary 1 (robust filter, ``KIND_ROBUST``).
     H, Af : ndarray, shape (N_f, nx, nx)
         Vertex matrices; ``N_f = N`` (parameter-dependent) or ``1`` (robust).
     Bf : ndarray, shape (N_f, nx, ny)
@@ -219,7 +245,24 @@ class HinfDesign:
     def check_model(self, plant: Any, *, source: str = "design", plant_name: str = "") -> None:
         """Raise :class:`~lpvest.errors.ModelFileError` unless this design fits
         ``plant``: same dimensions, and the same vertex matrices when the
-        design recorded them (:func:`model_digest`)."""
+        design recorded them (:func:`model_digest`).
+
+        Parameters
+        ----------
+        plant : PolytopicLPV
+            The plant the design is to filter (a model with general noise in its
+            H-infinity setting, :func:`lpvest.systems.polytopic.hinf_setting`); its
+            ``n_vertices, nx, ny, nz, nw`` must equal the design's.
+        source : str, default "design"
+            What the design is (e.g. its file path): the start of the error message.
+        plant_name : str, default ""
+            The plant's name in the error message (``""``: ``plant.name``, or "this one").
+
+        Raises
+        ------
+        ModelFileError
+            A dimension differs, or the design recorded a :func:`model_digest` that is not the plant's.
+        """
         got = {"n_vertices": plant.n_vertices, "nx": plant.nx, "ny": plant.ny, "nz": plant.nz, "nw": plant.nw}
         want = {"n_vertices": self.n_vertices, "nx": self.nx, "ny": self.ny, "nz": self.nz, "nw": self.nw}
         for key, value in want.items():
@@ -243,6 +286,28 @@ class HinfDesign:
         a validated ``alpha``, not checked again).
 
         A robust design ignores ``alpha`` (it may be ``None``).
+
+        Parameters
+        ----------
+        alpha : array_like, shape (N,), optional
+            Scheduling parameter on the unit simplex; required for a parameter-dependent
+            design, ignored by a robust one.
+        check : bool, default True
+            Validate ``alpha`` (shape, finite, on the simplex); ``False``: ``alpha`` is
+            taken as an already validated ndarray.
+
+        Returns
+        -------
+        FilterMatrices
+            ``sum_i alpha_i (H_i, A_{f,i}, B_{f,i}, C_{f,i}, D_{f,i})`` (parameter-dependent),
+            as fresh arrays, or the single set of a robust design (read-only views).
+
+        Raises
+        ------
+        DimensionError
+            ``alpha`` is ``None`` for a parameter-dependent design, or has the wrong shape.
+        SchedulingRangeError
+            ``alpha`` is not on the unit simplex (with ``check=True``).
         """
         if not self.scheduled:
             return FilterMatrices(*(getattr(self, n)[0] for n in _FILTER_NAMES))
@@ -255,7 +320,14 @@ class HinfDesign:
 
     # -- JSON -------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
-        """The JSON-able dictionary described in the module documentation."""
+        """The JSON-able dictionary described in the module documentation.
+
+        Returns
+        -------
+        dict
+            Plain Python values (lists, floats, str); ``"epsilon"`` is ``None`` for
+            ``epsilon = inf``.
+        """
         return {
             "format": DESIGN_FORMAT,
             "version": DESIGN_FORMAT_VERSION,
@@ -286,7 +358,18 @@ class HinfDesign:
         }
 
     def to_json(self, path: str | Path | None = None) -> str:
-        """The design as JSON text; also written to ``path`` when given."""
+        """The design as JSON text; also written to ``path`` when given.
+
+        Parameters
+        ----------
+        path : str or Path, optional
+            File to write (UTF-8, overwritten); by default nothing is written.
+
+        Returns
+        -------
+        str
+            The JSON text of :meth:`to_dict` (indented, ending with a newline).
+        """
         text = json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n"
         if path is not None:
             Path(path).write_text(text, encoding="utf-8")
@@ -295,7 +378,21 @@ class HinfDesign:
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], *, source: str = "design") -> HinfDesign:
         """Inverse of :meth:`to_dict`; raises :class:`~lpvest.errors.ModelFileError`
-        naming ``source`` and the field when the data are malformed."""
+        naming ``source`` and the field when the data are malformed.
+
+        Parameters
+        ----------
+        data : mapping
+            The dictionary of the JSON format (``"format": "lpvest.hinf-design"``,
+            ``"version": 1``); ``"plant"`` and ``"model_digest"`` may be missing.
+        source : str, default "design"
+            Where the data came from (e.g. a file path), for error messages.
+
+        Returns
+        -------
+        HinfDesign
+            The design; its dimensions agree with ``n_vertices, nx, ny, nz`` of ``data``.
+        """
 
         def field(mapping: Mapping[str, Any], key: str, where: str = "") -> Any:
             if not isinstance(mapping, Mapping) or key not in mapping:
@@ -351,6 +448,22 @@ class HinfDesign:
     @classmethod
     def from_json(cls, source: str | Path) -> HinfDesign:
         """Load a design from a JSON file path or from JSON text.
+
+        Parameters
+        ----------
+        source : str or Path
+            A :class:`~pathlib.Path`, a path string, or JSON text (a string whose first
+            non-blank character is ``{``).
+
+        Returns
+        -------
+        HinfDesign
+            The design read by :meth:`from_dict`.
+
+        Raises
+        ------
+        ModelFileError
+            The file cannot be read, is not valid JSON, or is not a valid design.
 
         Examples
         --------
