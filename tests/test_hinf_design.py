@@ -507,6 +507,15 @@ def test_wrong_dimensions_and_types():
         dataclasses.replace(d, Bf=np.zeros((2, 2, 3)))
     with pytest.raises(DimensionError, match="a robust design needs 1 set"):
         dataclasses.replace(d, kind=KIND_ROBUST)
+    for bad in ("2", 2.5, True, 0):
+        with pytest.raises(DimensionError, match="n_vertices must be a positive integer"):
+            HinfProgram(bad, 2, 1, 2, 1)  # type: ignore[arg-type]
+
+
+def test_both_infinities_of_epsilon_are_the_one_multiplier_at_phi_pi_over_2():
+    c = epsilon_curve(ex1(), [-math.inf, math.inf], kind=KIND_ROBUST)
+    assert list(c.epsilon) == [math.inf, math.inf] and list(c.phi) == [math.pi / 2] * 2
+    assert c.gamma[0] == c.gamma[1]
 
 
 def test_a_plant_unstable_inside_the_polytope_is_refused_at_once():

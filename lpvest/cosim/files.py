@@ -325,8 +325,8 @@ class CoSimResult:
         Parameters
         ----------
         path : os.PathLike or str
-            The CSV file to write: a header row of column names, then one
-            row per communication point (``%.17g``).
+            The CSV file to write (its folder is created): a header row of
+            column names, then one row per communication point (``%.17g``).
 
         Returns
         -------
@@ -334,6 +334,7 @@ class CoSimResult:
             ``path``.
         """
         path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)  # as plot() and write_ssp() do
         cols = ["time", *self.names]
         table = np.column_stack([self.data[c] for c in cols])
         np.savetxt(path, table, delimiter=",", header=",".join(cols), comments="", fmt="%.17g")

@@ -536,7 +536,7 @@ class HinfProgram:
             raise ArgumentError(f"kind must be {KIND_PD!r} or {KIND_ROBUST!r}; found {abbreviate(kind, 30)}")
         dims = {"n_vertices": n_vertices, "nx": nx, "ny": ny, "nz": nz, "nw": nw}
         for name, value in dims.items():
-            if int(value) != value or value < 1:
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
                 raise DimensionError(f"{name} must be a positive integer; found {abbreviate(value, 30)}")
         _check_margin(margin)
         t0 = time.perf_counter()
@@ -1190,7 +1190,7 @@ def epsilon_curve(
     with prog.warm_starts():
         out = [prog.attempt(plant, float(e)) for e in eps]
     return EpsilonCurve(
-        epsilon=eps.copy(),
+        epsilon=np.where(np.isinf(eps), math.inf, eps),  # -inf and inf are one multiplier: phi = pi/2
         phi=np.array([math.pi / 2 if math.isinf(e) else math.atan(e) for e in eps]),
         gamma=np.array([r.gamma for r in out]),
         status=tuple(r.status for r in out),
@@ -1217,7 +1217,8 @@ def search_epsilon(
     ``phi in (-pi/2, pi/2]``, and the LMIs depend continuously on
     ``(sin phi, cos phi)`` (see the module documentation). The search
     evaluates a uniform grid of ``n_grid`` angles (both signs of epsilon,
-    magnitudes from ``~pi/(2 n_grid)`` up to infinity), then refines the
+    magnitudes from ``pi/n_grid`` (``pi/(2 n_grid)`` for an odd ``n_grid``; an
+    even one includes ``epsilon = 0``) up to infinity), then refines the
     ``n_refine`` best local minima of the grid by a bounded Brent search
     (``scipy.optimize.minimize_scalar``) between their grid neighbours, to
     ``xatol`` in ``phi``. A minimum whose two neighbours are equal to it within
