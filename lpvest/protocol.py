@@ -359,6 +359,20 @@ class Component(ABC):
     def _read(self, inputs: Mapping[str, Any]) -> Any:
         """One sample's inputs, checked (raise a typed error, change nothing)."""
 
+    def _read_checked(self, inputs: Mapping[str, Any]) -> Any:
+        """:meth:`_read` for inputs checked at the boundary (``prepare(checked=True)``).
+
+        The caller guarantees every input port is present as a float64 array
+        of the port's shape, every value finite, and every element of a port
+        named ``p`` within the component's scheduling box (to the tolerance of
+        :func:`lpvest.validation.check_box`): what an FMU's ``fmi2SetReal``
+        checks for each element against its declared range. A component
+        overrides this to skip exactly those checks and keep the rest (a
+        simplex sum, a covariance); the default reads as :meth:`_read` does.
+        The sample must be the one :meth:`_read` would give, to the bit.
+        """
+        return self._read(inputs)
+
     @abstractmethod
     def _evaluate(self, sample: Any) -> tuple[dict[str, np.ndarray], Any]:
         """``(outputs, pending)`` for a checked sample; no state change."""
@@ -455,7 +469,7 @@ class Component(ABC):
         self._commit(pending)
         return out
 
-    def prepare(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    def prepare(self, inputs: Mapping[str, Any], *, checked: bool = False) -> dict[str, np.ndarray]:
         """Evaluate the current sample for a following :meth:`advance`, for a
         caller that guarantees these inputs stay unchanged (the FMU adapter):
         like :meth:`outputs`, without fingerprinting the inputs and without
@@ -466,13 +480,17 @@ class Component(ABC):
         inputs : mapping of str to array_like
             One sample's value of every input port, by port name (shape
             ``port.shape``).
+        checked : bool, default False
+            The caller has checked the inputs as :meth:`_read_checked` says
+            (an FMU checks each element when it is set): the component skips
+            those checks. The outputs are the same to the bit.
 
         Returns
         -------
         outputs : dict of str to ndarray
             The value of every output port, by port name (not copies).
         """
-        out, pending = self._evaluate(self._read(inputs))
+        out, pending = self._evaluate(self._read_checked(inputs) if checked else self._read(inputs))
         self._memo = (None, out, pending)  # only advance() takes it: step() never reuses a None key
         return out
 

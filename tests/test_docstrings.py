@@ -20,9 +20,8 @@ import importlib
 import inspect
 import warnings
 
-import pytest
-
 import numpydoc.validate as numpydoc_validate
+import pytest
 
 #: The packages whose ``__all__`` is the public API.
 PUBLIC_PACKAGES = (

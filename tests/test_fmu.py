@@ -129,6 +129,61 @@ def test_polytopic_plant_is_bit_for_bit_the_library(fmus, name, system, rho):
     assert np.array_equal(got["y"], ref.y) and np.array_equal(got["z"], ref.z) and np.array_equal(got["x"], ref.x)
 
 
+SHIFTED_BOX = """
+[system]
+name = "shifted-box"
+title = "Peixoto Example 1 with its scheduling box moved to [1, 3]: 0 is outside"
+default = "plant"
+
+[scheduling]
+names = ["theta"]
+lower = [1.0]
+upper = [3.0]
+
+[models.plant]
+type = "polytopic"
+map = { kind = "formulas", alpha = ["(3 - theta)/2", "(theta - 1)/2"] }
+vertex = [{ A = [[0.43, 0.0], [1.0, 0.48]], Bw = [[2.0], [0.1]] },
+          { A = [[0.1, 0.9], [0.0, 0.05]], Bw = [[1.0], [0.1]] }]
+common = { Cz = [[1.0, 0.0], [0.0, 1.0]], Dz = [[0.0], [0.0]], Cy = [[1.0, 0.0]], Dy = [[1.0]] }
+"""
+
+
+def test_an_input_starts_inside_its_range_and_the_checks_made_at_set_are_not_repeated(tmp_path):
+    # FMI: min <= start <= max; an input starts at the point of its range nearest to 0,
+    # and the component, which skips the checks fmi2SetReal made, never sees a value
+    # outside the range (an unset input included)
+    from fmpy import read_model_description
+
+    from lpvest.fmi.build import build_fmus
+
+    (tmp_path / "shifted.toml").write_text(SHIFTED_BOX)
+    (result,), _ = build_fmus([tmp_path / "shifted.toml"], tmp_path / "out", roles=["Plant"])
+    assert result.validation.problems == []
+    path = tmp_path / "out" / "ShiftedBoxPlant.fmu"
+    starts = {v.name: (float(v.start), v.min, v.max) for v in read_model_description(str(path)).modelVariables
+              if v.causality == "input"}
+    assert starts == {"p[1]": (1.0, "1.0", "3.0"), "w[1]": (0.0, None, None)}
+    plant = load_system(tmp_path / "shifted.toml").model()
+    T = 40
+    p = 2.0 + np.sin(0.25 * np.arange(T))[:, None]
+    w = paper_w(np.arange(T))[:, None]
+    d = Driver(path)
+    assert d.initialize() == 0
+    y0 = d.vector("y")
+    assert d.step(0.0, 1.0) == 0, d.errors()  # nothing set: the start values, p = 1, w = 0
+    ys, xs = [y0], [np.zeros(2)]
+    for k in range(T):
+        d.set_vector("p", p[k])
+        d.set_vector("w", w[k])
+        ys.append(d.vector("y"))
+        xs.append(d.vector("x"))
+        assert d.step(k + 1.0, 1.0) == 0, d.errors()
+    d.free()
+    ref = plant.simulate(plant.alpha_batch(np.vstack([[1.0], p])), np.vstack([[0.0], w]))
+    assert np.array_equal(np.array(ys), ref.y) and np.array_equal(np.array(xs), ref.x)
+
+
 @pytest.mark.blas_sensitive
 def test_affine_plant_with_drawn_noise_matches_simulate(fmus):
     model = load_system(fmus.affine_model).model()

@@ -137,6 +137,31 @@ def test_a_step_after_prepare_reads_its_own_inputs(plant_model, design):
     assert f.get_state()["k"] == 1 and out["zhat"].shape == (design.nz,)
 
 
+def test_prepare_checked_skips_only_the_checks_made_at_the_boundary(plant_model, design, rng):
+    # inputs checked as an FMU checks them (finite, in range): the same numbers, to the bit
+    p, w = _inputs(rng, 20)
+    pairs = [(DiscretePlant(plant_model), DiscretePlant(plant_model)),
+             (HinfFilter(design, simplex_map=plant_model.simplex_map),
+              HinfFilter(design, simplex_map=plant_model.simplex_map))]
+    for k in range(20):
+        for checked, plain in pairs:
+            names = [q.name for q in plain.input_ports]
+            sample = {n: np.array(p[k] if n == "p" else w[k]) for n in names}
+            a = checked.prepare(dict(sample), checked=True)
+            b = plain.prepare(dict(sample))
+            assert all(np.array_equal(a[n], b[n]) for n in b)
+            checked.advance()
+            plain.advance()
+    # what the boundary does not check is still checked: weights of an FMU input are
+    # each in [0, 1], but their sum is the component's to check
+    polytopic = plant_model.__class__(plant_model.vertex_stacks(), name="no-map")
+    f = HinfFilter(design)
+    for comp, inputs in ((DiscretePlant(polytopic), {"alpha": np.array([0.7, 0.7]), "w": np.zeros(1)}),
+                         (f, {"alpha": np.array([0.7, 0.7]), "y": np.zeros(1)})):
+        with pytest.raises(SchedulingRangeError, match="alpha"):
+            comp.prepare(inputs, checked=True)
+
+
 def test_scheduler_outputs_then_step_reports_the_same_values(plant_model):
     spec = SignalSpec.build("sinusoid", 1, amplitude=1.0, omega=0.25)
     a = SchedulerComponent(spec, plant_model.space, plant_model.simplex_map)

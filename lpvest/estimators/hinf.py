@@ -412,6 +412,18 @@ class HinfFilter(Component):
                 alpha = np.asarray(self.simplex_map(p), dtype=float)  # on the simplex by construction
         return alpha, y, u
 
+    def _read_checked(self, inputs: Mapping[str, Any]) -> tuple[np.ndarray | None, np.ndarray, np.ndarray | None]:
+        """:meth:`_read` of inputs checked at the boundary (:meth:`Component._read_checked`)."""
+        u = None if self.plant is None else inputs["u"]
+        alpha: np.ndarray | None = None
+        if self.scheduled:
+            if self.simplex_map is None:
+                alpha = inputs["alpha"]
+                check_simplex(alpha, "alpha")  # each weight in [0, 1] does not make a sum of 1
+            else:
+                alpha = np.asarray(self.simplex_map(inputs["p"]), dtype=float)
+        return alpha, inputs["y"], u
+
     def _evaluate(
         self, sample: tuple[np.ndarray | None, np.ndarray, np.ndarray | None]
     ) -> tuple[dict[str, np.ndarray], Any]:

@@ -209,12 +209,25 @@ class LpvestSlave(Fmi2Slave):
         self._n_outputs = 0
         for port in self._input_ports:
             self._add_port(port, "input")
+        # each input starts at the point of its declared range nearest to 0 (its
+        # start value in the model description: FMI wants min <= start <= max)
+        for e in self._elements.values():
+            if e.kind == "input":
+                lo = -math.inf if e.minimum is None else e.minimum
+                hi = math.inf if e.maximum is None else e.maximum
+                self._inputs[e.owner].reshape(-1)[e.index] = min(max(0.0, lo), hi)
         # per input variable: (flat view of its port's array, index, lowest, highest accepted value)
         self._input_targets: dict[int, tuple[np.ndarray, int, float, float]] = {
             vr: (self._inputs[e.owner].reshape(-1), e.index,
                  -math.inf if e.minimum is None else e.minimum - e.tol,
                  math.inf if e.maximum is None else e.maximum + e.tol)
             for vr, e in self._elements.items() if e.kind == "input"}
+        # every input value within its declared range (then the component skips the
+        # checks fmi2SetReal made: prepare(checked=True)); None: not known yet. Values
+        # enter only through the checks of fmi2SetReal (a rejected one is not stored)
+        # or a restored state, so once true it stays true until a state is restored;
+        # the initial zeros may lie outside a range that excludes 0.
+        self._inputs_in_range: bool | None = None
         for port in self._output_ports:
             self._add_port(port, "output")
         self._feedthrough = self._direct_outputs(component)
@@ -451,7 +464,14 @@ class LpvestSlave(Fmi2Slave):
             # the same copy of the inputs is handed to step() when nothing is set in between
             inputs = self._input_dict()
             prepare = self._prepare if component is self._component else None
-            values: Mapping[str, Any] = prepare(inputs) if prepare is not None else component.outputs(inputs)
+            if prepare is not None:
+                checked = self._inputs_in_range
+                if not checked:
+                    checked = self._inputs_in_range = all(
+                        lo <= arr[i] <= hi for arr, i, lo, hi in self._input_targets.values())
+                values: Mapping[str, Any] = prepare(inputs, checked=checked)
+            else:
+                values = component.outputs(inputs)
             self._step_inputs = inputs
         elif len(held) == len(self._output_ports):
             values = held  # every output holds its value until inputs are set: nothing to compute
@@ -723,6 +743,7 @@ class LpvestSlave(Fmi2Slave):
             self._params = params
             for name, value in inputs.items():  # in place: the fast set_real writes into these arrays
                 self._inputs[name][...] = value
+            self._inputs_in_range = None
             self._store_outputs(outputs, check=False)
             self._held = held
             self._step_inputs = None

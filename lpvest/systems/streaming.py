@@ -81,6 +81,10 @@ class _Rules:
         """Range checks of a sample (``val`` gains derived values)."""
         self.model.space.check(val["p"])
 
+    def derive(self, val: dict[str, np.ndarray]) -> None:
+        """:meth:`check` for a sample checked at the boundary (``p`` in its box):
+        only the derived values and the checks the boundary cannot make."""
+
     def evaluate(self, x: np.ndarray, val: dict[str, np.ndarray], noise: np.ndarray,
                  no_u: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
         raise NotImplementedError
@@ -111,6 +115,12 @@ class _PolytopicRules(_Rules):
             check_simplex(val["alpha"], "alpha")
         else:
             val["alpha"] = self.model.alpha(val["p"])  # range-checked
+
+    def derive(self, val: dict[str, np.ndarray]) -> None:
+        if self.model.simplex_map is None:
+            check_simplex(val["alpha"], "alpha")  # each weight in [0, 1] does not make a sum of 1
+        else:
+            val["alpha"] = self.model.simplex_map(val["p"])  # what alpha(p) gives after its range check
 
     def evaluate(self, x: np.ndarray, val: dict[str, np.ndarray], noise: np.ndarray,
                  no_u: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
@@ -310,6 +320,12 @@ class DiscretePlant(Component):
                 raise DimensionError(f"input {name!r} is missing (inputs: {', '.join(self._in_names)})")
             val[name] = as_vector(inputs[name], name, size)
         self._rules.check(val)
+        return val
+
+    def _read_checked(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+        """:meth:`_read` of inputs checked at the boundary (:meth:`Component._read_checked`)."""
+        val = {name: inputs[name] for name, _ in self._sizes}
+        self._rules.derive(val)
         return val
 
     def _evaluate(self, val: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], np.ndarray]:
