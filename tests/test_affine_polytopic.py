@@ -95,6 +95,13 @@ def test_non_monomial_without_bounds_cannot_be_converted(rng):
         affine_to_polytopic(dep)
 
 
+@pytest.mark.parametrize("text", ["shift(p1, 1)", "2 * shift(p1, 0)"])
+def test_a_basis_function_may_not_use_shift(text):
+    # it depends on p_t only; shift(p1, 0) was accepted but could not be evaluated
+    with pytest.raises(ExpressionError, match=r"may not use shift\(\); it depends on p_t only"):
+        parse_basis(text, SPACE2)
+
+
 def test_peixoto_printed_vertices_equal_conversion_of_system_10():
     plant = load_system("peixoto-ex1").model()
     assert plant.affine is not None
