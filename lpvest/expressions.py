@@ -571,7 +571,7 @@ class Expression:
         Raises
         ------
         ExpressionError
-            The formula uses a variable.
+            The formula uses a variable, or its value is not finite.
         """
         if not self.is_constant:
             shown = ", ".join(sorted(_shown(n) for n in self.names))
@@ -580,7 +580,10 @@ class Expression:
                 f"{shorten(shown, 60)}"
             )
         value: Any = self.tree.body.value if isinstance(self.tree.body, ast.Constant) else self.evaluate({})
-        return float(value)
+        value = float(value)
+        if not math.isfinite(value):
+            raise ExpressionError(f"formula {abbreviate(self.text)} has the value {value}, not a finite number")
+        return value
 
     # -- calculus -------------------------------------------------------------
     def derivative(self, var: str) -> Expression:

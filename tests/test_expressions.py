@@ -223,3 +223,11 @@ def test_a_malformed_number_is_an_error_without_a_python_warning(recwarn):
     with pytest.raises(ExpressionError, match=r"^formula '0x1for' is not valid: invalid syntax$"):
         Expression.parse("0x1for")
     assert not [w for w in recwarn if issubclass(w.category, SyntaxWarning)]
+
+
+def test_value_of_a_constant_formula_is_finite_or_an_error():
+    # a derivative folds its constants without the parser's overflow check
+    d = Expression.parse("x * 1e200 * 1e200").derivative("x")
+    with pytest.raises(ExpressionError, match="has the value inf, not a finite number"):
+        d.value()
+    assert Expression.parse("x * 1e100 * 1e100").derivative("x").value() == pytest.approx(1e200)
