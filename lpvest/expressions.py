@@ -259,7 +259,9 @@ class _Validator(ast.NodeTransformer):
                 raise self.fail("shift takes a variable and an integer, e.g. shift(p, 1)")
             if abs(k) > 1000:
                 raise self.fail(f"shift by {k} samples: at most 1000 are allowed")
-            return ast.copy_location(ast.Name(shift_name(node.args[0].id, k), ast.Load()), node)
+            # shift(p, 0) is p itself: one name for one value
+            name = node.args[0].id if k == 0 else shift_name(node.args[0].id, k)
+            return ast.copy_location(ast.Name(name, ast.Load()), node)
         if fname not in FUNCTIONS:
             raise self.fail(
                 f"unknown function {abbreviate(fname, 24)}; allowed: {', '.join(sorted(FUNCTIONS))}, shift"

@@ -528,13 +528,12 @@ def parse_basis(
     Raises
     ------
     ExpressionError
-        ``text`` is not a valid formula of the components, uses ``shift``, or
-        is constant.
+        ``text`` is not a valid formula of the components, uses ``shift`` with
+        a non-zero shift, or is constant.
     """
     expr = Expression.parse(text, allowed=space.names)
-    if expr.shifts:
-        raise ExpressionError(f"basis function {abbreviate(text)} may not use shift(); it depends on p_t only "
-                              "(write p for shift(p, 0))")
+    if expr.shifts and any(k != 0 for ks in expr.shifts.values() for k in ks):
+        raise ExpressionError(f"basis function {abbreviate(text)} may not use shift(); it depends on p_t only")
     exps = expr.monomial_exponents(space.names)
     if exps is not None and sum(exps) > 0 and bounds is None:
         return Monomial(exps, text)
