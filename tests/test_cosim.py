@@ -69,6 +69,13 @@ def test_stop_time_and_integer_step_counter(fmus):
     assert res.shape == (10001,)
     assert res["time"][-1] == 1000.0  # k * h, not a sum of 10,000 steps
     assert res["time"][3] == 3 * 0.1
+    # a stop time between communication points is refused, as in a co-simulation file
+    # (it was rounded to the nearest step without a word)
+    with pytest.raises(CoSimulationError, match=r"stop_time = 1000.05: expected start_time \(0\) \+ a whole "
+                                                r"number of steps of 0.1; found 10000.5 steps"):
+        simulate([Component("r", fmus["ramp"])], [], step_size=0.1, stop_time=1000.05)
+    with pytest.raises(CoSimulationError, match="more steps than a float can count"):
+        simulate([Component("r", fmus["ramp"])], [], step_size=0.1, stop_time=float("inf"))
 
 
 @pytest.mark.parametrize(

@@ -32,6 +32,7 @@ Examples
 
 from __future__ import annotations
 
+import math
 import re
 import shutil
 import tempfile
@@ -51,6 +52,7 @@ __all__ = [
     "CoSimulationError",
     "AlgebraicLoopError",
     "simulate",
+    "whole_steps",
 ]
 
 
@@ -267,6 +269,45 @@ def _expand(names: Iterable[str], base: str) -> list[str]:
         if m:
             found.append((tuple(int(i) for i in m.group(1).split(",")), n))
     return [n for _, n in sorted(found)]
+
+
+def whole_steps(start_time: float, stop_time: float, step_size: float) -> int:
+    """The number of steps of ``step_size`` from ``start_time`` to ``stop_time``,
+    which must be a whole number (to 1e-9 relative), as in a co-simulation file.
+
+    Parameters
+    ----------
+    start_time, stop_time : float
+        The interval.
+    step_size : float
+        The communication step (> 0).
+
+    Returns
+    -------
+    int
+        ``(stop_time - start_time) / step_size``, rounded; at least 0.
+
+    Raises
+    ------
+    CoSimulationError
+        ``stop_time`` is not finite, before ``start_time``, or not a whole
+        number of steps after it.
+
+    Examples
+    --------
+    >>> whole_steps(0.0, 0.3, 0.1)
+    3
+    """
+    ratio = (float(stop_time) - float(start_time)) / float(step_size)
+    if not math.isfinite(ratio):
+        raise CoSimulationError(f"stop_time = {stop_time!r}: expected start_time + a whole number of steps of "
+                                f"{step_size:g} (more steps than a float can count)")
+    n = int(round(ratio))
+    if n < 0 or abs(ratio - n) > 1e-9 * max(1.0, abs(ratio)):
+        raise CoSimulationError(f"stop_time = {stop_time!r}: expected start_time ({start_time:g}) + a whole "
+                                f"number of steps of {step_size:g}; found {ratio:.6g} steps")
+    return n
+
 
 
 class CoSimulation:
@@ -677,8 +718,9 @@ class CoSimulation:
         n_steps : int, optional
             Communication steps to run (``0``: initialise only, one row).
         stop_time : float, optional
-            Run ``round((stop_time - start_time) / step_size)`` steps instead;
-            give exactly one of ``n_steps`` and ``stop_time``.
+            Run up to ``stop_time``, which must be ``start_time`` plus a whole
+            number of steps (:func:`whole_steps`); give exactly one of
+            ``n_steps`` and ``stop_time``.
         progress : bool, optional
             Show a progress bar; default: for more than 20,000 steps.
 
@@ -701,7 +743,7 @@ class CoSimulation:
         if (n_steps is None) == (stop_time is None):
             raise CoSimulationError("give n_steps or stop_time")
         if n_steps is None:
-            n_steps = int(round((float(stop_time) - self.start_time) / self.step_size))  # type: ignore[arg-type]
+            n_steps = whole_steps(self.start_time, stop_time, self.step_size)  # type: ignore[arg-type]
         if n_steps < 0:
             raise CoSimulationError(f"n_steps must be non-negative; found {n_steps}")
         h, t0 = self.step_size, self.start_time

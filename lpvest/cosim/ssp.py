@@ -78,7 +78,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import abbreviate, shorten
-from .master import Component, Connection, CoSimulation, CoSimulationError
+from .master import Component, Connection, CoSimulation, CoSimulationError, whole_steps
 
 __all__ = ["write_ssp", "read_ssp", "SspSystem", "simulate_ssp", "IMPORTERS"]
 
@@ -446,10 +446,9 @@ def simulate_ssp(
         end = stop_time if stop_time is not None else system.stop_time
         if end is None:
             raise CoSimulationError(f"{path}: no stop time in the file; give n_steps or stop_time")
-        ratio = (end - t0) / h
-        if not math.isfinite(ratio) or ratio > 1e9:
+        if (end - t0) / h > 1e9:
             raise CoSimulationError(f"{path}: from {t0:g} to {end:g} in steps of {h:g}: too many steps")
-        n_steps = int(round(ratio))
+        n_steps = whole_steps(t0, end, h)
     if n_steps < 1:
         raise CoSimulationError(f"n_steps must be at least 1; found {n_steps}")
     names = [f"{c}.{o}" for c, outs in system.outputs.items() for o in outs]
