@@ -466,6 +466,15 @@ def test_monotonicity_and_tau_needed(model, data):
     assert err.max_K_error[n1] < 1e-3 <= err.max_K_error[n1 - 1]
     assert err.max_K_error[n6] < 1e-6 <= err.max_K_error[n6 - 1]
     assert tau_needed(err, 1e-30) is None
+    model_p = (model, p[:5])
+    K = frozen_gains(*model_p)
+    with pytest.raises(DimensionError, match=r"gains has shape \(4, 2, 2\); expected \(5, 2, 2\)"):
+        empirical_prediction_error(*model_p, None, K[:4], runs=10)
+    for runs in (0, 2.5, True):
+        with pytest.raises(ValueError, match="runs must be a positive integer"):
+            empirical_prediction_error(*model_p, None, K, runs=runs)
+    with pytest.raises(TypeError, match="model must be an AffineLPV"):
+        empirical_prediction_error(load_system("cox-toth-ex1").model(), p[:5], None, K, runs=10)
     for fn in (tau_needed, decay_rate, monotonicity):  # "k" is not "K": an error, not the P errors
         args = (err, 1e-3) if fn is tau_needed else (err,)
         with pytest.raises(DimensionError, match="which must be 'K' or 'P'; found 'k'"):

@@ -26,12 +26,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..errors import DimensionError, NumericalError, abbreviate
+from ..errors import ArgumentError, ArgumentTypeError, DimensionError, NumericalError, abbreviate
 from ..estimators.kalman.model import KalmanModel
 from ..estimators.kalman.recursion import covariance_step, initial_moments, riccati_sweep
 from ..estimators.truncated import restart_covariance, start_covariance
 from ..systems.affine import AffineLPV
-from ..validation import as_rng, as_signal
+from ..validation import as_rng, as_signal, check_finite
 
 __all__ = [
     "TruncationErrors",
@@ -488,6 +488,17 @@ def empirical_prediction_error(
         ``sum_runs e_t e_t^T / runs`` with ``e_t = y_t - yhat_t`` (the
         prediction error has mean zero, so this is its covariance).
 
+    Raises
+    ------
+    ArgumentTypeError
+        ``model`` is not an AffineLPV.
+    ArgumentError
+        ``runs`` is not a positive integer.
+    DimensionError
+        ``p``, ``u`` or ``gains`` has the wrong shape.
+    NonFiniteError
+        ``gains`` holds NaN or inf.
+
     Examples
     --------
     >>> from lpvest import load_system
@@ -496,10 +507,18 @@ def empirical_prediction_error(
     >>> empirical_prediction_error(model, p, None, frozen_gains(model, p), runs=100, rng=0).shape
     (20, 2, 2)
     """
+    if not isinstance(model, AffineLPV):
+        raise ArgumentTypeError(f"model must be an AffineLPV (it is simulated with its noise); found "
+                                f"{type(model).__name__}")
+    if isinstance(runs, bool) or not isinstance(runs, int | np.integer) or runs < 1:
+        raise ArgumentError(f"runs must be a positive integer; found {abbreviate(runs, 30)}")
     km = KalmanModel(model)
     p = as_signal(p, "p", km.n_p)
     T = p.shape[0]
     n, nu, m = km.nx, km.nu, km.ny
+    gains = check_finite(np.asarray(gains, dtype=float), "gains")
+    if gains.shape != (T, n, m):
+        raise DimensionError(f"gains has shape {gains.shape}; expected ({T}, {n}, {m})")
     u = as_signal(u if u is not None else np.zeros((T, nu)), "u", nu, T)
     gen = as_rng(rng)
     mats = model.at_batch(p)
