@@ -50,7 +50,7 @@ from typing import Any, TypeVar, overload
 
 import numpy as np
 
-from .errors import LpvestError, ModelFileError, abbreviate, shorten
+from .errors import LpvestError, ModelFileError, OutputError, abbreviate, shorten
 from .expressions import CONSTANTS, FUNCTIONS, Expression, FormulaMatrix
 from .scheduling import (
     BasisFunction,
@@ -863,14 +863,26 @@ def save_system(system: SystemFile, path: str | Path) -> Path:
     system : SystemFile
         The system.
     path : os.PathLike or str
-        The file to write (UTF-8); an existing file is replaced.
+        The file to write (UTF-8; its folder is created); an existing file is
+        replaced.
 
     Returns
     -------
     path : pathlib.Path
         ``path`` as a :class:`~pathlib.Path`.
+
+    Raises
+    ------
+    OutputError
+        The file cannot be written (the message names it and says why).
     """
     path = Path(path)
-    path.write_text(dump_system(system), encoding="utf-8")
+    text = dump_system(system)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text, encoding="utf-8")
+    except OSError as exc:
+        raise OutputError(f"cannot write the model file {shorten(str(path), 60)}: "
+                          f"{exc.strerror or type(exc).__name__}") from exc
     return path
 

@@ -639,6 +639,13 @@ def test_option_and_declaration_errors(small):
     model = KernelModel.from_io(io, a1=UnknownConstant())
     with pytest.raises(DimensionError, match="penalty must be None, 'gcv' or a finite lambda >= 0"):
         fit_kernel_model(model, t, d.u, d.y, penalty=-1.0)
+    for bad in (np.bool_(True), np.float64("nan"), "1e-3"):
+        with pytest.raises(DimensionError, match="penalty must be None"):
+            fit_kernel_model(model, t, d.u, d.y, penalty=bad)
+    # a numpy scalar is a number like any other (np.int64 was refused, np.float64 accepted)
+    a = fit_kernel_model(model, t, d.u, d.y, penalty=np.int64(1))
+    b = fit_kernel_model(model, t, d.u, d.y, penalty=1.0)
+    np.testing.assert_array_equal(a.beta, b.beta)
     with pytest.raises(DimensionError, match="points .* must be an even integer"):
         fit_kernel_model(model, t, d.u, d.y, points=5)
     with pytest.raises(DimensionError, match="n_basis = 2 B-splines of order 3: need n_basis >= order"):

@@ -390,3 +390,14 @@ def test_a_model_unstable_along_the_schedule_is_an_error_not_inf(tmp_path):
     with pytest.raises(NumericalError, match=r"^simulating peixoto-ex2 / model plant: y is -?inf at k = 15 "
                                              r"\(the model is unstable along this schedule"):
         simulate_system(load_system(path), steps=20)
+
+
+def test_save_system_creates_the_folder_and_names_a_file_it_cannot_write(tmp_path):
+    from lpvest import OutputError, save_system
+
+    system = load_system("peixoto-ex1")
+    path = save_system(system, tmp_path / "new" / "folder" / "ex1.toml")
+    assert load_system(path).model().n_vertices == 2
+    (tmp_path / "a-file").write_text("x")
+    with pytest.raises(OutputError, match=r"cannot write the model file .*ex1\.toml"):
+        save_system(system, tmp_path / "a-file" / "ex1.toml")

@@ -445,7 +445,8 @@ def check_options(penalty: object, difference_order: int, rank_rtol: float) -> N
         An option is out of range or of the wrong type.
     """
     if penalty is not None and not (isinstance(penalty, str) and penalty == "gcv"):
-        if isinstance(penalty, bool) or not isinstance(penalty, int | float) or not np.isfinite(penalty) or penalty < 0:
+        if (isinstance(penalty, bool | np.bool_) or not isinstance(penalty, int | float | np.integer | np.floating)
+                or not np.isfinite(penalty) or penalty < 0):
             raise DimensionError(f"penalty must be None, 'gcv' or a finite lambda >= 0; found "
                                  f"{abbreviate(penalty, 30)}")
     if isinstance(difference_order, bool) or not isinstance(difference_order, int) or difference_order < 1:
