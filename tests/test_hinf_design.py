@@ -280,6 +280,8 @@ def test_search_curve_is_exposed():
     assert np.all(np.diff(c.phi) > 0) and c.phi[-1] == pytest.approx(np.pi / 2)
     assert math.isinf(c.epsilon[-1])
     assert c.best()[1] == s.design.gamma == min(c.gamma)
+    with pytest.raises(ValueError, match="read-only"):
+        c.gamma[0] = 0.0
     assert np.any(c.epsilon < 0) and np.any(c.epsilon > 0)
 
 
@@ -510,6 +512,27 @@ def test_wrong_dimensions_and_types():
     for bad in ("2", 2.5, True, 0):
         with pytest.raises(DimensionError, match="n_vertices must be a positive integer"):
             HinfProgram(bad, 2, 1, 2, 1)  # type: ignore[arg-type]
+
+
+def test_last_variables_are_never_an_earlier_solve_after_a_solver_failure(monkeypatch):
+    import cvxpy as cp
+
+    plant = ex1()
+    prog = HinfProgram.for_plant(plant, kind=KIND_ROBUST)
+    with pytest.raises(LMIInfeasibleError, match="no solution yet"):
+        prog.last_variables()
+    prog.solve(plant, 1.0)
+    assert prog.last_variables()["delta"] > 0
+
+    def fail(*args, **kwargs):
+        raise cp.error.SolverError("simulated failure")
+
+    monkeypatch.setattr(prog._problem, "solve", fail)
+    attempt = prog.attempt(plant, 2.0)
+    assert attempt.design is None and "simulated failure" in attempt.detail
+    # cvxpy keeps the variables of the solve at epsilon = 1: not this program's last answer
+    with pytest.raises(LMIInfeasibleError, match="no solution yet"):
+        prog.last_variables()
 
 
 def test_both_infinities_of_epsilon_are_the_one_multiplier_at_phi_pi_over_2():

@@ -547,6 +547,7 @@ class HinfProgram:
         if self.auto:
             self.solver = choose_solver(n_vertices, nx, nz, nw, kind)
         self._warm = False  # warm starts only inside a search (HinfProgram.warm_starts)
+        self._returned_point = False  # the last solve returned a point (last_variables)
         self.margin = float(margin)
         self.solver_options = dict(solver_options or {})
         self.printed_phi21 = bool(printed_phi21)
@@ -666,9 +667,10 @@ class HinfProgram:
         Raises
         ------
         LMIInfeasibleError
-            No solve has returned a point (none yet, or the last one found the LMIs infeasible).
+            No solve has returned a point (none yet, the last one found the LMIs
+            infeasible, or the solver failed: cvxpy then keeps an earlier point).
         """
-        if self._var["delta"].value is None:
+        if not self._returned_point or self._var["delta"].value is None:
             raise LMIInfeasibleError("the program has no solution yet", status=str(self._problem.status))
         return self._values()
 
@@ -696,6 +698,7 @@ class HinfProgram:
             status, message = str(self._problem.status), ""
         except cp.error.SolverError as exc:
             status, message = "solver_error", f" ({exc})"
+        self._returned_point = status in _ACCEPTED
         return status, time.perf_counter() - t0, message
 
     @contextlib.contextmanager
@@ -1094,6 +1097,12 @@ class EpsilonCurve:
     gamma: np.ndarray
     status: tuple[str, ...]
     gamma_lower: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("epsilon", "phi", "gamma", "gamma_lower"):  # read-only, as HinfDesign's arrays
+            value = np.array(getattr(self, name), dtype=float)
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
 
     def best(self) -> tuple[float, float]:
         """``(epsilon, gamma)`` of the smallest sampled ``gamma``.
