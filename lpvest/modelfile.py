@@ -654,7 +654,11 @@ class _Reader:
 
 
 def loads_system(
-    text: str, *, origin: str = "<string>", parameters: Mapping[str, float] | None = None
+    text: str,
+    *,
+    origin: str = "<string>",
+    parameters: Mapping[str, float] | None = None,
+    allow_outside_range: bool = False,
 ) -> SystemFile:
     """Parse a model file from TOML text (``origin`` names it in errors).
 
@@ -666,7 +670,10 @@ def loads_system(
         What errors call the text (e.g. the file it came from).
     parameters : mapping of str to float, optional
         Values overriding the file's ``[parameters]``; an override outside a
-        parameter's declared range is an error.
+        parameter's declared range is an error unless ``allow_outside_range``.
+    allow_outside_range : bool, default False
+        Accept overrides outside a parameter's declared range, as
+        :func:`load_system` does.
 
     Returns
     -------
@@ -680,7 +687,7 @@ def loads_system(
     """
     if not isinstance(text, str):
         raise ModelFileError(f"{origin}: expected the TOML text as a string, found {describe_value(text)}")
-    return _build(parse_toml(text, origin), origin, parameters, None)
+    return _build(parse_toml(text, origin), origin, parameters, None, allow_outside_range)
 
 
 def load_system(

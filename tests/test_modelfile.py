@@ -92,6 +92,13 @@ def test_parameter_override():
     # a study beyond the range says so
     beyond = load_system("peixoto-ex2", parameters={"rho": 30.0}, allow_outside_range=True)
     assert beyond.model().vertices.A[0, 1, 1] == pytest.approx(-1.5)
+    # the same from text
+    from lpvest.catalog import find_system
+
+    text = find_system("peixoto-ex2").read_text(encoding="utf-8")
+    with pytest.raises(ModelFileError, match=r"parameters\.rho: override 30 is outside"):
+        loads_system(text, parameters={"rho": 30.0})
+    assert loads_system(text, parameters={"rho": 30.0}, allow_outside_range=True).parameters == {"rho": 30.0}
 
 
 RANGED = """
