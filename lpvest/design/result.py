@@ -149,7 +149,9 @@ class HinfDesign:
         Solver name and the final ``problem.status``.
     compile_time, solve_time : float
         Seconds: one-time compilation of the LMI program that produced this
-        design (shared by every solve of that program), and this solve.
+        design (shared by every solve of that program), and the solves at
+        this ``epsilon`` (a retry at the larger margin and a fallback solver
+        included).
     lmi_margin : float
         ``-max`` eigenvalue over every LMI (6)-(7) at the returned point (> 0).
     lyapunov_margin : float
