@@ -240,21 +240,20 @@ def hinf_filter_batch(
     x = np.zeros(design.nx) if xf0 is None else as_vector(xf0, "xf0", design.nx)
     Z = np.empty((T, design.nz))
     X = np.empty((T, design.nx))
-    if plant is None or uu is None:
-        gains = None if not design.scheduled else aa
-        for k in range(T):
-            X[k] = x
-            Z[k], x = hinf_step(design, x, None if gains is None else gains[k], yy[k])
-        return HinfRun(Z, X)
-    path = _InputPath(plant, design.n_vertices)
-    xu = np.zeros(plant.nx)
+    gains = aa if design.scheduled else None
+    path = None if plant is None else _InputPath(plant, design.n_vertices)
+    xu = np.zeros(0 if plant is None else plant.nx)
     for k in range(T):
         X[k] = x
-        a = path.at(None if aa is None else aa[k])
-        y_w = yy[k] - a["Cy"] @ xu - a["Dyu"] @ uu[k]  # the measurement of the plant without input
-        z_f, x = hinf_step(design, x, aa[k] if design.scheduled and aa is not None else None, y_w)
-        Z[k] = a["Cz"] @ xu + a["Dzu"] @ uu[k] + z_f
-        xu = a["A"] @ xu + a["Bu"] @ uu[k]
+        g = None if gains is None else gains[k]
+        if path is None:
+            Z[k], x = hinf_step(design, x, g, yy[k])
+        else:
+            assert uu is not None  # a plant with a known input was given u (checked above)
+            a = path.at(None if aa is None else aa[k])
+            z_f, x = hinf_step(design, x, g, path.without_input(a, xu, uu[k], yy[k]))
+            Z[k] = path.estimate(a, xu, uu[k], z_f)
+            xu = path.next_state(a, xu, uu[k])
     return HinfRun(Z, X)
 
 
@@ -282,6 +281,21 @@ class _InputPath:
             return self._fixed
         assert alpha is not None  # the path varies: the filter is scheduled (needs_scheduling)
         return self._stack.at(alpha)
+
+    @staticmethod
+    def without_input(a: Mapping[str, np.ndarray], xu: np.ndarray, u: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """The measurement of the plant without input: ``y - Cy x_u - Dyu u``."""
+        return y - a["Cy"] @ xu - a["Dyu"] @ u
+
+    @staticmethod
+    def estimate(a: Mapping[str, np.ndarray], xu: np.ndarray, u: np.ndarray, z_f: np.ndarray) -> np.ndarray:
+        """``z^ = Cz x_u + Dzu u + z_f``: the response to ``u`` added back."""
+        return a["Cz"] @ xu + a["Dzu"] @ u + z_f
+
+    @staticmethod
+    def next_state(a: Mapping[str, np.ndarray], xu: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """``x_u+ = A x_u + Bu u``."""
+        return a["A"] @ xu + a["Bu"] @ u
 
 
 #: The plant matrices of the filter's copy of the response to a known input.
@@ -433,18 +447,19 @@ class HinfFilter(Component):
         if self.plant is None:
             zhat = m.Cf @ self._xf + m.Df @ y
             return {"zhat": zhat, "xf": self._xf.copy()}, (m, alpha, y, zhat, None, None)
-        assert self._u_path is not None
-        a = self._u_path.at(alpha)
-        y_w = y - a["Cy"] @ self._xu - a["Dyu"] @ u  # the measurement of the plant without input
+        path = self._u_path
+        assert path is not None and u is not None
+        a = path.at(alpha)
+        y_w = path.without_input(a, self._xu, u, y)
         z_f = m.Cf @ self._xf + m.Df @ y_w
-        zhat = a["Cz"] @ self._xu + a["Dzu"] @ u + z_f
+        zhat = path.estimate(a, self._xu, u, z_f)
         return {"zhat": zhat, "xf": self._xf.copy()}, (m, alpha, y_w, z_f, a, u)
 
     def _commit(self, pending: Any) -> None:
         m, alpha, y, zhat, a, u = pending
         self._xf = _step_with(m, self._xf, alpha, y, zhat).xf_next
         if a is not None:
-            self._xu = a["A"] @ self._xu + a["Bu"] @ u
+            self._xu = _InputPath.next_state(a, self._xu, u)
         self._k += 1
 
     def get_state(self) -> dict[str, Any]:
