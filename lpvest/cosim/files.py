@@ -51,7 +51,7 @@ import numpy as np
 from ..errors import ModelFileError, abbreviate, shorten
 from ..plotting import save_figure
 from ..tomlfiles import describe_value, read_toml
-from .master import Component, Connection, CoSimulation, CoSimulationError
+from .master import Component, Connection, CoSimulation, CoSimulationError, step_count
 
 __all__ = ["CoSimFile", "CoSimResult", "load_cosim", "DEFAULT_FMU_DIR"]
 
@@ -506,14 +506,14 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
         where_steps = "steps"
     else:
         stop = r.number(data, "stop_time")
-        ratio = (stop - t0) / h
+        count, ratio = step_count(t0, stop, h)
         if not math.isfinite(ratio):
             raise r.error("stop_time", f"expected start_time + a positive whole number of steps of {h:g}, "
                           f"found {stop!r} (more steps than a float can count)")
-        n_steps = int(round(ratio))
-        if n_steps < 1 or abs(ratio - n_steps) > 1e-9 * max(1.0, abs(ratio)):
+        if count is None or count < 1:
             raise r.error("stop_time", f"expected start_time + a positive whole number of steps of {h:g}, "
                           f"found {stop!r} ({ratio:.6g} steps)")
+        n_steps = count
         where_steps = "stop_time"
     if n_steps > MAX_STEPS:
         raise r.error(where_steps,

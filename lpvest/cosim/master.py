@@ -53,6 +53,7 @@ __all__ = [
     "AlgebraicLoopError",
     "simulate",
     "whole_steps",
+    "step_count",
 ]
 
 
@@ -298,15 +299,41 @@ def whole_steps(start_time: float, stop_time: float, step_size: float) -> int:
     >>> whole_steps(0.0, 0.3, 0.1)
     3
     """
-    ratio = (float(stop_time) - float(start_time)) / float(step_size)
+    n, ratio = step_count(start_time, stop_time, step_size)
     if not math.isfinite(ratio):
         raise CoSimulationError(f"stop_time = {stop_time!r}: expected start_time + a whole number of steps of "
                                 f"{step_size:g} (more steps than a float can count)")
-    n = int(round(ratio))
-    if n < 0 or abs(ratio - n) > 1e-9 * max(1.0, abs(ratio)):
+    if n is None or n < 0:
         raise CoSimulationError(f"stop_time = {stop_time!r}: expected start_time ({start_time:g}) + a whole "
                                 f"number of steps of {step_size:g}; found {ratio:.6g} steps")
     return n
+
+
+def step_count(start_time: float, stop_time: float, step_size: float) -> tuple[int | None, float]:
+    """``(n, ratio)``: ``ratio = (stop_time - start_time) / step_size`` and
+    ``n`` the whole number it is (to 1e-9 relative), or ``None`` when it is
+    not one (or not finite). The one rule of :func:`whole_steps` and of
+    co-simulation files.
+
+    Parameters
+    ----------
+    start_time, stop_time : float
+        The interval.
+    step_size : float
+        The communication step (> 0).
+
+    Returns
+    -------
+    n : int or None
+        The number of steps, possibly negative; ``None``: not a whole number.
+    ratio : float
+        The number of steps as a float.
+    """
+    ratio = (float(stop_time) - float(start_time)) / float(step_size)
+    if not math.isfinite(ratio):
+        return None, ratio
+    n = int(round(ratio))
+    return (n if abs(ratio - n) <= 1e-9 * max(1.0, abs(ratio)) else None), ratio
 
 
 
