@@ -740,8 +740,7 @@ class HinfProgram:
             if not eig[-1] < -tol:
                 ok = False
         lyap_min = math.inf
-        for j in range(self.n_vertices):
-            P = np.block([[values["P1"][j], values["P3"][j]], [values["P3"][j].T, values["P2"][j]]])
+        for P in _lyapunov_matrices(values):
             eig = np.linalg.eigvalsh(0.5 * (P + P.T))
             lyap_min = min(lyap_min, float(eig[0]))
             if not eig[0] > 100.0 * np.finfo(float).eps * max(1.0, float(np.max(np.abs(eig)))):
@@ -763,8 +762,7 @@ class HinfProgram:
         total = float(values["delta"])
         for blk, Z in zip(lmis, duals[: len(lmis)], strict=True):
             total += float(np.vdot(np.asarray(Z, dtype=float), np.asarray(blk.matrix, dtype=float)))
-        for j, W in enumerate(duals[len(lmis):]):
-            P = np.block([[values["P1"][j], values["P3"][j]], [values["P3"][j].T, values["P2"][j]]])
+        for W, P in zip(duals[len(lmis):], _lyapunov_matrices(values), strict=True):
             total -= float(np.vdot(np.asarray(W, dtype=float), P))
         return total
 
@@ -875,10 +873,7 @@ class HinfProgram:
         lyap_margin: float,
         solver: str,
     ) -> HinfDesign:
-        lyap = np.stack([
-            np.block([[values["P1"][j], values["P3"][j]], [values["P3"][j].T, values["P2"][j]]])
-            for j in range(self.n_vertices)
-        ])
+        lyap = np.stack(_lyapunov_matrices(values))
         lyap = 0.5 * (lyap + np.transpose(lyap, (0, 2, 1)))
         return HinfDesign(
             kind=self.kind,
@@ -902,6 +897,12 @@ class HinfProgram:
             plant=plant.name,
             model_digest=model_digest(plant),
         )
+
+
+def _lyapunov_matrices(values: Mapping[str, Any]) -> list[np.ndarray]:
+    """``P_j = [[P1_j, P3_j], [P3_j^T, P2_j]]`` per vertex, from a solve's variables."""
+    return [np.block([[p1, p3], [p3.T, p2]])
+            for p1, p2, p3 in zip(values["P1"], values["P2"], values["P3"], strict=True)]
 
 
 def _check_margin(margin: object) -> None:
