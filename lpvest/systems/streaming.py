@@ -78,8 +78,12 @@ class _Rules:
         return np.zeros(self.model.nx) if x0 is None else x0.copy()
 
     def check(self, val: dict[str, np.ndarray]) -> None:
-        """Range checks of a sample (``val`` gains derived values)."""
-        self.model.space.check(val["p"])
+        """Range checks of a sample (``val`` gains derived values): ``p`` in
+        its box, then :meth:`derive`."""
+        space = self.model.space
+        if space is not None:  # None: a polytopic model scheduled by alpha itself
+            space.check(val["p"])
+        self.derive(val)
 
     def derive(self, val: dict[str, np.ndarray]) -> None:
         """:meth:`check` for a sample checked at the boundary (``p`` in its box):
@@ -110,17 +114,11 @@ class _PolytopicRules(_Rules):
         return (ins + [Port("w", (m.nw,), "disturbance")],
                 [Port("y", (m.ny,), "measured output"), Port("z", (m.nz,), "signal to be estimated")])
 
-    def check(self, val: dict[str, np.ndarray]) -> None:
-        if self.model.simplex_map is None:
-            check_simplex(val["alpha"], "alpha")
-        else:
-            val["alpha"] = self.model.alpha(val["p"])  # range-checked
-
     def derive(self, val: dict[str, np.ndarray]) -> None:
         if self.model.simplex_map is None:
             check_simplex(val["alpha"], "alpha")  # each weight in [0, 1] does not make a sum of 1
         else:
-            val["alpha"] = self.model.simplex_map(val["p"])  # what alpha(p) gives after its range check
+            val["alpha"] = self.model.simplex_map(val["p"])
 
     def evaluate(self, x: np.ndarray, val: dict[str, np.ndarray], noise: np.ndarray,
                  no_u: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
