@@ -413,18 +413,17 @@ class HinfFilter(Component):
                 f"HinfFilter ({self.design.kind}) inputs are {sorted(self._in_names)}; "
                 f"missing {missing}, unknown {unknown}"
             )
-        y = as_vector(inputs["y"], "y", self.design.ny)
-        u = None if self.plant is None else as_vector(inputs["u"], "u", self.plant.nu)
-        alpha: np.ndarray | None = None
+        # the checks an FMU makes element by element; _read_checked does the rest
+        checked = {"y": as_vector(inputs["y"], "y", self.design.ny)}
+        if self.plant is not None:
+            checked["u"] = as_vector(inputs["u"], "u", self.plant.nu)
         if self.scheduled:
             if self.simplex_map is None:
-                alpha = as_vector(inputs["alpha"], "alpha", self.design.n_vertices)
-                check_simplex(alpha, "alpha")
+                checked["alpha"] = as_vector(inputs["alpha"], "alpha", self.design.n_vertices)
             else:
                 space = self.simplex_map.space
-                p = space.check(as_vector(inputs["p"], "p", space.dim))
-                alpha = np.asarray(self.simplex_map(p), dtype=float)  # on the simplex by construction
-        return alpha, y, u
+                checked["p"] = space.check(as_vector(inputs["p"], "p", space.dim))
+        return self._read_checked(checked)
 
     def _read_checked(self, inputs: Mapping[str, Any]) -> tuple[np.ndarray | None, np.ndarray, np.ndarray | None]:
         """:meth:`_read` of inputs checked at the boundary (:meth:`Component._read_checked`)."""
@@ -435,7 +434,7 @@ class HinfFilter(Component):
                 alpha = inputs["alpha"]
                 check_simplex(alpha, "alpha")  # each weight in [0, 1] does not make a sum of 1
             else:
-                alpha = np.asarray(self.simplex_map(inputs["p"]), dtype=float)
+                alpha = np.asarray(self.simplex_map(inputs["p"]), dtype=float)  # on the simplex by construction
         return alpha, inputs["y"], u
 
     def _evaluate(
