@@ -157,6 +157,8 @@ ERRORS = [
      "components: missing (expected a table [components.NAME] per component)"),
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Scheduler"', 'fmu = "PeixotoEx1Scheduler"\ngain = 2'),
      "components.sched.gain: unknown key (expected one of: feedthrough, fmu, parameters)"),
+    (lambda t: _edit(t, "[components.src]", '[components."2src"]'),
+     "components.2src: is not a valid component name (expected a letter, then letters, digits, _)"),
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Scheduler"', "fmu = 3"),
      "components.sched.fmu: expected a string, found a number (3)"),
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Scheduler"', 'parameters = { omega = [0.3] }'),

@@ -540,7 +540,8 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
     for name, spec in comps_raw.items():
         where = f"components.{_key(name)}"
         if not name.isidentifier():
-            raise r.error(where, f"expected a component name that is an identifier, found {abbreviate(name, 30)}")
+            # the name is in the field path already (as a model file says of a parameter name)
+            raise r.error(where, "is not a valid component name (expected a letter, then letters, digits, _)")
         if not isinstance(spec, dict):
             raise r.error(where, f"expected a table, found {describe_value(spec)}")
         bad = sorted(set(spec) - _COMPONENT_KEYS)
