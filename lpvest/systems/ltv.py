@@ -591,7 +591,7 @@ class LTVSolution:
     --------
     >>> io = LTVInputOutput(a=[1.0, 0.0], b=[0.0], x0=[0.0, 1.0])  # y'' + y = 0: y = sin t
     >>> sol = io.to_state_space().solution(0.0, [0.0, 1.0], u=0.0)
-    >>> bool(abs(sol(1.0)[0] - np.sin(1.0)) < 1e-12), bool(abs(sol(2.5)[0] - np.sin(2.5)) < 1e-12)
+    >>> bool(abs(sol(1.0)[0] - np.sin(1.0)) < 1e-10), bool(abs(sol(2.5)[0] - np.sin(2.5)) < 1e-10)
     (True, True)
     """
 
