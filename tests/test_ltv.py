@@ -255,3 +255,11 @@ def test_solution_errors():
     sol(3.0)
     with pytest.raises(ArgumentError, match=r"t = 0.5 lies before the current integration step.*must not decrease"):
         sol(0.5)
+
+
+def test_value_at_one_time_is_the_array_value():
+    """TimeFunction.at (the plant's per-step path) gives the numbers __call__ gives, bit for bit."""
+    t = np.random.default_rng(5).uniform(-20.0, 20.0, 2000)
+    for f in (TimeFunction.of("120*sin(t)"), TimeFunction.of("t**2 + 1/(t + 1000)"), TimeFunction.of(2.5),
+              TimeFunction.of(lambda s: np.exp(-s) * np.cos(s))):
+        assert [f.at(float(tk)) for tk in t] == [float(f(tk)) for tk in t], f

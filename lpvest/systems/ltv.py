@@ -138,6 +138,23 @@ class TimeFunction:
         t_arr = np.asarray(t, dtype=float)
         return np.broadcast_to(np.asarray(self.fn(t_arr), dtype=float), t_arr.shape).copy()
 
+    def at(self, t: float) -> float:
+        """The value at one time: ``float(self(t))``, without array handling for a formula.
+
+        Parameters
+        ----------
+        t : float
+            The time.
+
+        Returns
+        -------
+        float
+            The value (the same number as ``self(t)``).
+        """
+        if self.expression is not None:
+            return float(self.expression.evaluate({"t": float(t)}))
+        return float(self(t))
+
     def derivative(self) -> TimeFunction:
         """The time derivative as a :class:`TimeFunction`.
 

@@ -458,7 +458,7 @@ class LTVPlant(TimedComponent):
         return u
 
     def _evaluate(self, u: TimeFunction | float) -> tuple[dict[str, np.ndarray], TimeFunction | float]:
-        u_now = float(u(self._t)) if isinstance(u, TimeFunction) else u
+        u_now = u.at(self._t) if isinstance(u, TimeFunction) else u
         y = self.model.C(self._t) @ self._x
         return {"y": np.asarray(y, dtype=float).reshape(1), "x": self._x.copy(), "u_applied": np.array([u_now])}, u
 
