@@ -186,12 +186,13 @@ def test_reproduce_all_reduced_writes_everything(tmp_path, experiment_fmus, capf
     assert _without_times((tmp_path / "serial" / "report.md").read_text()) == \
         _without_times((tmp_path / "report.md").read_text())
     # progress: one line per finished task (4 experiments, one task for the three Sridhar
-    # experiments, Example 2's stability limits and 3 values of rho), nothing from the
-    # workers' progress bars
-    done = [line for line in lines if re.match(r"\[\d/9\] ", line)]
-    assert [line[:5] for line in done] == [f"[{i}/9]" for i in range(1, 10)]
+    # experiments, Example 2's stability limits, FMU co-simulation and 3 values of rho),
+    # nothing from the workers' progress bars
+    done = [line for line in lines if re.match(r"\[[ \d]\d/10\] ", line)]
+    assert [line[:6] for line in done] == [f"[{i:>2}/10]" for i in range(1, 11)]
     assert sum("] peixoto-example2: rho = " in line for line in done) == 3
     assert sum("] peixoto-example2: stability limits (" in line for line in done) == 1
+    assert sum("] peixoto-example2: FMU co-simulation (" in line for line in done) == 1
     assert sum("] sridhar-noiseless + sridhar-noisy + sridhar-sliding (" in line for line in done) == 1
     out, err = capfd.readouterr()
     assert "\r" not in out + err + "".join(lines)

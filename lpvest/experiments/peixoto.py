@@ -629,10 +629,11 @@ def split_example2(
     progress: bool | None = None,
     fmus: ExperimentFmus | str | Path | None = None,
 ) -> Split:
-    """Example 2 as tasks, the plant's stability limits (:func:`stability_limits`)
-    and one design per ``rho`` (:func:`example2_task`), and the rest
-    (:func:`run_example2`) as the last step: what ``lpvest reproduce`` spreads
-    over its workers.
+    """Example 2 as tasks, the plant's stability limits (:func:`stability_limits`),
+    the FMU co-simulation (:func:`example2_cosim`) and one design per ``rho``
+    (:func:`example2_task`), and the rest (:func:`run_example2`: the FMU
+    results against the library, the table, the figure) as the last step: what
+    ``lpvest reproduce`` spreads over its workers.
 
     Parameters
     ----------
@@ -643,27 +644,36 @@ def split_example2(
     progress : bool or None, default None
         Not used: the last step shows no progress bar (the same options as :func:`run_example2`).
     fmus : ExperimentFmus, str, Path or None, default None
-        The FMU cache of the last step's co-simulation.
+        The FMU cache of the co-simulation (the tasks' shared data, and the last step's).
 
     Returns
     -------
     Split
-        ``1 + len(rhos)`` tasks (:func:`example2_part`) and the last step.
+        ``2 + len(rhos)`` tasks (:func:`example2_part`) and the last step.
     """
     del progress  # the tasks' progress is their caller's
     rhos = tuple(float(r) for r in rhos)
-    tasks = (Task(0, {"stability_limits": 1}), *(Task(i + 1, {"rho": rho}) for i, rho in enumerate(rhos)))
-    finish = functools.partial(_finish_example2, out_dir, rhos, as_experiment_fmus(fmus))
-    return Split(example2_part, None, tasks, finish, "Example 2: rho sweep",
-                 ("stability limits", *(f"rho = {rho:g}" for rho in rhos)))
+    fmu_rhos = tuple(r for r in EXAMPLE2_FMU_RHOS if r in rhos)
+    cache = as_experiment_fmus(fmus)
+    tasks = (Task(0, {"stability_limits": 1}), Task(1, {"cosim_rhos": fmu_rhos}),
+             *(Task(i + 2, {"rho": rho}) for i, rho in enumerate(rhos)))
+    finish = functools.partial(_finish_example2, out_dir, rhos, cache)
+    return Split(example2_part, cache, tasks, finish, "Example 2: rho sweep",
+                 ("stability limits", "FMU co-simulation", *(f"rho = {rho:g}" for rho in rhos)))
 
 
-def example2_part(shared: Any, task: Task) -> TaskResult:
+def example2_part(fmus: ExperimentFmus, task: Task) -> TaskResult:
     """A task of :func:`split_example2`: the design at ``task.point["rho"]``
-    (:func:`example2_task`), or the plant's stability limits (value: the
-    :class:`StabilityLimits`) for the point ``{"stability_limits": 1}``."""
+    (:func:`example2_task`); the plant's stability limits (value: the
+    :class:`StabilityLimits`) for ``{"stability_limits": 1}``; the FMU
+    co-simulation at the values of ``task.point["cosim_rhos"]`` (value: the
+    recorded results, the steps and the seconds it took)."""
     if "rho" in task.point:
-        return example2_task(shared, task)
+        return example2_task(None, task)
+    if "cosim_rhos" in task.point:
+        timer = Timer()
+        res = timer.run(example2_cosim(task.point["cosim_rhos"]), fmus)
+        return TaskResult(value=(res, timer.steps, timer.seconds))
     return TaskResult(value=stability_limits())
 
 
@@ -698,12 +708,14 @@ def run_example2(
 
 def _finish_example2(out_dir: Path | None, rhos: tuple[float, ...], fmus: ExperimentFmus,
                      outcomes: Sequence[TaskResult]) -> ExperimentResult:
-    """Example 2 from its tasks' results (the stability limits, then one design per
-    rho): the table, the FMU co-simulation, the figure."""
+    """Example 2 from its tasks' results (the stability limits, the FMU
+    co-simulation, then one design per rho): the table, the FMU results against
+    the library, the figure."""
     from ..modelfile import load_system
 
     lim: StabilityLimits = outcomes[0].value
-    curve = outcomes[1:]
+    res, steps, seconds = outcomes[1].value
+    curve = outcomes[2:]
     rows: list[dict[str, Any]] = []
     designs: dict[float, Any] = {}
     for rho, r in zip(rhos, curve, strict=True):
@@ -732,9 +744,9 @@ def _finish_example2(out_dir: Path | None, rhos: tuple[float, ...], fmus: Experi
     lines.append(explanation)
 
     fmu_rhos = [r for r in EXAMPLE2_FMU_RHOS if r in designs]
-    timer = Timer()
     spec = example2_cosim(fmu_rhos)
-    res = timer.run(spec, fmus)
+    timer = Timer()
+    timer.steps, timer.seconds = steps, seconds
     runs: list[HinfFmuResult] = []
     fmu_rows: list[dict[str, Any]] = []
     for rho in fmu_rhos:

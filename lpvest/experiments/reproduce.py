@@ -231,7 +231,7 @@ def _run_on(engine: Any, groups: list[list[Experiment]], cache: ExperimentFmus, 
     for group in groups:  # the many small tasks last: they even out the workers' loads at the end
         exp = group[0]
         if exp.split is not None:
-            split = exp.split(rep.out / exp.name, fmus=cache, progress=False, **rep.options(exp))
+            split = exp.split(rep.out / exp.name, fmus=view, progress=False, **rep.options(exp))
             splits[exp.name] = (exp, split)
             split_data[exp.name] = split.shared
             jobs += [_Part(exp.name, split.fn, exp.name, t, label)
