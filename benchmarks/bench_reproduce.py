@@ -20,6 +20,12 @@ Measured, each against its target (issue 23, a quiet 2-core machine):
    ``--workers`` (default one per core) into a fresh output folder, the FMU
    cache warmed first; ``--serial`` also times ``workers=0`` (everything in
    this process, as before this issue) and prints the ratio.
+   ``--baseline DIR``: the same command of another lpvest (a checkout or
+   ``git archive`` of an earlier commit, put first on ``PYTHONPATH``, the same
+   virtual environment and the same experiments' FMUs built by that version
+   into ``DIR/fmu-cache-bench``) timed alternately with this one, each in a
+   new process (``python -m lpvest.cli reproduce all``): before and after, side
+   by side under the same load.
 4. ``--fresh``: **a fresh ``./dev main``** (target <= 90 s): the repository's
    committed HEAD cloned into a temporary folder and ``./dev main`` run there
    from nothing (a new ``.venv``, pip install from the pip cache of this
@@ -132,6 +138,37 @@ def reproduce_all_time(fmus, workers: int | None) -> float:
     return seconds
 
 
+def cli_reproduce_all(pythonpath: Path | None, fmus: Path, extra: list[str]) -> float:
+    """``python -m lpvest.cli reproduce all`` in a new process (``pythonpath``
+    first on the path: another lpvest); wall seconds."""
+    env = dict(os.environ)
+    if pythonpath is not None:
+        env["PYTHONPATH"] = str(pythonpath) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    with tempfile.TemporaryDirectory() as out:
+        t = time.perf_counter()
+        proc = subprocess.run([sys.executable, "-m", "lpvest.cli", "reproduce", "all", "--out", out,
+                               "--fmus", str(fmus), *extra], env=env, capture_output=True, text=True, check=False)
+        seconds = time.perf_counter() - t
+    if proc.returncode != 0:
+        print(proc.stdout[-2000:], proc.stderr[-2000:], sep="\n")
+        raise SystemExit(f"lpvest reproduce all ({pythonpath or 'this lpvest'}) failed with status {proc.returncode}")
+    return seconds
+
+
+def baseline(base: Path, fmus: Path, repeat: int) -> dict[str, float]:
+    """``reproduce all`` of the lpvest in ``base`` and of this one, alternating."""
+    base_fmus = base / "fmu-cache-bench"
+    cli_reproduce_all(base, base_fmus, [])  # builds that version's FMUs (cold): not timed
+    times: dict[str, list[float]] = {"baseline": [], "this": []}
+    for _ in range(repeat):
+        times["baseline"].append(cli_reproduce_all(base, base_fmus, []))
+        print(f"  reproduce all, baseline {base}: {times['baseline'][-1]:.1f} s (load {_load()})", flush=True)
+        times["this"].append(cli_reproduce_all(None, fmus, []))
+        print(f"  reproduce all, this lpvest: {times['this'][-1]:.1f} s (load {_load()})", flush=True)
+    return {"baseline_s": min(times["baseline"]), "this_s": min(times["this"]),
+            "ratio": min(times["this"]) / min(times["baseline"])}
+
+
 def fresh_dev_main() -> float:
     """A clone of HEAD, then ``./dev main`` from nothing; wall seconds."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -157,6 +194,9 @@ def main() -> None:
     parser.add_argument("--skip-all", action="store_true", help="do not time reproduce all")
     parser.add_argument("--serial", action="store_true", help="also time reproduce all with workers = 0")
     parser.add_argument("--fresh", action="store_true", help="also time a fresh ./dev main (a clone of HEAD)")
+    parser.add_argument("--baseline", metavar="DIR", help="also time reproduce all of the lpvest in DIR (a checkout "
+                                                          "of an earlier commit), alternating with this one")
+    parser.add_argument("--skip-example2", action="store_true", help="do not time Example 2")
     parser.add_argument("--out", help="write the results as JSON")
     args = parser.parse_args()
 
@@ -172,9 +212,10 @@ def main() -> None:
     print(f"LTV plant at 1 kHz (wall / CPU time per step): library {ltv['library_us_per_step']:.1f} / "
           f"{ltv['library_cpu_us_per_step']:.1f} us, FMU {ltv['fmu_us_per_step']:.1f} / "
           f"{ltv['fmu_cpu_us_per_step']:.1f} us (target <= 100)", flush=True)
-    results["example2"] = ex2 = example2(fmus, args.repeat)
-    print(f"Example 2: 1 worker {ex2['one_worker_s']:.1f} s, 2 workers {ex2['two_workers_s']:.1f} s, "
-          f"ratio {ex2['ratio']:.3f} (target <= 0.55)", flush=True)
+    if not args.skip_example2:
+        results["example2"] = ex2 = example2(fmus, args.repeat)
+        print(f"Example 2: 1 worker {ex2['one_worker_s']:.1f} s, 2 workers {ex2['two_workers_s']:.1f} s, "
+              f"ratio {ex2['ratio']:.3f} (target <= 0.55)", flush=True)
     if not args.skip_all:
         results["reproduce_all_s"] = t_all = reproduce_all_time(fmus, args.workers)
         print(f"reproduce all, cached FMUs, {args.workers or os.cpu_count()} workers: {t_all:.1f} s "
@@ -183,6 +224,10 @@ def main() -> None:
             results["reproduce_all_serial_s"] = t_serial = reproduce_all_time(fmus, 0)
             print(f"reproduce all, cached FMUs, in this process: {t_serial:.1f} s (ratio {t_all / t_serial:.3f})",
                   flush=True)
+    if args.baseline:
+        results["baseline"] = b = baseline(Path(args.baseline).resolve(), fmus.directory, args.repeat)
+        print(f"reproduce all (command line), cached FMUs: baseline {b['baseline_s']:.1f} s, this lpvest "
+              f"{b['this_s']:.1f} s, ratio {b['ratio']:.3f}", flush=True)
     if args.fresh:
         results["fresh_dev_main_s"] = t_fresh = fresh_dev_main()
         print(f"fresh ./dev main: {t_fresh:.1f} s (target <= 90)", flush=True)
