@@ -189,7 +189,7 @@ def test_reproduce_all_reduced_writes_everything(tmp_path, experiment_fmus, capf
     # experiments, Example 2's stability limits, FMU co-simulation and 3 values of rho),
     # nothing from the workers' progress bars
     done = [line for line in lines if re.match(r"\[[ \d]\d/10\] ", line)]
-    assert [line[:6] for line in done] == [f"[{i:>2}/10]" for i in range(1, 11)]
+    assert [line[:7] for line in done] == [f"[{i:>2}/10]" for i in range(1, 11)]
     assert sum("] peixoto-example2: rho = " in line for line in done) == 3
     assert sum("] peixoto-example2: stability limits (" in line for line in done) == 1
     assert sum("] peixoto-example2: FMU co-simulation (" in line for line in done) == 1
