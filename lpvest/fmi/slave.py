@@ -50,6 +50,7 @@ their submodules so that the FMU can carry them too.
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -90,6 +91,21 @@ _TIME_RTOL = 1e-9
 def _num(value: float) -> str:
     """A number as short as it reads back exactly (``1.0000001``, ``-1``, ``0.3``)."""
     return repr(float(value)).removesuffix(".0")
+
+
+class _WeakCall:
+    """A bound method held through a weak reference to its object (a call after
+    the object is gone does nothing)."""
+
+    __slots__ = ("_ref",)
+
+    def __init__(self, method: Any) -> None:
+        self._ref = weakref.WeakMethod(method)
+
+    def __call__(self, *args: Any) -> None:
+        method = self._ref()
+        if method is not None:
+            method(*args)
 
 
 class _Element:
@@ -248,6 +264,13 @@ class LpvestSlave(Fmi2Slave):
         self._dirty = True
         self._time = 0.0
         self._start_time = 0.0
+        # pythonfmu 0.7 passes queued messages to the host at the end of each FMI call, but not
+        # at the end of fmi2Instantiate or fmi2Reset (the two calls that run this constructor);
+        # its fmi2FreeInstance then flushes what is still queued through a logger it has already
+        # destroyed, and the host crashes (instantiate -> free). So nothing logged here stays in
+        # the queue: it is logged at fmi2SetupExperiment (docs/fmus.md, 6.).
+        self._construction_log = list(self.log_queue)
+        del self.log_queue[:]
 
     def _direct_outputs(self, component: Any) -> tuple[str, ...]:
         """The outputs that depend on an input at the same instant: they hold their
@@ -445,8 +468,11 @@ class LpvestSlave(Fmi2Slave):
                 return fn()
         extobj = self.__dict__.get("_extobj")
         if extobj is None:
-            extobj = self._extobj = _make_extobj(call=self._fp_warning, over="call", invalid="call", divide="call",
-                                                 under="ignore")
+            # the callback holds the slave weakly: numpy keeps it in a capsule, which the garbage
+            # collector cannot look into, so a bound method there made every slave that ever
+            # computed immortal (an instance leaked per fmi2FreeInstance)
+            extobj = self._extobj = _make_extobj(call=_WeakCall(self._fp_warning), over="call", invalid="call",
+                                                 divide="call", under="ignore")
         token = _extobj_contextvar.set(extobj)
         try:
             return fn()
@@ -504,6 +530,10 @@ class LpvestSlave(Fmi2Slave):
     def setup_experiment(
         self, start_time: float, stop_time: float | None = None, tolerance: float | None = None
     ) -> None:
+        if self._construction_log:
+            self.log_queue[:0] = self._construction_log
+            self._construction_log = []
+
         def run() -> None:
             t0 = float(start_time)
             if not math.isfinite(t0):
