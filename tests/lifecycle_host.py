@@ -3,6 +3,7 @@ script in its own process by tests/test_fmu_lifecycle.py; the C host
 tests/data/c_lifecycle.c drives the same sequences).
 
 usage: python tests/lifecycle_host.py fmpy|libcosim JOB.json [SEQUENCE ...]
+       python tests/lifecycle_host.py matrix FOLDER   (the create -> free matrix of its FMUs)
 
 JOB.json holds, per FMU, what a host needs (unpacked folder, GUID, model
 identifier, step size, input value references and values, output value
@@ -47,15 +48,18 @@ MANY: list[tuple[int, str]] = [
     (2, "X"), (2, "R"), (0, "F"), (3, "I"), (2, "Z"), (2, "F"), (3, "S"), (3, "E"), (3, "X"), (3, "R"),
     (3, "T"), (3, "F"),
 ]
-#: libcosim: what an execution does with its slaves. "connect-fail-free": an execution deleted
-#: after a refused connection, before its first step (instantiate -> free); "error-free": a
-#: step refused by the FMU (an invalid initial value), then deleted
-LIBCOSIM_SEQUENCES = ("instantiate-free", "step-free", "error-free", "connect-fail-free")
+#: libcosim: what an execution does with its slaves (it makes the calls: instantiate when a
+#: slave is created, setup and initialization at the first step, terminate and free when the
+#: execution is deleted). "connect-fail-free": an execution deleted after a refused connection,
+#: before its first step (instantiate -> free). libcosim has no reset, and libcosimpy 0.0.6
+#: ends the process (std::terminate on an uncaught cosim::error) when an FMU returns fmi2Error
+#: during initialization, so "free after an error" is driven in fmpy and the C host only.
+LIBCOSIM_SEQUENCES = ("instantiate-free", "step-free", "connect-fail-free")
 
 STEPS = 3
 
 
-def _fmpy_sequences(job: dict, names: list[str]) -> dict:
+def _fmpy_sequences(job: dict, names: list[str], every: bool) -> dict:
     from fmpy.fmi1 import FMICallException
     from fmpy.fmi2 import FMU2Slave
 
@@ -117,6 +121,8 @@ def _fmpy_sequences(job: dict, names: list[str]) -> dict:
             for i, letter in steps:
                 out["statuses"] += op(fmus, i, letter, spec, out)
             result[spec["name"]][seq] = out
+    if not every:
+        return result
     # every FMU at once, created in order and freed interleaved, half of them run
     print("BEGIN * all-at-once", flush=True)
     fmus: dict[int, FMU2Slave] = {}
@@ -135,7 +141,7 @@ def _fmpy_sequences(job: dict, names: list[str]) -> dict:
     return result
 
 
-def _libcosim_sequences(job: dict, names: list[str]) -> dict:
+def _libcosim_sequences(job: dict, names: list[str], every: bool) -> dict:
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
     from libcosimpy.CosimObserver import CosimObserver
@@ -163,17 +169,13 @@ def _libcosim_sequences(job: dict, names: list[str]) -> dict:
                     ex.real_initial_value(index, vr, value)
                 out["ok"].append(bool(ex.step(STEPS)))
                 out["outputs"].append(list(obs.last_real_values(index, spec["outputs"])))
-            elif seq == "error-free":
-                # an invalid value (NaN) for the first input, else a refused step (h = 0 is not allowed
-                # by libcosim: a parameter out of its range instead)
-                vr, value = spec["invalid"]
-                ex.real_initial_value(index, vr, value)
-                out["ok"].append(bool(ex.step(1)))
             elif seq == "connect-fail-free":
-                out["ok"].append(bool(ex.connect_real_variables(index, 10**6, index, 10**6 + 1)))
+                out["ok"].append(ex.connect_real_variables(index, 10**6, index, 10**6 + 1) == 0)  # 0: success
             del ex, slave
             gc.collect()
             result[spec["name"]][seq] = out
+    if not every:
+        return result
     # many executions and slaves alive at once, deleted in another order than created
     print("BEGIN * all-at-once", flush=True)
     alive = [execution(spec, f"{spec['name']}-all") for spec in job["fmus"]]
@@ -191,10 +193,8 @@ def _libcosim_sequences(job: dict, names: list[str]) -> dict:
 def make_job(paths: dict[str, str], folder: str) -> dict:
     """The job for the hosts: each FMU unpacked under ``folder``, its GUID,
     identifier and step, its inputs set to the middle of their declared range
-    (else their start value), its Real outputs (at most 64: the C host's
-    limit), and an invalid value (NaN) for its first input, else its first
-    Real parameter."""
-    import math
+    (else their start value), and its Real outputs (at most 64: the C
+    host's limit)."""
     import os
     import zipfile
 
@@ -206,7 +206,7 @@ def make_job(paths: dict[str, str], folder: str) -> dict:
         unzip = os.path.join(folder, name)
         with zipfile.ZipFile(paths[name]) as z:
             z.extractall(unzip)
-        inputs, outputs, invalid = [], [], None
+        inputs, outputs = [], []
         for v in md.modelVariables:
             if v.type != "Real":
                 continue
@@ -218,16 +218,13 @@ def make_job(paths: dict[str, str], folder: str) -> dict:
                 inputs.append([v.valueReference, value])
             elif v.causality == "output" and len(outputs) < 64:
                 outputs.append(v.valueReference)
-        first = next((v for v in md.modelVariables if v.type == "Real" and v.causality == "input"), None) or next(
-            v for v in md.modelVariables if v.type == "Real" and v.causality == "parameter")
-        invalid = [first.valueReference, math.nan]
         fmus.append({"name": name, "path": paths[name], "unzip": unzip, "guid": md.guid,
                      "identifier": md.coSimulation.modelIdentifier, "h": float(md.defaultExperiment.stepSize),
-                     "inputs": inputs, "outputs": outputs, "invalid": invalid})
+                     "inputs": inputs, "outputs": outputs})
     return {"fmus": fmus}
 
 
-def c_job(job: dict) -> str:
+def c_job(job: dict, sequences: dict[str, str] = SEQUENCES, *, many: bool = True) -> str:
     """The job as the C host reads it (tests/data/c_lifecycle.c)."""
     lines = []
     for f in job["fmus"]:
@@ -235,8 +232,9 @@ def c_job(job: dict) -> str:
         ins = " ".join(f"{vr} {value!r}" for vr, value in f["inputs"])
         lines.append(f"FMU {f['name']} {f['unzip']} {f['identifier']} {f['guid']} {f['h']!r} {len(f['inputs'])} {ins} "
                      f"{len(f['outputs'])} {' '.join(map(str, f['outputs']))}")
-    lines += [f"SEQ {name} {ops}" for name, ops in SEQUENCES.items()]
-    lines.append(f"MANY {len(MANY)} " + " ".join(f"{i}:{letter}" for i, letter in MANY))
+    lines += [f"SEQ {name} {ops}" for name, ops in sequences.items()]
+    if many:
+        lines.append(f"MANY {len(MANY)} " + " ".join(f"{i}:{letter}" for i, letter in MANY))
     return "\n".join(lines) + "\n"
 
 
@@ -246,13 +244,78 @@ def _live_slaves() -> int:
     return sum(1 for o in gc.get_objects() if any(c.__name__ == "Fmi2Slave" for c in type(o).__mro__[1:]))
 
 
+def c_host(folder: str) -> str:
+    """The C host (tests/data/c_lifecycle.c) compiled into ``folder``."""
+    import os
+    import shutil
+    import subprocess
+
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if cc is None:
+        raise RuntimeError("no C compiler")
+    exe = os.path.join(folder, "c_lifecycle")
+    src = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "c_lifecycle.c")
+    subprocess.run([cc, "-O2", "-Wall", "-Wextra", "-Werror", "-o", exe, src, "-ldl"], check=True)
+    return exe
+
+
+def c_env() -> dict[str, str]:
+    """The environment a C host needs for a Python FMU: libpython preloaded, numpy on the path."""
+    import os
+    import sysconfig
+
+    import numpy as np
+
+    libpython = os.path.join(sysconfig.get_config_var("LIBDIR") or "", sysconfig.get_config_var("INSTSONAME") or "")
+    if not os.path.isfile(libpython):
+        raise RuntimeError("no shared libpython")
+    env = {k: v for k, v in os.environ.items() if k not in ("LD_PRELOAD", "PYTHONPATH", "PYTHONHOME")}
+    env.update(LD_PRELOAD=libpython, PYTHONPATH=os.path.dirname(os.path.dirname(os.path.abspath(np.__file__))))
+    return env
+
+
+def matrix(folder: str) -> str:
+    """The create -> free matrix of every FMU in ``folder``: instantiate, then
+    free, one process per host and FMU (a crash ends only its own)."""
+    import glob
+    import os
+    import subprocess
+    import tempfile
+
+    paths = {os.path.basename(p)[:-4]: p for p in sorted(glob.glob(os.path.join(folder, "*.fmu")))}
+    rows = [("FMU", "fmpy", "libcosim", "C host")]
+    with tempfile.TemporaryDirectory() as tmp:
+        exe, env = c_host(tmp), c_env()
+        for name, path in paths.items():
+            job = make_job({name: path}, os.path.join(tmp, "unz"))
+            json_job = os.path.join(tmp, f"{name}.json")
+            with open(json_job, "w", encoding="utf-8") as f:
+                json.dump(job, f)
+            text_job = os.path.join(tmp, f"{name}.txt")
+            with open(text_job, "w", encoding="utf-8") as f:
+                f.write(c_job(job, {"instantiate-free": "IF"}, many=False) + "PLAIN\n")
+            cells = [name]
+            for cmd, host_env in (([sys.executable, __file__, "fmpy", json_job, "instantiate-free"], None),
+                                  ([sys.executable, __file__, "libcosim", json_job, "instantiate-free"], None),
+                                  ([exe, text_job], env)):
+                proc = subprocess.run(cmd, capture_output=True, text=True, env=host_env, check=False, timeout=600)
+                survived = proc.returncode == 0 and ("RESULT" in proc.stdout or "DONE" in proc.stdout)
+                cells.append("survived" if survived else f"crashed ({proc.returncode})")
+            rows.append(tuple(cells))
+    widths = [max(len(r[i]) for r in rows) for i in range(4)]
+    return "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in rows)
+
+
 def main(argv: list[str]) -> int:
+    if argv[:1] == ["matrix"]:
+        print(matrix(argv[1]))
+        return 0
     host, path, *names = argv
     job = json.loads(open(path, encoding="utf-8").read())
     if host == "fmpy":
-        result = _fmpy_sequences(job, names or [*SEQUENCES, "many"])
+        result = _fmpy_sequences(job, names or [*SEQUENCES, "many"], every=not names)
     elif host == "libcosim":
-        result = _libcosim_sequences(job, names or list(LIBCOSIM_SEQUENCES))
+        result = _libcosim_sequences(job, names or list(LIBCOSIM_SEQUENCES), every=not names)
     else:
         raise SystemExit(f"unknown host {host!r}")
     result["live_slaves"] = _live_slaves()
