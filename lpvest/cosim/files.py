@@ -21,7 +21,7 @@ The format, by example (``examples/peixoto_ex1_hinf.toml`` is a complete file)::
         "sched.p -> plant.p",        #   name connects every element (p[1], p[2], ...)
         "plant.y -> filter.y",
     ]
-    record = ["plant.z", "filter.zhat"]          # optional; default: every output
+    record = ["plant.z", "filter.zhat"]          # optional; default: every output but Strings
     plots = [["plant.z[1]", "filter.zhat[1]"]]   # optional panels; default: one per vector
 
     [components.sched]               # one table per component; the key is its name

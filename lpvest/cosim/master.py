@@ -434,8 +434,9 @@ class CoSimulation:
     start_time : float, default 0.0
         Communication point ``t_0``.
     record : sequence of str, optional
-        Variables to record (``"comp.var"``, vectors expand). Default: every
-        output of every component.
+        Variables to record (``"comp.var"``, vectors expand; Real, Integer,
+        Boolean or Enumeration). Default: every output of every component but
+        String ones (:attr:`not_recorded`).
 
     Raises
     ------
@@ -1208,7 +1209,7 @@ def simulate(
     start_time : float, default 0.0
         Communication point ``t_0``.
     record : sequence of str, optional
-        Variables to record (``"comp.var"``); default: every output.
+        Variables to record (``"comp.var"``); default: every output but String ones.
     progress : bool, optional
         Show a progress bar; default: for more than 20,000 steps.
     on_discard : {"stop", "error"}, default "stop"
