@@ -636,15 +636,18 @@ def _fmu_variables(path: Path, system: SspSystem) -> dict[str, dict[str, Any]]:
 def _check_against_fmus(path: Path, system: SspSystem, variables: dict[str, dict[str, Any]], importer: str) -> None:
     """Every connector and bound parameter is a variable of its component's
     FMU, of the declared kind and type, which the importer can exchange."""
+    def variable(comp: str, name: str, what: str) -> Any:
+        v = variables[comp].get(name)
+        if v is None:
+            raise CoSimulationError(f"{what}: its FMU {system.components[comp]} has no variable "
+                                    f"{abbreviate(name, 40)}")
+        return v
+
     exchanged = _EXCHANGED[importer]
     for comp, conns in system.connectors.items():
-        fmu = variables[comp]
         for name, kind, typ in conns:
             what = f"{path}: component {comp}: connector {abbreviate(name, 40)}"
-            v = fmu.get(name)
-            if v is None:
-                raise CoSimulationError(f"{what} ({kind or 'no kind'}): its FMU {system.components[comp]} has no "
-                                        f"variable {abbreviate(name, 40)}")
+            v = variable(comp, name, f"{what} ({kind or 'no kind'})")
             if kind in ("input", "output") and v.causality != kind:
                 raise CoSimulationError(f"{what} has kind {kind}, but the FMU's variable has causality {v.causality}")
             if typ and typ != v.type:
@@ -667,13 +670,9 @@ def _check_against_fmus(path: Path, system: SspSystem, variables: dict[str, dict
                 raise CoSimulationError(f"{path}: component {comp}: fmpy's simulate_ssp cannot open the "
                                         f"percent-encoded source {abbreviate(source, 60)}; run this file with libcosim")
     for comp, values in system.parameters.items():
-        fmu = variables[comp]
         for name, typ, text in values:
             what = f"{path}: component {comp}: parameter {abbreviate(name, 40)}"
-            v = fmu.get(name)
-            if v is None:
-                raise CoSimulationError(f"{what}: its FMU {system.components[comp]} has no variable "
-                                        f"{abbreviate(name, 40)}")
+            v = variable(comp, name, what)
             if typ != v.type:
                 raise CoSimulationError(f"{what} is given as {typ}, but the FMU's variable has type {v.type}")
             if typ == "Enumeration":
