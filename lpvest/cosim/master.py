@@ -121,7 +121,7 @@ class DiscardedStep:
         ``time`` plus a step); ``None``: it does not say.
     terminated : bool or None
         The component's ``fmi2Terminated``: it asks to end the simulation
-        (``True``), or could only not complete this step (``False``);
+        (``True``), or only could not complete this step (``False``);
         ``None``: it does not say.
     message : str
         The warning's text (one line, with the component's last message).
@@ -874,8 +874,9 @@ class CoSimulation:
         ------
         CoSimulationError
             The co-simulation is closed or has run (:meth:`reset` first), the
-            step count is invalid, or a component failed (returned fmi2Error
-            or fmi2Fatal, or fmi2Discard with ``on_discard="error"``).
+            step count is invalid, or a component failed: a call returned
+            fmi2Error or fmi2Fatal, a get or set fmi2Discard, or
+            ``fmi2DoStep`` fmi2Discard with ``on_discard="error"``.
 
         Warns
         -----
