@@ -316,6 +316,28 @@ def test_a_hand_written_ssp_file_is_read(tmp_path):
         ({"source": "C:/evil.fmu"},
          r"component 'plant': source 'C:/evil\.fmu' is not a relative path inside the archive"),
         ({"source": "resources/Other.fmu"}, r"component 'plant': source 'resources/Other\.fmu' is not in the archive"),
+        # a source is a URI reference, and libcosim decodes its percent-escapes
+        # before it opens the file: checked after decoding (issue 19)
+        ({"source": "%2e%2e/evil.fmu", "members": ["%2e%2e/evil.fmu"]},
+         r"component 'plant': source '%2e%2e/evil\.fmu' \(decoded: '\.\./evil\.fmu'\) is not a relative path inside "
+         r"the archive \(no '\.\.', no absolute path\)"),
+        ({"source": "resources/%2E%2E/%2e%2e/evil.fmu", "members": ["resources/%2E%2E/%2e%2e/evil.fmu"]},
+         r"component 'plant': source 'resources/%2E%2E/%2e%2e/evil\.fmu' \(decoded: 'resources/\.\./\.\./evil\.fmu'\) "
+         r"is not a relative path"),
+        ({"source": "resources/%252e%252e/%252e%252e/evil.fmu", "members": ["resources/%2e%2e/%2e%2e/evil.fmu"]},
+         r"component 'plant': source 'resources/%252e%252e/%252e%252e/evil\.fmu' \(decoded: "
+         r"'resources/\.\./\.\./evil\.fmu'\) is not a relative path"),  # safe for an importer that decodes twice
+        ({"source": "..%2fevil.fmu", "members": ["../evil.fmu"]},
+         r"component 'plant': source '\.\.%2fevil\.fmu' has a percent-escape that decodes to a path separator"),
+        ({"source": "resources%5CPlant.fmu"},
+         r"component 'plant': source 'resources%5CPlant\.fmu' has a percent-escape that decodes to a path separator"),
+        ({"source": "resources/Pl%zzant.fmu"},
+         r"component 'plant': source 'resources/Pl%zzant\.fmu' has a malformed percent-escape \(expected '%' and two "
+         r"hexadecimal digits\)"),
+        ({"source": "resources/%ff.fmu"}, r"component 'plant': source 'resources/%ff\.fmu' does not decode to UTF-8"),
+        ({"source": "resources/My%20Plant.fmu", "members": ["resources/My%20Plant.fmu"]},
+         r"component 'plant': source 'resources/My%20Plant\.fmu' \(decoded: 'resources/My Plant\.fmu'\) is not in the "
+         r"archive"),
         ({"seed": "inf"}, r"component 'plant': parameter 'seed': expected an integer, found 'inf'"),
         ({"seed": "99999999999"},
          r"component 'plant': parameter 'seed': 99999999999 is outside the range of an FMI Integer"),
@@ -329,6 +351,21 @@ def test_an_unsafe_or_malformed_ssp_file_is_one_line_naming_it(tmp_path, change,
     with pytest.raises(CoSimulationError, match=f"^{path}: {message}") as info:
         read_ssp(path)
     assert "\n" not in str(info.value)
+
+
+def test_a_percent_encoded_source_names_the_decoded_member(tmp_path):
+    system = read_ssp(_ssp_file(tmp_path, source="resources/My%20Plant.fmu", members=["resources/My Plant.fmu"]))
+    assert system.components == {"plant": "resources/My Plant.fmu"}
+    assert system.sources == {"plant": "resources/My%20Plant.fmu"}
+
+
+def test_libcosim_is_never_given_a_source_outside_the_archive(tmp_path):
+    """read_ssp accepted '%2e%2e/...' (not '..' as written), and libcosim,
+    which decodes it, ran an FMU from outside the archive (issue 19)."""
+    path = _ssp_file(tmp_path, source="%2e%2e/evil.fmu", members=["%2e%2e/evil.fmu"])
+    with pytest.raises(CoSimulationError, match=rf"^{path}: component 'plant': source '%2e%2e/evil\.fmu' \(decoded: "
+                                                r"'\.\./evil\.fmu'\) is not a relative path inside the archive"):
+        simulate_ssp(path, importer="libcosim")
 
 
 def test_an_ssp_file_that_is_not_a_zip_archive(tmp_path):
@@ -348,3 +385,238 @@ def test_an_xml_declaration_with_an_unknown_encoding(tmp_path):
     with pytest.raises(CoSimulationError, match=f"^{path}: not an SSP file with a SystemStructure.ssd: unknown "
                                                 "encoding: nan$"):
         read_ssp(path)
+
+
+# -- FMUs with every type, files of other tools (issue 19) -------------------------------------------------
+
+FH = 0.5  # a power of two: every value below is exact
+FN = 6
+
+
+def _rewrite_ssd(path, change):
+    """Apply ``change`` to the root of the SSP's SystemStructure.ssd, in place."""
+    import xml.etree.ElementTree as ET
+
+    from lpvest.cosim.ssp import NS
+
+    with zipfile.ZipFile(path) as z:
+        members = {n: z.read(n) for n in z.namelist()}
+    root = ET.fromstring(members["SystemStructure.ssd"])
+    change(root, NS)
+    members["SystemStructure.ssd"] = ET.tostring(root, encoding="utf-8", xml_declaration=True)
+    with zipfile.ZipFile(path, "w") as z:
+        for name, data in members.items():
+            z.writestr(name, data)
+    return path
+
+
+def _keep_connectors(keep):
+    """A change of the SSD: each component declares only the connectors in ``keep``, as another tool may write
+    it (fmpy's simulate_ssp needs every declared input connected; it cannot exchange Strings; libcosim cannot
+    read an Enumeration)."""
+
+    def change(root, ns):
+        for comp in root.findall("ssd:System/ssd:Elements/ssd:Component", ns):
+            conns = comp.find("ssd:Connectors", ns)
+            for c in list(conns):
+                if c.get("name") not in keep[comp.get("name")]:
+                    conns.remove(c)
+
+    return change
+
+
+def _typed_system(foreign_fmus, tmp_path, importer, *, extras=True):
+    """lim -> a -> b (tests/foreign_fmus.py) with Real, Integer and Boolean connections; with ``extras``, for
+    fmpy an Enumeration parameter and output too, for libcosim String outputs."""
+    a_params = {"gain": 3.0, "offset": -2, "invert": True}
+    keep = {"lim": ["time_out", "counter"],
+            "a": ["real_in", "int_in", "real_out", "int_out", "bool_out", "steps"],
+            "b": ["real_in", "int_in", "bool_in", "real_out", "int_out", "bool_out", "steps"]}
+    if extras and importer == "fmpy":
+        a_params["floor_level"] = "mid"
+        keep["a"].append("enum_out")
+    elif extras:
+        keep["a"].append("string_out")
+        keep["b"].append("string_out")
+    comps = [Component("lim", foreign_fmus["Limited"], {"last": 100}),
+             Component("a", foreign_fmus["AllTypes"], a_params), Component("b", foreign_fmus["AllTypes"])]
+    conns = ["lim.time_out -> a.real_in", "lim.counter -> a.int_in", "a.real_out -> b.real_in",
+             "a.int_out -> b.int_in", "a.bool_out -> b.bool_in"]
+    path = write_ssp(tmp_path / f"typed-{importer}.ssp", comps, conns, step_size=FH, stop_time=FN * FH)
+    return _rewrite_ssd(path, _keep_connectors(keep))
+
+
+@pytest.mark.parametrize("importer", ["fmpy", "libcosim"])
+def test_outputs_of_every_type_are_read_with_their_own_type(foreign_fmus, tmp_path, importer):
+    """Integer, Boolean and Enumeration outputs come out as numbers of their
+    own variables. AllTypes' value references overlap across types: libcosim's
+    real-valued read of the Integer output int_out (reference 2) returned the
+    Real output real_out (reference 2) before. String outputs are left out,
+    as the master leaves them out."""
+    res = simulate_ssp(_typed_system(foreign_fmus, tmp_path, importer), importer=importer)
+    names = ["lim.counter", "lim.time_out", "a.real_out", "a.int_out", "a.steps"]  # the FMUs' order
+    names += ["a.enum_out", "a.bool_out"] if importer == "fmpy" else ["a.bool_out"]
+    names += ["b.real_out", "b.int_out", "b.steps", "b.bool_out"]
+    assert res.dtype.names == ("time", *names)
+    # Jacobi (module documentation): row k is read after step k, whose inputs
+    # were read after step k - 1; before the first step fmpy feeds 0 into every
+    # input, libcosim the outputs at t_0 propagated
+    t = np.arange(FN + 1) * FH  # t_0 .. t_N
+    t_k = t[:-1]
+    np.testing.assert_array_equal(res["time"], t[1:])
+    np.testing.assert_array_equal(res["lim.time_out"], t[1:])
+    np.testing.assert_array_equal(res["lim.counter"], np.floor(t[1:]))
+    np.testing.assert_array_equal(res["a.real_out"], 3.0 * t_k)          # gain * time_out(t_k)
+    np.testing.assert_array_equal(res["a.int_out"], np.floor(t_k) - 2)   # counter(t_k) + offset
+    np.testing.assert_array_equal(res["a.bool_out"], np.ones(FN))        # false xor invert
+    np.testing.assert_array_equal(res["a.steps"], np.arange(1.0, FN + 1))
+    first_int, first_bool = (0.0, 0.0) if importer == "fmpy" else (-2.0, 1.0)
+    np.testing.assert_array_equal(res["b.real_out"], 2.0 * np.concatenate([[0.0], res["a.real_out"][:-1]]))
+    np.testing.assert_array_equal(res["b.int_out"], np.concatenate([[first_int], res["a.int_out"][:-1]]) + 1)
+    np.testing.assert_array_equal(res["b.bool_out"], np.concatenate([[first_bool], res["a.bool_out"][:-1]]))
+    if importer == "fmpy":
+        np.testing.assert_array_equal(res["a.enum_out"], np.full(FN, 2.0))  # the bound item 'mid' applied
+
+
+def test_enumerations_in_the_file_and_what_each_importer_makes_of_them(foreign_fmus, tmp_path):
+    from fmpy.ssp.ssd import read_ssd
+
+    comps = [Component("a", foreign_fmus["AllTypes"], {"floor_level": "high"}),
+             Component("b", foreign_fmus["AllTypes"])]
+    path = write_ssp(tmp_path / "enum.ssp", comps, ["a.enum_out -> b.enum_in"], step_size=FH, stop_time=FN * FH)
+    read_ssd(str(path), validate=True)  # valid against SSP 1.0's schema (fmpy's copy)
+    with zipfile.ZipFile(path) as z:
+        xml = z.read("SystemStructure.ssd").decode()
+    # SSP 1.0: a parameter value by item name, the type in the SSD's Enumerations
+    assert '<ssv:Enumeration value="high" name="Level" />' in xml
+    assert '<ssc:Enumeration name="Level" />' in xml
+    assert ('<ssc:Enumeration name="Level">\n      <ssc:Item name="low" value="1" />\n      '
+            '<ssc:Item name="mid" value="2" />\n      <ssc:Item name="high" value="3" />') in xml
+    assert read_ssp(path).parameters["a"] == [("floor_level", "Enumeration", "high")]
+    # libcosim's SSP parser aborts its process on an Enumeration; fmpy has no String calls
+    with pytest.raises(CoSimulationError, match=rf"^{path}: component a: connector 'enum_in': libcosim does not see "
+                                                r"Enumeration variables; run this file with fmpy$"):
+        simulate_ssp(path, importer="libcosim")
+    with pytest.raises(CoSimulationError, match=rf"^{path}: component a: connector 'string_in': fmpy's simulate_ssp "
+                                                r"cannot exchange String variables; run this file with libcosim$"):
+        simulate_ssp(path, importer="fmpy")
+    # without the String connectors fmpy runs it, but feeds 0 into every input
+    # before the first step: not an item of Level, and the FMU says so (one line)
+    _rewrite_ssd(path, _keep_connectors({"a": ["enum_out"], "b": ["enum_in", "enum_out"]}))
+    with pytest.raises(CoSimulationError, match=rf"^{path}: fmpy's simulate_ssp failed: FMICallException: "
+                                                r"fmi2SetInteger failed with status 3 \(error\)\.$"):
+        simulate_ssp(path, importer="fmpy")
+
+
+def _add_connector(component, name, kind, typ):
+    def change(root, ns):
+        import xml.etree.ElementTree as ET
+
+        for comp in root.findall("ssd:System/ssd:Elements/ssd:Component", ns):
+            if comp.get("name") == component:
+                c = ET.SubElement(comp.find("ssd:Connectors", ns), f"{{{ns['ssd']}}}Connector",
+                                  {"name": name, "kind": kind})
+                ET.SubElement(c, f"{{{ns['ssc']}}}{typ}")
+
+    return change
+
+
+def _add_parameter(component, name, typ, value):
+    def change(root, ns):
+        import xml.etree.ElementTree as ET
+
+        for comp in root.findall("ssd:System/ssd:Elements/ssd:Component", ns):
+            if comp.get("name") == component:
+                params = comp.find("ssd:ParameterBindings/ssd:ParameterBinding/ssd:ParameterValues/"
+                                   "ssv:ParameterSet/ssv:Parameters", ns)
+                p = ET.SubElement(params, f"{{{ns['ssv']}}}Parameter", {"name": name})
+                ET.SubElement(p, f"{{{ns['ssv']}}}{typ}", {"value": value})
+
+    return change
+
+
+@pytest.mark.parametrize("importer", ["fmpy", "libcosim"])
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        # fmpy raised a raw KeyError for these two
+        (_add_connector("lim", "y[3]", "output", "Real"),
+         r"component lim: connector 'y\[3\]' \(output\): its FMU resources/Limited\.fmu has no variable 'y\[3\]'"),
+        (_add_parameter("a", "gain2", "Real", "1.0"),
+         r"component a: parameter 'gain2': its FMU resources/AllTypes\.fmu has no variable 'gain2'"),
+        (_add_connector("lim", "u", "output", "Real"),
+         r"component lim: connector 'u' has kind output, but the FMU's variable has causality input"),
+        (_add_connector("b", "steps", "output", "Real"),
+         r"component b: connector 'steps' is declared Real, but the FMU's variable has type Integer"),
+        (_add_parameter("a", "offset", "Real", "1.5"),
+         r"component a: parameter 'offset' is given as Real, but the FMU's variable has type Integer"),
+    ],
+)
+def test_a_connector_or_parameter_the_fmu_lacks_is_one_line_naming_both(foreign_fmus, tmp_path, importer, change,
+                                                                         message):
+    path = _typed_system(foreign_fmus, tmp_path, importer)
+    # libcosim's file keeps String outputs, fmpy's an Enumeration output: neither matters here
+    _rewrite_ssd(path, change)
+    with pytest.raises(CoSimulationError, match=f"^{path}: {message}$") as info:
+        simulate_ssp(path, importer=importer)
+    assert "\n" not in str(info.value)
+
+
+def test_a_connection_to_an_undeclared_connector_is_refused_when_read(foreign_fmus, tmp_path):
+    path = _typed_system(foreign_fmus, tmp_path, "libcosim")
+    _rewrite_ssd(path, _keep_connectors({"lim": ["time_out"], "a": ["real_in", "real_out", "int_out", "bool_out"],
+                                         "b": ["real_in", "int_in", "bool_in"]}))
+    with pytest.raises(CoSimulationError, match=rf"^{path}: connection 2: component 'lim' has no connector 'counter'$"):
+        read_ssp(path)
+
+
+def test_fmpy_is_not_given_an_unconnected_input(foreign_fmus, tmp_path):
+    """fmpy's simulate_ssp wires an input connector without a connection to the
+    source of the connection it looked at before (l1.u got l1.time_out), or
+    fails with UnboundLocalError: refused in one line; libcosim leaves it at its
+    start value."""
+    comps = [Component("l2", foreign_fmus["Limited"]), Component("l1", foreign_fmus["Limited"])]
+    path = write_ssp(tmp_path / "two.ssp", comps, ["l1.time_out -> l2.u"], step_size=FH, stop_time=FN * FH)
+    with pytest.raises(CoSimulationError, match=rf"^{path}: component l1: input connector 'u' is not connected, "
+                                                r"and fmpy's simulate_ssp would feed it another connection's value; "
+                                                r"connect it, or run this file with libcosim$"):
+        simulate_ssp(path, importer="fmpy")
+    res = simulate_ssp(path, importer="libcosim")
+    np.testing.assert_array_equal(res["l1.y"], np.zeros(FN))
+    np.testing.assert_array_equal(res["l2.y"], np.arange(FN) * FH)  # l1's time at the start of each step
+
+
+def test_the_same_system_gives_a_byte_identical_file(foreign_fmus, tmp_path):
+    import os
+
+    fmu = tmp_path / "Limited.fmu"
+    fmu.write_bytes(foreign_fmus["Limited"].read_bytes())
+    comps = [Component("lim", fmu, None), Component("a", foreign_fmus["AllTypes"], {"floor_level": "mid"})]
+    first = write_ssp(tmp_path / "1.ssp", comps, ["lim.time_out -> a.real_in"], step_size=FH, stop_time=3.0)
+    stat = fmu.stat()
+    os.utime(fmu, ns=(stat.st_atime_ns, stat.st_mtime_ns + 86_400 * 10**9))  # the FMU copied a day later
+    second = write_ssp(tmp_path / "2.ssp", comps, ["lim.time_out -> a.real_in"], step_size=FH, stop_time=3.0)
+    assert first.read_bytes() == second.read_bytes()
+    with zipfile.ZipFile(first) as z:
+        assert {i.date_time for i in z.infolist()} == {(1980, 1, 1, 0, 0, 0)}  # no clock, no file time
+        assert z.namelist() == ["SystemStructure.ssd", "resources/Limited.fmu", "resources/AllTypes.fmu"]
+
+
+def test_a_percent_encoded_source_runs_in_libcosim_and_is_refused_by_fmpy(foreign_fmus, tmp_path):
+    """libcosim decodes a source's escapes (so read_ssp checks the decoded
+    name); fmpy opens it as written, so it cannot run such a file."""
+    path = _typed_system(foreign_fmus, tmp_path, "libcosim", extras=False)
+    with zipfile.ZipFile(path) as z:
+        members = {n: z.read(n) for n in z.namelist()}
+    members["resources/Lim ited.fmu"] = members.pop("resources/Limited.fmu")
+    members["SystemStructure.ssd"] = members["SystemStructure.ssd"].replace(
+        b'source="resources/Limited.fmu"', b'source="resources/Lim%20ited.fmu"')
+    with zipfile.ZipFile(path, "w") as z:
+        for name, data in members.items():
+            z.writestr(name, data)
+    assert read_ssp(path).components["lim"] == "resources/Lim ited.fmu"
+    np.testing.assert_array_equal(simulate_ssp(path, importer="libcosim")["lim.time_out"], np.arange(1, FN + 1) * FH)
+    with pytest.raises(CoSimulationError, match=rf"^{path}: component lim: fmpy's simulate_ssp cannot open the "
+                                                r"percent-encoded source 'resources/Lim%20ited\.fmu'; run this file "
+                                                r"with libcosim$"):
+        simulate_ssp(path, importer="fmpy")
