@@ -329,6 +329,48 @@ def test_plain_simulate_fmu_gives_the_library_estimates_one_row_later(fmus, name
             np.testing.assert_array_equal(res[col], ref, err_msg=col)
 
 
+@pytest.mark.parametrize("name", sorted(n for n in FILTERS if "BSplineObserver" not in n))
+def test_with_measurement_delay_simulate_fmu_gives_the_library_estimates_two_rows_later(fmus, name):
+    """A Jacobi master's alignment, fed to plain ``fmpy.simulate_fmu``: the row
+    at t_k holds p_k (and u_k) but y_(k-1) (the row at t_0: y_0 again, as
+    libcosim initializes it). With ``measurement_delay = 1`` the filter pairs
+    y_(k-1) with p_(k-1), u_(k-1) and its estimate of sample k - 1 is read
+    after the step from t_k, in the row at t_(k+1): the library's undelayed
+    estimate of sample k - 1, bit for bit. Rows t_0 and t_1 (no measurement
+    yet) read 0; a state (xf) at t_(k+1) is the undelayed state of sample k."""
+    from fmpy import simulate_fmu
+
+    make, params, data, T, h = FILTERS[name]
+    est = make()
+    inputs = data(T)
+    late = dict(inputs)
+    late["y"] = np.concatenate([inputs["y"][:1], inputs["y"][:-1]])
+    ins = [(f"{n}[{i + 1}]", v[:, i]) for n, v in late.items() for i in range(v.shape[1])]
+    table = np.zeros(T, dtype=[("time", float)] + [(col, float) for col, _ in ins])
+    table["time"] = np.arange(T) * h
+    for col, values in ins:
+        table[col] = values
+    outputs = [(p, f"{p.name}[{i + 1}]" if p.shape else p.name) for p in est.output_ports
+               for i in range(int(np.prod(p.shape)) if p.shape else 1) if len(p.shape) <= 1]
+    res = simulate_fmu(str(fmus[name]), input=table, output_interval=h, stop_time=T * h,
+                       start_values={**params, "measurement_delay": 1}, output=[col for _, col in outputs])
+    assert res.shape == (T + 1,)
+    want = {p.name: [] for p in est.output_ports}
+    for k in range(T):
+        out = est.step({n: v[k] for n, v in inputs.items()})
+        for p in est.output_ports:
+            want[p.name].append(np.asarray(out[p.name], dtype=float).reshape(-1))
+    for port, col in outputs:
+        i = int(col.split("[")[1].rstrip("]")) - 1 if "[" in col else 0
+        ref = np.array(want[port.name])[:, i]
+        if port.direct:
+            assert res[col][0] == 0 and res[col][1] == 0, col
+            np.testing.assert_array_equal(res[col][2:], ref[: T - 1], err_msg=col)
+        else:
+            assert res[col][0] == 0, col
+            np.testing.assert_array_equal(res[col][1:], ref, err_msg=col)
+
+
 def test_observer_resynchronises_after_a_rejected_sample(fmus):
     """The B-spline observer keeps time from the communication points: a sample
     whose y is rejected (NaN) is not consumed, fmi2DoStep is refused, the last

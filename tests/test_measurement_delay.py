@@ -21,6 +21,7 @@ from lpvest.errors import ArgumentError, ArgumentTypeError, DimensionError, NonF
 from lpvest.estimators.hinf import HinfFilter
 from lpvest.estimators.kalman import LPVKalmanFilter
 from lpvest.estimators.truncated import TruncatedKalmanFilter
+from lpvest.fmi.registry import MEASUREMENT_DELAY, EstimatorKind, build_estimator, estimator_kinds
 from lpvest.fmi.state import decode_state, encode_state
 from lpvest.protocol import MeasurementDelay, run_streaming
 from lpvest.signals import SchedulerComponent, SignalSpec
@@ -212,3 +213,23 @@ def test_a_state_that_does_not_fit_is_refused_and_changes_nothing(state, match):
         late.set_state(state)
     after = late.get_state()
     assert after["kept"] == before["kept"] and np.array_equal(after["inputs"]["p"], before["inputs"]["p"])
+
+
+def test_every_sampled_filter_fmu_has_the_parameter_and_the_observer_none():
+    """The FMU roles Kalman, TruncatedKalman, HinfPD and HinfRobust have late
+    measurements (their plants' y feeds through); the B-spline observer does
+    not (its plant's y(t) = C(t) x(t) does not), and a timed estimator cannot."""
+    kinds = {k.role: k for k in estimator_kinds()}
+    assert {r: k.late_inputs for r, k in kinds.items()} == {
+        "Kalman": ("y",), "TruncatedKalman": ("y",), "HinfPD": ("y",), "HinfRobust": ("y",), "BSplineObserver": ()}
+    assert MEASUREMENT_DELAY.name == "measurement_delay" and MEASUREMENT_DELAY.fmi_type == "Integer"
+    assert MEASUREMENT_DELAY.start == 0 and MEASUREMENT_DELAY.minimum == 0
+    with pytest.raises(ArgumentError, match="estimator X: a timed estimator .* cannot have late inputs"):
+        EstimatorKind("X", "m:f", sample_time="dt", late_inputs=("y",))
+    kind = kinds["Kalman"].to_json()
+    model = load_system("cox-toth-truncation").model()
+    params = {"x0": model.x0, "P0": model.P0}
+    assert isinstance(build_estimator(kind, model, None, {**params, "measurement_delay": 0}), LPVKalmanFilter)
+    late = build_estimator(kind, model, None, {**params, "measurement_delay": 1})
+    assert isinstance(late, MeasurementDelay) and (late.delay, late.late) == (1, ("y",))
+    assert isinstance(late.component, LPVKalmanFilter)
