@@ -229,14 +229,27 @@ def test_invalid_filter_parameter_is_fmi2error(fmus):
     d.free()
 
 
-def test_observer_fmu_refuses_a_communication_step_other_than_dt(fmus):
+def test_observer_fmu_refuses_a_step_that_is_not_a_whole_number_of_samples(fmus):
+    """The observer's sample time is its parameter dt: a step of 1.5 dt is
+    refused and consumes nothing; a step of 10 dt runs 10 samples with the
+    inputs held, as the library observer stepped 10 times with those inputs."""
+    make, params, data, T, h = FILTERS["SridharLtvBSplineObserver"]
+    inputs = data(T)
+    est = make()
     d = Driver(fmus["SridharLtvBSplineObserver"])
-    assert d.initialize() == 0
-    d.set_vector("u", 0.0)
-    d.set_vector("y", 0.0)
-    assert d.step(0.0, 0.01) >= 2
-    assert any("communication step 0.01 s differs from the observer's sample time dt = 0.001 s" in m
-               for m in d.errors()), d.errors()
+    assert d.initialize(**params) == 0
+    for j in range(T // 10):
+        _feed(d, inputs, 10 * j)
+        if j == 3:
+            assert d.step(10 * j * h, 1.5 * h) == 3
+            assert any("the communication step h = 0.0015 is not a whole number of samples of the sample time "
+                       "0.001 (a step runs m >= 1 samples; set the parameter dt)" in m for m in d.errors()), d.errors()
+        assert d.step(10 * j * h, 10 * h) == 0, d.errors()
+        for _ in range(10):
+            want = est.step({n: v[10 * j] for n, v in inputs.items()})
+        got = _read(d, est)
+        for port in est.output_ports:  # feedthrough estimates hold the last sample's value
+            assert np.array_equal(got[port.name], np.asarray(want[port.name]).reshape(port.shape)), (j, port.name)
     d.free()
 
 
@@ -369,6 +382,40 @@ def test_with_measurement_delay_simulate_fmu_gives_the_library_estimates_two_row
         else:
             assert res[col][0] == 0, col
             np.testing.assert_array_equal(res[col][1:], ref, err_msg=col)
+
+
+@pytest.mark.parametrize(("name", "delay"), [("CoxTothTruncationKalman", 0), ("PeixotoEx1HinfPD", 1)])
+def test_simulate_fmu_with_a_step_of_two_samples_holds_the_inputs(fmus, name, delay):
+    """``fmpy.simulate_fmu(..., step_size=2 h)`` on a filter of sample time h:
+    every step sets the inputs at t_(2j) and runs samples 2j and 2j + 1 with
+    them (zero-order hold); the row at t_(2j+2) is the library's output after
+    those two samples, bit for bit, with the measurement one sample late too."""
+    from fmpy import simulate_fmu
+
+    from lpvest.protocol import MeasurementDelay
+
+    make, params, data, T, h = FILTERS[name]
+    est = make() if not delay else MeasurementDelay(make(), delay=delay)
+    inputs = data(T)
+    ins = [(f"{n}[{i + 1}]", v[:, i]) for n, v in inputs.items() for i in range(v.shape[1])]
+    table = np.zeros(T, dtype=[("time", float)] + [(col, float) for col, _ in ins])
+    table["time"] = np.arange(T) * h
+    for col, values in ins:
+        table[col] = values
+    cols = [f"{p.name}[{i + 1}]" for p in est.output_ports if len(p.shape) == 1 for i in range(p.shape[0])]
+    res = simulate_fmu(str(fmus[name]), input=table, step_size=2 * h, output_interval=2 * h, stop_time=T * h,
+                       start_values={**params, "measurement_delay": delay}, output=cols)
+    assert res.shape == (T // 2 + 1,)
+    np.testing.assert_array_equal(res["time"], np.arange(T // 2 + 1) * 2 * h)
+    for j in range(T // 2):
+        row = {n: v[2 * j] for n, v in inputs.items()}
+        est.step(row)
+        out = est.step(row)
+        after = est.outputs(row)  # a state (xf) is read at the step's end time
+        got = np.array([res[c][j + 1] for c in cols])
+        want = np.concatenate([np.asarray((out if p.direct else after)[p.name]).reshape(-1)
+                               for p in est.output_ports if len(p.shape) == 1])
+        assert np.array_equal(got, want), j
 
 
 def test_observer_resynchronises_after_a_rejected_sample(fmus):
