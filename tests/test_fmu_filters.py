@@ -227,6 +227,51 @@ def test_invalid_filter_parameter_is_fmi2error(fmus):
     assert status == 3
     assert any("start" in m and "sometimes" in m for m in d.errors()), d.errors()
     d.free()
+    d = Driver(fmus["PeixotoEx1HinfPD"])
+    assert d.initialize(measurement_delay=-1) == 3
+    assert any("parameter measurement_delay = -1 is outside its declared range [0, 2147483647]; value rejected"
+               in m for m in d.errors()), d.errors()
+    d.free()
+
+
+@pytest.mark.parametrize("name", ["CoxTothTruncationKalman", "PeixotoEx1HinfPD", "CoxTothTruncationHinfRobust"])
+def test_a_filter_with_its_measurement_late_saves_and_restores_its_kept_samples(fmus, name):
+    """With measurement_delay = 1 the FMU state holds the filter's state and the
+    scheduling and input kept for the next measurement: saved mid-run (also right
+    after the first step, before any measurement), restored in the instance and
+    deserialized in a fresh one, the run continues identically."""
+    make, params, data, T, h = FILTERS[name]
+    est = make()
+    inputs = data(T)
+    late = dict(inputs)
+    late["y"] = np.concatenate([inputs["y"][:1], inputs["y"][:-1]])
+
+    def run(d: Driver, k0: int, k1: int) -> np.ndarray:
+        rows = []
+        for k in range(k0, k1):
+            _feed(d, late, k)
+            rows.append(np.concatenate([d.vector(p.name).ravel() for p in est.output_ports]))
+            assert d.step(k * h, h) == 0, d.errors()
+        return np.array(rows)
+
+    for cut in (1, T // 2):
+        d = Driver(fmus[name], "a")
+        assert d.initialize(**params, measurement_delay=1) == 0
+        run(d, 0, cut)
+        state = d.fmu.getFMUstate()
+        blob = d.fmu.serializeFMUstate(state)
+        first = run(d, cut, T)
+        d.fmu.setFMUstate(state)
+        assert np.array_equal(first, run(d, cut, T))
+        d.fmu.freeFMUstate(state)
+        d.free()
+        fresh = Driver(fmus[name], "b")
+        assert fresh.initialize(**params, measurement_delay=1) == 0
+        restored = fresh.fmu.deSerializeFMUstate(blob)
+        fresh.fmu.setFMUstate(restored)
+        assert np.array_equal(first, run(fresh, cut, T))
+        fresh.fmu.freeFMUstate(restored)
+        fresh.free()
 
 
 def test_observer_fmu_refuses_a_step_that_is_not_a_whole_number_of_samples(fmus):
