@@ -12,7 +12,7 @@ import pytest
 from lpvest import load_system
 from lpvest.cli import main
 from lpvest.cosim import Component, CoSimulation, CoSimulationError
-from lpvest.cosim.ssp import read_ssp, simulate_ssp, write_ssp
+from lpvest.cosim.ssp import DELAY, read_ssp, simulate_ssp, write_ssp
 from lpvest.design import HinfDesign
 from lpvest.estimators.hinf import HinfFilter
 from lpvest.signals import SchedulerComponent, SignalSpec, SourceComponent
@@ -38,8 +38,16 @@ def _components(fmus, h=H, **sched):
 
 @pytest.fixture(scope="module")
 def ssp(fmus, tmp_path_factory):
+    """The file for a Jacobi importer (the default): the filter's measurement_delay = 1 bound."""
     return write_ssp(tmp_path_factory.mktemp("ssp") / "peixoto.ssp", _components(fmus), CONNECTIONS,
                      step_size=H, stop_time=N * H, description="Peixoto et al. Example 1")
+
+
+@pytest.fixture(scope="module")
+def ssp_undelayed(fmus, tmp_path_factory):
+    """The same system written with jacobi=False: the filter takes y as it comes."""
+    return write_ssp(tmp_path_factory.mktemp("ssp") / "peixoto0.ssp", _components(fmus), CONNECTIONS,
+                     step_size=H, stop_time=N * H, description="Peixoto et al. Example 1", jacobi=False)
 
 
 @pytest.fixture(scope="module")
@@ -68,23 +76,31 @@ def library(fmus):
     return make
 
 
-def _jacobi(library, first: dict[str, float]) -> dict[str, np.ndarray]:
+def _jacobi(library, first: dict[str, float], *, delay: int = 0, m: int = 1, n: int = N) -> dict[str, np.ndarray]:
     """Jacobi stepping of the library components: every component steps from t_k
     with the inputs read after the previous step (``first`` at k = 0), and its
     outputs are read after the step: those with direct feedthrough (the plant's
     y, the filter's zhat) hold their value at the sample just consumed, the
-    others (p, w, the states x and xf) are at t_(k+1) (lpvest.fmi.slave)."""
+    others (p, w, the states x and xf) are at t_(k+1) (lpvest.fmi.slave). The
+    filter pairs its measurement ``delay`` samples late (MeasurementDelay); a
+    step of ``m`` samples runs the plant and the filter ``m`` samples with their
+    inputs held."""
+    from lpvest.protocol import MeasurementDelay
+
     sched, src, plant, filt = library()
+    if delay:
+        filt = MeasurementDelay(filt, delay=delay)
     pin = {"p": np.array([first["p"]]), "w": np.array([first["w"]])}
     fin = {"p": np.array([first["p"]]), "y": np.array([first["y"]])}
     rows = []
-    for k in range(N):
-        sched.step({}, dt=H, t_end=(k + 1) * H)
-        src.step({}, dt=H, t_end=(k + 1) * H)
-        po = plant.step(pin)
-        fo = filt.step(fin)
+    for k in range(n):
+        sched.step({}, dt=m * H, t_end=(k + 1) * m * H)
+        src.step({}, dt=m * H, t_end=(k + 1) * m * H)
+        for _ in range(m):
+            po = plant.step(pin)
+            fo = filt.step(fin)
         so, wo = sched.outputs({}), src.outputs({})
-        x, xf = plant.get_state()["x"], filt.get_state()["xf"]
+        x, xf = plant.get_state()["x"], filt.outputs(fin)["xf"]
         rows.append(np.concatenate([so["p"], wo["w"], po["y"], x, fo["zhat"], xf]))
         pin = {"p": so["p"], "w": wo["w"]}
         fin = {"p": so["p"], "y": po["y"]}
@@ -112,7 +128,8 @@ def test_the_file_holds_the_system_the_step_and_the_bound_parameters(fmus, ssp):
     assert sys_.parameters["src"] == [("w.onset", "Real", "4.0")]
     assert sys_.parameters["plant"] == [("x0[1]", "Real", "0.5"), ("x0[2]", "Real", "-0.25"),
                                         ("sample_time", "Real", "0.5")]
-    assert sys_.parameters["filter"] == [("sample_time", "Real", "0.5")]
+    # the importers step in parallel: the filter's y (the plant's, with feedthrough) arrives one sample late
+    assert sys_.parameters["filter"] == [("sample_time", "Real", "0.5"), ("measurement_delay", "Integer", "1")]
     assert sys_.outputs["filter"] == ["zhat[1]", "zhat[2]", "xf[1]", "xf[2]"]
 
 
@@ -146,9 +163,11 @@ def test_fmpy_ignores_the_bindings_and_the_step_unless_told(fmus, ssp):
         fmpy_simulate_ssp(str(ssp), stop_time=4 * H - 0.25 * H, step_size=H)
 
 
+@pytest.mark.parametrize("delay", [0, 1])
 @pytest.mark.parametrize("importer", ["fmpy", "libcosim"])
-def test_each_importer_runs_the_file_as_jacobi_stepping_predicts(ssp, master, library, importer):
-    res = simulate_ssp(ssp, importer=importer)
+def test_each_importer_runs_the_file_as_jacobi_stepping_predicts(ssp, ssp_undelayed, master, library, importer,
+                                                                 delay):
+    res = simulate_ssp(ssp if delay else ssp_undelayed, importer=importer)
     assert res.shape == (N,)
     # time accumulated over N steps: |dt| <= N eps t; sin(omega t + phase) rounds
     # its argument and itself once each
@@ -163,7 +182,7 @@ def test_each_importer_runs_the_file_as_jacobi_stepping_predicts(ssp, master, li
         first = {"p": 0.0, "w": 0.0, "y": 0.0}
     else:
         first = {"p": master["sched.p[1]"][0], "w": master["src.w[1]"][0], "y": master["plant.y[1]"][0]}
-    pred = _jacobi(library, first)
+    pred = _jacobi(library, first, delay=delay)
     for name, values in pred.items():
         # the FMUs run lpvest's own steps: the same stable recursions (plant,
         # filter: sums of <= 4 products per step) over N steps, no growth assumed
@@ -171,13 +190,14 @@ def test_each_importer_runs_the_file_as_jacobi_stepping_predicts(ssp, master, li
         np.testing.assert_allclose(res[name], values, rtol=0, atol=tol, err_msg=f"{importer}: {name}")
 
 
-def test_jacobi_delay_against_our_master_exactly(ssp, master, library, capsys):
+def test_jacobi_delay_against_our_master_exactly(ssp_undelayed, master, library, capsys):
     """libcosim (initialized like our master) against our master, with the exact
     relation: the plant runs identically and its y is read after each step
     holding the value of the sample it consumed (y_k); so the filter gets
     (theta_(k+1), y_k) in step k + 1 instead of (theta_(k+1), y_(k+1)): every
-    measurement one sample late."""
-    res = simulate_ssp(ssp, importer="libcosim")
+    measurement one sample late (the file written with jacobi=False, so the
+    filter takes y as it comes)."""
+    res = simulate_ssp(ssp_undelayed, importer="libcosim")
     x = np.column_stack([master["plant.x[1]"], master["plant.x[2]"]])
     w, p, y = master["src.w[1]"], master["sched.p[1]"], master["plant.y[1]"]
     # the plant gets p_k and w_k in step k: its state is our master's, and its y is y_k
@@ -204,6 +224,23 @@ def test_jacobi_delay_against_our_master_exactly(ssp, master, library, capsys):
               f"||z - zhat|| / ||w||: master {gain_master:.3f}, Jacobi {gain_jacobi:.3f}")
     assert np.all(diff > 1e-2)  # a visible change, not round-off
     assert gain_jacobi > gain_master
+
+
+def test_with_the_measurement_delay_each_estimate_is_our_masters_one_step_later(ssp, master):
+    """The file as written (measurement_delay = 1 bound) under libcosim, which
+    initializes like our master: the filter pairs y_k, which arrives in step
+    k + 1, with theta_k, so the estimate read after step k + 1 is our master's
+    estimate of sample k, to the bit (the same FMU code on the same samples),
+    and the state read after step k is our master's x_f,k; read after step 0
+    (no measurement yet) the estimate is 0. (fmpy feeds 0.0 before the first
+    step, here theta_0 = sin(0.5): its run is checked against the library's
+    Jacobi stepping in test_each_importer_runs_the_file_as_jacobi_stepping_predicts.)"""
+    res = simulate_ssp(ssp, importer="libcosim")
+    zhat = np.column_stack([res["filter.zhat[1]"], res["filter.zhat[2]"]])
+    assert np.array_equal(zhat[0], [0.0, 0.0])
+    np.testing.assert_array_equal(zhat[1:], np.column_stack([master["filter.zhat[1]"], master["filter.zhat[2]"]])[:-2])
+    np.testing.assert_array_equal(np.column_stack([res["filter.xf[1]"], res["filter.xf[2]"]]),
+                                  np.column_stack([master["filter.xf[1]"], master["filter.xf[2]"]])[:-1])
 
 
 def test_string_parameters_libcosim_applies_them_fmpy_cannot(fmus, tmp_path):
@@ -235,8 +272,10 @@ def test_command_line_writes_the_ssp_of_a_cosim_file(fmus, tmp_path, capsys):
 
 def test_the_readme_numbers_for_the_example_file(fmus, tmp_path):
     """README, SSP export: on examples/peixoto_ex1_hinf.toml fmpy and libcosim
-    agree, and ||z - zhat|| / ||w|| is 1.07 with our master, 1.60 with Jacobi
-    stepping (certified gamma = 1.21)."""
+    agree; ||z - zhat|| / ||w|| (each estimate against the z of its own sample)
+    is 1.07 with our master, 1.60 with Jacobi stepping and the measurement taken
+    as it comes (certified gamma = 1.21), and 1.07 again, our master's estimates
+    to the bit, with the file as written (measurement_delay = 1)."""
     from pathlib import Path
 
     from lpvest.cosim.files import load_cosim
@@ -244,18 +283,147 @@ def test_the_readme_numbers_for_the_example_file(fmus, tmp_path):
     spec = load_cosim(Path(__file__).resolve().parent.parent / "examples" / "peixoto_ex1_hinf.toml",
                       fmu_dir=fmus.out)
     m = spec.run().data
-    path = spec.to_ssp(tmp_path / "example.ssp")
-    f, lc = simulate_ssp(path, importer="fmpy"), simulate_ssp(path, importer="libcosim")
-    for name in lc.dtype.names:
-        np.testing.assert_array_equal(f[name], lc[name], err_msg=name)
     w = np.linalg.norm(m["src.w[1]"])
-    e_master = np.column_stack([m[f"plant.z[{i}]"] - m[f"filter.zhat[{i}]"] for i in (1, 2)])
-    # the estimate of sample k is read after step k (the FMUs hold it): against z_k
-    e_jacobi = np.column_stack([m[f"plant.z[{i}]"][:-1] - lc[f"filter.zhat[{i}]"] for i in (1, 2)])
-    assert np.linalg.norm(e_master) / w == pytest.approx(1.07, abs=0.005)
-    assert np.linalg.norm(e_jacobi) / w == pytest.approx(1.60, abs=0.005)
-    with zipfile.ZipFile(fmus["PeixotoEx1HinfPD"]) as z:
-        assert HinfDesign.from_json(z.read("resources/design.json").decode()).gamma == pytest.approx(1.21, abs=0.005)
+    z = np.column_stack([m[f"plant.z[{i}]"] for i in (1, 2)])
+    zhat_master = np.column_stack([m[f"filter.zhat[{i}]"] for i in (1, 2)])
+    assert np.linalg.norm(z - zhat_master) / w == pytest.approx(1.07, abs=0.005)
+    as_is = write_ssp(tmp_path / "as_is.ssp", spec.components, spec.connections, step_size=spec.step_size,
+                      stop_time=spec.stop_time, jacobi=False)
+    paired = spec.to_ssp(tmp_path / "example.ssp")
+    for path, late in ((as_is, 0), (paired, 1)):
+        f, lc = simulate_ssp(path, importer="fmpy"), simulate_ssp(path, importer="libcosim")
+        for name in lc.dtype.names:
+            np.testing.assert_array_equal(f[name], lc[name], err_msg=name)
+        zhat = np.column_stack([lc[f"filter.zhat[{i}]"] for i in (1, 2)])
+        if late:  # the estimate of sample k is read after step k + 1: against z_k
+            np.testing.assert_array_equal(zhat[1:], zhat_master[:-2])
+            assert np.linalg.norm(z[:-2] - zhat[1:]) / w == pytest.approx(1.07, abs=0.005)
+        else:  # read after step k, from (theta_k, y_(k-1)): against z_k
+            assert np.linalg.norm(z[:-1] - zhat) / w == pytest.approx(1.60, abs=0.005)
+    with zipfile.ZipFile(fmus["PeixotoEx1HinfPD"]) as z_:
+        assert HinfDesign.from_json(z_.read("resources/design.json").decode()).gamma == pytest.approx(1.21, abs=0.005)
+
+
+def _paper_system(fmus, example: int, **filter_params) -> tuple[list[Component], list[str]]:
+    """Figs. 1-2 of Peixoto et al. (theta_k = sin(0.25 k), w_k = sin(0.5 k) exp(-0.1 k)
+    from k = 10, x_0 = 0) for Example 1 or 2 (rho = 1) with both H-infinity filters."""
+    ex = f"PeixotoEx{example}"
+    comps = [
+        Component("sched", fmus[f"{ex}Scheduler"], {"kind": "sinusoid", "offset": [0.0], "amplitude": [1.0],
+                                                    "omega": [0.25]}),
+        Component("src", fmus[f"{ex}Source"], {"w.kind": "decaying", "w.amplitude": [1.0], "w.omega": [0.5],
+                                               "w.decay": [0.1], "w.onset": 10.0}),
+        Component("plant", fmus[f"{ex}Plant"]),
+        Component("pd", fmus[f"{ex}HinfPD"], dict(filter_params)),
+        Component("robust", fmus[f"{ex}HinfRobust"], dict(filter_params)),
+    ]
+    conns = ["sched.p -> plant.p", "src.w -> plant.w", "sched.p -> pd.p", "plant.y -> pd.y", "plant.y -> robust.y"]
+    return comps, conns
+
+
+@pytest.mark.parametrize("example", [1, 2])
+def test_the_certified_bound_holds_under_jacobi_importers_with_the_delay(fmus, tmp_path, example, capsys):
+    """Peixoto et al. Examples 1 and 2, both filters, under libcosim and fmpy's
+    simulate_ssp: with the file as written (measurement_delay = 1) every
+    estimate is our master's estimate of its own sample, to the bit (both
+    importers: theta_0 = w_0 = x_0 = 0, so fmpy's 0.0 before the first step is
+    the sample itself), and ||z - zhat|| / ||w|| <= gamma, each estimate against
+    the z of its own sample and w over the samples estimated. Without the delay
+    (jacobi=False) the ratios are printed next to them: the table of the issue."""
+    steps = 100
+    comps, conns = _paper_system(fmus, example)
+    record = ["src.w", "plant.z", "pd.zhat", "robust.zhat"]
+    with CoSimulation(comps, conns, step_size=1.0, record=record) as sim:
+        m = sim.run(steps - 1)  # samples 0 .. steps - 1
+    nz = sum(n.startswith("plant.z[") for n in m.dtype.names)
+
+    def cols(res, base):
+        return np.column_stack([res[f"{base}[{i + 1}]"] for i in range(nz)])
+
+    z = cols(m, "plant.z")
+    w = m["src.w[1]"]
+    gammas = {}
+    for f, role in (("pd", "HinfPD"), ("robust", "HinfRobust")):
+        with zipfile.ZipFile(fmus[f"PeixotoEx{example}{role}"]) as zf:
+            gammas[f] = HinfDesign.from_json(zf.read("resources/design.json").decode()).gamma
+    ratio = {("master", f, 0): np.linalg.norm(z - cols(m, f"{f}.zhat")) / np.linalg.norm(w) for f in gammas}
+    for jacobi in (False, True):
+        path = write_ssp(tmp_path / f"ex{example}_{jacobi}.ssp", comps, conns, step_size=1.0, stop_time=float(steps),
+                         jacobi=jacobi)
+        for importer in ("libcosim", "fmpy"):
+            res = simulate_ssp(path, importer=importer)
+            np.testing.assert_array_equal(cols(res, "plant.z"), z)  # row k: z_k, held after step k
+            for f, gamma in gammas.items():
+                zhat = cols(res, f"{f}.zhat")
+                if jacobi:  # row k + 1: the estimate of sample k
+                    assert np.array_equal(zhat[0], np.zeros(nz))
+                    np.testing.assert_array_equal(zhat[1:], cols(m, f"{f}.zhat")[:-1], err_msg=f"{importer} {f}")
+                    r = np.linalg.norm(z[:-1] - zhat[1:]) / np.linalg.norm(w[:-1])
+                    assert r <= gamma, (importer, f, r, gamma)
+                else:  # row k: from (theta_k, y_(k-1))
+                    r = np.linalg.norm(z - zhat) / np.linalg.norm(w)
+                ratio[(importer, f, int(jacobi))] = r
+    with capsys.disabled():
+        print(f"\nPeixoto Example {example}: ||z - zhat|| / ||w||")
+        for f, gamma in gammas.items():
+            print(f"  {f:<7} gamma {gamma:.4f}  master {ratio[('master', f, 0)]:.4f}  " + "  ".join(
+                f"{imp} delay {d}: {ratio[(imp, f, d)]:.4f}" for imp in ("libcosim", "fmpy") for d in (0, 1)))
+
+
+def test_what_the_writer_binds_for_a_jacobi_importer(fmus, tmp_path):
+    """measurement_delay = 1 for a filter whose measurement comes from a
+    feedthrough output of a discrete-time FMU; nothing with jacobi=False, for a
+    measurement from an FMU without feedthrough, or when the caller set it; a
+    filter whose measurement or scheduling would arrive partly late cannot be
+    paired by the parameter: a one-line error naming it."""
+    comps = _components(fmus)
+
+    def bound(path):
+        return {c: dict((n, v) for n, _, v in vals) for c, vals in read_ssp(path).parameters.items()}
+
+    assert bound(write_ssp(tmp_path / "a.ssp", comps, CONNECTIONS, step_size=H))["filter"][DELAY] == "1"
+    assert DELAY not in bound(write_ssp(tmp_path / "b.ssp", comps, CONNECTIONS, step_size=H, jacobi=False))["filter"]
+    # y recorded from a source (no feedthrough): in time
+    recorded = ["sched.p -> filter.p", "src.w -> filter.y"]
+    assert DELAY not in bound(write_ssp(tmp_path / "c.ssp", comps, recorded, step_size=H))["filter"]
+    explicit = [*comps[:3], Component("filter", comps[3].fmu, {"sample_time": H, DELAY: 0})]
+    assert bound(write_ssp(tmp_path / "d.ssp", explicit, CONNECTIONS, step_size=H))["filter"][DELAY] == "0"
+    # the scheduling from a feedthrough output too: late as well, and no delay of y pairs that
+    late_p = ["sched.p -> plant.p", "src.w -> plant.w", "plant.y -> filter.p", "plant.y -> filter.y"]
+    with pytest.raises(CoSimulationError, match=r"^component filter: under Jacobi stepping y\[1\] would arrive one "
+                                                r"sample late and p\[1\] would arrive one sample late too: no "
+                                                r"measurement_delay pairs them; set measurement_delay in the "
+                                                r"component's parameters to write the file anyway$"):
+        write_ssp(tmp_path / "e.ssp", comps, late_p, step_size=H)
+    assert not (tmp_path / "e.ssp").exists()
+    # a two-element measurement, one element late and one in time
+    two = [Component("src", fmus["CoxTothTruncationSource"]), Component("plant", fmus["CoxTothTruncationPlant"]),
+           Component("kf", fmus["CoxTothTruncationKalman"])]
+    mixed = ["plant.y[1] -> kf.y[1]", "src.u -> kf.y[2]"]
+    with pytest.raises(CoSimulationError, match=r"component kf: under Jacobi stepping y\[1\] would arrive one "
+                                                r"sample late and y\[2\] would arrive in time"):
+        write_ssp(tmp_path / "f.ssp", two, mixed, step_size=1.0)
+
+
+@pytest.mark.parametrize("importer", ["fmpy", "libcosim"])
+def test_a_communication_step_of_two_samples_under_each_importer(fmus, tmp_path, master, library, importer):
+    """The file's step is two samples of the plant and the filter: every FMU
+    step runs two samples with the inputs held (zero-order hold), the filter
+    pairing its measurement one sample late, as the library's Jacobi stepping
+    with m = 2 predicts."""
+    n = N // 2
+    path = write_ssp(tmp_path / "two.ssp", _components(fmus), CONNECTIONS, step_size=2 * H, stop_time=n * 2 * H)
+    res = simulate_ssp(path, importer=importer)
+    assert res.shape == (n,)
+    if importer == "fmpy":
+        first = {"p": 0.0, "w": 0.0, "y": 0.0}
+    else:
+        first = {"p": master["sched.p[1]"][0], "w": master["src.w[1]"][0], "y": master["plant.y[1]"][0]}
+    pred = _jacobi(library, first, delay=1, m=2, n=n)
+    for name, values in pred.items():
+        # as in test_each_importer_runs_the_file_as_jacobi_stepping_predicts, over 2 n samples
+        tol = roundoff(float(np.max(np.abs(values))), 2 * n, n=4)
+        np.testing.assert_allclose(res[name], values, rtol=0, atol=tol, err_msg=f"{importer}: {name}")
 
 
 # -- reading an SSP file that is not ours (issue 12) ------------------------------------------------

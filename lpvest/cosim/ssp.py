@@ -67,6 +67,14 @@ calls by the connection graph instead, so ``y_k`` reaches the filter at
 ``t_k`` (no delay); ``tests/test_ssp.py`` measures the difference on
 Peixoto et al.'s Example 1 and checks it against this relation exactly.
 
+So :func:`write_ssp` (``jacobi=True``, the default) binds
+``measurement_delay = 1`` for every filter whose measurement comes from such
+an output: the filter then pairs ``y_k``, arriving in step ``k + 1``, with
+``theta_k`` and the known input of sample ``k``
+(:class:`~lpvest.protocol.MeasurementDelay`), and its estimate of sample
+``k``, read after step ``k + 1``, is the estimate our master reads at
+``t_k``: to the bit, with the certified bound intact.
+
 Examples
 --------
 >>> from lpvest.cosim import Component
@@ -98,6 +106,7 @@ import numpy as np
 
 from ..errors import abbreviate, shorten
 from ..fmi.build import write_zip_entry
+from ..fmi.spec import SPEC_FILE
 from .master import Component, Connection, CoSimulation, CoSimulationError, whole_steps
 
 __all__ = ["write_ssp", "read_ssp", "SspSystem", "simulate_ssp", "IMPORTERS"]
@@ -140,6 +149,7 @@ def write_ssp(
     stop_time: float | None = None,
     name: str = "lpvest-system",
     description: str | None = None,
+    jacobi: bool = True,
 ) -> Path:
     """Write the system as an SSP archive at ``path`` and return the path.
 
@@ -153,6 +163,16 @@ def write_ssp(
     step is declared as libcosim's ``FixedStepAlgorithm`` annotation of the
     default experiment. The same system gives a byte-identical file (the
     archive's members in a fixed order, with a fixed time stamp).
+
+    **Measurement delay** (``jacobi=True``). The importers step every FMU in
+    parallel (Jacobi), so an input fed by an output with direct feedthrough
+    of a discrete-time FMU (a plant's ``y``) receives the value of the sample
+    before. A filter FMU with the parameter ``measurement_delay`` whose
+    measurement inputs (``y``) are fed so gets ``measurement_delay = 1``
+    bound in the file: it pairs each measurement with the scheduling and
+    known input of its own sample, and its estimate of sample ``k`` is read
+    after step ``k + 1``. A value given in the component's parameters is kept
+    as given.
 
     Parameters
     ----------
@@ -172,6 +192,12 @@ def write_ssp(
         Name of the system structure and of its system.
     description : str, optional
         The system's ``description`` attribute; ``None`` or empty: none.
+    jacobi : bool, default True
+        The file is for an importer that steps in parallel (Jacobi: libcosim,
+        fmpy's ``simulate_ssp``, most tools): bind ``measurement_delay`` as
+        above. ``False``: bind only the components' parameters (an importer
+        that orders its calls by the connections, as
+        :class:`~lpvest.cosim.CoSimulation` does).
 
     Returns
     -------
@@ -182,7 +208,10 @@ def write_ssp(
     ------
     CoSimulationError
         An invalid step size or set-up (as :class:`~lpvest.cosim.CoSimulation`
-        raises it).
+        raises it), or, with ``jacobi``, a filter whose measurement inputs
+        would arrive partly late, or with a scheduling or known input that
+        arrives late too (no ``measurement_delay`` pairs those; set it in the
+        component's parameters to write the file anyway).
     """
     from .._version import __version__
 
@@ -192,6 +221,7 @@ def write_ssp(
     with CoSimulation(components, connections, step_size=step_size, start_time=start_time) as sim:
         units = sim._units
         links = [(units[s.comp].spec.name, s.name, units[d.comp].spec.name, d.name) for s, d in sim._links]
+        delays = _jacobi_delays(sim) if jacobi else {}
         sources: dict[Path, str] = {}
         for u in units:
             fmu = Path(u.spec.fmu).resolve()
@@ -235,13 +265,16 @@ def write_ssp(
                     c = ET.SubElement(conns, _q("ssd", "Connector"), {"name": v.name, "kind": v.causality})
                     ET.SubElement(c, _q("ssc", v.type),
                                   {"name": enumeration(u.variables[v.name])} if v.type == "Enumeration" else {})
-            if u.start_values:
+            bound = list(u.start_values)
+            if u.spec.name in delays:
+                bound.append((u.variables[DELAY], delays[u.spec.name], DELAY))
+            if bound:
                 bindings = ET.SubElement(comp, _q("ssd", "ParameterBindings"))
                 binding = ET.SubElement(bindings, _q("ssd", "ParameterBinding"))
                 values = ET.SubElement(binding, _q("ssd", "ParameterValues"))
                 pset = ET.SubElement(values, _q("ssv", "ParameterSet"), {"version": "1.0", "name": u.spec.name})
                 params = ET.SubElement(pset, _q("ssv", "Parameters"))
-                for v, value, _ in u.start_values:
+                for v, value, _ in bound:
                     p = ET.SubElement(params, _q("ssv", "Parameter"), {"name": v.name})
                     text = (_fmt(value) if v.type == "Real" else str(value).lower() if v.type == "Boolean"
                             else str(value))
@@ -278,6 +311,61 @@ def write_ssp(
             for fmu, arc in sources.items():
                 write_zip_entry(z, arc, fmu.read_bytes())
     return path
+
+
+#: The filter parameter :func:`write_ssp` binds for a Jacobi importer
+#: (:data:`lpvest.fmi.registry.MEASUREMENT_DELAY`).
+DELAY = "measurement_delay"
+
+
+def _late_inputs(fmu: str | Path) -> tuple[str, ...]:
+    """The input ports that ``measurement_delay`` pairs in an lpvest estimator
+    FMU (its spec's ``late_inputs``); ``()`` for any other FMU."""
+    try:
+        with zipfile.ZipFile(fmu) as z:
+            spec = json.loads(z.read(f"resources/{SPEC_FILE}"))
+    except (KeyError, OSError, ValueError, zipfile.BadZipFile):
+        return ()
+    kind = spec.get("estimator") if isinstance(spec, dict) else None
+    return tuple(kind.get("late_inputs") or ()) if isinstance(kind, dict) else ()
+
+
+def _jacobi_delays(sim: CoSimulation) -> dict[str, int]:
+    """Component -> the ``measurement_delay`` a Jacobi importer needs, for each
+    filter that has the parameter (not set by the caller) and whose
+    measurement inputs are fed by outputs that arrive one sample late: outputs
+    with direct feedthrough of a discrete-time FMU, read after the step that
+    consumed the sample."""
+    units, out = sim._units, {}
+    for i, u in enumerate(units):
+        var = u.variables.get(DELAY)
+        if var is None or var.causality != "parameter" or DELAY in u.spec.parameters:
+            continue
+        ports = _late_inputs(u.spec.fmu)
+        if not ports:
+            continue
+        fed = {d.name: s for s, d in sim._links if d.comp == i}
+        late = set()
+        for name, src in fed.items():
+            source = units[src.comp]
+            discrete = next((v.variability == "discrete" for v in source.md.modelVariables if v.name == src.name),
+                            False)
+            if discrete and source.depends.get(src.name):
+                late.add(name)
+        if not late:
+            continue
+        measured = {n for n in fed if n.split("[")[0] in ports}
+        if late != measured:
+            early = sorted(measured - late)
+            others = sorted(late - measured)
+            what = (f"{', '.join(others)} would arrive one sample late too" if others
+                    else f"{', '.join(early)} would arrive in time")
+            raise CoSimulationError(
+                f"component {u.spec.name}: under Jacobi stepping {', '.join(sorted(late & measured))} would "
+                f"arrive one sample late and {what}: no {DELAY} pairs them; set {DELAY} in the component's "
+                "parameters to write the file anyway", where=f"components.{u.spec.name}")
+        out[u.spec.name] = 1
+    return out
 
 
 @dataclass(frozen=True)
