@@ -42,6 +42,7 @@ class Client:
     def map(self, run, tasks, **kw):
         assert run is engine_module._run and kw["pure"] is False and kw["shared"] is self.shared
         self.submitted.append(("tasks", kw["key"], kw["fn"]))
+        self.mapped = list(tasks)
         self.futures = [Future(k) for k in kw["key"]]
         return self.futures
 
@@ -93,14 +94,14 @@ def run(monkeypatch):
     monkeypatch.setattr(engine_module.time, "monotonic", lambda: clock["t"])
     monkeypatch.setattr(engine_module.time, "sleep", lambda s: clock.__setitem__("t", clock["t"] + s))
 
-    def go(script, n=3, *, idle_timeout=None, on_outcome=None, progress=False):
+    def go(script, n=3, *, idle_timeout=None, on_outcome=None, **options):
         client = go.client = Client()
         monkeypatch.setattr(distributed, "as_completed", Completed(client, script))
         eng = Engine(idle_timeout=idle_timeout)
         eng._client = client
         tasks = [Task(i, {"a": i}) for i in range(n)]
         seen: list[Outcome] = []
-        out = eng.map(fn, {"shared": 1}, tasks, on_outcome=on_outcome or seen.append, progress=progress)
+        out = eng.map(fn, {"shared": 1}, tasks, on_outcome=on_outcome or seen.append, **options)
         return out, seen, client
 
     return go
@@ -248,3 +249,70 @@ def test_the_quiet_worker_settings_and_a_missing_extra():
                                          r"'lpvest_no_such_module'\); install the extra: "
                                          r"pip install 'lpvest\[sweep\]'$"):
         require_sweep_extra("json", "lpvest_no_such_module")
+
+
+@pytest.mark.parametrize(("workers", "quiet"), [(3, True), (None, False)])
+def test_the_local_cluster_is_worker_processes_of_one_thread_each_quiet_and_configured(monkeypatch, workers, quiet):
+    """The embedded cluster: one process per worker (an FMU's Python per interpreter), one thread
+    each, the workers' preload that leaves Ctrl-C to the client, the quiet-worker settings in force
+    while it starts, Dask's loggers at ERROR when quiet."""
+    import logging
+
+    import dask
+
+    made = {}
+
+    class Cluster:
+        def __init__(self, **kw):
+            made["cluster"] = kw
+            made["config"] = {k: dask.config.get(k) for k in LOCAL_WORKER_CONFIG}
+
+        def close(self, timeout):
+            made["closed"] = timeout
+
+    def client(target, timeout):
+        made["client"] = (target, timeout)
+        return Client()
+
+    monkeypatch.setattr(distributed, "LocalCluster", Cluster)
+    monkeypatch.setattr(distributed, "Client", client)
+    monkeypatch.setattr(engine_module.os, "cpu_count", lambda: 7)
+    for name in ("distributed", "distributed.nanny", "distributed.worker", "distributed.scheduler"):
+        monkeypatch.setattr(logging.getLogger(name), "level", logging.NOTSET)
+    eng = Engine(workers=workers, quiet=quiet, start_timeout=9.0).start()
+    assert made["cluster"] == {"n_workers": workers or 7, "threads_per_worker": 1, "processes": True,
+                               "dashboard_address": ":0", "preload": ["lpvest.sweep._worker"],
+                               "silence_logs": logging.ERROR if quiet else logging.WARNING}
+    assert made["config"] == LOCAL_WORKER_CONFIG
+    assert made["client"][0] is eng._cluster and made["client"][1] == 9.0
+    levels = {logging.getLogger(n).level for n in ("distributed", "distributed.nanny", "distributed.worker",
+                                                     "distributed.scheduler")}
+    assert levels == ({logging.ERROR} if quiet else {logging.NOTSET})
+    eng.close()
+    assert made["closed"] == 9.0
+
+
+def test_a_local_cluster_that_cannot_start_is_a_sweep_error(monkeypatch):
+    def cluster(**kw):
+        raise OSError("no free port")
+
+    monkeypatch.setattr(distributed, "LocalCluster", cluster)
+    with pytest.raises(SweepError, match=r"^cannot start or reach the Dask scheduler \(a local cluster\): "
+                                         r"no free port$"):
+        Engine(workers=1).start()
+
+
+def test_the_progress_bar_counts_tasks_and_failures_only_when_asked(run, capsys):
+    failed = Outcome(1, None, "ValueError: bad", 0.1, "w")
+    run([[(0, ok(0))], [(1, failed)], [(2, ok(2))]])
+    assert capsys.readouterr().err == ""  # no bar by default
+    run([[(0, ok(0))], [(1, failed)], [(2, ok(2))]], progress=True)
+    err = capsys.readouterr().err
+    assert "tasks: 100%" in err and "3/3" in err and "failed=1" in err
+
+
+def test_each_task_is_submitted_and_run_by_the_task_function_on_the_shared_data(run):
+    _, _, client = run([[(0, ok(0))], [(1, ok(1))]], n=2)
+    assert client.mapped == [Task(0, {"a": 0}), Task(1, {"a": 1})]
+    out = engine_module._run(Task(4, {"a": 4}), lambda shared, task: TaskResult({"v": shared * task.index}), 2.5)
+    assert out.index == 4 and out.ok and out.result == TaskResult({"v": 10.0})
