@@ -80,8 +80,8 @@ class FakeSlave:
     """Stands in for ``fmpy.fmi2.FMU2Slave``; ``MODELS`` maps a model identifier to its class."""
 
     MODELS: dict[str, type[Model]] = {}
-    #: (instance name, function) -> status a call returns instead of running
-    FAIL: dict[tuple[str, str], int] = {}
+    #: (instance name, function) -> status a call returns instead of running (or an exception it raises)
+    FAIL: dict[tuple[str, str], Any] = {}
 
     def __init__(self, guid: str, unzipDirectory: str, modelIdentifier: str, instanceName: str) -> None:
         self.name, self.identifier = instanceName, modelIdentifier
@@ -98,6 +98,8 @@ class FakeSlave:
     def _record(self, what: str, detail: Any = None) -> int:
         CALLS.append((self.name, what, detail))
         status = self.FAIL.get((self.name, what), 0)
+        if isinstance(status, BaseException):
+            raise status
         if status and self.logger is not None:
             self.logger(None, None, status, b"logStatusError", f"{what} failed in {self.name} 100%%".encode())
         return status

@@ -266,3 +266,45 @@ def test_the_entry_module_loads_the_package_from_memory_and_restores_sys_path(tm
         for name in list(sys.modules):
             if name == b.entry or name == b.package or name.startswith(b.package + "."):
                 del sys.modules[name]
+
+
+def test_a_module_level_if_on_a_flag_runs_its_imports_and_every_name_of_an_import_is_followed(tmp_path):
+    files = {**PKG, "pkg/util.py": "FLAG = True\nif FLAG:\n    import scipy.linalg\n\n\ndef h():\n    return 2\n",
+             "role.py": "import numpy as np, pkg.util as u\n\n\nclass Slave:\n    pass\n"}
+    b = _bundle(_tree(tmp_path, files))
+    assert "pkg.util" in b.modules  # named after a third-party module on the same line
+    assert b.requirements == ("numpy>=1.26", "scipy>=1.11")  # `if FLAG:` runs at import: scipy is needed
+
+
+def test_yield_from_and_raise_from_are_not_imports(tmp_path):
+    role = textwrap.dedent("""\
+        import extmod as extmod
+
+
+        def g():
+            yield from extmod.X
+            raise ValueError("x") from extmod.E
+
+
+        class Slave:
+            pass
+        """)
+    root = _tree(tmp_path, {**PKG, "role.py": role, "extmod.py": "X = [1]\nE = None\n"})
+    b = _bundle(root, extra_roots=[SourceRoot("extmod", root / "extmod.py", "_ext.extmod")])
+    text = b.files[f"{b.package}/_fmus/role.py"].decode()
+    assert text == role.replace("import extmod as extmod", f"import {b.package}._ext.extmod as extmod")
+
+
+def test_a_package_and_a_module_of_the_same_text_are_different_code(tmp_path):
+    as_module = _tree(tmp_path / "m", {**PKG, "role.py": "import pkg.util as u\n"})
+    files = {k: v for k, v in PKG.items() if k != "pkg/util.py"}
+    as_package = _tree(tmp_path / "p", {**files, "pkg/util/__init__.py": PKG["pkg/util.py"],
+                                        "role.py": "import pkg.util as u\n"})
+    a, b = _bundle(as_module), _bundle(as_package)
+    assert f"{a.package}/util.py" in a.files and f"{b.package}/util/__init__.py" in b.files
+    assert a.package != b.package
+
+
+def test_a_reference_splits_at_the_first_colon(tmp_path):
+    b = _bundle(_tree(tmp_path, PKG))
+    assert b.reference("pkg.util:h:x") == f"{b.package}.util:h:x"

@@ -360,3 +360,46 @@ def test_the_log_names_the_last_problem_and_is_cut(fmus):
     assert _log_text(unit) == "no log message"
     unit.log = ["[ERROR] " + "x" * 300]
     assert _log_text(unit) == ("[ERROR] " + "x" * 300)[:197] + "..."
+
+
+def test_simulate_is_construct_run_close_with_every_option(fmus, capsys):
+    comps = [Component("src", fmus["src"], {"k": 2.0}), Component("gain", fmus["gain"])]
+    res = simulate(comps, ["src.y -> gain.u"], step_size=0.5, stop_time=3.0, start_time=1.0, record=["gain.y"],
+                   progress=True)
+    assert res.dtype.names == ("time", "gain.y")
+    np.testing.assert_array_equal(res["time"], [1.0, 1.5, 2.0, 2.5, 3.0])
+    np.testing.assert_array_equal(res["gain.y"], 2.0 * 2.0 * res["time"])
+    assert "co-simulation: 100%" in capsys.readouterr().err and CALLS[-1][1] == "freeInstance"
+    res = simulate(comps, [], step_size=1.0, n_steps=2)
+    assert res["time"].tolist() == [0.0, 1.0, 2.0] and "gain.y" in res.dtype.names
+    assert capsys.readouterr().err == ""  # a short run shows no bar
+
+
+def test_warnings_from_sets_gets_and_steps_are_logged_not_failures(fmus):
+    FakeSlave.FAIL.update({("gain", "set"): 1, ("gain", "get"): 1, ("delay", "doStep"): 1})
+    with chain(fmus) as sim:
+        res = sim.run(2)
+        log = sim._units[1].log
+    assert len(res) == 3
+    assert "[WARNING] set failed in gain 100%" in log and "[WARNING] get failed in gain 100%" in log
+
+
+def test_an_fmu_that_cannot_be_loaded_or_initialised_is_named_with_the_reason(fmus, monkeypatch):
+    monkeypatch.setattr(FakeSlave, "MODELS", {"Src": Src})  # no binary for Gain
+    with pytest.raises(CoSimulationError, match=r"^component gain: .*Gain.fmu cannot be loaded: 'Gain'$") as info:
+        CoSimulation([Component("src", fmus["src"]), Component("gain", fmus["gain"])], [], step_size=1.0)
+    assert info.value.where == "components.gain.fmu"
+    FakeSlave.FAIL[("src", "exitInitializationMode")] = RuntimeError("lost   the\n licence")
+    with CoSimulation([Component("src", fmus["src"])], [], step_size=1.0) as sim:
+        with pytest.raises(CoSimulationError, match=r"^component src: exitInitializationMode failed at t = 0: "
+                                                    r"lost the licence \(no log message\)$"):
+            sim.run(1)
+    with pytest.raises(CoSimulationError, match=r"^step_size must be positive; found -1$") as info:
+        CoSimulation([Component("src", fmus["src"])], [], step_size=-1)
+    assert info.value.where == "step_size"
+
+
+def test_a_ratio_near_one_step_is_whole_only_within_1e_9():
+    assert step_count(0.0, 1.0 + 0.5e-9, 1.0)[0] == 1
+    assert step_count(0.0, 1.0 + 1.5e-9, 1.0)[0] is None  # relative to max(1, ratio) = 1
+    assert step_count(0.0, 100.0 + 50e-9, 1.0)[0] == 100 and step_count(0.0, 100.0 + 150e-9, 1.0)[0] is None

@@ -297,3 +297,54 @@ def test_a_restored_state_continues_identically_and_a_foreign_state_is_refused(r
     assert "the state belongs to 'CoxTothTruncationKalman', not to 'PeixotoEx1Plant'" in p.errors()[0]
     p.set_state(edit_state(p.get_state(), params={"other": 1.0}))
     assert "the state's parameters do not match this FMU" in p.errors()[0]
+
+
+# -- non-Real variables and the model description's metadata -------------------------------
+
+
+def test_string_integer_and_boolean_parameters_are_set_read_and_checked(resources, tmp_path):
+    s = Slave(resources["peixoto-ex1Scheduler"])
+    assert s.get("kind") == ["sinusoid"] and s.get("seed") == [0]
+    s.slave.setup_experiment(0.0)
+    s.set("kind", "constant")
+    s.set("seed", 7)
+    assert s.get("kind") == ["constant"] and s.get("seed") == [7]
+    s.set("seed", 2**31)
+    assert s.errors() == ["[PeixotoEx1Scheduler] parameter seed = 2147483648 is outside its declared range "
+                          "[0, 2147483647]; value rejected"]
+    assert s.get("seed") == [7]
+    s.set("seed", 8)  # a valid value clears the complaint
+    s.slave.exit_initialization_mode()
+    assert s.errors() == []
+    s.set("kind", "random")
+    assert s.errors() == ["[PeixotoEx1Scheduler] parameter kind is fixed: it can be set only before "
+                          "fmi2ExitInitializationMode"]
+    assert s.get("kind") == ["constant"]
+    plant_dir = write_resources("cox-toth-truncation", "Plant", tmp_path / "ct")
+    p = Slave(plant_dir)
+    assert p.get("noise") == [True]
+    p.slave.set_boolean([p.vr["noise"]], [False])
+    assert p.get("noise") == [False] and p.slave.parameters()["noise"] is False
+    p.slave.set_string([p.vr["noise"]], ["x"])
+    assert p.errors() == [f"[CoxTothTruncationPlant] fmi2SetString: value reference {p.vr['noise']} is not a "
+                          "String variable"]
+    assert p.slave.get_boolean([p.vr["seed"]]) == [False] and p.slave.get_string([p.vr["seed"]]) == [""]
+    assert "is not a Boolean variable" in p.errors()[0]
+
+
+def test_the_metadata_declares_ranges_dependencies_and_sampling(resources):
+    s = plant(resources)
+    meta = s.slave.fmi_metadata()
+    assert meta["timed"] is False
+    assert meta["ranges"][s.vr["p[1]"]] == (-1.0, 1.0) and meta["ranges"][s.vr["sample_time"]] == (0.0, None)
+    assert s.vr["w[1]"] not in meta["ranges"]
+    inputs = sorted([s.vr["p[1]"], s.vr["w[1]"]])
+    assert meta["dependencies"][s.vr["y[1]"]] == inputs and meta["dependencies"][s.vr["z[2]"]] == inputs
+    assert meta["dependencies"][s.vr["x[1]"]] == []  # a state depends on no input at the same instant
+    assert set(meta["dependencies"]) == {s.vr[n] for n in ("y[1]", "z[1]", "z[2]", "x[1]", "x[2]")}
+    f = Slave(resources["peixoto-ex1HinfPD"])
+    fm = f.slave.fmi_metadata()
+    assert fm["dependencies"][f.vr["zhat[1]"]] == sorted([f.vr["p[1]"], f.vr["y[1]"]])
+    assert fm["dependencies"][f.vr["xf[2]"]] == []
+    sched = Slave(resources["peixoto-ex1Scheduler"])
+    assert all(d == [] for d in sched.slave.fmi_metadata()["dependencies"].values())  # no inputs at all
