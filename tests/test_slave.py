@@ -82,7 +82,8 @@ def test_far_from_t0_a_skipped_or_repeated_point_is_refused_and_consumes_nothing
     t = t0 + 12 * h
     a.set_reals({"p[1]": 0.3, "w[1]": 0.2})
     for bad_t, bad_h, why in [(t + h, h, "is not the FMU's current time"), (t - h, h, "is not the FMU's current time"),
-                              (t, 1.5 * h, "is not the sample time"), (t, 0.0, "must be > 0"),
+                              (t, 1.5 * h, f"is not the sample time {h:g} (one fmi2DoStep is one sample; set the "
+                                           "parameter sample_time)"), (t, 0.0, "must be > 0"),
                               (t, -h, "must be > 0"), (t, math.nan, "must be finite"),
                               (math.inf, h, "must be finite")]:
         assert not a.step(bad_t, bad_h)
@@ -107,7 +108,8 @@ def test_the_time_match_tolerance_is_relative_to_the_larger_time(resources):
 def test_a_step_before_initialization_or_after_terminate_is_refused(resources):
     s = plant(resources)
     assert not s.step(0.0, 1.0)
-    assert "not initialized yet" in s.errors()[0]
+    assert s.errors() == ["[PeixotoEx1Plant] fmi2DoStep refused at t = 0 (h = 1): the FMU is not initialized yet "
+                          "(fmi2ExitInitializationMode)"]
     assert s.initialize() == []
     assert s.step(0.0, 1.0)
     s.slave.terminate()
@@ -236,7 +238,8 @@ def test_an_output_that_would_be_inf_is_an_error_naming_it_and_numpy_warnings_ar
     assert s.take_log() == [(WARNING, "[PeixotoEx1Plant] numpy: floating-point overflow at t = 0")]
     assert s.get("x[2]") == [math.inf]
     log = s.take_log()
-    assert all(status == WARNING for status, _ in log[:-1])
+    assert log[:-1] and all(m == (WARNING, "[PeixotoEx1Plant] numpy: floating-point invalid value at t = 1")
+                            for m in log[:-1])  # inf - inf in the outputs (0 * inf)
     assert log[-1][0] == ERROR and log[-1][1].startswith("[PeixotoEx1Plant] fmi2GetReal: output ")
     assert "x[2] is not finite (NaN or inf) at t = 1" in log[-1][1]
     assert not s.step(1.0, 1.0)
@@ -348,3 +351,62 @@ def test_the_metadata_declares_ranges_dependencies_and_sampling(resources):
     assert fm["dependencies"][f.vr["xf[2]"]] == []
     sched = Slave(resources["peixoto-ex1Scheduler"])
     assert all(d == [] for d in sched.slave.fmi_metadata()["dependencies"].values())  # no inputs at all
+
+
+def test_the_model_description_declares_each_variable(resources):
+    import xml.etree.ElementTree as ET
+
+    s = plant(resources)
+    md = s.slave.to_xml()
+    assert md.get("modelName") == "PeixotoEx1Plant" and md.get("description").startswith("Plant: ")
+    declared = {v.get("name"): (v.get("causality"), v.get("variability"), v.get("description"), v[0].get("start"))
+                for v in md.iter("ScalarVariable")}
+    assert declared["p[1]"] == ("input", None, "scheduling (theta)", "0")
+    assert declared["w[1]"][:2] == ("input", None) and declared["w[1]"][3] == "0"
+    assert declared["y[1]"][:2] == ("output", None) and declared["x[2]"][:2] == ("output", None)
+    assert declared["sample_time"] == ("parameter", "fixed", "time between samples (s): every fmi2DoStep is one "
+                                       "sample, with communication step = sample_time", "1")
+    assert declared["x0[2]"][:2] == ("parameter", "fixed")
+    assert ET.tostring(md).count(b"<ScalarVariable") == len(s.vr) == 10
+
+
+def test_outputs_read_before_initialization_come_from_the_start_values(resources):
+    s = plant(resources)
+    model = load_system("peixoto-ex1").model()
+    m = model.at(model.alpha([0.0]))  # p starts at 0, the point of [-1, 1] nearest 0
+    x0 = np.array([float(v) for v in s.get("x0[1]", "x0[2]")])  # the parameter's start value
+    assert s.get("y[1]") == (m.Cy @ x0).tolist() and s.get("x[1]", "x[2]") == x0.tolist()
+    s.set("x0[1]", 2.0)  # a parameter changes the preview
+    assert s.get("x[1]") == [2.0] and s.get("y[1]") == (m.Cy @ [2.0, x0[1]]).tolist()
+
+
+def test_a_host_that_skips_setup_or_rounds_the_first_point_still_steps(resources):
+    s = plant(resources)
+    s.slave.enter_initialization_mode()
+    s.slave.exit_initialization_mode()  # no fmi2SetupExperiment: start time 0
+    assert s.errors() == []
+    assert s.step(1e-12, 1.0), s.errors()  # 1e-12 is 0 to the rule's 1e-9 of the step
+    assert s.step(1.0 + 1e-12, 1.0), s.errors()
+
+
+def test_every_invalid_value_is_named_when_initialization_fails(resources):
+    s = plant(resources)
+    s.slave.setup_experiment(0.0)
+    s.set("sample_time", -1.0)
+    s.set("x0[1]", math.inf)
+    s.take_log()
+    s.slave.exit_initialization_mode()
+    assert s.errors() == ["[PeixotoEx1Plant] fmi2ExitInitializationMode: invalid values were set: parameter "
+                          "sample_time = -1 is outside its declared range [0, inf]; value rejected; parameter "
+                          "x0[1] = inf is not finite; value rejected"]
+
+
+def test_a_spec_without_a_sample_time_samples_every_second(tmp_path):
+    import json
+
+    folder = write_resources("peixoto-ex1", "Plant", tmp_path / "r")
+    spec = json.loads((folder / "lpvest_fmu.json").read_text())
+    del spec["sample_time"]
+    (folder / "lpvest_fmu.json").write_text(json.dumps(spec))
+    s = Slave(folder)
+    assert s.get("sample_time") == [1.0]
