@@ -272,3 +272,22 @@ def test_a_failed_evaluation_path_is_retried_in_ieee_arithmetic():
     assert type(plain(t=1.0, u=np.float64(2.0))) is not float  # a numpy value takes the general path
     assert np.isnan(Expression.parse("u**t")(t=0.5, u=-4.0))
     assert Expression.parse("u**t")(t=0.5, u=complex(-4.0, 0.0)) == pytest.approx(2j)  # complex in: complex out
+
+
+@pytest.mark.parametrize(("text", "var", "source"), [
+    ("t*t", "t", "t + t"), ("sin(t)*p", "p", "sin(t)"), ("0*t + p*t", "t", "p"), ("t**3", "t", "3 * t ** 2"),
+    ("exp(2*t)", "t", "exp(2 * t) * 2"), ("p/t", "t", "-p / t ** 2"), ("log(t)", "t", "1 / t"),
+    ("sqrt(t)", "t", "0.5 / sqrt(t)"), ("t - p", "p", "-1"), ("p + 3", "t", "0"),
+])
+def test_derivatives_are_written_with_zeros_and_ones_folded(text, var, source):
+    """The derivative's text (what a kernel model shows) has no 0 + x, 1 * x or constant operations."""
+    d = Expression.parse(text).derivative(var)
+    assert d.source == source and d.text == f"d/d{var}({text})"
+
+
+def test_constants_and_shift_names():
+    c = Expression.constant(2.5)
+    assert c.is_constant and c.value() == 2.5 and c.source == "2.5"
+    with pytest.raises(ExpressionError, match=r"^formula 'shift\(__x, 1\)': shift takes a variable and an integer, "
+                                              r"e\.g\. shift\(p, 1\)$"):
+        Expression.parse("shift(__x, 1)")

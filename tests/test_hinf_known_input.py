@@ -311,3 +311,37 @@ def test_a_singular_or_exploding_filter_step_is_a_numerical_error():
     np.testing.assert_allclose(m.H @ step.xf_next, m.Af @ np.ones(d.nx) + m.Bf @ np.ones(d.ny), rtol=0,
                                atol=roundoff(float(np.abs(m.H).sum() + np.abs(m.Af).sum() + np.abs(m.Bf).sum()),
                                              4, n=2 * d.nx))
+
+
+def test_inputs_of_the_wrong_shape_are_named_and_the_ports_describe_themselves():
+    plant, d = setup(KIND_PD)
+    T = 4
+    alpha, y, u = np.full((T, 2), 0.5), np.zeros((T, 2)), np.zeros((T, 1))
+    with pytest.raises(DimensionError, match=r"^u is the known input of a plant: pass the plant too \(plant=\.\.\.\), "
+                                             r"or leave u out for a plant without one$"):
+        hinf_filter_batch(d, y, alpha, u=u)
+    for kw, name in (({"y": np.zeros((T, 3))}, "y"), ({"u": np.zeros((T, 2))}, "u"),
+                     ({"alpha": np.full((T, 3), 1 / 3)}, "alpha"), ({"xf0": np.zeros(3)}, "xf0")):
+        args = {"y": y, "alpha": alpha, "u": u, **kw}
+        with pytest.raises(DimensionError, match=rf"^{name} has shape "):
+            hinf_filter_batch(d, args.pop("y"), args.pop("alpha"), plant=plant, **args)
+    with pytest.raises(ModelFileError, match=r"^parameter-dependent design: designed for a plant with nz = 2"):
+        HinfFilter(d, plant=hinf_setting(model(), z=[[1.0, 0.0]]))
+    f = HinfFilter(d, simplex_map=plant.simplex_map, plant=plant)
+    assert [(q.name, q.shape, q.description) for q in f.input_ports] == [
+        ("p", (1,), "physical scheduling (p)"), ("u", (1,), "known input u_k (compensated)"),
+        ("y", (2,), "measured output y_k")]
+    g = HinfFilter(d, plant=plant)
+    assert (g.input_ports[0].name, g.input_ports[0].description) == ("alpha", "scheduling on the unit simplex")
+    with pytest.raises(DimensionError, match=r"^p has shape \(2,\); expected \(1,\)$"):
+        f.step({"p": np.zeros(2), "u": np.zeros(1), "y": np.zeros(2)})
+
+
+def test_a_singular_scheduled_filter_names_the_scheduling_point():
+    from lpvest.errors import NumericalError
+    from lpvest.estimators.hinf import hinf_step
+
+    _, d = setup(KIND_PD)
+    bad = dataclasses.replace(d, H=np.zeros_like(np.asarray(d.H)))
+    with pytest.raises(NumericalError, match=r"^H\(alpha\) is singular at alpha = \[0\.25 0\.75\]: "):
+        hinf_step(bad, np.zeros(d.nx), np.array([0.25, 0.75]), np.ones(d.ny))

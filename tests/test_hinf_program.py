@@ -87,7 +87,7 @@ def test_an_indefinite_or_singular_lyapunov_matrix_is_refused(checked, P, lyap):
 
 def test_an_lmi_not_negative_beyond_rounding_is_refused_and_named(checked):
     values = _values(2.0, 3.0, 0.5)
-    ok, margin, _, why, _ = checked(values, -np.eye(2), np.diag([-1.0, 1e-3]), np.diag([-1.0, -2.0]))
+    ok, margin, _, why, _ = checked(values, -np.eye(2), np.diag([-2.0, -1.0, 1e-3]), np.diag([-1.0, -2.0]))
     assert not ok and margin == -1e-3
     assert why.startswith("largest LMI eigenvalue 0.001 (Phi_1)")
     # within 100 eps of the largest eigenvalue's size is still not < 0: refused
@@ -181,3 +181,14 @@ def test_programs_refuse_bad_dimensions_kinds_and_margins(ex1):
     if (other.n_vertices, other.nx, other.ny, other.nz, other.nw) != (2, 2, 1, 2, 1):
         with pytest.raises(DimensionError, match=r"this program was compiled for \(2, 2, 1, 2, 1\)"):
             prog.attempt(other, 1.0)
+
+
+def test_an_epsilon_curve_records_each_epsilon_and_its_angle(ex1):
+    from lpvest.design import epsilon_curve, search_epsilon
+
+    curve = epsilon_curve(ex1, [-0.5, 150.0, math.inf], kind=KIND_ROBUST)
+    np.testing.assert_array_equal(curve.epsilon, [-0.5, 150.0, math.inf])
+    np.testing.assert_array_equal(curve.phi, [math.atan(-0.5), math.atan(150.0), math.pi / 2])
+    assert np.all(np.isfinite(curve.gamma[1:])) and curve.best()[1] == min(curve.gamma)
+    with pytest.raises(ArgumentError, match=r"^n_grid must be an integer, at least 3; found 2$"):
+        search_epsilon(ex1, kind=KIND_ROBUST, n_grid=2)
