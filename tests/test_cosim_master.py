@@ -343,7 +343,8 @@ def test_set_up_errors_name_the_connection_or_component(fmus, tmp_path):
         CoSimulation.check([Component("m", tmp_path / "missing.fmu")], [], step_size=1.0)
     assert info.value.where == "components.m.fmu"
     (tmp_path / "bad.fmu").write_bytes(b"not a zip")
-    with pytest.raises(CoSimulationError, match=r"^component b: .*bad.fmu is not a valid FMU: ") as info:
+    with pytest.raises(CoSimulationError, match=r"^component b: .*bad.fmu is not a valid FMU: File is not a zip "
+                                                r"file$") as info:
         CoSimulation.check([Component("b", tmp_path / "bad.fmu")], [], step_size=1.0)
     assert info.value.where == "components.b.fmu"
 
@@ -403,3 +404,9 @@ def test_a_ratio_near_one_step_is_whole_only_within_1e_9():
     assert step_count(0.0, 1.0 + 0.5e-9, 1.0)[0] == 1
     assert step_count(0.0, 1.0 + 1.5e-9, 1.0)[0] is None  # relative to max(1, ratio) = 1
     assert step_count(0.0, 100.0 + 50e-9, 1.0)[0] == 100 and step_count(0.0, 100.0 + 150e-9, 1.0)[0] is None
+
+
+def test_an_input_can_be_given_a_start_value(fmus):
+    with CoSimulation([Component("gain", fmus["gain"], {"u": 4.0, "k": 0.5})], [], step_size=1.0) as sim:
+        res = sim.run(1)
+    assert res["gain.y"].tolist() == [2.0, 2.0]

@@ -193,7 +193,9 @@ def test_a_scheduler_and_a_worker_count_together_are_refused():
     with pytest.raises(SweepError, match="^give workers for a local cluster or scheduler for an existing one, not "
                                          "both$"):
         Engine("tcp://127.0.0.1:1", workers=2)
-    assert Engine(workers=3).workers == 3 and Engine().workers is None
+    assert Engine(workers=3).workers == 3 and Engine(workers=1).workers == 1 and Engine().workers is None
+    default = Engine()
+    assert (default.scheduler, default.idle_timeout, default.start_timeout, default.quiet) == (None, None, 60.0, True)
 
 
 def test_an_unreachable_scheduler_is_a_sweep_error_naming_it(monkeypatch):
@@ -308,7 +310,7 @@ def test_the_progress_bar_counts_tasks_and_failures_only_when_asked(run, capsys)
     assert capsys.readouterr().err == ""  # no bar by default
     run([[(0, ok(0))], [(1, failed)], [(2, ok(2))]], progress=True)
     err = capsys.readouterr().err
-    assert "tasks: 100%" in err and "3/3" in err and "failed=1" in err
+    assert "tasks: 100%" in err and "3/3" in err and "failed=1" in err and "task/s" in err
 
 
 def test_each_task_is_submitted_and_run_by_the_task_function_on_the_shared_data(run):
