@@ -28,6 +28,7 @@ import argparse
 import dataclasses
 import sys
 import time
+import warnings
 import zipfile
 from collections.abc import Sequence
 from pathlib import Path
@@ -252,7 +253,9 @@ def _design_args(items: Sequence[str] | None) -> dict[str, Path]:
 
 
 def cmd_build(args: argparse.Namespace) -> int:
-    from .fmi.build import build_fmus, format_table, status_bridge
+    import warnings
+
+    from .fmi.build import BuildWarning, build_fmus, format_table
 
     out = Path(args.out)
     sources = args.model or None
@@ -267,14 +270,18 @@ def cmd_build(args: argparse.Namespace) -> int:
         options["epsilon"] = args.epsilon
     if args.solver is not None:
         options["solver"] = args.solver
-    results, notes = build_fmus(sources, out, roles=roles, designs=designs, design_options=options,
-                                progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+    with warnings.catch_warnings(record=True) as caught:  # what the FMUs lack: printed as notes below
+        warnings.simplefilter("always", BuildWarning)
+        results, notes = build_fmus(sources, out, roles=roles, designs=designs, design_options=options,
+                                    progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+    for w in caught:
+        if issubclass(w.category, BuildWarning):
+            notes.append(str(w.message))
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
     print(format_table([r.validation for r in results]))
     for note in notes:
         print(f"note: {note}")
-    if status_bridge() is None:
-        print("note: no C compiler (or not Linux): the FMUs use pythonfmu's binary as is, so bad input "
-              "shows as fmi2Discard at the next fmi2DoStep instead of fmi2Error")
     bad = [r for r in results if not r.validation.ok]
     print(f"{len(results)} FMU(s) in {out}" + (f"; {len(bad)} failed validation" if bad else ", all valid"))
     if not results:
@@ -328,7 +335,11 @@ def cmd_cosim(args: argparse.Namespace) -> int:
               "adds a one-step delay where an output feeds through from an input (see lpvest.cosim.ssp)")
         return 0
     out = _out_dir(args.out)
-    result = spec.run(progress=None)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = spec.run(progress=None)
+    for w in caught:  # e.g. a component discarded a step: the run stopped there
+        print(f"lpvest: warning: {' '.join(str(w.message).split())}", file=sys.stderr)
     stem = spec.path.stem
     print(result.summary())
     print(f"wrote {result.write_csv(out / f'{stem}.csv')}")

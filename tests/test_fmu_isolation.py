@@ -373,3 +373,64 @@ def test_an_fmu_built_where_lpvest_is_not_a_source_checkout_carries_the_same_cod
     """), cwd=tmp_path)
     assert there == here.package
     assert os.path.basename(str(tree)) not in json.dumps(list(here.files))
+
+
+# -- sys.path, sys.meta_path and sys.modules over many instances ----------------------------------
+
+_INSTANCES = """
+import json, os, sys, zipfile
+from fmpy import read_model_description
+from fmpy.fmi2 import FMU2Slave
+path, folder, n = {path!r}, {folder!r}, {n}
+md = read_model_description(path)
+copies = []
+for i in range(3):  # instances of three unpacked copies, in turn (fmpy's simulate_fmu unpacks each time)
+    copies.append(os.path.join(folder, f"copy{{i}}"))
+    with zipfile.ZipFile(path) as z:
+        z.extractall(copies[-1])
+def snapshot():
+    return {{"path": list(sys.path), "meta_path": [id(f) for f in sys.meta_path],
+            "finders": [getattr(f, "package", None) for f in sys.meta_path],
+            "modules": {{name: id(m) for name, m in sys.modules.items()}}}}
+def instance(k):
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=copies[k % 3], modelIdentifier=md.coSimulation.modelIdentifier,
+                    instanceName=f"i{{k}}")
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    fmu.doStep(0.0, float(md.defaultExperiment.stepSize))
+    fmu.terminate()
+    fmu.freeInstance()
+before = snapshot()
+instance(0)
+first = snapshot()
+for k in range(1, n):
+    instance(k)
+print("RESULT" + json.dumps({{"before": before, "first": first, "last": snapshot()}}))
+"""
+
+
+@pytest.mark.slow
+def test_sys_path_meta_path_and_modules_do_not_change_over_300_instances(fmus, tmp_path):
+    """300 instances of an FMU (three unpacked copies in turn, each instance run
+    for a step and freed): sys.path, sys.meta_path and sys.modules are the same
+    objects after the 300th instance as after the 1st. What the first load may
+    change, by design: the FMU's private package is added to sys.modules with
+    its entry module, one finder serving that package goes on sys.meta_path, and
+    the standard-library and numpy/scipy modules its code imports are loaded.
+    Nothing that was there before changes, and sys.path is the host's."""
+    name = "SridharLtvBSplineObserver"  # numpy and scipy, imported partly inside functions
+    package = json.loads(_read(fmus[name], "resources/manifest.json"))["inputs"]["bundle"]["package"]
+    result = _run(_INSTANCES.format(path=str(fmus[name]), folder=str(tmp_path), n=300))
+    before, first, last = result["before"], result["first"], result["last"]
+    assert last == first
+    assert first["path"] == before["path"]
+    assert first["meta_path"][1:] == before["meta_path"] and first["finders"][0] == package
+    for module, ident in before["modules"].items():
+        assert first["modules"].get(module) == ident, module
+    allowed = set(sys.stdlib_module_names) | {"numpy", "scipy"}
+    added = set(first["modules"]) - set(before["modules"])
+    own = {m for m in added if m in (package, package + "_entry") or m.startswith(package + ".")}
+    assert f"{package}._fmus.lpvest_estimator" in own
+    assert {m for m in added - own if m.split(".")[0] not in allowed} == set()

@@ -27,14 +27,18 @@ instantiated once from that folder to write the model description
 the inputs each output depends on, ``InitialUnknowns`` (pythonfmu writes
 none), ``variability="discrete"`` for the outputs of a discrete-time
 component, a GUID derived from the manifest and no time stamp.
-``binaries/linux64/<id>.so`` is the lpvest status bridge
-(``status_bridge.c``, compiled here with the C compiler) in front of
-pythonfmu's export library; without a C compiler pythonfmu's library is used
-as is (bad input then shows as fmi2Discard at the next fmi2DoStep, and a
-Python exception as fmi2Fatal). ``binaries/win64`` carries pythonfmu's DLL.
+``binaries/linux64/<id>.so`` and ``binaries/win64/<id>.dll`` are the lpvest
+status bridge (``status_bridge.c``) in front of pythonfmu's export library
+(``lpvest-pythonfmu-export.so``/``.dll`` next to it): compiled here with the
+C compiler for Linux, and cross-compiled with zig (the ``ziglang`` package of
+the ``build`` extra) for Windows, or for Linux where no C compiler is. Without
+a compiler for a platform, pythonfmu's library is used as is there, and the
+build says so once (:class:`BuildWarning`): bad input then shows as
+fmi2Discard at the next fmi2DoStep, and a Python exception as fmi2Fatal.
+pythonfmu 0.7 ships no macOS binary, so an FMU has none.
 
 Reproducible: the same inputs (model file, design, lpvest code, options,
-pythonfmu, compiler) give a byte-identical ``.fmu``: zip entries in sorted
+pythonfmu, compilers) give a byte-identical ``.fmu``: zip entries in sorted
 order with a fixed time stamp and permissions, no absolute path, no host name,
 no time.
 
@@ -69,7 +73,7 @@ from xml.dom.minidom import parseString
 from xml.etree.ElementTree import Element, SubElement, tostring
 
 from .._version import __version__
-from ..errors import LpvestError
+from ..errors import ArgumentError, LpvestError
 from .bundle import Bundle, SourceRoot, make_bundle
 from .naming import fmu_name
 from .registry import EstimatorKind, estimator_kinds, resolve
@@ -87,7 +91,12 @@ __all__ = [
     "format_table",
     "scripts_dir",
     "status_bridge",
+    "bridge_note",
+    "zig_version",
+    "BuildWarning",
+    "BRIDGE_PLATFORMS",
     "manifest_inputs",
+    "write_zip_entry",
     "DEFAULT_OUT",
     "MANIFEST_FILE",
 ]
@@ -98,7 +107,6 @@ DEFAULT_OUT = "fmu-build"
 #: The manifest in an FMU's resources folder: every input of the build and its SHA-256.
 MANIFEST_FILE = "manifest.json"
 
-_INNER_LIBRARY = "lpvest-pythonfmu-export.so"
 #: The lpvest package an FMU carries modules of (this one).
 _PACKAGE_DIR = Path(__file__).resolve().parent.parent
 _MANIFEST_FORMAT = "lpvest-fmu-manifest-1"
@@ -291,31 +299,127 @@ def _design_fits(path: Path, model: Any) -> bool:
 # -- the status bridge ------------------------------------------------------------
 
 
+#: The platforms (pythonfmu's folder names) the status bridge is built for, and zig's target for each.
+BRIDGE_PLATFORMS: dict[str, str] = {"linux64": "x86_64-linux-gnu", "win64": "x86_64-windows-gnu"}
+_SUFFIX = {"linux64": ".so", "win64": ".dll"}
+
+
+class BuildWarning(UserWarning):
+    """An FMU was built without a part it normally carries (the message says
+    what is missing and what the FMU then lacks)."""
+
+
+def _inner_library(platform: str) -> str:
+    """The file name of pythonfmu's library behind the bridge in ``binaries/<platform>/``."""
+    return "lpvest-pythonfmu-export" + _SUFFIX[platform]
+
+
+def _cc() -> str | None:
+    return os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+
+
 @functools.cache
-def status_bridge() -> Path | None:
-    """The compiled status bridge for this platform, or ``None`` when there is
-    no C compiler or the platform is not Linux (compiled once per process)."""
-    if not sys.platform.startswith("linux"):
+def zig_version() -> str | None:
+    """The version of the ``ziglang`` package's compiler (the ``build`` extra),
+    or ``None`` when it is not installed."""
+    import importlib.util
+
+    if importlib.util.find_spec("ziglang") is None:
         return None
-    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
-    if not cc:
+    proc = subprocess.run([sys.executable, "-m", "ziglang", "version"], capture_output=True, text=True, check=False)
+    return proc.stdout.strip() if proc.returncode == 0 and proc.stdout.strip() else None
+
+
+def _bridge_command(platform: str, src: Path, out: Path) -> tuple[list[str], str] | None:
+    """The command that compiles the bridge for ``platform`` and a description
+    of its compiler (recorded in the manifest), or ``None``: on Linux the C
+    compiler for linux64, else zig (``python -m ziglang cc``) for any target."""
+    inner = f'-DINNER_LIBRARY="{_inner_library(platform)}"'
+    cc = _cc() if platform == "linux64" and sys.platform.startswith("linux") else None
+    if cc is not None:
+        # -ffile-prefix-map and no -g: nothing of the build folder ends up in the binary
+        return ([*cc.split(), "-shared", "-fPIC", "-O2", "-fvisibility=hidden", f"-ffile-prefix-map={src.parent}=.",
+                 inner, "-o", str(out), str(src), "-ldl"], _compiler_version())
+    zig = zig_version()
+    if zig is None:
         return None
+    # zig's output depends on its version, the flags and the source only (checked byte for byte by
+    # tests/test_fmu_windows.py); -s: no debug information, no program database
+    cmd = [sys.executable, "-m", "ziglang", "cc", "-target", BRIDGE_PLATFORMS[platform], "-shared", "-O2", "-s",
+           inner, "-o", str(out), str(src)]
+    if platform == "linux64":
+        cmd[-4:-4] = ["-fPIC", "-fvisibility=hidden"]
+        cmd.append("-ldl")
+    return cmd, f"zig {zig}"
+
+
+@functools.cache
+def _compile_bridge(platform: str) -> tuple[Path, str] | None:
     src = Path(__file__).with_name("status_bridge.c")
     out_dir = Path(tempfile.mkdtemp(prefix="lpvest-bridge-"))
     atexit.register(shutil.rmtree, out_dir, True)
-    out = out_dir / "status_bridge.so"
-    # -ffile-prefix-map and no -g: nothing of the build folder ends up in the binary
-    cmd = [*cc.split(), "-shared", "-fPIC", "-O2", "-fvisibility=hidden", f"-ffile-prefix-map={src.parent}=.",
-           f'-DINNER_LIBRARY="{_INNER_LIBRARY}"', "-o", str(out), str(src), "-ldl"]
-    proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
-    if proc.returncode != 0:
-        raise BuildError(f"compiling the status bridge failed ({' '.join(cmd)}):\n{proc.stderr}")
-    return out
+    out = out_dir / f"status_bridge{_SUFFIX[platform]}"
+    found = _bridge_command(platform, src, out)
+    if found is None:
+        return None
+    cmd, compiler = found
+    proc = subprocess.run(cmd, capture_output=True, text=True, check=False, cwd=out_dir)
+    if proc.returncode != 0 or not out.is_file():
+        raise BuildError(f"compiling the status bridge for {platform} failed ({' '.join(cmd)}):\n{proc.stderr}")
+    return out, compiler
+
+
+def status_bridge(platform: str = "linux64") -> Path | None:
+    """The status bridge (``status_bridge.c``) compiled for ``platform``
+    (``linux64`` or ``win64``), or ``None`` when no compiler for it is at hand:
+    linux64 needs a C compiler on Linux or ziglang, win64 ziglang (the
+    ``build`` extra). Compiled once per process."""
+    if platform not in BRIDGE_PLATFORMS:
+        raise ArgumentError(f"platform {platform!r}: the status bridge is built for "
+                            f"{', '.join(BRIDGE_PLATFORMS)} only")
+    found = _compile_bridge(platform)
+    return None if found is None else found[0]
+
+
+def _bridge_compiler(platform: str) -> str | None:
+    found = _compile_bridge(platform)
+    return None if found is None else found[1]
+
+
+#: What an FMU lacks on a platform whose binary is pythonfmu's library as is.
+_WITHOUT_BRIDGE = ("its {platform} binary is pythonfmu's library as is, without lpvest's status bridge: there "
+                   "a rejected input returns fmi2OK and shows as fmi2Discard at the next fmi2DoStep, a refused "
+                   "step is fmi2Discard (then reported as terminated), and with the tool's logging off no "
+                   "message is shown (docs/fmus.md, 6.)")
+
+
+def bridge_note(platform: str) -> str | None:
+    """Why the FMUs built here lack the status bridge on ``platform`` and what
+    they then lack, or ``None`` when they carry it."""
+    if status_bridge(platform) is not None:
+        return None
+    if platform == "win64":
+        missing = "the C cross compiler for Windows is missing (pip install 'lpvest[build]' installs ziglang)"
+    elif sys.platform.startswith("linux"):
+        missing = "no C compiler (cc, gcc or $CC) and no ziglang (pip install 'lpvest[build]')"
+    else:
+        missing = "not on Linux and no ziglang to cross-compile (pip install 'lpvest[build]')"
+    return f"{missing}: " + _WITHOUT_BRIDGE.format(platform=platform)
+
+
+@functools.cache
+def _warn_without_bridge(platform: str) -> None:
+    """Say once per process, as a :class:`BuildWarning`, what an FMU lacks without the bridge."""
+    import warnings
+
+    note = bridge_note(platform)
+    if note is not None:
+        warnings.warn(note, BuildWarning, stacklevel=4)
 
 
 @functools.cache
 def _compiler_version() -> str:
-    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+    cc = _cc()
     if not cc:
         return "none"
     proc = subprocess.run([*cc.split(), "--version"], capture_output=True, text=True, check=False)
@@ -437,7 +541,11 @@ def manifest_inputs(plan: FmuPlan, bundle: Bundle | None = None, design: str | b
                                            "requirements": list(plan.estimator.requirements)}
         if plan.design_options:
             est["design_options"] = {k: v for k, v in sorted(plan.design_options)}
-    bridge = status_bridge()
+    bridges = {}
+    for platform in BRIDGE_PLATFORMS:
+        bridge = status_bridge(platform)
+        bridges[platform] = None if bridge is None else {"sha256": _sha(bridge.read_bytes()),
+                                                          "compiler": _bridge_compiler(platform)}
     return {
         "identifier": plan.identifier,
         "role": plan.role,
@@ -454,8 +562,7 @@ def manifest_inputs(plan: FmuPlan, bundle: Bundle | None = None, design: str | b
         "design_file_sha256": None if plan.design is None else _sha(plan.design.read_bytes()),
         "bundle": {"package": bundle.package, "digest": bundle.digest, "requirements": list(bundle.requirements)},
         "pythonfmu": pythonfmu.__version__,
-        "status_bridge_sha256": None if bridge is None else _sha(bridge.read_bytes()),
-        "compiler": _compiler_version() if bridge is not None else None,
+        "status_bridges": bridges,
         "python": f"{sys.version_info.major}.{sys.version_info.minor}",
     }
 
@@ -579,7 +686,24 @@ def _model_description(plan: FmuPlan, bundle: Bundle, staging: Path, guid: str) 
     return xml, counts["input"], counts["output"], counts["parameter"]
 
 
-def _zip_write(z: zipfile.ZipFile, name: str, data: bytes, executable: bool = False) -> None:
+def write_zip_entry(z: zipfile.ZipFile, name: str, data: bytes, executable: bool = False) -> None:
+    """Write ``data`` as the member ``name`` of ``z`` so that the archive
+    depends on nothing but the members and their order: a fixed time stamp
+    (1980-01-01), Unix permissions 0644 (0755 when ``executable``), deflate at
+    level 9. The FMU builder and the SSP writer
+    (:func:`lpvest.cosim.ssp.write_ssp`) write every member so.
+
+    Parameters
+    ----------
+    z : zipfile.ZipFile
+        An archive open for writing.
+    name : str
+        The member's name (``/``-separated).
+    data : bytes
+        Its content.
+    executable : bool, default False
+        Mark it executable (a shared library).
+    """
     info = zipfile.ZipInfo(name, date_time=_ZIP_TIME)
     info.compress_type = zipfile.ZIP_DEFLATED
     info.create_system = 3  # Unix: the permissions below are honoured
@@ -596,7 +720,6 @@ def build_fmu(plan: FmuPlan, out_dir: str | Path, *, progress: Callable[[str], N
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     target = out / f"{plan.identifier}.fmu"
-    bridge = status_bridge()
     binaries = Path(pythonfmu.__file__).parent / "resources" / "binaries"
     with tempfile.TemporaryDirectory(prefix="lpvest-fmu-") as tmp:
         staging = Path(tmp) / "resources"
@@ -615,16 +738,19 @@ def build_fmu(plan: FmuPlan, out_dir: str | Path, *, progress: Callable[[str], N
                 continue
             platform = lib.parent.name
             name = f"binaries/{platform}/{plan.identifier}{lib.suffix}"
-            if platform == "linux64" and bridge is not None:
+            bridge = status_bridge(platform) if platform in BRIDGE_PLATFORMS else None
+            if bridge is not None:
                 entries[name] = (bridge.read_bytes(), True)
-                entries[f"binaries/{platform}/{_INNER_LIBRARY}"] = (lib.read_bytes(), True)
+                entries[f"binaries/{platform}/{_inner_library(platform)}"] = (lib.read_bytes(), True)
             else:
+                if platform in BRIDGE_PLATFORMS:
+                    _warn_without_bridge(platform)
                 entries[name] = (lib.read_bytes(), True)
         partial = out / f".{plan.identifier}.fmu.part"
         with zipfile.ZipFile(partial, "w") as z:
             for name in sorted(entries):
                 data, executable = entries[name]
-                _zip_write(z, name, data, executable)
+                write_zip_entry(z, name, data, executable)
         partial.replace(target)
     return target
 

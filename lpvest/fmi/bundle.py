@@ -356,6 +356,21 @@ import sys
 globals().setdefault("_references", []).append(globals())
 
 
+def _unlist(entry):
+    """Take back off sys.path the resources folder pythonfmu's binary inserted
+    at sys.path[0] before executing this module (it does so at every
+    instantiation, for the folder of that instance's unpacked copy, which
+    need not be this module's): sys.path[0] is removed when it is a
+    resources folder of this FMU, and only then."""
+    import os
+
+    first = sys.path[0] if sys.path else None
+    if isinstance(first, str) and os.path.isfile(os.path.join(first, "slavemodule.txt")) and os.path.isfile(
+        os.path.join(first, entry)
+    ):
+        del sys.path[0]
+
+
 def _load(package):
     if package in sys.modules:
         return
@@ -398,10 +413,9 @@ def _load(package):
             exec(compile(source, path, "exec"), module.__dict__)
 
     sys.meta_path.insert(0, Finder())
-    while here in sys.path:
-        sys.path.remove(here)
 
 
+_unlist("{entry}.py")
 _load("{package}")
 
 from {package}._fmus.{script} import {cls} as {cls}  # noqa: E402
@@ -476,7 +490,7 @@ def make_bundle(
             init = "/".join(parts[:i]) + "/__init__.py"
             if init not in files:
                 files[init] = f'"""{".".join(parts[:i])}: part of an lpvest FMU\'s private package."""\n'.encode()
-    files[f"{entry}.py"] = _ENTRY.format(identifier=identifier, package=package, script=script,
+    files[f"{entry}.py"] = _ENTRY.format(identifier=identifier, package=package, entry=entry, script=script,
                                          cls=slave_class).encode("utf-8")
     needed = set(scan.hard) | set(declared)
     unknown = sorted(n for n in needed if n not in KNOWN_REQUIREMENTS)

@@ -25,21 +25,48 @@
  * (consumed here, never shown to the host). fmi2GetBooleanStatus(fmi2Terminated)
  * is fmi2False: an lpvest slave never asks to end the simulation.
  *
+ * Lifecycle: pythonfmu 0.7's fmi2FreeInstance destroys an instance's logger
+ * before the instance, whose destructor then passes the messages still queued
+ * on the Python side through that destroyed logger (a use-after-free: the host
+ * crashes when the logger was on). The queue is drained at the end of every
+ * FMI call except fmi2Instantiate and fmi2Reset, the two that run the slave's
+ * constructor. So this layer drains it right after those two (a zero-length
+ * fmi2GetReal, which calls no slave code but the getter of no variable) and
+ * pythonfmu never frees an instance with queued messages, whatever its slave
+ * logs while constructed. After the inner library returned fmi2Fatal (a Python
+ * exception: it has then released the instance's Python objects already, and
+ * freeing it would release them again), no call reaches the inner instance any
+ * more: every call returns fmi2Fatal and fmi2FreeInstance frees only this
+ * layer's part (the inner instance, a few hundred bytes, is left allocated).
+ *
+ * Platforms: Linux (dlopen; compiled by the build with the C compiler) and
+ * Windows (LoadLibrary; cross-compiled by the build with zig). The inner library
+ * is the file INNER_LIBRARY in the folder of this library's own file.
+ *
  * No Python API is used here; the Python interpreter is the host's (or loaded
  * with LD_PRELOAD for a C host), exactly as for pythonfmu's own library.
  */
+#ifndef _WIN32
 #define _GNU_SOURCE
-#include <dlfcn.h>
+#endif
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#ifdef _WIN32
+#include <windows.h>
+#define EXPORT __declspec(dllexport)
+#ifndef INNER_LIBRARY
+#define INNER_LIBRARY "lpvest-pythonfmu-export.dll"
+#endif
+#else
+#include <dlfcn.h>
+#define EXPORT __attribute__((visibility("default")))
 #ifndef INNER_LIBRARY
 #define INNER_LIBRARY "lpvest-pythonfmu-export.so"
 #endif
-
-#define EXPORT __attribute__((visibility("default")))
+#endif
 
 /* --- the FMI 2.0 types (fmi2TypesPlatform.h, fmi2FunctionTypes.h) --- */
 typedef void* fmi2Component;
@@ -102,7 +129,9 @@ typedef struct {
 
 static Inner inner;
 static int inner_loaded = 0;
+#ifndef _WIN32
 static void (*inner_finalize)(void) = NULL;
+#endif
 
 /* pythonfmu 0.7's library has a use-after-free at process exit: the static
  * shared_ptr holding its interpreter state is destroyed by an exit handler, and
@@ -112,9 +141,11 @@ static void (*inner_finalize)(void) = NULL;
  * from an exit handler registered after the library is loaded (exit handlers
  * run in reverse order) releases the state once, while the pointer is alive;
  * both later calls then see an empty pointer. */
+#ifndef _WIN32
 static void finalize_inner(void) {
     if (inner_finalize) inner_finalize();
 }
+#endif
 
 typedef struct {
     fmi2Component inner;
@@ -126,6 +157,7 @@ typedef struct {
     char** categories;
     fmi2Status worst;             /* most severe status logged during the current call */
     fmi2Real time;                /* the FMU's current time (fmi2LastSuccessfulTime) */
+    int broken;                   /* the inner library returned fmi2Fatal: never call it again */
 } Bridge;
 
 /* the category of the slave's messages that state its time (see the top of this file) */
@@ -145,14 +177,97 @@ static void report(fmi2CallbackLogger logger, fmi2ComponentEnvironment env, fmi2
     free(fmt);
 }
 
+static char* copy_string(const char* text) {
+    size_t n = strlen(text) + 1;
+    char* out = (char*)malloc(n);
+    if (out) memcpy(out, text, n);
+    return out;
+}
+
+#define LOAD_ALL(LOAD)                                                                                          \
+    LOAD(Instantiate) LOAD(FreeInstance) LOAD(SetupExperiment) LOAD(EnterInitializationMode)                    \
+    LOAD(ExitInitializationMode) LOAD(Terminate) LOAD(Reset) LOAD(GetReal) LOAD(GetInteger) LOAD(GetBoolean)    \
+    LOAD(GetString) LOAD(SetReal) LOAD(SetInteger) LOAD(SetBoolean) LOAD(SetString) LOAD(GetFMUstate)           \
+    LOAD(SetFMUstate) LOAD(FreeFMUstate) LOAD(SerializedFMUstateSize) LOAD(SerializeFMUstate)                   \
+    LOAD(DeSerializeFMUstate) LOAD(DoStep) LOAD(GetRealStatus)
+
+#ifdef _WIN32
 static int load_inner(const fmi2CallbackFunctions* host, fmi2String name) {
     if (inner_loaded) return 1;
-    Dl_info info;
-    if (!dladdr((void*)&load_inner, &info) || !info.dli_fname) {
-        report(host ? host->logger : NULL, host ? host->componentEnvironment : NULL, name, fmi2Fatal,
-               "lpvest status bridge: cannot find its own file (dladdr failed)");
+    fmi2CallbackLogger logger = host ? host->logger : NULL;
+    fmi2ComponentEnvironment env = host ? host->componentEnvironment : NULL;
+    HMODULE self = NULL;
+    wchar_t path[32768];
+    if (!GetModuleHandleExW(GET_MODULE_HANDLE_EX_FLAG_FROM_ADDRESS | GET_MODULE_HANDLE_EX_FLAG_UNCHANGED_REFCOUNT,
+                            (LPCWSTR)(void*)&load_inner, &self)) {
+        report(logger, env, name, fmi2Fatal, "lpvest status bridge: cannot find its own file (GetModuleHandleExW)");
         return 0;
     }
+    const DWORD cap = (DWORD)(sizeof path / sizeof path[0]);
+    DWORD n = GetModuleFileNameW(self, path, cap);
+    if (n == 0 || n >= cap) {
+        report(logger, env, name, fmi2Fatal, "lpvest status bridge: cannot find its own file (GetModuleFileNameW)");
+        return 0;
+    }
+    DWORD dir_len = n;
+    while (dir_len > 0 && path[dir_len - 1] != L'\\' && path[dir_len - 1] != L'/') dir_len--;
+    const char* file = INNER_LIBRARY;
+    size_t file_len = strlen(file);
+    if (dir_len + file_len + 1 > cap) {
+        report(logger, env, name, fmi2Fatal, "lpvest status bridge: the path of its folder is too long");
+        return 0;
+    }
+    for (size_t i = 0; i <= file_len; i++) path[dir_len + i] = (wchar_t)(unsigned char)file[i];
+    /* the inner library's own dependencies (python3.dll, the C++ runtime) are looked up as when a host
+       loads it directly, its folder first */
+    HMODULE h = LoadLibraryExW(path, NULL, LOAD_WITH_ALTERED_SEARCH_PATH);
+    if (!h) {
+        char msg[512];
+        snprintf(msg, sizeof msg,
+                 "lpvest status bridge: cannot load %s next to it (Windows error %lu; python3.dll must be found: "
+                 "run the FMU in a Python host or put Python's folder on PATH)",
+                 INNER_LIBRARY, (unsigned long)GetLastError());
+        report(logger, env, name, fmi2Fatal, msg);
+        return 0;
+    }
+#define LOAD(field)                                                                                  \
+    inner.field = (__typeof__(inner.field))(void (*)(void))GetProcAddress(h, "fmi2" #field);        \
+    if (!inner.field) {                                                                              \
+        report(logger, env, name, fmi2Fatal, "lpvest status bridge: the inner library lacks fmi2" #field); \
+        return 0;                                                                                    \
+    }
+    LOAD_ALL(LOAD)
+#undef LOAD
+    /* pythonfmu's DLL finalizes its interpreter state in its own DllMain (no exit-order problem there) */
+    inner_loaded = 1; /* never unloaded: pythonfmu keeps its interpreter thread alive anyway */
+    return 1;
+}
+#else
+/* In a C host (libpython preloaded, no interpreter running yet) pythonfmu's library starts the
+ * interpreter on a thread of its own and finalizes it at exit, after the exit handlers of the
+ * extension modules loaded since have run (scipy's among them): Py_Finalize then crashes the
+ * exiting host. So the interpreter is started here, once, as a Python host's is, and kept
+ * until the process ends (pythonfmu then neither starts nor finalizes one). Without libpython
+ * in the process nothing is started, and loading the inner library fails as it says below. */
+static void start_python(void) {
+    int (*is_initialized)(void) = (int (*)(void))dlsym(RTLD_DEFAULT, "Py_IsInitialized");
+    void (*initialize)(int) = (void (*)(int))dlsym(RTLD_DEFAULT, "Py_InitializeEx");
+    void* (*release_gil)(void) = (void* (*)(void))dlsym(RTLD_DEFAULT, "PyEval_SaveThread");
+    if (!is_initialized || !initialize || !release_gil || is_initialized()) return;
+    initialize(0); /* 0: no signal handlers, the host's stay */
+    release_gil(); /* pythonfmu takes the GIL in every call (PyGILState_Ensure), from any thread */
+}
+
+static int load_inner(const fmi2CallbackFunctions* host, fmi2String name) {
+    if (inner_loaded) return 1;
+    fmi2CallbackLogger logger = host ? host->logger : NULL;
+    fmi2ComponentEnvironment env = host ? host->componentEnvironment : NULL;
+    Dl_info info;
+    if (!dladdr((void*)&load_inner, &info) || !info.dli_fname) {
+        report(logger, env, name, fmi2Fatal, "lpvest status bridge: cannot find its own file (dladdr failed)");
+        return 0;
+    }
+    start_python();
     const char* slash = strrchr(info.dli_fname, '/');
     size_t dir_len = slash ? (size_t)(slash - info.dli_fname + 1) : 0;
     size_t len = dir_len + strlen(INNER_LIBRARY) + 1;
@@ -167,29 +282,32 @@ static int load_inner(const fmi2CallbackFunctions* host, fmi2String name) {
                  "lpvest status bridge: cannot load %s: %s (a C host must load libpython first, "
                  "e.g. LD_PRELOAD=libpython3.x.so)",
                  path, dlerror());
-        report(host ? host->logger : NULL, host ? host->componentEnvironment : NULL, name, fmi2Fatal, msg);
+        report(logger, env, name, fmi2Fatal, msg);
         free(path);
         return 0;
     }
     free(path);
-#define LOAD(field)                                                          \
-    inner.field = (__typeof__(inner.field))dlsym(h, "fmi2" #field);         \
-    if (!inner.field) {                                                      \
-        report(host ? host->logger : NULL, host ? host->componentEnvironment : NULL, name, fmi2Fatal, \
-               "lpvest status bridge: the inner library lacks fmi2" #field); \
-        return 0;                                                            \
+#define LOAD(field)                                                                                  \
+    inner.field = (__typeof__(inner.field))dlsym(h, "fmi2" #field);                                 \
+    if (!inner.field) {                                                                              \
+        report(logger, env, name, fmi2Fatal, "lpvest status bridge: the inner library lacks fmi2" #field); \
+        return 0;                                                                                    \
     }
-    LOAD(Instantiate) LOAD(FreeInstance) LOAD(SetupExperiment) LOAD(EnterInitializationMode)
-    LOAD(ExitInitializationMode) LOAD(Terminate) LOAD(Reset) LOAD(GetReal) LOAD(GetInteger) LOAD(GetBoolean)
-    LOAD(GetString) LOAD(SetReal) LOAD(SetInteger) LOAD(SetBoolean) LOAD(SetString) LOAD(GetFMUstate)
-    LOAD(SetFMUstate) LOAD(FreeFMUstate) LOAD(SerializedFMUstateSize) LOAD(SerializeFMUstate)
-    LOAD(DeSerializeFMUstate) LOAD(DoStep) LOAD(GetRealStatus)
+    LOAD_ALL(LOAD)
 #undef LOAD
+    /* this library stays loaded from now on, as the inner one does (its handle is never closed): a
+       host's dlclose would otherwise run the exit handler below, and a C host whose interpreter the
+       inner library started would see it finalized (numpy cannot be imported again after that) */
+    if (!dlopen(info.dli_fname, RTLD_NOW | RTLD_NOLOAD | RTLD_NODELETE)) {
+        report(logger, env, name, fmi2Fatal, "lpvest status bridge: cannot keep itself loaded (dlopen)");
+        return 0;
+    }
     inner_finalize = (void (*)(void))dlsym(h, "finalizePythonInterpreter");
     if (inner_finalize) atexit(finalize_inner);
     inner_loaded = 1;  /* never unloaded: pythonfmu keeps its interpreter thread alive anyway */
     return 1;
 }
+#endif
 
 /* The text is handed on as the format string with no arguments (hosts that
  * bind the logger without varargs, e.g. through ctypes, print the format
@@ -247,20 +365,41 @@ static void bridge_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Sta
     free(text);
 }
 
-static fmi2Status combine(fmi2Status inner_status, fmi2Status logged) {
+static fmi2Status combine(Bridge* b, fmi2Status inner_status) {
+    if (inner_status == fmi2Fatal) b->broken = 1;
     if (inner_status == fmi2Fatal || inner_status == fmi2Pending) return inner_status;
-    return logged > inner_status ? logged : inner_status;
+    return b->worst > inner_status ? b->worst : inner_status;
+}
+
+/* every call after the inner library returned fmi2Fatal (see the top of this file) */
+static fmi2Status refuse_broken(Bridge* b, const char* what) {
+    char msg[256];
+    snprintf(msg, sizeof msg,
+             "%s: an earlier call failed with fmi2Fatal (a Python exception in the slave); the instance can "
+             "only be freed",
+             what);
+    report(b->host.logger, b->host.componentEnvironment, b->name, fmi2Fatal, msg);
+    return fmi2Fatal;
 }
 
 #define BRIDGE(c) ((Bridge*)(c))
-#define FORWARD(c, call)                                \
+#define FORWARD(c, what, call)                          \
     do {                                                \
         Bridge* b_ = BRIDGE(c);                         \
         if (!b_) return fmi2Error;                      \
+        if (b_->broken) return refuse_broken(b_, what); \
         b_->worst = fmi2OK;                             \
         fmi2Status s_ = call;                           \
-        return combine(s_, b_->worst);                  \
+        return combine(b_, s_);                         \
     } while (0)
+
+/* After the slave was constructed (fmi2Instantiate, fmi2Reset): have pythonfmu hand on what the
+ * constructor logged, which it otherwise keeps queued until the next call, and which its
+ * fmi2FreeInstance would pass through a destroyed logger (see the top of this file). A
+ * zero-length fmi2GetReal runs no getter; pythonfmu drains its queue at its end. */
+static fmi2Status drain(Bridge* b) {
+    return inner.GetReal(b->inner, NULL, 0, NULL);
+}
 
 EXPORT const char* fmi2GetTypesPlatform(void) { return "default"; }
 EXPORT const char* fmi2GetVersion(void) { return "2.0"; }
@@ -278,9 +417,18 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     b->mine.stepFinished = NULL;
     b->mine.componentEnvironment = b;
     b->logging_on = loggingOn;
-    b->name = strdup(instanceName ? instanceName : "");
+    b->name = copy_string(instanceName ? instanceName : "");
+    if (!b->name) {
+        free(b);
+        return NULL;
+    }
     b->inner = inner.Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation, &b->mine, visible, fmi2True);
     if (!b->inner) {
+        free(b->name);
+        free(b);
+        return NULL;
+    }
+    if (drain(b) == fmi2Fatal) { /* the slave raised: nothing usable was made (pythonfmu logged why) */
         free(b->name);
         free(b);
         return NULL;
@@ -298,7 +446,7 @@ static void free_categories(Bridge* b) {
 EXPORT void fmi2FreeInstance(fmi2Component c) {
     Bridge* b = BRIDGE(c);
     if (!b) return;
-    inner.FreeInstance(b->inner);
+    if (!b->broken) inner.FreeInstance(b->inner); /* else left allocated: see the top of this file */
     free_categories(b);
     free(b->name);
     free(b);
@@ -313,8 +461,14 @@ EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, si
     if (nCategories > 0 && categories) {
         b->categories = (char**)calloc(nCategories, sizeof(char*));
         if (!b->categories) return fmi2Error;
-        for (size_t i = 0; i < nCategories; i++) b->categories[i] = strdup(categories[i] ? categories[i] : "");
         b->n_categories = nCategories;
+        for (size_t i = 0; i < nCategories; i++) {
+            b->categories[i] = copy_string(categories[i] ? categories[i] : "");
+            if (!b->categories[i]) {
+                free_categories(b);
+                return fmi2Error;
+            }
+        }
     }
     return fmi2OK;
 }
@@ -323,72 +477,78 @@ EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefi
                                       fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
     Bridge* b = BRIDGE(c);
     if (!b) return fmi2Error;
+    if (b->broken) return refuse_broken(b, "fmi2SetupExperiment");
     b->worst = fmi2OK;
     fmi2Status s = inner.SetupExperiment(b->inner, toleranceDefined, tolerance, startTime, stopTimeDefined, stopTime);
-    s = combine(s, b->worst); /* after the call: the messages it logged set b->worst */
+    s = combine(b, s); /* after the call: the messages it logged set b->worst */
     if (s <= fmi2Warning) b->time = startTime;
     return s;
 }
 EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
-    FORWARD(c, inner.EnterInitializationMode(b_->inner));
+    FORWARD(c, "fmi2EnterInitializationMode", inner.EnterInitializationMode(b_->inner));
 }
-EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c) { FORWARD(c, inner.ExitInitializationMode(b_->inner)); }
-EXPORT fmi2Status fmi2Terminate(fmi2Component c) { FORWARD(c, inner.Terminate(b_->inner)); }
+EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c) { FORWARD(c, "fmi2ExitInitializationMode", inner.ExitInitializationMode(b_->inner)); }
+EXPORT fmi2Status fmi2Terminate(fmi2Component c) { FORWARD(c, "fmi2Terminate", inner.Terminate(b_->inner)); }
 EXPORT fmi2Status fmi2Reset(fmi2Component c) {
     Bridge* b = BRIDGE(c);
     if (!b) return fmi2Error;
+    if (b->broken) return refuse_broken(b, "fmi2Reset");
     b->worst = fmi2OK;
     b->time = 0.0;
-    fmi2Status s = inner.Reset(b->inner);
-    return combine(s, b->worst);
+    fmi2Status s = inner.Reset(b->inner); /* runs the slave's constructor again */
+    if (s != fmi2Fatal) {
+        fmi2Status d = drain(b);
+        if (d == fmi2Fatal) s = d;
+    }
+    return combine(b, s);
 }
 
 EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
-    FORWARD(c, inner.GetReal(b_->inner, vr, nvr, value));
+    FORWARD(c, "fmi2GetReal", inner.GetReal(b_->inner, vr, nvr, value));
 }
 EXPORT fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
-    FORWARD(c, inner.GetInteger(b_->inner, vr, nvr, value));
+    FORWARD(c, "fmi2GetInteger", inner.GetInteger(b_->inner, vr, nvr, value));
 }
 EXPORT fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
-    FORWARD(c, inner.GetBoolean(b_->inner, vr, nvr, value));
+    FORWARD(c, "fmi2GetBoolean", inner.GetBoolean(b_->inner, vr, nvr, value));
 }
 EXPORT fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
-    FORWARD(c, inner.GetString(b_->inner, vr, nvr, value));
+    FORWARD(c, "fmi2GetString", inner.GetString(b_->inner, vr, nvr, value));
 }
 EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
-    FORWARD(c, inner.SetReal(b_->inner, vr, nvr, value));
+    FORWARD(c, "fmi2SetReal", inner.SetReal(b_->inner, vr, nvr, value));
 }
 EXPORT fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                  const fmi2Integer value[]) {
-    FORWARD(c, inner.SetInteger(b_->inner, vr, nvr, value));
+    FORWARD(c, "fmi2SetInteger", inner.SetInteger(b_->inner, vr, nvr, value));
 }
 EXPORT fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                  const fmi2Boolean value[]) {
-    FORWARD(c, inner.SetBoolean(b_->inner, vr, nvr, value));
+    FORWARD(c, "fmi2SetBoolean", inner.SetBoolean(b_->inner, vr, nvr, value));
 }
 EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                 const fmi2String value[]) {
-    FORWARD(c, inner.SetString(b_->inner, vr, nvr, value));
+    FORWARD(c, "fmi2SetString", inner.SetString(b_->inner, vr, nvr, value));
 }
 
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state) {
-    FORWARD(c, inner.GetFMUstate(b_->inner, state));
+    FORWARD(c, "fmi2GetFMUstate", inner.GetFMUstate(b_->inner, state));
 }
 EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) {
-    FORWARD(c, inner.SetFMUstate(b_->inner, state));
+    FORWARD(c, "fmi2SetFMUstate", inner.SetFMUstate(b_->inner, state));
 }
 EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* state) {
-    FORWARD(c, inner.FreeFMUstate(b_->inner, state));
+    FORWARD(c, "fmi2FreeFMUstate", inner.FreeFMUstate(b_->inner, state));
 }
 EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t* size) {
-    FORWARD(c, inner.SerializedFMUstateSize(b_->inner, state, size));
+    FORWARD(c, "fmi2SerializedFMUstateSize", inner.SerializedFMUstateSize(b_->inner, state, size));
 }
 EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size) {
-    FORWARD(c, inner.SerializeFMUstate(b_->inner, state, bytes, size));
+    FORWARD(c, "fmi2SerializeFMUstate", inner.SerializeFMUstate(b_->inner, state, bytes, size));
 }
 EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size,
                                           fmi2FMUstate* state) {
-    FORWARD(c, inner.DeSerializeFMUstate(b_->inner, bytes, size, state));
+    FORWARD(c, "fmi2DeSerializeFMUstate", inner.DeSerializeFMUstate(b_->inner, bytes, size, state));
 }
 
 static fmi2Status unsupported(fmi2Component c, const char* what) {
@@ -421,10 +581,11 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint
                              fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
     Bridge* b = BRIDGE(c);
     if (!b) return fmi2Error;
+    if (b->broken) return refuse_broken(b, "fmi2DoStep");
     b->worst = fmi2OK;
     fmi2Status s = inner.DoStep(b->inner, currentCommunicationPoint, communicationStepSize,
                                 noSetFMUStatePriorToCurrentPoint);
-    s = combine(s, b->worst); /* after the call: the messages it logged set b->worst */
+    s = combine(b, s); /* after the call: the messages it logged set b->worst */
     if (s <= fmi2Warning) b->time = currentCommunicationPoint + communicationStepSize;
     return s;
 }
