@@ -143,11 +143,15 @@ def cli_reproduce_all(pythonpath: Path | None, fmus: Path, extra: list[str]) -> 
     first on the path: another lpvest); wall seconds."""
     env = dict(os.environ)
     if pythonpath is not None:
-        env["PYTHONPATH"] = str(pythonpath) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+        rest = os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else ""
+        env["PYTHONPATH"] = str(Path(pythonpath).resolve()) + rest
     with tempfile.TemporaryDirectory() as out:
         t = time.perf_counter()
+        # run from the (empty) output folder: ``python -m`` puts the working directory first on
+        # sys.path, ahead of PYTHONPATH, so a run from a checkout would import that checkout's lpvest
         proc = subprocess.run([sys.executable, "-m", "lpvest.cli", "reproduce", "all", "--out", out,
-                               "--fmus", str(fmus), *extra], env=env, capture_output=True, text=True, check=False)
+                               "--fmus", str(Path(fmus).resolve()), *extra],
+                              env=env, cwd=out, capture_output=True, text=True, check=False)
         seconds = time.perf_counter() - t
     if proc.returncode != 0:
         print(proc.stdout[-2000:], proc.stderr[-2000:], sep="\n")
