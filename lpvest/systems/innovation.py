@@ -26,8 +26,9 @@ import numpy as np
 
 from ..errors import DimensionError, ExpressionError, NumericalError, abbreviate, shorten
 from ..expressions import Expression, FormulaMatrix, shift_name
+from ..rng import as_stream
 from ..scheduling import SchedulingSpace
-from ..validation import as_matrix, as_rng, as_signal, as_vector, check_positive_definite
+from ..validation import as_matrix, as_signal, as_vector, check_positive_definite
 from .affine import AffineDependence
 from .text import dependence_table, describe_dependence, format_matrix, formula_value, matrix_table, number
 
@@ -285,7 +286,7 @@ class InnovationLPV:
         u = as_signal(u if u is not None else np.zeros((T, self.nu)), "u", self.nu, T)
         if e is None:
             L = np.linalg.cholesky(self.innovation_covariance)
-            e = as_rng(rng).standard_normal((T, self.ny)) @ L.T
+            e = as_stream(rng).correlated(L, T)
         else:
             e = as_signal(e, "e", self.ny, T)
         m, K = self._along(p, T)
@@ -479,7 +480,7 @@ class LPVInputOutput:
         for t in range(T):
             self.space.check(p[t], what=f"scheduling value at t={t}:")
         u = as_signal(u, "u", 1, T)[:, 0]
-        ev: np.ndarray = (as_rng(rng).standard_normal(T) * np.sqrt(self.noise_variance) if e is None
+        ev: np.ndarray = (as_stream(rng).normal(T) * np.sqrt(self.noise_variance) if e is None
                           else as_signal(e, "e", 1, T)[:, 0])
         vals = self.space.as_dict(p)
 

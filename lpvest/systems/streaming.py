@@ -16,11 +16,13 @@ reproduces ``simulate`` to the bit (with the noise drawn one sample at a time).
 - :class:`LTVPlant` wraps a continuous-time :class:`~lpvest.systems.LTVStateSpace`
   (or :class:`~lpvest.systems.LTVInputOutput`) and integrates over each step.
 
-Noise convention (affine and innovation models, ``noise=True``): the generator
-``numpy.random.default_rng(seed)`` first draws the initial state when ``P0``
-is not zero, then one vector per sample ``k = 0, 1, ...``:
-``[w_k; v_k] = L z_k`` with ``L L^T = [[Q, S], [S^T, R]]`` (affine) or
-``e_k = L z_k`` with ``L L^T = Omega`` (innovation), ``z_k ~ N(0, I)``. With
+Noise convention (affine and innovation models, ``noise=True``): the stream
+``lpvest.rng.Stream(seed)`` (the same numbers in the native FMUs) first draws
+the initial state when ``P0`` is not zero (``x0 + L_0 z``, ``L_0`` the
+semidefinite Cholesky factor of ``P0``), then one vector per sample
+``k = 0, 1, ...``: ``[w_k; v_k] = L z_k`` with ``L L^T = [[Q, S], [S^T, R]]``
+(affine) or ``e_k = L z_k`` with ``L L^T = Omega`` (innovation),
+``z_k ~ N(0, I)`` (:meth:`lpvest.rng.Stream.correlated`). With
 ``P0 = 0`` this is the sequence ``AffineLPV.simulate(p, u, rng=seed)`` and
 ``InnovationLPV.simulate(p, u, rng=seed)`` use, so the streaming plant and the
 batch simulation agree. External noise inputs (``w``, ``v``, ``e``) are added
@@ -46,6 +48,7 @@ import numpy as np
 
 from ..errors import DimensionError, ExpressionError
 from ..protocol import Component, Port, TimedComponent
+from ..rng import Stream
 from ..validation import as_matrix, as_vector, check_positive_definite, check_simplex
 from .affine import AffineLPV
 from .innovation import InnovationLPV, innovation_step
@@ -74,7 +77,7 @@ class _Rules:
         return None
 
     def initial_state(self, x0: np.ndarray | None, P0: np.ndarray | None, noise: bool,
-                      rng: np.random.Generator) -> np.ndarray:
+                      rng: Stream) -> np.ndarray:
         return np.zeros(self.model.nx) if x0 is None else x0.copy()
 
     def check(self, val: dict[str, np.ndarray]) -> None:
@@ -139,10 +142,10 @@ class _AffineRules(_Rules):
         return np.linalg.cholesky(self.model.noise.joint)
 
     def initial_state(self, x0: np.ndarray | None, P0: np.ndarray | None, noise: bool,
-                      rng: np.random.Generator) -> np.ndarray:
+                      rng: Stream) -> np.ndarray:
         mean = self.model.x0 if x0 is None else x0
         if noise and P0 is not None and np.any(P0):
-            return np.asarray(rng.multivariate_normal(mean, P0), dtype=float)
+            return rng.gaussian_vector(mean, P0)
         return mean.copy()
 
     def evaluate(self, x: np.ndarray, val: dict[str, np.ndarray], noise: np.ndarray,
@@ -176,7 +179,7 @@ class _InnovationRules(_Rules):
         return np.linalg.cholesky(self.model.innovation_covariance)
 
     def initial_state(self, x0: np.ndarray | None, P0: np.ndarray | None, noise: bool,
-                      rng: np.random.Generator) -> np.ndarray:
+                      rng: Stream) -> np.ndarray:
         return (self.model.x0 if x0 is None else x0).copy()
 
     def evaluate(self, x: np.ndarray, val: dict[str, np.ndarray], noise: np.ndarray,
@@ -297,7 +300,7 @@ class DiscretePlant(Component):
     # -- the protocol -----------------------------------------------------------------
     def _reset(self) -> None:
         """Back to sample 0: initial state, generator re-seeded, first noise drawn."""
-        self._rng = np.random.default_rng(self.seed)
+        self._rng = Stream(self.seed)
         self._k = 0
         self._x = np.asarray(self._rules.initial_state(self._x0, self._P0, self.noise, self._rng), dtype=float)
         self._noise = self._draw()
@@ -309,7 +312,7 @@ class DiscretePlant(Component):
         n = self._chol.shape[0]
         if not self.noise:
             return np.zeros(n)
-        return (self._rng.standard_normal((1, n)) @ self._chol.T)[0]
+        return self._rng.correlated(self._chol, 1)[0]
 
     def _read(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
         val = {}
@@ -348,14 +351,14 @@ class DiscretePlant(Component):
         state : dict of str to object
             ``"x"``: the state (ndarray, shape (n_x,)), ``"k"``: the sample
             index (int), ``"noise"``: the model noise drawn for the current
-            sample (ndarray), ``"rng"``: the generator's ``bit_generator.state``
+            sample (ndarray), ``"rng"``: the stream's state (:attr:`lpvest.rng.Stream.state`)
             (dict).
         """
         return {
             "x": self._x.copy(),
             "k": self._k,
             "noise": self._noise.copy(),
-            "rng": self._rng.bit_generator.state,
+            "rng": self._rng.state,
         }
 
     def _set_state(self, state: Mapping[str, Any]) -> None:
@@ -363,8 +366,8 @@ class DiscretePlant(Component):
         noise = np.asarray(state["noise"], dtype=float)
         if noise.shape != self._noise.shape:
             raise DimensionError(f"state noise has shape {noise.shape}; expected {self._noise.shape}")
-        rng = np.random.default_rng()
-        rng.bit_generator.state = state["rng"]
+        rng = Stream(None)
+        rng.state = state["rng"]
         self._x, self._k, self._noise, self._rng = x.copy(), int(state["k"]), noise.copy(), rng
 
 
