@@ -8,12 +8,16 @@ Its input ports become FMI inputs (``p[j]`` with the scheduling box as declared
 range, ``alpha[i]`` in [0, 1], ``u[i]``, ``y[i]``), its output ports FMI outputs
 (``xhat[i]``, ``P[i,j]``, ...). After the inputs of sample k are set, the
 outputs read ``outputs(inputs)`` (the estimates at k, no state change) before
-fmi2DoStep; fmi2DoStep calls ``step(inputs)``.
+fmi2DoStep; fmi2DoStep calls ``step(inputs)``. An estimator whose kind has
+late inputs (the measurement ``y``) gets the parameter ``measurement_delay``:
+``lpvest.fmi.registry.build_estimator`` pairs a measurement that arrives that
+many samples late with the other inputs of its own sample
+(``lpvest.protocol.MeasurementDelay``).
 """
 
 from pathlib import Path
 
-from lpvest.fmi.registry import resolve
+from lpvest.fmi.registry import MEASUREMENT_DELAY, build_estimator
 from lpvest.fmi.slave import LpvestSlave
 from lpvest.fmi.spec import Parameter
 from lpvest.fmi.state import decode_state
@@ -25,7 +29,8 @@ class LpvestEstimator(LpvestSlave):
     def declare(self):
         kind = self.spec["estimator"]
         model = self.model()
-        return self.model_parameters() + [Parameter.from_json(p).for_model(model) for p in kind["parameters"]]
+        pars = self.model_parameters() + [Parameter.from_json(p).for_model(model) for p in kind["parameters"]]
+        return pars + ([MEASUREMENT_DELAY] if kind.get("late_inputs") else [])
 
     def make_component(self, params):
         kind = self.spec["estimator"]
@@ -36,8 +41,7 @@ class LpvestEstimator(LpvestSlave):
                 design = path.read_text(encoding="utf-8")
             else:
                 design = decode_state(path.read_bytes())
-        options = {p["name"]: params[p["name"]] for p in kind["parameters"]}
-        return resolve(kind["factory"])(self.model(params), design=design, **options)
+        return build_estimator(kind, self.model(params), design, params)
 
     def input_range(self, port, index):
         return self.scheduling_range(port, index)

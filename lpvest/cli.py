@@ -28,6 +28,7 @@ import argparse
 import dataclasses
 import sys
 import time
+import warnings
 import zipfile
 from collections.abc import Sequence
 from pathlib import Path
@@ -322,7 +323,11 @@ def cmd_cosim(args: argparse.Namespace) -> int:
               "adds a one-step delay where an output feeds through from an input (see lpvest.cosim.ssp)")
         return 0
     out = _out_dir(args.out)
-    result = spec.run(progress=None)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = spec.run(progress=None)
+    for w in caught:  # e.g. a component discarded a step: the run stopped there
+        print(f"lpvest: warning: {' '.join(str(w.message).split())}", file=sys.stderr)
     stem = spec.path.stem
     print(result.summary())
     print(f"wrote {result.write_csv(out / f'{stem}.csv')}")

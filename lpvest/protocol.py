@@ -34,6 +34,14 @@ A key covers the exact values, so an input that would be rejected is never
 served from the memo, and the reused values are the very numbers a fresh
 evaluation gives.
 
+**A measurement that arrives late.** A master that steps every component
+in parallel (Jacobi: libcosim, fmpy's ``simulate_ssp``, most tools) passes
+outputs read *after* the step, so a filter receives the measurement ``y`` of
+sample ``k - 1`` together with the scheduling of sample ``k``.
+:class:`MeasurementDelay` wraps any sampled component and pairs each late
+input with the other inputs of its own sample, so the component runs on the
+samples it was designed for, ``delay`` samples later.
+
 This module is the bottom of the package: it imports only numpy and
 :mod:`lpvest.errors`.
 
@@ -61,14 +69,16 @@ Examples
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
+from collections import deque
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
-from .errors import DimensionError
+from .errors import ArgumentError, ArgumentTypeError, DimensionError, abbreviate
 
 __all__ = [
     "Port",
@@ -76,6 +86,8 @@ __all__ = [
     "Timed",
     "Component",
     "TimedComponent",
+    "MeasurementDelay",
+    "whole_samples",
     "input_key",
     "run_streaming",
 ]
@@ -617,6 +629,241 @@ class TimedComponent(Component):
             return None
         self._commit(kept[1], self.time + float(dt) if t_end is None else float(t_end))
         return kept[0]
+
+
+class MeasurementDelay(Component):
+    """A sampled component whose measurement arrives ``delay`` samples late:
+    each late input is paired with the other inputs of its own sample.
+
+    At step ``j`` the wrapper receives the inputs named in ``late`` of sample
+    ``j - delay`` (e.g. ``y_{j-1}``) and the others of sample ``j`` (e.g.
+    ``p_j``, ``u_j``). It keeps the others of the last ``delay`` samples and
+    hands ``component`` the sample ``j - delay`` whole (``p_{j-1}``,
+    ``u_{j-1}``, ``y_{j-1}``): the component runs on exactly the samples it
+    would get without the delay, in the same order, so its output at step
+    ``j`` is, to the bit, its output for sample ``j - delay`` without the
+    delay. A Kalman filter stays the exact filter, an H-infinity filter keeps
+    its certified bound: nothing is approximated, the estimate of sample ``k``
+    comes ``delay`` samples later.
+
+    **Before the first measurement.** At the first ``delay`` steps no
+    measurement of a sample has arrived (what the late inputs hold then
+    belongs to no sample and is ignored, after the usual checks): the
+    component is not stepped, and every output is 0. The scheduling and
+    known inputs of those steps are kept for the samples they belong to.
+
+    Each step's inputs are checked as they arrive, by the component's own
+    checks (a bad value raises there, before anything changes), so the
+    component's checks must not couple a late input with the others of the
+    same step. ``delay = 0`` pairs every input with its own step: the
+    component itself, to the bit. The wrapper takes over ``component`` and
+    resets it; :meth:`get_state` holds the component's state and the kept
+    inputs.
+
+    Parameters
+    ----------
+    component : Sampled
+        A sampled (not timed) streaming component, e.g.
+        :class:`~lpvest.estimators.kalman.LPVKalmanFilter` or
+        :class:`~lpvest.estimators.hinf.HinfFilter`.
+    delay : int, default 1
+        By how many samples the late inputs arrive late (``>= 0``).
+    late : tuple of str, default ("y",)
+        The input ports that arrive late (the measurement); the others arrive
+        with their own sample.
+
+    Raises
+    ------
+    ArgumentTypeError
+        ``component`` is timed, or ``delay`` is not an integer.
+    ArgumentError
+        ``delay`` is negative, or ``late`` is empty or names no input of
+        ``component``.
+
+    Examples
+    --------
+    >>> from lpvest import load_system
+    >>> from lpvest.estimators.kalman import LPVKalmanFilter
+    >>> model = load_system("cox-toth-truncation").model()
+    >>> late = MeasurementDelay(LPVKalmanFilter(model), delay=1)
+    >>> late.step({"p": [0.5], "u": [1.0], "y": [0.0, 0.0]})["xhat"]    # no measurement yet
+    array([0., 0.])
+    >>> a = late.step({"p": [0.1], "u": [0.0], "y": [0.3, -0.2]})["xhat"]   # y of sample 0, paired with p_0, u_0
+    >>> b = LPVKalmanFilter(model).step({"p": [0.5], "u": [1.0], "y": [0.3, -0.2]})["xhat"]
+    >>> bool((a == b).all())
+    True
+    """
+
+    def __init__(self, component: Sampled, *, delay: int = 1, late: tuple[str, ...] = ("y",)) -> None:
+        if isinstance(component, TimedComponent) or getattr(component, "timed", False):
+            raise ArgumentTypeError(f"{type(component).__name__} keeps time (a timed component): a measurement "
+                                    "delay pairs samples of a sampled component")
+        if isinstance(delay, bool) or not isinstance(delay, int | np.integer):
+            raise ArgumentTypeError(f"delay must be an integer number of samples; found {abbreviate(delay, 30)}")
+        if delay < 0:
+            raise ArgumentError(f"delay must be >= 0 samples; found {delay}")
+        ports = tuple(component.input_ports)
+        names = [p.name for p in ports]
+        late = tuple(late)
+        unknown = [n for n in late if n not in names]
+        if not late or unknown:
+            raise ArgumentError(f"late must name inputs of {type(component).__name__} ({', '.join(names)}); "
+                                f"found {abbreviate(list(late), 60)}")
+        self._inner = component
+        self._inner_is_component = isinstance(component, Component)
+        self._delay = int(delay)
+        self._late = late
+        self._on_time = tuple(p for p in ports if p.name not in late)
+        self._late_ports = tuple(p for p in ports if p.name in late)
+        ins = tuple(replace(p, description=f"{p.description} (arriving {self._delay} sample(s) late)".lstrip())
+                    if p.name in late and self._delay else p for p in ports)
+        self._queue: deque[dict[str, np.ndarray]] = deque()
+        super().__init__(ins, tuple(component.output_ports))
+
+    @property
+    def component(self) -> Sampled:
+        """The wrapped component (it runs on the paired samples)."""
+        return self._inner
+
+    @property
+    def delay(self) -> int:
+        """By how many samples the late inputs arrive late."""
+        return self._delay
+
+    @property
+    def late(self) -> tuple[str, ...]:
+        """The names of the late inputs."""
+        return self._late
+
+    @property
+    def waiting(self) -> bool:
+        """Whether no measurement has arrived yet (the first ``delay`` steps)."""
+        return len(self._queue) < self._delay
+
+    # -- the component (this module's protocol) ----------------------------------------
+    def _reset(self) -> None:
+        self._inner.reset()
+        self._queue = deque()
+
+    def _arrived(self, inputs: Mapping[str, Any]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """The checked inputs of this step as float64 copies: (on time, late)."""
+        on_time = {p.name: np.array(inputs[p.name], dtype=float).reshape(p.shape) for p in self._on_time}
+        late = {p.name: np.array(inputs[p.name], dtype=float).reshape(p.shape) for p in self._late_ports}
+        return on_time, late
+
+    def _read(self, inputs: Mapping[str, Any]) -> Any:
+        inner = self._inner
+        if self._inner_is_component:
+            inner._read(inputs)  # type: ignore[attr-defined]  # the component's own checks, as they arrive
+        else:
+            inner.outputs(inputs)  # a component of the protocol only: its checks, no state change
+        return self._arrived(inputs)
+
+    def _read_checked(self, inputs: Mapping[str, Any]) -> Any:
+        inner = self._inner
+        if self._inner_is_component:
+            inner._read_checked(inputs)  # type: ignore[attr-defined]
+        else:
+            inner.outputs(inputs)
+        return self._arrived(inputs)
+
+    def _evaluate(self, sample: Any) -> tuple[dict[str, np.ndarray], Any]:
+        on_time, late = sample
+        if len(self._queue) < self._delay:  # no measurement of a sample yet
+            return {p.name: np.zeros(p.shape) for p in self._out}, (on_time, None)
+        paired = {**(self._queue[0] if self._delay else on_time), **late}
+        if self._inner_is_component:
+            inner: Any = self._inner
+            # every value of the pair passed the component's checks when it arrived
+            out, pending = inner._evaluate(inner._read_checked(paired))
+            return out, (on_time, (pending,))
+        return self._inner.outputs(paired), (on_time, (paired,))
+
+    def _commit(self, pending: Any) -> None:
+        on_time, inner_pending = pending
+        if inner_pending is not None:
+            if self._inner_is_component:
+                inner: Any = self._inner
+                inner._memo = None
+                inner._commit(inner_pending[0])
+            else:
+                self._inner.step(inner_pending[0])
+        if self._delay:
+            if len(self._queue) == self._delay:
+                self._queue.popleft()
+            self._queue.append(on_time)
+
+    def get_state(self) -> dict[str, Any]:
+        """The component's state and the kept inputs.
+
+        Returns
+        -------
+        state : dict
+            ``"component"``: the wrapped component's :meth:`get_state`;
+            ``"kept"``: how many samples' on-time inputs are kept (``<= delay``);
+            ``"inputs"``: per on-time input port, those values stacked, oldest
+            first (shape ``(kept, *port.shape)``).
+        """
+        n = len(self._queue)
+        return {
+            "component": self._inner.get_state(),
+            "kept": n,
+            "inputs": {p.name: np.array([k[p.name] for k in self._queue], dtype=float).reshape((n, *p.shape))
+                       for p in self._on_time},
+        }
+
+    def _set_state(self, state: Mapping[str, Any]) -> None:
+        try:
+            n, values, inner = state["kept"], state["inputs"], state["component"]
+        except (KeyError, TypeError):
+            raise DimensionError("a MeasurementDelay state needs 'component', 'kept' and 'inputs'") from None
+        if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 0 <= n <= self._delay:
+            raise DimensionError(f"kept = {abbreviate(n, 30)} must be an integer in [0, delay = {self._delay}]")
+        kept: deque[dict[str, np.ndarray]] = deque({} for _ in range(int(n)))
+        for p in self._on_time:
+            a = np.array(values.get(p.name) if isinstance(values, Mapping) else None, dtype=float)
+            if a.shape != (n, *p.shape):
+                raise DimensionError(f"kept inputs {p.name} have shape {a.shape}; expected {(int(n), *p.shape)}")
+            for i in range(int(n)):
+                kept[i][p.name] = a[i].copy()
+        self._inner.set_state(inner)
+        self._queue = kept
+
+
+def whole_samples(h: float, sample_time: float, *, rtol: float = 1e-9) -> int | None:
+    """How many samples a step ``h`` is: ``m = round(h / sample_time)`` when
+    ``h`` is that whole number ``m >= 1`` of samples to ``rtol`` relative
+    (``|h / sample_time - m| <= rtol * max(1, h / sample_time)``: the rule of
+    communication points, which hosts accumulate in floating point), else
+    ``None``. A ratio so large that ``rtol`` cannot tell ``m`` from ``m + 1``
+    (``rtol * h / sample_time >= 1/2``) is ``None`` too.
+
+    Parameters
+    ----------
+    h : float
+        The step (a communication step size).
+    sample_time : float
+        The time between samples (> 0).
+    rtol : float, default 1e-9
+        The relative tolerance.
+
+    Returns
+    -------
+    m : int or None
+        The number of samples, ``>= 1``; ``None``: not a whole number of samples.
+
+    Examples
+    --------
+    >>> whole_samples(3.0, 1.0), whole_samples(0.30000000000000004, 0.1), whole_samples(1.5, 1.0)
+    (3, 3, None)
+    >>> whole_samples(0.5, 1.0) is None, whole_samples(1e12, 1.0) is None
+    (True, True)
+    """
+    ratio = float(h) / float(sample_time)
+    if not math.isfinite(ratio) or not ratio > 0.5 or rtol * ratio >= 0.5:
+        return None
+    m = int(round(ratio))
+    return m if abs(ratio - m) <= rtol * max(1.0, ratio) else None
 
 
 def run_streaming(

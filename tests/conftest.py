@@ -15,7 +15,11 @@ def rng() -> np.random.Generator:
 from hypothesis import HealthCheck, settings  # noqa: E402
 
 # the FMU sets, built once per session (tests/conftest_fmu.py)
-from .conftest_fmu import experiment_fmus as experiment_fmus, fmus as fmus  # noqa: E402
+from .conftest_fmu import (  # noqa: E402
+    experiment_fmus as experiment_fmus,
+    fmus as fmus,
+    foreign_fmus as foreign_fmus,
+)
 
 # -- property-based tests (hypothesis): fixed seed in CI ---------------------------------------
 # derandomize: every run explores the same examples, so CI is reproducible; a

@@ -85,3 +85,15 @@ def experiment_fmus(fmus: FmuSet, tmp_path_factory: pytest.TempPathFactory):
     cache = ExperimentFmus(tmp_path_factory.mktemp("experiment-fmus"))
     cache.adopt(fmus.paths)
     return cache
+
+
+@pytest.fixture(scope="session")
+def foreign_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """The foreign C FMUs of tests/foreign_fmus.py (AllTypes, Limited), built
+    once per session."""
+    from .foreign_fmus import MODELS, build_foreign_fmu, compiler
+
+    if compiler() is None:
+        pytest.skip("the foreign test FMUs need a C compiler (cc or gcc)")
+    out = tmp_path_factory.mktemp("foreign-fmus")
+    return {name: build_foreign_fmu(name, out) for name in MODELS}

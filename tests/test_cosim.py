@@ -5,7 +5,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lpvest.cosim import AlgebraicLoopError, Component, CoSimulation, CoSimulationError, simulate
+from lpvest.cosim import (
+    AlgebraicLoopError,
+    Component,
+    CoSimulation,
+    CoSimulationError,
+    DiscardedStepWarning,
+    simulate,
+)
 from tests.tolerances import roundoff
 
 SCRIPTS = Path(__file__).parent / "fmu_scripts"
@@ -104,13 +111,19 @@ def test_driven_twice_and_bad_parameter(fmus):
 
 def test_component_failure_names_component_time_and_log(fmus):
     comps = [Component("f", fmus["failing"], {"fail_at": 3.0})]
-    # pythonfmu maps do_step() returning False to fmi2Discard; the master stops
-    # there and quotes the component's log
+    # pythonfmu maps do_step() returning False to fmi2Discard: the run stops
+    # there (the rows up to t = 3 kept), and the warning quotes the component's log
+    with pytest.warns(DiscardedStepWarning, match=r"component f: doStep at t = 3 returned discard: .*; the run "
+                                                  r"stops at t = 3 after 3 of 10 steps \(\[ERROR\] deliberate "
+                                                  r"failure for the test\)"):
+        res = simulate(comps, [], step_size=1.0, n_steps=10)
+    np.testing.assert_array_equal(res["time"], [0.0, 1.0, 2.0, 3.0])
+    # a caller that needs every step gets the error instead
     with pytest.raises(
         CoSimulationError,
         match=r"component f: doStep at t = 3 returned discard \(\[ERROR\] deliberate failure for the test\)",
     ):
-        simulate(comps, [], step_size=1.0, n_steps=10)
+        simulate(comps, [], step_size=1.0, n_steps=10, on_discard="error")
 
 
 def test_each_instance_keeps_its_own_log(fmus):
@@ -120,7 +133,7 @@ def test_each_instance_keeps_its_own_log(fmus):
              Component("g", fmus["gain"])]
     with pytest.raises(CoSimulationError, match=r"component f: doStep at t = 2 returned discard "
                                                 r"\(\[ERROR\] deliberate failure for the test\)"):
-        simulate(comps, ["r.y -> g.u[1]"], step_size=1.0, n_steps=5)
+        simulate(comps, ["r.y -> g.u[1]"], step_size=1.0, n_steps=5, on_discard="error")
 
 
 def test_only_connected_or_recorded_outputs_are_read(fmus):

@@ -578,7 +578,9 @@ def test_requirements_list_what_the_fmu_imports(fmus):
     ("infinite time", math.inf, 1.0, "must be finite"),
     ("skipped point", 4.0, 1.0, "the communication point t = 4 is not the FMU's current time 3"),
     ("repeated point", 2.0, 1.0, "the communication point t = 2 is not the FMU's current time 3"),
-    ("not the sample time", 3.0, 0.5, "the communication step h = 0.5 is not the sample time 1"),
+    ("half a sample", 3.0, 0.5, "the communication step h = 0.5 is not a whole number of samples of the sample "
+                                "time 1 (a step runs m >= 1 samples; set the parameter sample_time)"),
+    ("two and a half samples", 3.0, 2.5, "the communication step h = 2.5 is not a whole number of samples"),
 ])
 @pytest.mark.parametrize("name", ["PeixotoEx1Plant", "CoxTothTruncationKalman"])
 def test_a_step_that_is_not_the_next_sample_is_an_error_and_consumes_nothing(fmus, name, case, t, h, message):
@@ -613,6 +615,79 @@ def test_a_step_that_is_not_the_next_sample_is_an_error_and_consumes_nothing(fmu
         assert d.step(float(k), 1.0) == 0
     assert np.array_equal(d2.outputs(outputs), ref.outputs(outputs))
     d2.free()
+    ref.free()
+
+
+#: case -> (FMU, parameters): discrete-time FMUs, filters among them with the measurement one sample late
+WHOLE_STEPS = {
+    "plant": ("PeixotoEx1Plant", {}),
+    "kalman": ("CoxTothTruncationKalman", {}),
+    "kalman, measurement one sample late": ("CoxTothTruncationKalman", {"measurement_delay": 1}),
+    "hinf, measurement one sample late": ("PeixotoEx1HinfPD", {"measurement_delay": 1}),
+}  # the B-spline observer: test_observer_fmu_refuses_a_step_that_is_not_a_whole_number_of_samples
+
+
+@pytest.mark.parametrize("case", sorted(WHOLE_STEPS))
+def test_a_step_of_m_whole_samples_is_m_samples_with_the_inputs_held(fmus, case):
+    """fmi2DoStep(t, m h) runs m samples with the inputs held (zero-order hold):
+    afterwards every output reads what m one-sample steps with the same inputs
+    give (a feedthrough output the value of the last sample consumed, the
+    others their value at t + m h), to the bit, and the FMU's time is t + m h.
+    Steps of different whole numbers of samples follow one another; with the
+    measurement one sample late, each of the m samples pairs the held
+    measurement with the held scheduling of the sample before."""
+    from fmpy.fmi2 import fmi2LastSuccessfulTime
+
+    name, params = WHOLE_STEPS[case]
+    a, b = Driver(fmus[name], "a"), Driver(fmus[name], "b")
+    assert a.initialize(**params) == 0 and b.initialize(**params) == 0
+    h = a.step_size
+    ports = [v for v in a.md.modelVariables if v.causality == "input"]
+    outputs = [v.name for v in a.md.modelVariables if v.causality == "output"]
+    t = 0
+    for j, m in enumerate((3, 1, 2, 4, 5, 3)):
+        for d in (a, b):
+            for v in ports:
+                mid = 0.5 * (float(v.min) + float(v.max)) if v.min is not None else 0.0
+                assert d.set(v.name, mid + 0.3 * math.sin(j + v.valueReference)) == 0
+        assert a.step(t * h, m * h) == 0, a.errors()
+        for i in range(m):  # no input set in between: the same inputs again
+            assert b.step((t + i) * h, h) == 0, b.errors()
+        t += m
+        assert np.array_equal(a.outputs(outputs), b.outputs(outputs)), (j, m)
+        assert a.fmu.getRealStatus(fmi2LastSuccessfulTime) == pytest.approx(t * h, rel=1e-12)
+    a.free()
+    b.free()
+
+
+def test_a_step_whose_later_sample_fails_is_refused_and_consumes_nothing(fmus):
+    """A step of m samples is refused whole when one of its samples fails: here
+    sample 2 of 2, whose output overflows (y_1 = C_y x_1 + D_y w with x_1 = B_w w,
+    w = 1e308); nothing is consumed, and the step with a valid input goes on as
+    in a fresh instance."""
+    from fmpy.fmi2 import fmi2LastSuccessfulTime
+
+    d = Driver(fmus["PeixotoEx1Plant"])
+    assert d.initialize() == 0
+    outputs = [v.name for v in d.md.modelVariables if v.causality == "output"]
+    d.set_vector("p", 0.5)
+    d.set_vector("w", 1e308)
+    before = d.outputs(outputs)  # sample 0: y_0 = D_y w is finite
+    assert np.all(np.isfinite(before))
+    assert d.step(0.0, 2.0) == 3
+    assert any("fmi2DoStep refused at t = 0 (h = 2, 2 samples): sample 2 of 2 (at t = 1): output y[1] is not "
+               "finite (NaN or inf); nothing consumed" in m for m in d.errors()), d.errors()
+    assert d.fmu.getRealStatus(fmi2LastSuccessfulTime) == 0.0
+    assert np.array_equal(d.outputs(outputs), before)
+    d.set_vector("w", 0.25)
+    assert d.step(0.0, 2.0) == 0
+    ref = Driver(fmus["PeixotoEx1Plant"], "reference")
+    assert ref.initialize() == 0
+    ref.set_vector("p", 0.5)
+    ref.set_vector("w", 0.25)
+    assert ref.step(0.0, 1.0) == 0 and ref.step(1.0, 1.0) == 0
+    assert np.array_equal(d.outputs(outputs), ref.outputs(outputs))
+    d.free()
     ref.free()
 
 
@@ -679,8 +754,10 @@ def test_log_messages_are_capped(fmus):
 
 
 def test_discrete_time_fmus_declare_their_sample_time(fmus):
-    """One fmi2DoStep is one sample: the default experiment's step is the sample
-    time, the FMU cannot take other steps, and its outputs are piecewise constant."""
+    """A step is a whole number of samples: the default experiment's step is the
+    sample time, the FMU does not claim canHandleVariableCommunicationStepSize
+    (a step that is not a whole number of samples is refused), and its outputs
+    are piecewise constant."""
     for name in sorted(EXPECTED):
         root = ET.fromstring(z_read(fmus[name], "modelDescription.xml"))
         step = float(root.find("DefaultExperiment").get("stepSize"))

@@ -227,16 +227,74 @@ def test_invalid_filter_parameter_is_fmi2error(fmus):
     assert status == 3
     assert any("start" in m and "sometimes" in m for m in d.errors()), d.errors()
     d.free()
+    d = Driver(fmus["PeixotoEx1HinfPD"])
+    assert d.initialize(measurement_delay=-1) == 3
+    assert any("parameter measurement_delay = -1 is outside its declared range [0, 2147483647]; value rejected"
+               in m for m in d.errors()), d.errors()
+    d.free()
 
 
-def test_observer_fmu_refuses_a_communication_step_other_than_dt(fmus):
+@pytest.mark.parametrize("name", ["CoxTothTruncationKalman", "PeixotoEx1HinfPD", "CoxTothTruncationHinfRobust"])
+def test_a_filter_with_its_measurement_late_saves_and_restores_its_kept_samples(fmus, name):
+    """With measurement_delay = 1 the FMU state holds the filter's state and the
+    scheduling and input kept for the next measurement: saved mid-run (also right
+    after the first step, before any measurement), restored in the instance and
+    deserialized in a fresh one, the run continues identically."""
+    make, params, data, T, h = FILTERS[name]
+    est = make()
+    inputs = data(T)
+    late = dict(inputs)
+    late["y"] = np.concatenate([inputs["y"][:1], inputs["y"][:-1]])
+
+    def run(d: Driver, k0: int, k1: int) -> np.ndarray:
+        rows = []
+        for k in range(k0, k1):
+            _feed(d, late, k)
+            rows.append(np.concatenate([d.vector(p.name).ravel() for p in est.output_ports]))
+            assert d.step(k * h, h) == 0, d.errors()
+        return np.array(rows)
+
+    for cut in (1, T // 2):
+        d = Driver(fmus[name], "a")
+        assert d.initialize(**params, measurement_delay=1) == 0
+        run(d, 0, cut)
+        state = d.fmu.getFMUstate()
+        blob = d.fmu.serializeFMUstate(state)
+        first = run(d, cut, T)
+        d.fmu.setFMUstate(state)
+        assert np.array_equal(first, run(d, cut, T))
+        d.fmu.freeFMUstate(state)
+        d.free()
+        fresh = Driver(fmus[name], "b")
+        assert fresh.initialize(**params, measurement_delay=1) == 0
+        restored = fresh.fmu.deSerializeFMUstate(blob)
+        fresh.fmu.setFMUstate(restored)
+        assert np.array_equal(first, run(fresh, cut, T))
+        fresh.fmu.freeFMUstate(restored)
+        fresh.free()
+
+
+def test_observer_fmu_refuses_a_step_that_is_not_a_whole_number_of_samples(fmus):
+    """The observer's sample time is its parameter dt: a step of 1.5 dt is
+    refused and consumes nothing; a step of 10 dt runs 10 samples with the
+    inputs held, as the library observer stepped 10 times with those inputs."""
+    make, params, data, T, h = FILTERS["SridharLtvBSplineObserver"]
+    inputs = data(T)
+    est = make()
     d = Driver(fmus["SridharLtvBSplineObserver"])
-    assert d.initialize() == 0
-    d.set_vector("u", 0.0)
-    d.set_vector("y", 0.0)
-    assert d.step(0.0, 0.01) >= 2
-    assert any("communication step 0.01 s differs from the observer's sample time dt = 0.001 s" in m
-               for m in d.errors()), d.errors()
+    assert d.initialize(**params) == 0
+    for j in range(T // 10):
+        _feed(d, inputs, 10 * j)
+        if j == 3:
+            assert d.step(10 * j * h, 1.5 * h) == 3
+            assert any("the communication step h = 0.0015 is not a whole number of samples of the sample time "
+                       "0.001 (a step runs m >= 1 samples; set the parameter dt)" in m for m in d.errors()), d.errors()
+        assert d.step(10 * j * h, 10 * h) == 0, d.errors()
+        for _ in range(10):
+            want = est.step({n: v[10 * j] for n, v in inputs.items()})
+        got = _read(d, est)
+        for port in est.output_ports:  # feedthrough estimates hold the last sample's value
+            assert np.array_equal(got[port.name], np.asarray(want[port.name]).reshape(port.shape)), (j, port.name)
     d.free()
 
 
@@ -327,6 +385,82 @@ def test_plain_simulate_fmu_gives_the_library_estimates_one_row_later(fmus, name
             assert res[col][0] == ref[0], col
         else:  # a state (the H-infinity filter's xf): at t_(k+1) it is already the state of sample k + 1
             np.testing.assert_array_equal(res[col], ref, err_msg=col)
+
+
+@pytest.mark.parametrize("name", sorted(n for n in FILTERS if "BSplineObserver" not in n))
+def test_with_measurement_delay_simulate_fmu_gives_the_library_estimates_two_rows_later(fmus, name):
+    """A Jacobi master's alignment, fed to plain ``fmpy.simulate_fmu``: the row
+    at t_k holds p_k (and u_k) but y_(k-1) (the row at t_0: y_0 again, as
+    libcosim initializes it). With ``measurement_delay = 1`` the filter pairs
+    y_(k-1) with p_(k-1), u_(k-1) and its estimate of sample k - 1 is read
+    after the step from t_k, in the row at t_(k+1): the library's undelayed
+    estimate of sample k - 1, bit for bit. Rows t_0 and t_1 (no measurement
+    yet) read 0; a state (xf) at t_(k+1) is the undelayed state of sample k."""
+    from fmpy import simulate_fmu
+
+    make, params, data, T, h = FILTERS[name]
+    est = make()
+    inputs = data(T)
+    late = dict(inputs)
+    late["y"] = np.concatenate([inputs["y"][:1], inputs["y"][:-1]])
+    ins = [(f"{n}[{i + 1}]", v[:, i]) for n, v in late.items() for i in range(v.shape[1])]
+    table = np.zeros(T, dtype=[("time", float)] + [(col, float) for col, _ in ins])
+    table["time"] = np.arange(T) * h
+    for col, values in ins:
+        table[col] = values
+    outputs = [(p, f"{p.name}[{i + 1}]" if p.shape else p.name) for p in est.output_ports
+               for i in range(int(np.prod(p.shape)) if p.shape else 1) if len(p.shape) <= 1]
+    res = simulate_fmu(str(fmus[name]), input=table, output_interval=h, stop_time=T * h,
+                       start_values={**params, "measurement_delay": 1}, output=[col for _, col in outputs])
+    assert res.shape == (T + 1,)
+    want = {p.name: [] for p in est.output_ports}
+    for k in range(T):
+        out = est.step({n: v[k] for n, v in inputs.items()})
+        for p in est.output_ports:
+            want[p.name].append(np.asarray(out[p.name], dtype=float).reshape(-1))
+    for port, col in outputs:
+        i = int(col.split("[")[1].rstrip("]")) - 1 if "[" in col else 0
+        ref = np.array(want[port.name])[:, i]
+        if port.direct:
+            assert res[col][0] == 0 and res[col][1] == 0, col
+            np.testing.assert_array_equal(res[col][2:], ref[: T - 1], err_msg=col)
+        else:
+            assert res[col][0] == 0, col
+            np.testing.assert_array_equal(res[col][1:], ref, err_msg=col)
+
+
+@pytest.mark.parametrize(("name", "delay"), [("CoxTothTruncationKalman", 0), ("PeixotoEx1HinfPD", 1)])
+def test_simulate_fmu_with_a_step_of_two_samples_holds_the_inputs(fmus, name, delay):
+    """``fmpy.simulate_fmu(..., step_size=2 h)`` on a filter of sample time h:
+    every step sets the inputs at t_(2j) and runs samples 2j and 2j + 1 with
+    them (zero-order hold); the row at t_(2j+2) is the library's output after
+    those two samples, bit for bit, with the measurement one sample late too."""
+    from fmpy import simulate_fmu
+
+    from lpvest.protocol import MeasurementDelay
+
+    make, params, data, T, h = FILTERS[name]
+    est = make() if not delay else MeasurementDelay(make(), delay=delay)
+    inputs = data(T)
+    ins = [(f"{n}[{i + 1}]", v[:, i]) for n, v in inputs.items() for i in range(v.shape[1])]
+    table = np.zeros(T, dtype=[("time", float)] + [(col, float) for col, _ in ins])
+    table["time"] = np.arange(T) * h
+    for col, values in ins:
+        table[col] = values
+    cols = [f"{p.name}[{i + 1}]" for p in est.output_ports if len(p.shape) == 1 for i in range(p.shape[0])]
+    res = simulate_fmu(str(fmus[name]), input=table, step_size=2 * h, output_interval=2 * h, stop_time=T * h,
+                       start_values={**params, "measurement_delay": delay}, output=cols)
+    assert res.shape == (T // 2 + 1,)
+    np.testing.assert_array_equal(res["time"], np.arange(T // 2 + 1) * 2 * h)
+    for j in range(T // 2):
+        row = {n: v[2 * j] for n, v in inputs.items()}
+        est.step(row)
+        out = est.step(row)
+        after = est.outputs(row)  # a state (xf) is read at the step's end time
+        got = np.array([res[c][j + 1] for c in cols])
+        want = np.concatenate([np.asarray((out if p.direct else after)[p.name]).reshape(-1)
+                               for p in est.output_ports if len(p.shape) == 1])
+        assert np.array_equal(got, want), j
 
 
 def test_observer_resynchronises_after_a_rejected_sample(fmus):

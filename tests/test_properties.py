@@ -438,7 +438,9 @@ def mutated_ssd(draw, seed: str) -> bytes:
             i = draw(st.integers(0, len(parts) // 2 - 1)) * 2 + 1
             parts[i] = draw(st.one_of(
                 st.sampled_from(["../evil.fmu", "/abs.fmu", "resources/../../x.fmu", "", "nan", "inf", "-1", "1e999",
-                                 "99999999999", "true", "x" * 5000, "resources/Plant.fmu", "0"]),
+                                 "99999999999", "true", "x" * 5000, "resources/Plant.fmu", "0",
+                                 "%2e%2e/evil.fmu", "resources%2fPlant.fmu", "resources/%zz.fmu", "resources/%ff.fmu",
+                                 "resources/%50lant.fmu"]),
                 text)).encode("utf-8", "replace").replace(b'"', b"'").replace(b"<", b"&lt;").replace(b"&", b"&amp;")
             raw = b'"'.join(parts)
         else:

@@ -17,7 +17,16 @@ Examples
 from __future__ import annotations
 
 from .files import CoSimFile, CoSimResult, load_cosim
-from .master import AlgebraicLoopError, Component, Connection, CoSimulation, CoSimulationError, simulate
+from .master import (
+    AlgebraicLoopError,
+    Component,
+    Connection,
+    CoSimulation,
+    CoSimulationError,
+    DiscardedStep,
+    DiscardedStepWarning,
+    simulate,
+)
 from .ssp import read_ssp, simulate_ssp, write_ssp
 
 __all__ = [
@@ -26,6 +35,8 @@ __all__ = [
     "CoSimulation",
     "CoSimulationError",
     "AlgebraicLoopError",
+    "DiscardedStep",
+    "DiscardedStepWarning",
     "simulate",
     "CoSimFile",
     "CoSimResult",

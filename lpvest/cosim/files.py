@@ -21,7 +21,7 @@ The format, by example (``examples/peixoto_ex1_hinf.toml`` is a complete file)::
         "sched.p -> plant.p",        #   name connects every element (p[1], p[2], ...)
         "plant.y -> filter.y",
     ]
-    record = ["plant.z", "filter.zhat"]          # optional; default: every output
+    record = ["plant.z", "filter.zhat"]          # optional; default: every output but Strings
     plots = [["plant.z[1]", "filter.zhat[1]"]]   # optional panels; default: one per vector
 
     [components.sched]               # one table per component; the key is its name
@@ -51,7 +51,7 @@ import numpy as np
 from ..errors import ModelFileError, abbreviate, shorten
 from ..plotting import save_figure
 from ..tomlfiles import describe_value, read_toml
-from .master import Component, Connection, CoSimulation, CoSimulationError, step_count
+from .master import Component, Connection, CoSimulation, CoSimulationError, DiscardedStep, step_count
 
 __all__ = ["CoSimFile", "CoSimResult", "load_cosim", "DEFAULT_FMU_DIR"]
 
@@ -248,7 +248,7 @@ class CoSimFile:
             except CoSimulationError as exc:
                 raise self._reword(exc) from exc
             elapsed = time.perf_counter() - t0
-        return CoSimResult(self, data, elapsed, order)
+        return CoSimResult(self, data, elapsed, order, sim.discarded, tuple(sim.not_recorded))
 
     def to_ssp(self, path: str | Path) -> Path:
         """Write this system as an SSP file (:func:`lpvest.cosim.ssp.write_ssp`).
@@ -308,12 +308,20 @@ class CoSimResult:
         Seconds spent in the run (FMUs instantiated already).
     execution_order : list of str
         The per-step operations (:attr:`CoSimulation.execution_order`).
+    discarded : DiscardedStep or None, default None
+        Where the run stopped because a component discarded a step
+        (:attr:`CoSimulation.discarded`); ``None``: it ran every step.
+    not_recorded : tuple of str, default ()
+        Outputs the default record leaves out (String outputs,
+        :attr:`CoSimulation.not_recorded`).
     """
 
     spec: CoSimFile
     data: np.ndarray
     elapsed: float
     execution_order: list[str]
+    discarded: DiscardedStep | None = None
+    not_recorded: tuple[str, ...] = ()
 
     @property
     def names(self) -> list[str]:
@@ -411,6 +419,13 @@ class CoSimResult:
             f"{spec.step_size:g} (t = {spec.start_time:g} .. {spec.stop_time:g}) in {self.elapsed:.2f} s",
             "  each step: " + "; ".join(_short(op) for op in self.execution_order) + "; doStep each",
         ]
+        stop = self.discarded
+        if stop is not None:
+            lines[0] = (f"co-simulated {spec.path.name}: {n} component{'s' * (n != 1)}, stopped after {stop.steps} "
+                        f"of {spec.n_steps} steps of {spec.step_size:g} (t = {spec.start_time:g} .. {stop.time:g}: "
+                        f"{stop.component} discarded the next step) in {self.elapsed:.2f} s")
+        if self.not_recorded:
+            lines.append(f"  not recorded (String outputs): {shorten(', '.join(self.not_recorded), 200)}")
         width = max((len(c) for c in self.names), default=0)
         for c in self.names:
             col = self.data[c]

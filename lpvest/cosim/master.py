@@ -36,6 +36,7 @@ import math
 import re
 import shutil
 import tempfile
+import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -51,6 +52,8 @@ __all__ = [
     "CoSimulation",
     "CoSimulationError",
     "AlgebraicLoopError",
+    "DiscardedStep",
+    "DiscardedStepWarning",
     "simulate",
     "whole_steps",
     "step_count",
@@ -93,6 +96,45 @@ class AlgebraicLoopError(CoSimulationError):
     """
 
 
+class DiscardedStepWarning(UserWarning):
+    """A component discarded a step (fmi2Discard): the run stopped there and
+    its result ends at that step's communication point
+    (:attr:`CoSimulation.discarded` tells more)."""
+
+
+@dataclass(frozen=True)
+class DiscardedStep:
+    """Where a run stopped because a component's ``fmi2DoStep`` returned
+    fmi2Discard (:attr:`CoSimulation.discarded`).
+
+    Parameters
+    ----------
+    component : str
+        The component that discarded the step.
+    time : float
+        The communication point ``t_k`` the discarded step started from: the
+        result's last row.
+    steps : int
+        The steps completed (``k``; the result has ``k + 1`` rows).
+    last_successful_time : float or None
+        The component's ``fmi2LastSuccessfulTime`` (from ``time`` up to
+        ``time`` plus a step); ``None``: it does not say.
+    terminated : bool or None
+        The component's ``fmi2Terminated``: it asks to end the simulation
+        (``True``), or only could not complete this step (``False``);
+        ``None``: it does not say.
+    message : str
+        The warning's text (one line, with the component's last message).
+    """
+
+    component: str
+    time: float
+    steps: int
+    last_successful_time: float | None
+    terminated: bool | None
+    message: str
+
+
 @dataclass(frozen=True)
 class Component:
     """One FMU instance in a co-simulation.
@@ -104,18 +146,32 @@ class Component:
         results (a Python identifier).
     fmu : str or Path
         The ``.fmu`` file.
-    parameters : mapping, optional
-        Start values of parameters (or any settable variable) by name.
+    parameters : mapping or None, optional
+        Start values of parameters (or any settable variable) by name
+        (an Enumeration's by item name or value); ``None``: none.
     feedthrough : bool, optional
         Override the FMU's declared dependencies: ``False`` means no output
         depends on a current input (e.g. ``y = C x``), ``True`` every output
         does. Default: read from the FMU's model description.
+
+    Raises
+    ------
+    CoSimulationError
+        ``parameters`` is neither a mapping nor ``None``.
     """
 
     name: str
     fmu: str | Path
     parameters: Mapping[str, Any] = field(default_factory=dict)
     feedthrough: bool | None = None
+
+    def __post_init__(self) -> None:
+        if self.parameters is None:
+            object.__setattr__(self, "parameters", {})
+        elif not isinstance(self.parameters, Mapping):
+            raise CoSimulationError(
+                f"component {abbreviate(self.name, 30)}: parameters: expected a mapping of variable names to start "
+                f"values, found {type(self.parameters).__name__}", where=f"components.{abbreviate(self.name, 30)}")
 
 
 @dataclass(frozen=True)
@@ -165,7 +221,12 @@ class Connection:
         return cls(parts[0], parts[1])
 
 
-_TYPES = ("Real", "Integer", "Boolean")
+#: The FMI types the master exchanges and records (String variables are only
+#: set, as start values), and the fmi2Get/fmi2Set call of each: an Enumeration
+#: value is an fmi2Integer.
+_TYPES = ("Real", "Integer", "Boolean", "Enumeration")
+_CALL = {"Real": "Real", "Integer": "Integer", "Enumeration": "Integer", "Boolean": "Boolean", "String": "String"}
+_CALLS = ("Real", "Integer", "Boolean")  #: the calls that exchange values at every step
 
 
 @dataclass
@@ -175,6 +236,8 @@ class _Var:
     vr: int
     type: str
     causality: str
+    declared: str = ""  #: an Enumeration's type name
+    items: tuple[tuple[str, int], ...] = ()  #: an Enumeration's items (name, value)
 
 
 @dataclass
@@ -206,11 +269,27 @@ def _log_text(unit: _Unit) -> str:
 #: The range of an FMI 2.0 Integer (fmi2Integer is a 32-bit int).
 _INT_RANGE = (-(2**31), 2**31 - 1)
 
+#: fmi2Discard, the status of a step a component could not complete.
+_DISCARD = 2
 
-def _convert(value: Any, fmi_type: str, what: str, where: str) -> Any:
-    """A start value as the Python type of its FMI type; a clear error otherwise."""
+
+def _convert(value: Any, fmi_type: str, what: str, where: str, items: Sequence[tuple[str, int]] = ()) -> Any:
+    """A start value as the Python type of its FMI type (an Enumeration's:
+    the value of the item given by name or value, among ``items``); a clear
+    error otherwise."""
     kind = type(value).__name__
     shown = abbreviate(value, 30)
+    if fmi_type == "Enumeration":
+        names = dict(items)
+        if isinstance(value, str) and value in names:
+            return names[value]
+        listed = shorten(", ".join(f"{n} = {v}" for n, v in items), 80)
+        if not isinstance(value, str):
+            number = _convert(value, "Integer", what, where)
+            if not items or number in names.values():
+                return number
+        raise CoSimulationError(f"{what}: expected one of {listed} (a name or its value), found {kind} {shown}",
+                                where=where)
     if fmi_type == "Real":
         if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
             raise CoSimulationError(f"{what}: expected a number, found {kind} {shown}", where=where)
@@ -355,8 +434,9 @@ class CoSimulation:
     start_time : float, default 0.0
         Communication point ``t_0``.
     record : sequence of str, optional
-        Variables to record (``"comp.var"``, vectors expand). Default: every
-        output of every component.
+        Variables to record (``"comp.var"``, vectors expand; Real, Integer,
+        Boolean or Enumeration). Default: every output of every component but
+        String ones (:attr:`not_recorded`).
 
     Raises
     ------
@@ -384,6 +464,8 @@ class CoSimulation:
         self._units: list[_Unit] = []
         self._closed = False
         self._ran = False  # run() consumed the instances; reset() before running again
+        #: Where the last run stopped on a discarded step; ``None``: it ran every step.
+        self.discarded: DiscardedStep | None = None
         self._components = tuple(components)  # as constructed: reset() starts from them
         try:
             self._setup(components, connections, record)
@@ -433,6 +515,7 @@ class CoSimulation:
             raise CoSimulationError(f"step_size must be positive; found {step_size}", where="step_size")
         sim = cls.__new__(cls)
         sim._closed = True  # nothing to free
+        sim.discarded = None
         sim._units = []
         sim.step_size, sim.start_time = float(step_size), float(start_time)
         sim._setup(components, connections, record)
@@ -456,6 +539,7 @@ class CoSimulation:
         for i, c in enumerate(components):
             self._units.append(self._describe(i, c))
         self._links = self._connect(connections)
+        self._not_recorded: list[_Var] = []
         self._record = self._record_list(record)
         self._schedule = self._order()
         for unit in self._units:
@@ -473,8 +557,12 @@ class CoSimulation:
             raise CoSimulationError(f"component {spec.name}: {path} is not an FMI 2.0 co-simulation FMU", where=where)
         variables: dict[str, _Var] = {}
         for v in md.modelVariables:
-            if v.type in _TYPES or v.type == "String":
-                variables[v.name] = _Var(index, v.name, v.valueReference, v.type, v.causality)
+            if v.type in _CALL:
+                declared = v.declaredType
+                items = tuple((i.name, int(i.value)) for i in declared.items) \
+                    if v.type == "Enumeration" and declared is not None else ()
+                variables[v.name] = _Var(index, v.name, v.valueReference, v.type, v.causality,
+                                         declared.name if declared is not None else "", items)
         inputs = [v.name for v in md.modelVariables if v.causality == "input"]
         outputs = [v.name for v in md.modelVariables if v.causality == "output"]
         depends: dict[str, set[str]] = {}
@@ -556,8 +644,14 @@ class CoSimulation:
                 raise CoSimulationError(f"connection source {sname} is not an output ({s.causality})")
             if d.causality != "input":
                 raise CoSimulationError(f"connection target {dname} is not an input ({d.causality})")
-            if s.type != d.type or s.type not in _TYPES:
+            if s.type == "String" or d.type == "String":
+                raise CoSimulationError(f"connection {sname} -> {dname}: a String variable cannot be connected "
+                                        "(the master exchanges Real, Integer, Boolean and Enumeration values)")
+            if s.type != d.type:
                 raise CoSimulationError(f"connection {sname} -> {dname}: types {s.type} and {d.type}")
+            if s.type == "Enumeration" and s.declared != d.declared:
+                raise CoSimulationError(f"connection {sname} -> {dname}: Enumeration types "
+                                        f"{abbreviate(s.declared, 30)} and {abbreviate(d.declared, 30)}")
             key = (d.comp, d.name)
             if key in driven:
                 raise CoSimulationError(f"{dname} is driven twice (by {driven[key]} and {sname})")
@@ -632,7 +726,9 @@ class CoSimulation:
 
     def _record_list(self, record: Sequence[str] | None) -> list[_Var]:
         if record is None:
-            return [u.variables[o] for u in self._units for o in u.outputs if u.variables[o].type in _TYPES]
+            outputs = [u.variables[o] for u in self._units for o in u.outputs if o in u.variables]
+            self._not_recorded = [v for v in outputs if v.type not in _TYPES]
+            return [v for v in outputs if v.type in _TYPES]
         out: list[_Var] = []
         seen: set[tuple[int, str]] = set()
         for i, r in enumerate(record):
@@ -640,8 +736,8 @@ class CoSimulation:
             numeric = [v for v in found if v.type in _TYPES]
             if not numeric:
                 raise CoSimulationError(
-                    f"recorded variable {abbreviate(r)} is a {found[0].type}; only Real, Integer and Boolean "
-                    "variables can be recorded", where=f"record[{i + 1}]")
+                    f"recorded variable {abbreviate(r)} is a {found[0].type}; only Real, Integer, Boolean and "
+                    "Enumeration variables can be recorded", where=f"record[{i + 1}]")
             for v in numeric:
                 if (v.comp, v.name) not in seen:
                     seen.add((v.comp, v.name))
@@ -668,7 +764,7 @@ class CoSimulation:
                 if v.causality not in ("parameter", "input"):
                     raise CoSimulationError(f"component {name}: {e} is an {v.causality}; it cannot be set",
                                             where=where)
-                values.append((v, _convert(val, v.type, f"component {name}: {e}", where), par))
+                values.append((v, _convert(val, v.type, f"component {name}: {e}", where, v.items), par))
         unit.start_values = values
 
     def _instantiate(self) -> None:
@@ -723,7 +819,7 @@ class CoSimulation:
                    "Boolean": unit.fmu.setBoolean, "String": unit.fmu.setString}
         for v, x, par in unit.start_values:
             self._call(unit, f"setting {v.name} = {abbreviate(x, 30)}",
-                       lambda s=setters[v.type], r=v.vr, x=x: s([r], [x]),
+                       lambda s=setters[_CALL[v.type]], r=v.vr, x=x: s([r], [x]),
                        where=f"components.{unit.spec.name}.parameters.{par}")
 
     def run(
@@ -732,10 +828,22 @@ class CoSimulation:
         *,
         stop_time: float | None = None,
         progress: bool | None = None,
+        on_discard: str = "stop",
     ) -> np.ndarray:
         """Initialise and run ``n_steps`` communication steps (or up to
         ``stop_time``); return the recorded variables at ``t_0 .. t_N`` as a
         structured array with a ``"time"`` field (``N + 1`` rows).
+
+        A component whose ``fmi2DoStep`` returns fmi2Discard could not complete
+        the step (an FMU valid only up to some time asks to end the simulation
+        so: ``fmi2Terminated``). A fixed-step master cannot retry a shorter
+        step, so the run stops there, as FMI 2.0 leaves it to the master: the
+        result ends with the row of the communication point ``t_k`` the step
+        started from (every component completed it), a
+        :class:`DiscardedStepWarning` says so, and :attr:`discarded` tells who,
+        when, the component's ``fmi2LastSuccessfulTime`` and whether it asked
+        to terminate. ``on_discard="error"`` raises instead, for callers that
+        need every step.
 
         A tqdm progress bar is shown when ``progress`` is true (default: for
         runs longer than 20,000 steps).
@@ -750,18 +858,30 @@ class CoSimulation:
             ``n_steps`` and ``stop_time``.
         progress : bool, optional
             Show a progress bar; default: for more than 20,000 steps.
+        on_discard : {"stop", "error"}, default "stop"
+            What a discarded step does: stop the run with a warning, or raise
+            :class:`CoSimulationError`.
 
         Returns
         -------
         ndarray, shape (N + 1,)
             Structured array of float fields: ``"time"`` (``t_0 + k h``), then
-            one per recorded element, ``"comp.var"`` (:attr:`recorded`).
+            one per recorded element, ``"comp.var"`` (:attr:`recorded`);
+            Integer, Boolean (0, 1) and Enumeration values are exact. After a
+            discarded step ``k``: ``k + 1`` rows.
 
         Raises
         ------
         CoSimulationError
             The co-simulation is closed or has run (:meth:`reset` first), the
-            step count is invalid, or a component failed.
+            step count is invalid, or a component failed: a call returned
+            fmi2Error or fmi2Fatal, a get or set fmi2Discard, or
+            ``fmi2DoStep`` fmi2Discard with ``on_discard="error"``.
+
+        Warns
+        -----
+        DiscardedStepWarning
+            A component discarded a step: the run stopped there.
         """
         if self._closed:
             raise CoSimulationError("the co-simulation is closed")
@@ -773,6 +893,9 @@ class CoSimulation:
             n_steps = whole_steps(self.start_time, stop_time, self.step_size)  # type: ignore[arg-type]
         if n_steps < 0:
             raise CoSimulationError(f"n_steps must be non-negative; found {n_steps}")
+        if on_discard not in ("stop", "error"):
+            raise CoSimulationError(f"on_discard must be 'stop' or 'error'; found {abbreviate(on_discard, 30)}")
+        self.discarded = None
         h, t0 = self.step_size, self.start_time
         t_end = t0 + n_steps * h
         self._ran = True
@@ -799,6 +922,7 @@ class CoSimulation:
 
             bar = tqdm(total=n_steps, unit="step", desc="co-simulation")
         exchange = self._exchange
+        last = n_steps  # the last row: n_steps, or the step a component discarded
         try:
             for k in range(n_steps + 1):
                 t = t0 + k * h
@@ -814,22 +938,49 @@ class CoSimulation:
                 for do_step, component, unit in steppers:
                     status = do_step(component, t, h, 1)
                     if status > 1:
-                        self._fail(unit, "doStep", status, t)
+                        if status != _DISCARD or on_discard == "error":
+                            self._fail(unit, "doStep", status, t)
+                        self.discarded = self._discard(unit, t, k, n_steps)
+                        break
+                if self.discarded is not None:
+                    last = k
+                    break
                 if bar is not None:
                     bar.update(1)
         finally:
             if bar is not None:
                 bar.close()
         dtype = [("time", "f8")] + [(f"{self._units[v.comp].spec.name}.{v.name}", "f8") for v in self._record]
-        out = np.empty(n_steps + 1, dtype=dtype)
-        out["time"] = t0 + np.arange(n_steps + 1) * h
+        out = np.empty(last + 1, dtype=dtype)
+        out["time"] = t0 + np.arange(last + 1) * h
         extra_col = {i: col for col, (i, _, _) in enumerate(extra)}
         for i, (name, _) in enumerate(dtype[1:]):
             if i in extra_col:
-                out[name] = extra_data[:, extra_col[i]]  # type: ignore[index]
+                out[name] = extra_data[: last + 1, extra_col[i]]  # type: ignore[index]
             else:
-                out[name] = data[:, rec_cols[i][1]]
+                out[name] = data[: last + 1, rec_cols[i][1]]
         return out
+
+    def _discard(self, unit: _Unit, t: float, k: int, n_steps: int) -> DiscardedStep:
+        """What a discarded step of ``unit`` from ``t_k = t`` tells (its
+        status queries; ``None`` where the FMU does not answer), warned about."""
+        from ctypes import byref
+
+        from fmpy.fmi2 import fmi2Boolean, fmi2LastSuccessfulTime, fmi2Real, fmi2Terminated
+
+        flag, time = fmi2Boolean(0), fmi2Real(0.0)
+        funcs, comp = unit.fmu._functions, unit.fmu.component
+        terminated = bool(flag.value) if funcs["fmi2GetBooleanStatus"](comp, fmi2Terminated, byref(flag)) <= 1 \
+            else None
+        last = time.value if funcs["fmi2GetRealStatus"](comp, fmi2LastSuccessfulTime, byref(time)) <= 1 else None
+        name = unit.spec.name
+        why = {True: "it asks to end the simulation", False: "it could not complete the step",
+               None: "it does not say whether it asks to end the simulation"}[terminated]
+        reached = "" if last is None else f" (last successful time {last:g})"
+        message = (f"component {name}: doStep at t = {t:g} returned discard: {why}{reached}; the run stops at "
+                   f"t = {t:g} after {k} of {n_steps} steps ({_log_text(unit)})")
+        warnings.warn(message, DiscardedStepWarning, stacklevel=3)
+        return DiscardedStep(name, t, k, last, terminated, message)
 
     def _fail(self, unit: _Unit, what: str, status: int, t: float) -> None:
         label = ["ok", "warning", "discard", "error", "fatal", "pending"][status] if 0 <= status < 6 else "?"
@@ -853,8 +1004,8 @@ class CoSimulation:
         gets: list[tuple[int, str, list[_Var]]] = []
         for op, comp, items in self._schedule:
             if op == "get":
-                for typ in _TYPES:
-                    vars_ = [v for v in items if v.type == typ]
+                for typ in _CALLS:
+                    vars_ = [v for v in items if _CALL[v.type] == typ]
                     if vars_:
                         gets.append((comp, typ, vars_))
         seen = {(v.comp, v.name) for _, _, vs in gets for v in vs}
@@ -862,7 +1013,7 @@ class CoSimulation:
         for v in self._record:
             if (v.comp, v.name) not in seen:
                 seen.add((v.comp, v.name))
-                extra.setdefault((v.comp, v.type), []).append(v)
+                extra.setdefault((v.comp, _CALL[v.type]), []).append(v)
         n_real = sum(len(vs) for _, typ, vs in gets if typ == "Real")
         n_real += sum(len(vs) for (_, typ), vs in extra.items() if typ == "Real")
         self._store = store = np.zeros(max(n_real, 1))
@@ -890,8 +1041,8 @@ class CoSimulation:
         get_iter = iter(gets)
         for op, comp, items in self._schedule:
             if op == "get":
-                for typ in _TYPES:
-                    if any(v.type == typ for v in items):
+                for typ in _CALLS:
+                    if any(_CALL[v.type] == typ for v in items):
                         ops.append(get_op(*next(get_iter)))
             else:
                 ops.append(("set", comp, items))
@@ -906,8 +1057,8 @@ class CoSimulation:
                 continue
             _, comp, items = entry
             unit = self._units[comp]
-            for typ in _TYPES:
-                links = [it for it in items if it[1].type == typ]
+            for typ in _CALLS:
+                links = [it for it in items if _CALL[it[1].type] == typ]
                 if not links:
                     continue
                 n = len(links)
@@ -974,12 +1125,19 @@ class CoSimulation:
         for unit in self._units:
             self._call(unit, "reset", unit.fmu.reset)
         self._ran = False
+        self.discarded = None
 
     # -- inspection and clean-up ----------------------------------------------
     @property
     def recorded(self) -> list[str]:
         """The recorded variables, ``"comp.var"`` per element (the result's columns after ``"time"``)."""
         return [f"{self._units[v.comp].spec.name}.{v.name}" for v in self._record]
+
+    @property
+    def not_recorded(self) -> list[str]:
+        """The outputs the default record leaves out, ``"comp.var"``: String
+        outputs (the result holds numbers). Empty when ``record`` was given."""
+        return [f"{self._units[v.comp].spec.name}.{v.name}" for v in self._not_recorded]
 
     @property
     def execution_order(self) -> list[str]:
@@ -1032,6 +1190,7 @@ def simulate(
     start_time: float = 0.0,
     record: Sequence[str] | None = None,
     progress: bool | None = None,
+    on_discard: str = "stop",
 ) -> np.ndarray:
     """Build, run and close a :class:`CoSimulation` in one call.
 
@@ -1051,9 +1210,12 @@ def simulate(
     start_time : float, default 0.0
         Communication point ``t_0``.
     record : sequence of str, optional
-        Variables to record (``"comp.var"``); default: every output.
+        Variables to record (``"comp.var"``); default: every output but String ones.
     progress : bool, optional
         Show a progress bar; default: for more than 20,000 steps.
+    on_discard : {"stop", "error"}, default "stop"
+        A discarded step stops the run with a :class:`DiscardedStepWarning`
+        (fewer rows), or raises (see :meth:`CoSimulation.run`).
 
     Returns
     -------
@@ -1061,4 +1223,4 @@ def simulate(
         The recorded values, as :meth:`CoSimulation.run` returns them.
     """
     with CoSimulation(components, connections, step_size=step_size, start_time=start_time, record=record) as sim:
-        return sim.run(n_steps, stop_time=stop_time, progress=progress)
+        return sim.run(n_steps, stop_time=stop_time, progress=progress, on_discard=on_discard)

@@ -32,8 +32,25 @@ initial inputs             0.0 for every connector          the outputs at the s
                                                             in initialization mode
 recorded values            every connector after each       what an observer asks for, after
                            step, labelled with the step's   each step, at the step's end time
-                           *start* time
+                           *start* time                     (one call per type)
+variable types             Real, Integer, Boolean,          Real, Integer, Boolean, String;
+                           Enumeration; **no** String       **no** Enumeration: its SSP parser
+                           connector (it raises)            aborts the process on one
+an input connector         **wired** to the source of the   keeps its start value
+without a connection       connection looked at before it
+                           (or an UnboundLocalError)
+``source`` with ``%XX``    opened as written                decoded, then opened
 =========================  ===============================  ==================================
+
+:func:`simulate_ssp` checks a file against its FMUs and the importer before
+it runs it, so that what the table marks **no** is one line naming the
+component and the connector or parameter instead of a wrong result, a raw
+``KeyError`` or a crashed process; it reads every Real, Integer, Boolean and
+Enumeration output with its own type's call (a type's value references are
+its own) and leaves String outputs out, as the master does. :func:`read_ssp`
+decodes a ``source``'s percent-escapes before it checks that the name stays
+inside the archive. :func:`write_ssp` names the FMUs in the archive without
+characters that need escaping, so both importers open them.
 
 Jacobi stepping (both importers): every component takes its step from ``t_k``
 with the inputs that were read *after the previous step*, and the outputs are
@@ -50,6 +67,14 @@ calls by the connection graph instead, so ``y_k`` reaches the filter at
 ``t_k`` (no delay); ``tests/test_ssp.py`` measures the difference on
 Peixoto et al.'s Example 1 and checks it against this relation exactly.
 
+So :func:`write_ssp` (``jacobi=True``, the default) binds
+``measurement_delay = 1`` for every filter whose measurement comes from such
+an output: the filter then pairs ``y_k``, arriving in step ``k + 1``, with
+``theta_k`` and the known input of sample ``k``
+(:class:`~lpvest.protocol.MeasurementDelay`), and its estimate of sample
+``k``, read after step ``k + 1``, is the estimate our master reads at
+``t_k``: to the bit, with the certified bound intact.
+
 Examples
 --------
 >>> from lpvest.cosim import Component
@@ -64,10 +89,12 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import subprocess
 import sys
 import tempfile
 import textwrap
+import urllib.parse
 import xml.etree.ElementTree as ET
 import zipfile
 from collections.abc import Sequence
@@ -78,6 +105,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import abbreviate, shorten
+from ..fmi.build import write_zip_entry
+from ..fmi.spec import SPEC_FILE
 from .master import Component, Connection, CoSimulation, CoSimulationError, whole_steps
 
 __all__ = ["write_ssp", "read_ssp", "SspSystem", "simulate_ssp", "IMPORTERS"]
@@ -92,6 +121,8 @@ NS = {
     "osp": "http://opensimulationplatform.com/SSP/OSPAnnotations",
 }
 _OSP_TYPE = "com.opensimulationplatform"
+#: The types of a connector or parameter value (SSP 1.0 also has Binary: not an FMI 2.0 type).
+_TYPES = ("Real", "Integer", "Boolean", "String", "Enumeration")
 
 
 def _q(prefix: str, tag: str) -> str:
@@ -100,6 +131,12 @@ def _q(prefix: str, tag: str) -> str:
 
 def _fmt(value: float) -> str:
     return repr(float(value))
+
+
+#: What an archive member's name may hold besides letters and digits: no
+#: character a URI would have to percent-encode (fmpy opens a source as
+#: written, libcosim decodes it first).
+_UNSAFE = re.compile(r"[^A-Za-z0-9._-]")
 
 
 def write_ssp(
@@ -112,6 +149,7 @@ def write_ssp(
     stop_time: float | None = None,
     name: str = "lpvest-system",
     description: str | None = None,
+    jacobi: bool = True,
 ) -> Path:
     """Write the system as an SSP archive at ``path`` and return the path.
 
@@ -120,8 +158,21 @@ def write_ssp(
     the master can run; vector names expand to their elements (``"plant.y"``
     connects ``y[1], y[2], ...``; ``parameters={"x0": [1, 0]}`` binds
     ``x0[1]`` and ``x0[2]``). Each component lists every input and output of
-    its FMU as a connector; the communication step is declared as
-    libcosim's ``FixedStepAlgorithm`` annotation of the default experiment.
+    its FMU as a connector (an Enumeration's type in the SSD's
+    ``Enumerations``, its parameter values by item name); the communication
+    step is declared as libcosim's ``FixedStepAlgorithm`` annotation of the
+    default experiment. The same system gives a byte-identical file (the
+    archive's members in a fixed order, with a fixed time stamp).
+
+    **Measurement delay** (``jacobi=True``). The importers step every FMU in
+    parallel (Jacobi), so an input fed by an output with direct feedthrough
+    of a discrete-time FMU (a plant's ``y``) receives the value of the sample
+    before. A filter FMU with the parameter ``measurement_delay`` whose
+    measurement inputs (``y``) are fed so gets ``measurement_delay = 1``
+    bound in the file: it pairs each measurement with the scheduling and
+    known input of its own sample, and its estimate of sample ``k`` is read
+    after step ``k + 1``. A value given in the component's parameters is kept
+    as given.
 
     Parameters
     ----------
@@ -141,6 +192,12 @@ def write_ssp(
         Name of the system structure and of its system.
     description : str, optional
         The system's ``description`` attribute; ``None`` or empty: none.
+    jacobi : bool, default True
+        The file is for an importer that steps in parallel (Jacobi: libcosim,
+        fmpy's ``simulate_ssp``, most tools): bind ``measurement_delay`` as
+        above. ``False``: bind only the components' parameters (an importer
+        that orders its calls by the connections, as
+        :class:`~lpvest.cosim.CoSimulation` does).
 
     Returns
     -------
@@ -151,7 +208,10 @@ def write_ssp(
     ------
     CoSimulationError
         An invalid step size or set-up (as :class:`~lpvest.cosim.CoSimulation`
-        raises it).
+        raises it), or, with ``jacobi``, a filter whose measurement inputs
+        would arrive partly late, or with a scheduling or known input that
+        arrives late too (no ``measurement_delay`` pairs those; set it in the
+        component's parameters to write the file anyway).
     """
     from .._version import __version__
 
@@ -161,15 +221,31 @@ def write_ssp(
     with CoSimulation(components, connections, step_size=step_size, start_time=start_time) as sim:
         units = sim._units
         links = [(units[s.comp].spec.name, s.name, units[d.comp].spec.name, d.name) for s, d in sim._links]
+        delays = _jacobi_delays(sim) if jacobi else {}
         sources: dict[Path, str] = {}
         for u in units:
             fmu = Path(u.spec.fmu).resolve()
             if fmu not in sources:
-                stem, n = fmu.stem, 1
+                base = _UNSAFE.sub("_", fmu.stem)
+                stem, n = base, 1
                 while f"resources/{stem}.fmu" in sources.values():
                     n += 1
-                    stem = f"{fmu.stem}_{n}"
+                    stem = f"{base}_{n}"
                 sources[fmu] = f"resources/{stem}.fmu"
+        enumerations: dict[str, tuple[tuple[str, int], ...]] = {}  # SSD name -> items
+        enum_names: dict[tuple[str, tuple[tuple[str, int], ...]], str] = {}
+
+        def enumeration(var: Any) -> str:
+            """The SSD's name of an Enumeration variable's type (the FMU's,
+            numbered when another FMU has a different type of that name)."""
+            key = (var.declared, var.items)
+            if key not in enum_names:
+                ename, n = var.declared or "Enumeration", 1
+                while ename in enumerations:
+                    n += 1
+                    ename = f"{var.declared or 'Enumeration'}_{n}"
+                enumerations[ename], enum_names[key] = var.items, ename
+            return enum_names[key]
         for prefix, uri in NS.items():
             ET.register_namespace(prefix, uri)
         root = ET.Element(_q("ssd", "SystemStructureDescription"),
@@ -185,25 +261,39 @@ def write_ssp(
             })
             conns = ET.SubElement(comp, _q("ssd", "Connectors"))
             for v in u.md.modelVariables:
-                if v.causality in ("input", "output") and v.type in ("Real", "Integer", "Boolean", "String"):
+                if v.causality in ("input", "output") and v.name in u.variables:
                     c = ET.SubElement(conns, _q("ssd", "Connector"), {"name": v.name, "kind": v.causality})
-                    ET.SubElement(c, _q("ssc", v.type))
-            if u.start_values:
+                    ET.SubElement(c, _q("ssc", v.type),
+                                  {"name": enumeration(u.variables[v.name])} if v.type == "Enumeration" else {})
+            bound = list(u.start_values)
+            if u.spec.name in delays:
+                bound.append((u.variables[DELAY], delays[u.spec.name], DELAY))
+            if bound:
                 bindings = ET.SubElement(comp, _q("ssd", "ParameterBindings"))
                 binding = ET.SubElement(bindings, _q("ssd", "ParameterBinding"))
                 values = ET.SubElement(binding, _q("ssd", "ParameterValues"))
                 pset = ET.SubElement(values, _q("ssv", "ParameterSet"), {"version": "1.0", "name": u.spec.name})
                 params = ET.SubElement(pset, _q("ssv", "Parameters"))
-                for v, value, _ in u.start_values:
+                for v, value, _ in bound:
                     p = ET.SubElement(params, _q("ssv", "Parameter"), {"name": v.name})
                     text = (_fmt(value) if v.type == "Real" else str(value).lower() if v.type == "Boolean"
                             else str(value))
-                    ET.SubElement(p, _q("ssv", v.type), {"value": text})
+                    if v.type == "Enumeration":  # SSP 1.0: the item's name
+                        attrs = {"value": {i: n for n, i in v.items}.get(value, text), "name": enumeration(v)}
+                    else:
+                        attrs = {"value": text}
+                    ET.SubElement(p, _q("ssv", v.type), attrs)
         if links:
             cs = ET.SubElement(system, _q("ssd", "Connections"))
             for a, av, b, bv in links:
                 ET.SubElement(cs, _q("ssd", "Connection"),
                               {"startElement": a, "startConnector": av, "endElement": b, "endConnector": bv})
+        if enumerations:
+            enums = ET.SubElement(root, _q("ssd", "Enumerations"))
+            for ename, items in enumerations.items():
+                e = ET.SubElement(enums, _q("ssc", "Enumeration"), {"name": ename})
+                for iname, ivalue in items:
+                    ET.SubElement(e, _q("ssc", "Item"), {"name": iname, "value": str(ivalue)})
         exp = {"startTime": _fmt(start_time)}
         if stop_time is not None:
             exp["stopTime"] = _fmt(stop_time)
@@ -215,11 +305,67 @@ def write_ssp(
         ET.indent(root)
         xml = ET.tostring(root, encoding="unicode", xml_declaration=False)
         path.parent.mkdir(parents=True, exist_ok=True)
-        with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
-            z.writestr("SystemStructure.ssd", '<?xml version="1.0" encoding="UTF-8"?>\n' + xml + "\n")
+        ssd = '<?xml version="1.0" encoding="UTF-8"?>\n' + xml + "\n"
+        with zipfile.ZipFile(path, "w") as z:
+            write_zip_entry(z, "SystemStructure.ssd", ssd.encode())
             for fmu, arc in sources.items():
-                z.write(fmu, arc)
+                write_zip_entry(z, arc, fmu.read_bytes())
     return path
+
+
+#: The filter parameter :func:`write_ssp` binds for a Jacobi importer
+#: (:data:`lpvest.fmi.registry.MEASUREMENT_DELAY`).
+DELAY = "measurement_delay"
+
+
+def _late_inputs(fmu: str | Path) -> tuple[str, ...]:
+    """The input ports that ``measurement_delay`` pairs in an lpvest estimator
+    FMU (its spec's ``late_inputs``); ``()`` for any other FMU."""
+    try:
+        with zipfile.ZipFile(fmu) as z:
+            spec = json.loads(z.read(f"resources/{SPEC_FILE}"))
+    except (KeyError, OSError, ValueError, zipfile.BadZipFile):
+        return ()
+    kind = spec.get("estimator") if isinstance(spec, dict) else None
+    return tuple(kind.get("late_inputs") or ()) if isinstance(kind, dict) else ()
+
+
+def _jacobi_delays(sim: CoSimulation) -> dict[str, int]:
+    """Component -> the ``measurement_delay`` a Jacobi importer needs, for each
+    filter that has the parameter (not set by the caller) and whose
+    measurement inputs are fed by outputs that arrive one sample late: outputs
+    with direct feedthrough of a discrete-time FMU, read after the step that
+    consumed the sample."""
+    units, out = sim._units, {}
+    for i, u in enumerate(units):
+        var = u.variables.get(DELAY)
+        if var is None or var.causality != "parameter" or DELAY in u.spec.parameters:
+            continue
+        ports = _late_inputs(u.spec.fmu)
+        if not ports:
+            continue
+        fed = {d.name: s for s, d in sim._links if d.comp == i}
+        late = set()
+        for name, src in fed.items():
+            source = units[src.comp]
+            discrete = next((v.variability == "discrete" for v in source.md.modelVariables if v.name == src.name),
+                            False)
+            if discrete and source.depends.get(src.name):
+                late.add(name)
+        if not late:
+            continue
+        measured = {n for n in fed if n.split("[")[0] in ports}
+        if late != measured:
+            early = sorted(measured - late)
+            others = sorted(late - measured)
+            what = (f"{', '.join(others)} would arrive one sample late too" if others
+                    else f"{', '.join(early)} would arrive in time")
+            raise CoSimulationError(
+                f"component {u.spec.name}: under Jacobi stepping {', '.join(sorted(late & measured))} would "
+                f"arrive one sample late and {what}: no {DELAY} pairs them; set {DELAY} in the component's "
+                "parameters to write the file anyway", where=f"components.{u.spec.name}")
+        out[u.spec.name] = 1
+    return out
 
 
 @dataclass(frozen=True)
@@ -232,7 +378,8 @@ class SspSystem:
     name : str
         The system structure's name (``""`` if none).
     components : dict of str to str
-        Component -> FMU inside the archive.
+        Component -> FMU inside the archive (its member name: the
+        component's ``source`` with percent-escapes decoded).
     connections : list of tuple of (str, str)
         ``("comp.var", "comp.var")``, source then target.
     parameters : dict of str to list of tuple of (str, str, str)
@@ -245,6 +392,11 @@ class SspSystem:
         Start time of the default experiment.
     stop_time : float or None, default None
         Stop time of the default experiment; ``None``: not declared.
+    connectors : dict of str to list of tuple of (str, str, str), default {}
+        Component -> ``[(name, kind, type)]`` of every connector, ``type``
+        as declared (``"Real"``, ..., ``"Enumeration"``; ``""``: not declared).
+    sources : dict of str to str, default {}
+        Component -> its ``source`` as written (a URI reference).
     """
 
     name: str
@@ -255,6 +407,8 @@ class SspSystem:
     step_size: float | None = None
     start_time: float = 0.0
     stop_time: float | None = None
+    connectors: dict[str, list[tuple[str, str, str]]] = field(default_factory=dict)
+    sources: dict[str, str] = field(default_factory=dict)
 
 
 #: The largest SystemStructure.ssd read (bytes): a description of a few
@@ -273,6 +427,40 @@ def _safe_member(source: str) -> bool:
     if not source or "\\" in source or "\x00" in source or source.startswith("/") or ":" in source.split("/")[0]:
         return False
     return all(part not in ("", ".", "..") for part in source.split("/"))
+
+
+_ESCAPE = re.compile(r"%([0-9A-Fa-f]{2})")
+
+
+def _member(path: Path, where: str, source: str) -> str:
+    """The archive member a component's ``source`` names: the URI reference
+    with its percent-escapes decoded (libcosim decodes them before it opens
+    the file). Refused: a malformed escape, an escape that decodes to a path
+    separator, and a name that leaves the archive (``..``, absolute, a drive),
+    checked after decoding, and again after every further decoding, so that
+    no importer that decodes twice is led outside either."""
+    shown = abbreviate(source, 60)
+    member, text = None, source
+    for _ in range(8):  # each round removes a level of '%25': a name holds few
+        if text.count("%") != len(_ESCAPE.findall(text)):
+            raise _ssp_error(path, f"{where}: source {shown} has a malformed percent-escape (expected '%' and two "
+                                   "hexadecimal digits)")
+        if any(chr(int(h, 16)) in "/\\" for h in _ESCAPE.findall(text)):
+            raise _ssp_error(path, f"{where}: source {shown} has a percent-escape that decodes to a path separator")
+        try:
+            decoded = urllib.parse.unquote(text, errors="strict")
+        except UnicodeDecodeError:
+            raise _ssp_error(path, f"{where}: source {shown} does not decode to UTF-8 text") from None
+        if not _safe_member(decoded):
+            also = "" if decoded == source else f" (decoded: {abbreviate(decoded, 60)})"
+            raise _ssp_error(path, f"{where}: source {shown}{also} is not a relative path inside the archive "
+                                   "(no '..', no absolute path)")
+        if member is None:
+            member = decoded
+        if decoded == text:
+            return member
+        text = decoded
+    raise _ssp_error(path, f"{where}: source {shown} is percent-encoded too many times over")
 
 
 def _number(path: Path, where: str, text: str | None, *, positive: bool = False) -> float:
@@ -298,6 +486,8 @@ def _checked_value(path: Path, where: str, typ: str, text: str) -> str:
             raise _ssp_error(path, f"{where}: {value} is outside the range of an FMI Integer")
     elif typ == "Boolean" and text.strip().lower() not in ("true", "false", "1", "0"):
         raise _ssp_error(path, f"{where}: expected true or false, found {abbreviate(text, 30)}")
+    elif typ == "Enumeration" and not text:
+        raise _ssp_error(path, f"{where}: expected the name of an enumeration item, found ''")
     return text
 
 
@@ -306,9 +496,11 @@ def read_ssp(path: str | Path) -> SspSystem:
 
     Every FMU a component names must be a member of the archive given by a
     relative name without ``..`` (an importer unpacks the archive and opens
-    it); numbers and parameter values must parse as their types. Anything
-    else raises :class:`~lpvest.cosim.CoSimulationError` naming the file and
-    the element.
+    it), checked after its percent-escapes are decoded (a ``source`` is a URI
+    reference; an escape may not stand for a path separator); every
+    connection joins declared connectors; numbers and parameter values must
+    parse as their types. Anything else raises
+    :class:`~lpvest.cosim.CoSimulationError` naming the file and the element.
 
     Parameters
     ----------
@@ -319,8 +511,13 @@ def read_ssp(path: str | Path) -> SspSystem:
     Returns
     -------
     SspSystem
-        The components, connections, parameter values, output connectors and
-        default experiment.
+        The components, connections, parameter values, connectors and default
+        experiment.
+
+    Raises
+    ------
+    CoSimulationError
+        The file is not such an SSP file (one line: the file and the element).
     """
     path = Path(path)
     try:
@@ -341,27 +538,35 @@ def read_ssp(path: str | Path) -> SspSystem:
     if system is None:
         raise _ssp_error(path, "SystemStructure.ssd has no System")
     components: dict[str, str] = {}
+    sources: dict[str, str] = {}
     parameters: dict[str, list[tuple[str, str, str]]] = {}
     outputs: dict[str, list[str]] = {}
+    connectors: dict[str, list[tuple[str, str, str]]] = {}
     for i, c in enumerate(system.findall("ssd:Elements/ssd:Component", NS)):
         cname = c.get("name", "")
         where = f"component {abbreviate(cname, 30)}" if cname else f"component {i + 1}"
         if not cname or cname in components:
             raise _ssp_error(path, f"{where}: expected a unique, non-empty name")
         source = c.get("source", "")
-        if not _safe_member(source):
-            raise _ssp_error(path, f"{where}: source {abbreviate(source, 60)} is not a relative path inside "
-                                   "the archive (no '..', no absolute path)")
-        if source not in members:
-            raise _ssp_error(path, f"{where}: source {abbreviate(source, 60)} is not in the archive")
-        components[cname] = source
-        outputs[cname] = [k.get("name", "") for k in c.findall("ssd:Connectors/ssd:Connector", NS)
-                          if k.get("kind") == "output"]
+        member = _member(path, where, source)
+        if member not in members:
+            also = "" if member == source else f" (decoded: {abbreviate(member, 60)})"
+            raise _ssp_error(path, f"{where}: source {abbreviate(source, 60)}{also} is not in the archive")
+        components[cname], sources[cname] = member, source
+        declared = []
+        for j, k in enumerate(c.findall("ssd:Connectors/ssd:Connector", NS)):
+            kname = k.get("name", "")
+            if not kname:
+                raise _ssp_error(path, f"{where}: connector {j + 1}: expected a name")
+            typ = next((t for t in _TYPES if k.find(f"ssc:{t}", NS) is not None), "")
+            declared.append((kname, k.get("kind", ""), typ))
+        connectors[cname] = declared
+        outputs[cname] = [n for n, kind, _ in declared if kind == "output"]
         values = []
         binding = c.find("ssd:ParameterBindings/ssd:ParameterBinding", NS)
         if binding is not None:
             for p in binding.findall("ssd:ParameterValues/ssv:ParameterSet/ssv:Parameters/ssv:Parameter", NS):
-                for typ in ("Real", "Integer", "Boolean", "String"):
+                for typ in _TYPES:
                     e = p.find(f"ssv:{typ}", NS)
                     if e is not None:
                         name = p.get("name", "")
@@ -375,9 +580,12 @@ def read_ssp(path: str | Path) -> SspSystem:
         if not all(ends):
             raise _ssp_error(path, f"connection {i + 1}: expected startElement, startConnector, endElement and "
                                    "endConnector")
-        for element in (ends[0], ends[2]):
+        for element, connector in ((ends[0], ends[1]), (ends[2], ends[3])):
             if element not in components:
                 raise _ssp_error(path, f"connection {i + 1}: no component {abbreviate(element, 30)}")
+            if all(connector != n for n, _, _ in connectors[element]):  # fmpy would raise a KeyError
+                raise _ssp_error(path, f"connection {i + 1}: component {abbreviate(element, 30)} has no connector "
+                                       f"{abbreviate(connector, 40)}")
         connections.append((f"{ends[0]}.{ends[1]}", f"{ends[2]}.{ends[3]}"))
     step = None
     start, stop = 0.0, None
@@ -391,7 +599,8 @@ def read_ssp(path: str | Path) -> SspSystem:
                 alg = a.find("osp:Algorithm/osp:FixedStepAlgorithm", NS)
                 if alg is not None and alg.get("baseStepSize") is not None:
                     step = _number(path, "FixedStepAlgorithm baseStepSize", alg.get("baseStepSize"), positive=True)
-    return SspSystem(root.get("name", ""), components, connections, parameters, outputs, step, start, stop)
+    return SspSystem(root.get("name", ""), components, connections, parameters, outputs, step, start, stop,
+                     connectors, sources)
 
 
 def _typed(typ: str, text: str) -> Any:
@@ -404,6 +613,15 @@ def _typed(typ: str, text: str) -> Any:
     return text
 
 
+#: The output types :func:`simulate_ssp` records (as the master does: String
+#: outputs are left out, the result holds numbers), and what each importer
+#: can exchange (fmpy has no String calls; libcosim does not see an FMU's
+#: Enumeration variables).
+_RECORDED = ("Real", "Integer", "Boolean", "Enumeration")
+_EXCHANGED = {"fmpy": ("Real", "Integer", "Boolean", "Enumeration"),
+              "libcosim": ("Real", "Integer", "Boolean", "String")}
+
+
 def simulate_ssp(
     path: str | Path,
     *,
@@ -412,6 +630,12 @@ def simulate_ssp(
     stop_time: float | None = None,
 ) -> np.ndarray:
     """Run an SSP file with another co-simulation master.
+
+    The file is checked against its FMUs first: every connector and bound
+    parameter must be a variable of the component's FMU, of the declared type
+    and kind, and one the importer can exchange (fmpy has no String calls;
+    libcosim does not see Enumeration variables); a mistake is one line
+    naming the component and the connector or parameter.
 
     Parameters
     ----------
@@ -429,15 +653,25 @@ def simulate_ssp(
     Returns
     -------
     numpy structured array
-        ``"time"`` and every output connector as ``"comp.var"``, one row per
-        step, the values read *after* the step: row ``k`` holds the outputs at
-        ``t_{k+1}``, and its ``"time"`` is ``t_{k+1}`` (fmpy labels that row
-        ``t_k``; the label is corrected here so both importers agree).
+        ``"time"`` and every Real, Integer, Boolean and Enumeration output
+        connector as ``"comp.var"`` (floats; String outputs are left out, as
+        :class:`~lpvest.cosim.CoSimulation` leaves them out), one row per
+        step, the values read *after* the step: row ``k`` holds the outputs
+        at ``t_{k+1}``, and its ``"time"`` is ``t_{k+1}`` (fmpy labels that
+        row ``t_k``; the label is corrected here so both importers agree).
+
+    Raises
+    ------
+    CoSimulationError
+        An invalid file (:func:`read_ssp`), a connector or parameter that does
+        not match the FMU or that the importer cannot exchange, no step size
+        or stop time, or a failed run.
 
     The stepping is each importer's own (Jacobi, see the module documentation).
     """
     if importer not in IMPORTERS:
         raise CoSimulationError(f"importer {abbreviate(importer, 30)}: expected one of {', '.join(IMPORTERS)}")
+    path = Path(path)
     system = read_ssp(path)
     if system.step_size is None:
         raise CoSimulationError(f"{path}: the SSD declares no step size (OSP FixedStepAlgorithm baseStepSize)")
@@ -451,11 +685,16 @@ def simulate_ssp(
         n_steps = whole_steps(t0, end, h)
     if n_steps < 1:
         raise CoSimulationError(f"n_steps must be at least 1; found {n_steps}")
-    names = [f"{c}.{o}" for c, outs in system.outputs.items() for o in outs]
+    variables = _fmu_variables(path, system)
+    _check_against_fmus(path, system, variables, importer)
+    recorded = {c: [n for n, kind, _ in conns if kind == "output" and variables[c][n].type in _RECORDED]
+                for c, conns in system.connectors.items()}
     if importer == "fmpy":
-        values = _run_fmpy(Path(path), system, n_steps)
+        values = _run_fmpy(path, system, variables, n_steps)
     else:
-        values = _run_libcosim(Path(path), system, n_steps)
+        values = _run_libcosim(path, {c: [(n, variables[c][n].type) for n in names] for c, names in recorded.items()},
+                               n_steps)
+    names = [f"{c}.{n}" for c, outs in recorded.items() for n in outs]
     out = np.empty(n_steps, dtype=[("time", "f8")] + [(n, "f8") for n in names])
     out["time"] = t0 + np.arange(1, n_steps + 1) * h
     for n in names:
@@ -463,45 +702,120 @@ def simulate_ssp(
     return out
 
 
-def _run_fmpy(path: Path, system: SspSystem, n_steps: int) -> dict[str, np.ndarray]:
+def _fmu_variables(path: Path, system: SspSystem) -> dict[str, dict[str, Any]]:
+    """Component -> {name: fmpy's ScalarVariable} of its FMU, each FMU in the
+    archive read once."""
+    from fmpy import read_model_description
+
+    by_member: dict[str, dict[str, Any]] = {}
+    with tempfile.TemporaryDirectory(prefix="lpvest-ssp-") as tmp, zipfile.ZipFile(path) as z:
+        for comp, member in system.components.items():
+            if member not in by_member:
+                try:
+                    fmu = z.extract(member, tmp)
+                    md = read_model_description(fmu, validate=False)
+                except Exception as exc:  # fmpy raises plain exceptions for a bad FMU
+                    text = shorten(" ".join(str(exc).split()), 80)
+                    raise CoSimulationError(f"{path}: component {comp}: {member} is not a valid FMU: {text}") from exc
+                by_member[member] = {v.name: v for v in md.modelVariables}
+    return {comp: by_member[member] for comp, member in system.components.items()}
+
+
+def _check_against_fmus(path: Path, system: SspSystem, variables: dict[str, dict[str, Any]], importer: str) -> None:
+    """Every connector and bound parameter is a variable of its component's
+    FMU, of the declared kind and type, which the importer can exchange."""
+    def variable(comp: str, name: str, what: str) -> Any:
+        v = variables[comp].get(name)
+        if v is None:
+            raise CoSimulationError(f"{what}: its FMU {system.components[comp]} has no variable "
+                                    f"{abbreviate(name, 40)}")
+        return v
+
+    exchanged = _EXCHANGED[importer]
+    for comp, conns in system.connectors.items():
+        for name, kind, typ in conns:
+            what = f"{path}: component {comp}: connector {abbreviate(name, 40)}"
+            v = variable(comp, name, f"{what} ({kind or 'no kind'})")
+            if kind in ("input", "output") and v.causality != kind:
+                raise CoSimulationError(f"{what} has kind {kind}, but the FMU's variable has causality {v.causality}")
+            if typ and typ != v.type:
+                raise CoSimulationError(f"{what} is declared {typ}, but the FMU's variable has type {v.type}")
+            if v.type not in exchanged:
+                raise CoSimulationError(f"{what}: {_CANNOT[importer]} {v.type} variables; run this file with "
+                                        f"{'libcosim' if importer == 'fmpy' else 'fmpy'}")
+    if importer == "fmpy":
+        # fmpy wires an input connector without a connection to the source of
+        # the connection it looked at before (or fails): refused, not run wrong
+        driven = {target for _, target in system.connections}
+        for comp, conns in system.connectors.items():
+            for name, kind, _ in conns:
+                if kind == "input" and f"{comp}.{name}" not in driven:
+                    raise CoSimulationError(f"{path}: component {comp}: input connector {abbreviate(name, 40)} is not "
+                                            "connected, and fmpy's simulate_ssp would feed it another connection's "
+                                            "value; connect it, or run this file with libcosim")
+        for comp, source in system.sources.items():
+            if source != system.components[comp]:  # fmpy opens the source as written
+                raise CoSimulationError(f"{path}: component {comp}: fmpy's simulate_ssp cannot open the "
+                                        f"percent-encoded source {abbreviate(source, 60)}; run this file with libcosim")
+    for comp, values in system.parameters.items():
+        for name, typ, text in values:
+            what = f"{path}: component {comp}: parameter {abbreviate(name, 40)}"
+            v = variable(comp, name, what)
+            if typ != v.type:
+                raise CoSimulationError(f"{what} is given as {typ}, but the FMU's variable has type {v.type}")
+            if typ == "Enumeration":
+                if importer == "libcosim":  # its SSP parser aborts the process on an Enumeration value
+                    raise CoSimulationError(f"{what}: {_CANNOT[importer]} Enumeration variables; run this file "
+                                            "with fmpy")
+                _item_value(path, comp, v, text)
+
+
+_CANNOT = {"fmpy": "fmpy's simulate_ssp cannot exchange", "libcosim": "libcosim does not see"}
+
+
+def _item_value(path: Path, comp: str, variable: Any, text: str) -> int:
+    """The value of the Enumeration item named ``text`` of an FMU's variable."""
+    items = {i.name: int(i.value) for i in variable.declaredType.items} if variable.declaredType else {}
+    if text not in items:
+        listed = shorten(", ".join(items), 60)
+        raise CoSimulationError(f"{path}: component {comp}: parameter {abbreviate(variable.name, 40)}: "
+                                f"{abbreviate(text, 30)} is not an item of its type (items: {listed})")
+    return items[text]
+
+
+def _run_fmpy(path: Path, system: SspSystem, variables: dict[str, dict[str, Any]],
+              n_steps: int) -> dict[str, np.ndarray]:
     from fmpy.ssp.simulation import simulate_ssp as fmpy_simulate
     from fmpy.ssp.ssd import Parameter, ParameterSet
 
     params = []
-    starts: dict[str, dict[str, str | None]] = {}
     for comp, values in system.parameters.items():
         for name, typ, text in values:
             if typ == "String":
                 # fmpy has no setter for String variables: a value equal to the
                 # FMU's start value needs none; any other cannot be applied
-                if comp not in starts:
-                    starts[comp] = _start_values(path, system.components[comp])
-                if starts[comp].get(name) == text:
+                if variables[comp][name].start == text:
                     continue
                 raise CoSimulationError(
                     f"{path}: fmpy's simulate_ssp cannot set the String parameter {comp}.{name} = {text!r} "
                     "(it has no setter for String variables); run this file with libcosim"
                 )
-            params.append(Parameter(name=f"{comp}.{name}", type=typ, value=_typed(typ, text)))
+            value = _item_value(path, comp, variables[comp][name], text) if typ == "Enumeration" \
+                else _typed(typ, text)
+            params.append(Parameter(name=f"{comp}.{name}", type=typ, value=value))
     h, t0 = system.step_size, system.start_time
     assert h is not None
     # fmpy steps while time < stop_time with time += h: stop half a step early
     # so that exactly n_steps are taken whatever the round-off
-    res = fmpy_simulate(str(path), start_time=t0, stop_time=t0 + (n_steps - 0.5) * h, step_size=h,
-                        parameter_set=ParameterSet(parameters=params) if params else None)
+    try:
+        res = fmpy_simulate(str(path), start_time=t0, stop_time=t0 + (n_steps - 0.5) * h, step_size=h,
+                            parameter_set=ParameterSet(parameters=params) if params else None)
+    except Exception as exc:  # fmpy raises plain exceptions (an FMU's error status, a file it cannot read)
+        text = shorten(" ".join(str(exc).split()), 120)
+        raise CoSimulationError(f"{path}: fmpy's simulate_ssp failed: {type(exc).__name__}: {text}") from exc
     if res.shape[0] != n_steps:
         raise CoSimulationError(f"fmpy took {res.shape[0]} steps; expected {n_steps}")
     return {n: np.asarray(res[n], dtype=float) for n in res.dtype.names if n != "time"}
-
-
-def _start_values(path: Path, source: str) -> dict[str, str | None]:
-    """Start values (as written in the model description) of an FMU inside an SSP."""
-    from fmpy import read_model_description
-
-    with tempfile.TemporaryDirectory(prefix="lpvest-ssp-") as tmp, zipfile.ZipFile(path) as z:
-        fmu = z.extract(source, tmp)
-        md = read_model_description(fmu, validate=False)
-    return {v.name: v.start for v in md.modelVariables}
 
 
 _LIBCOSIM_SCRIPT = """
@@ -515,25 +829,32 @@ ex = CosimExecution.from_ssp_file(path)
 obs = CosimObserver.create_last_value()
 ex.add_observer(obs)
 index = {ex.slave_infos()[i].name.decode(): ex.slave_infos()[i].index for i in range(ex.num_slaves())}
+# each type has its own value references (and its own observer call): read by type
+readers = {"Real": obs.last_real_values, "Integer": obs.last_integer_values, "Boolean": obs.last_boolean_values}
 refs = {}
-for comp, names in wanted.items():
+for comp, outputs in wanted.items():
     byname = {v.name.decode(): v.reference for v in ex.slave_variables(index[comp])}
-    refs[comp] = [byname[n] for n in names]
+    for typ in readers:
+        names = [n for n, t in outputs if t == typ]
+        if names:
+            refs.setdefault(comp, []).append((typ, names, [byname[n] for n in names]))
 rows = []
 for k in range(n_steps):
     if not ex.step(1):
         sys.exit(f"libcosim failed at step {k}: {ex.status()}")
-    rows.append({comp: obs.last_real_values(index[comp], refs[comp]) for comp in wanted})
+    rows.append({f"{comp}.{n}": float(x) for comp, groups in refs.items() for typ, names, r in groups
+                 for n, x in zip(names, readers[typ](index[comp], r))})
 print("RESULT" + json.dumps(rows))
 """
 
 
-def _run_libcosim(path: Path, system: SspSystem, n_steps: int) -> dict[str, np.ndarray]:
+def _run_libcosim(path: Path, wanted: dict[str, list[tuple[str, str]]], n_steps: int) -> dict[str, np.ndarray]:
+    """Run the file in libcosim; ``wanted``: component -> [(output, FMI type)] to read after each step."""
     try:
         import libcosimpy  # noqa: F401 - checked here, used in the subprocess
     except ImportError as exc:
         raise CoSimulationError("libcosim is not installed (pip install libcosimpy)") from exc
-    wanted = {c: outs for c, outs in system.outputs.items() if outs}
+    wanted = {c: outs for c, outs in wanted.items() if outs}
     with tempfile.TemporaryDirectory(prefix="lpvest-libcosim-") as tmp:
         proc = subprocess.run(
             [sys.executable, "-c", textwrap.dedent(_LIBCOSIM_SCRIPT), str(Path(path).resolve()), str(n_steps),
@@ -545,6 +866,4 @@ def _run_libcosim(path: Path, system: SspSystem, n_steps: int) -> dict[str, np.n
         tail = (proc.stderr or proc.stdout).strip().splitlines()[-3:]
         raise CoSimulationError(f"{path}: libcosim failed (exit status {proc.returncode}): " + " | ".join(tail))
     rows = json.loads(line[len("RESULT"):])
-    return {f"{c}.{n}": np.array([r[c][i] for r in rows]) for c, names in wanted.items()
-            for i, n in enumerate(names)}
-
+    return {f"{c}.{n}": np.array([r[f"{c}.{n}"] for r in rows]) for c, outs in wanted.items() for n, _ in outs}

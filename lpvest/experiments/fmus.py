@@ -243,7 +243,8 @@ class CoSimSpec:
 
         comps = [Component(name, fmus.path(ident), dict(params)) for name, ident, params in self.components]
         return simulate(comps, list(self.connections), step_size=self.step_size, n_steps=self.n_steps,
-                        record=None if self.record is None else list(self.record), progress=progress)
+                        record=None if self.record is None else list(self.record), progress=progress,
+                        on_discard="error")  # an experiment needs every step
 
     def describe(self) -> str:
         """``"sched (PeixotoEx1Scheduler) -> plant (PeixotoEx1Plant) ..."`` in component order."""

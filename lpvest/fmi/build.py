@@ -96,6 +96,7 @@ __all__ = [
     "BuildWarning",
     "BRIDGE_PLATFORMS",
     "manifest_inputs",
+    "write_zip_entry",
     "DEFAULT_OUT",
     "MANIFEST_FILE",
 ]
@@ -685,7 +686,24 @@ def _model_description(plan: FmuPlan, bundle: Bundle, staging: Path, guid: str) 
     return xml, counts["input"], counts["output"], counts["parameter"]
 
 
-def _zip_write(z: zipfile.ZipFile, name: str, data: bytes, executable: bool = False) -> None:
+def write_zip_entry(z: zipfile.ZipFile, name: str, data: bytes, executable: bool = False) -> None:
+    """Write ``data`` as the member ``name`` of ``z`` so that the archive
+    depends on nothing but the members and their order: a fixed time stamp
+    (1980-01-01), Unix permissions 0644 (0755 when ``executable``), deflate at
+    level 9. The FMU builder and the SSP writer
+    (:func:`lpvest.cosim.ssp.write_ssp`) write every member so.
+
+    Parameters
+    ----------
+    z : zipfile.ZipFile
+        An archive open for writing.
+    name : str
+        The member's name (``/``-separated).
+    data : bytes
+        Its content.
+    executable : bool, default False
+        Mark it executable (a shared library).
+    """
     info = zipfile.ZipInfo(name, date_time=_ZIP_TIME)
     info.compress_type = zipfile.ZIP_DEFLATED
     info.create_system = 3  # Unix: the permissions below are honoured
@@ -732,7 +750,7 @@ def build_fmu(plan: FmuPlan, out_dir: str | Path, *, progress: Callable[[str], N
         with zipfile.ZipFile(partial, "w") as z:
             for name in sorted(entries):
                 data, executable = entries[name]
-                _zip_write(z, name, data, executable)
+                write_zip_entry(z, name, data, executable)
         partial.replace(target)
     return target
 

@@ -39,9 +39,20 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ArgumentError, ArgumentTypeError
+from ..protocol import MeasurementDelay
 from .spec import MODEL_P0, MODEL_X0, SCHEDULING_CENTRE, Parameter
 
-__all__ = ["EstimatorKind", "ESTIMATOR_KINDS", "estimator_kinds", "resolve"]
+__all__ = ["EstimatorKind", "ESTIMATOR_KINDS", "MEASUREMENT_DELAY", "estimator_kinds", "resolve", "build_estimator"]
+
+#: The parameter of every estimator FMU whose kind has late inputs
+#: (:attr:`EstimatorKind.late_inputs`): how many samples its measurement
+#: arrives late; 1 under a master that steps the FMUs in parallel (Jacobi).
+MEASUREMENT_DELAY = Parameter(
+    "measurement_delay", 0,
+    "samples by which the measurement arrives late (1 under a Jacobi master: libcosim, fmpy's simulate_ssp); "
+    "it is paired with the other inputs of its own sample, and the estimate of sample k is output at step "
+    "k + measurement_delay (every output 0 before the first measurement)",
+    minimum=0)
 
 
 @dataclass(frozen=True)
@@ -81,6 +92,12 @@ class EstimatorKind:
         ``"module:function"`` returning why a model of the right type cannot
         have this estimator (``None`` when it can); the build plan leaves such
         an estimator out with a note.
+    late_inputs : tuple of str
+        The measurement inputs a master may deliver late (``("y",)``): the
+        FMU then has the parameter ``measurement_delay`` (:data:`MEASUREMENT_DELAY`),
+        and a value ``d > 0`` wraps the estimator in
+        :class:`~lpvest.protocol.MeasurementDelay` (:func:`build_estimator`).
+        Empty (the default): no such parameter. Only for a sampled estimator.
     """
 
     role: str
@@ -93,6 +110,12 @@ class EstimatorKind:
     requirements: tuple[str, ...] = ()
     sample_time: str | None = None
     supports: str | None = None
+    late_inputs: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.late_inputs and self.sample_time is not None:
+            raise ArgumentError(f"estimator {self.role}: a timed estimator (sample_time = {self.sample_time!r}) "
+                                "cannot have late inputs (a measurement delay pairs samples)")
 
     def applies_to(self, model: object) -> bool:
         """Whether ``model`` is an instance of one of the model types in :attr:`models`.
@@ -135,7 +158,7 @@ class EstimatorKind:
         -------
         dict
             ``role``, ``factory``, ``parameters`` (each :meth:`Parameter.to_json`),
-            ``description`` and ``sample_time``.
+            ``description``, ``sample_time`` and ``late_inputs``.
         """
         return {
             "role": self.role,
@@ -143,6 +166,7 @@ class EstimatorKind:
             "parameters": [p.to_json() for p in self.parameters],
             "description": self.description,
             "sample_time": self.sample_time,
+            "late_inputs": list(self.late_inputs),
         }
 
 
@@ -177,12 +201,42 @@ def resolve(target: str) -> Callable[..., Any]:
     return obj
 
 
+def build_estimator(kind: dict[str, Any], model: Any, design: Any, params: dict[str, Any]) -> Any:
+    """The streaming component of an estimator FMU: the kind's factory called
+    with the kind's parameters, wrapped in :class:`~lpvest.protocol.MeasurementDelay`
+    when the kind has late inputs and ``params["measurement_delay"]`` is > 0.
+
+    Parameters
+    ----------
+    kind : dict
+        The kind as stored in the FMU spec (:meth:`EstimatorKind.to_json`).
+    model : object
+        The model the FMU was built for.
+    design : object
+        The carried design, or ``None``.
+    params : dict
+        The FMU's parameter values by name (the kind's parameters, and
+        ``measurement_delay`` when it has late inputs).
+
+    Returns
+    -------
+    Sampled or Timed
+        The component (:mod:`lpvest.protocol`).
+    """
+    options = {p["name"]: params[p["name"]] for p in kind["parameters"]}
+    component = resolve(kind["factory"])(model, design=design, **options)
+    late = tuple(kind.get("late_inputs") or ())
+    delay = int(params.get(MEASUREMENT_DELAY.name, 0)) if late else 0
+    return MeasurementDelay(component, delay=delay, late=late) if delay else component
+
+
 #: The estimator FMUs built for every applicable model: one line per filter.
 ESTIMATOR_KINDS: list[EstimatorKind] = [
     EstimatorKind("Kalman", "lpvest.fmi.factories.kalman:build", models=("affine",),
                   parameters=(Parameter("x0", MODEL_X0, "mean of the initial state x_0"),
                               Parameter("P0", MODEL_P0, "covariance of the initial state x_0")),
-                  description="exact LPV Kalman filter in innovation form (Cox & Toth (4a)-(4e))"),
+                  description="exact LPV Kalman filter in innovation form (Cox & Toth (4a)-(4e))",
+                  late_inputs=("y",)),
     EstimatorKind("TruncatedKalman", "lpvest.fmi.factories.truncated:build", models=("affine",),
                   parameters=(Parameter("tau", 10, "memory: the gain uses p_(t-tau)..p_t", minimum=0,
                                         maximum=100_000),
@@ -191,7 +245,9 @@ ESTIMATOR_KINDS: list[EstimatorKind] = [
                               Parameter("start_p", SCHEDULING_CENTRE,
                                         "scheduling value the steady-state start is computed at")),
                   requirements=("scipy",),  # the steady-state start solves a DARE with scipy
-                  description="truncated-memory LPV Kalman filter (Cox & Toth Theorem 1)"),
+                  description="truncated-memory LPV Kalman filter (Cox & Toth Theorem 1)", late_inputs=("y",)),
+    # no late inputs: the observer's plant (continuous time, y(t) = C(t) x(t)) has no feedthrough, so a
+    # Jacobi master delivers y(t_k) and u(t_k) together, in time (docs/fmus.md, "Measurement delay")
     EstimatorKind("BSplineObserver", "lpvest.fmi.factories.bspline:build", models=("ltv-io",),
                   parameters=(Parameter("dt", 0.001, "sample time = communication step (s)", minimum=1e-12),
                               Parameter("window", 4.0, "window length (s)", minimum=0.0),
@@ -206,10 +262,12 @@ ESTIMATOR_KINDS: list[EstimatorKind] = [
                   supports="lpvest.estimators.bspline:observer_supports"),
     EstimatorKind("HinfPD", "lpvest.fmi.factories.hinf:build", models=("polytopic", "affine"),
                   design="lpvest.fmi.designs:hinf_pd",
-                  description="gain-scheduled H-infinity filter (Peixoto et al. Theorem 1), best epsilon"),
+                  description="gain-scheduled H-infinity filter (Peixoto et al. Theorem 1), best epsilon",
+                  late_inputs=("y",)),
     EstimatorKind("HinfRobust", "lpvest.fmi.factories.hinf:build", models=("polytopic", "affine"),
                   design="lpvest.fmi.designs:hinf_robust",
-                  description="robust H-infinity filter (Peixoto et al. Corollary 1), best epsilon"),
+                  description="robust H-infinity filter (Peixoto et al. Corollary 1), best epsilon",
+                  late_inputs=("y",)),
 ]
 
 

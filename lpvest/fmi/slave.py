@@ -15,20 +15,24 @@ What the base does for every FMU (docs/fmus.md states the conventions):
   inputs with start values, outputs listed (with their dependencies) by the
   builder, parameters with start values (variability ``fixed``);
 - **step semantics.** A discrete-time component (not ``timed``) gets the
-  parameter ``sample_time``: every ``fmi2DoStep`` must be one sample, with
-  ``h = sample_time``. After ``fmi2SetReal`` of the inputs at ``t_k``, an
+  parameter ``sample_time``: ``fmi2DoStep(t_k, h)`` with ``h = m sample_time``
+  (``m >= 1`` whole, to the relative tolerance of communication points)
+  runs the ``m`` samples ``k .. k + m - 1`` with the inputs held (zero-order
+  hold). After ``fmi2SetReal`` of the inputs at ``t_k``, an
   output reads its value at sample ``k`` (computed on demand, before
   ``fmi2DoStep``: zero-delay masters use this). ``fmi2DoStep(t_k, h)``
-  consumes sample ``k``; until an input is set again, an output that depends
+  consumes its samples; until an input is set again, an output that depends
   on the inputs at the same instant (direct feedthrough: a filter's
-  estimates, a plant's ``y``) holds its sample-``k`` value, and an output that
-  depends on none (a plant's state, a scheduler) reads its value at
-  ``t_k + h``. So a host that reads after each step (``fmpy.simulate_fmu``,
-  libcosim, SSP importers) records the estimate of sample ``k`` at
-  ``t_k + h``. A step that is not a valid next sample (``h <= 0`` or not
-  finite, ``h`` not the sample time, a communication point other than the
-  FMU's time, after ``fmi2Terminate``, with an invalid input) is refused with
-  fmi2Error and a log line, and consumes nothing;
+  estimates, a plant's ``y``) holds its value of the last sample consumed,
+  ``k + m - 1``, and an output that depends on none (a plant's state, a
+  scheduler) reads its value at ``t_k + h``. So a host that reads after each
+  one-sample step (``fmpy.simulate_fmu``, libcosim, SSP importers) records the
+  estimate of sample ``k`` at ``t_k + h``. A step that is not a valid next
+  step (``h <= 0`` or not finite, ``h`` not a whole number of samples, a
+  communication point other than the FMU's time, after ``fmi2Terminate``,
+  with an invalid input, a sample among the ``m`` that fails or has an
+  output that is not finite) is refused with fmi2Error and a log line, and
+  consumes nothing;
 - bad input never raises into pythonfmu (that would be fmi2Fatal and leaves the
   instance unusable): a NaN/inf value, a value outside the declared range or an
   invalid parameter is rejected, logged at status fmi2Error with a message
@@ -62,7 +66,7 @@ from pythonfmu.variables import Boolean, Integer, Real, String
 
 from .._version import __version__
 from ..errors import ArgumentError
-from ..protocol import Component
+from ..protocol import Component, whole_samples
 from .naming import element_names
 from .spec import Parameter, read_spec
 from .state import copy_state, decode_state, encode_state
@@ -215,10 +219,14 @@ class LpvestSlave(Fmi2Slave):
             self._add_parameter(par)
         component = self.make_component(self.parameters())
         self._timed = bool(getattr(component, "timed", False))
+        # the parameter that is the sample time: a step runs a whole number of samples (None: a function of time)
+        self._sample_time: str | None = (
+            "sample_time" if not self._timed else (self.spec.get("estimator") or {}).get("sample_time"))
+        self._whole: tuple[float, Any, int | None] = (math.nan, math.nan, None)  # (h, sample time, samples)
         if not self._timed:
             h = float(self.spec.get("sample_time", 1.0))
-            self._add_parameter(Parameter("sample_time", h, "time between samples (s): every fmi2DoStep is one "
-                                          "sample, with communication step = sample_time", minimum=0.0))
+            self._add_parameter(Parameter("sample_time", h, "time between samples (s): a communication step of "
+                                          "m whole samples (m >= 1) runs m samples, the inputs held", minimum=0.0))
         self._input_ports = tuple(component.input_ports)
         self._output_ports = tuple(component.output_ports)
         self._inputs = {p.name: np.zeros(p.shape) for p in self._input_ports}
@@ -595,15 +603,33 @@ class LpvestSlave(Fmi2Slave):
         if abs(t - self._time) > _TIME_RTOL * max(abs(t), abs(self._time), h):
             return (f"the communication point t = {_num(t)} is not the FMU's current time {_num(self._time)} "
                     "(a skipped or repeated point; restore a state with fmi2SetFMUstate to go back)")
-        if not self._timed:
-            ts = float(self._params["sample_time"])
-            if abs(h - ts) > _TIME_RTOL * ts:
-                return (f"the communication step h = {_num(h)} is not the sample time {_num(ts)} "
-                        "(one fmi2DoStep is one sample; set the parameter sample_time)")
+        if self._sample_time is not None and self._samples_in(h) is None:
+            ts = self._sample_length()
+            return (f"the communication step h = {_num(h)} is not a whole number of samples of the sample time "
+                    f"{_num(ts)} (a step runs m >= 1 samples; set the parameter {self._sample_time})")
         if self._invalid:
             return (f"invalid input(s) {', '.join(self._invalid)} (set valid values, restore a state with "
                     "fmi2SetFMUstate, or reset)")
         return None
+
+    def _samples_in(self, h: float) -> int | None:
+        """How many samples the step ``h`` runs (``h = m`` times the sample time,
+        :func:`lpvest.protocol.whole_samples`); ``None``: not a whole number.
+        A component that is a function of time (no sample time) runs one step."""
+        if self._sample_time is None:
+            return 1
+        ts = self._params[self._sample_time]
+        last = self._whole  # the last answer: a master steps by the same h again and again
+        if last[0] == h and last[1] == ts:
+            return last[2]
+        m = whole_samples(h, float(ts), rtol=_TIME_RTOL)
+        self._whole = (h, ts, m)
+        return m
+
+    def _sample_length(self) -> float:
+        """The sample time (the value of the parameter :attr:`_sample_time` names)."""
+        assert self._sample_time is not None
+        return float(self._params[self._sample_time])
 
     def do_step(self, current_time: float, step_size: float) -> bool:
         try:
@@ -629,20 +655,76 @@ class LpvestSlave(Fmi2Slave):
         inputs = self._step_inputs
         current = self._outputs
         self._step_inputs = None
+        m = self._samples_in(h)
+        assert m is not None  # checked by _step_problem
+        saved = component.get_state() if m > 1 else None  # a refused sample of the m consumes none of them
+        # a timed component with a sample time (the B-spline observer) takes its m samples one by one
+        h1 = h if m == 1 else self._sample_length()
         # the outputs were computed for these very inputs: the component takes the step it kept
         advanced = inputs is not None and self._advance is not None and (
-            self._advance(dt=h, t_end=t + h) if self._timed else self._advance()) is not None
+            self._advance(dt=h1, t_end=t + h1 if m > 1 else t + h) if self._timed else self._advance()) is not None
         if not advanced:
             inputs = inputs if inputs is not None else self._input_dict()
             if self._timed:
-                component.step(inputs, dt=h, t_end=t + h)
+                component.step(inputs, dt=h1, t_end=t + h1 if m > 1 else t + h)
             else:
                 component.step(inputs)
+        if m > 1:
+            assert saved is not None
+            held = inputs if inputs is not None else self._input_dict()
+            last = self._more_samples(t, h, m, held, saved)
+            if last is None:
+                self._dirty = True  # the sample-k outputs are computed again (the same numbers)
+                return False
+            current = last
         self._time = t + h
         # feedthrough outputs hold the value of the sample just consumed; with none, nothing holds
         self._held = {name: current[name] for name in self._feedthrough} if self._feedthrough else None
         self._dirty = True
         return True
+
+    def _more_samples(self, t: float, h: float, m: int, inputs: dict[str, np.ndarray],
+                      saved: Any) -> dict[str, Any] | None:
+        """Samples 2..m of a step of m samples, the inputs held (zero-order hold):
+        the outputs of the last one, or ``None`` (logged) when one of them fails
+        or has an output that is not finite; the component is then put back to
+        ``saved``, its state before the step, so the step consumes nothing."""
+        component = self._component
+        checked = bool(self._inputs_in_range)
+        ts = self._sample_length()
+        problem = None
+        values: Mapping[str, Any] = {}
+        for i in range(1, m):
+            try:
+                if self._timed:  # the sample of t + i ts, ending at the master's point t + h after the last
+                    values = component.step(inputs, dt=ts, t_end=t + h if i == m - 1 else t + (i + 1) * ts)
+                elif self._prepare is not None and self._advance is not None:
+                    values = self._prepare(inputs, checked=checked)
+                    self._advance()
+                else:
+                    values = component.step(inputs)
+            except Exception as exc:  # noqa: BLE001 - logged below, nothing reaches pythonfmu
+                problem = f"{type(exc).__name__}: {exc}"
+            else:
+                bad = self._not_finite(values)
+                if bad:
+                    problem = f"output {', '.join(bad[:5])}{' ...' if len(bad) > 5 else ''} is not finite (NaN or inf)"
+            if problem is not None:
+                component.set_state(saved)
+                self._log(Fmi2Status.error, f"fmi2DoStep refused at t = {_num(t)} (h = {_num(h)}, {m} samples): "
+                          f"sample {i + 1} of {m} (at t = {_num(t + i * ts)}): {problem}; nothing consumed")
+                return None
+        return dict(values)
+
+    def _not_finite(self, values: Mapping[str, Any]) -> list[str]:
+        """The output variables among ``values`` (by port) that are NaN or inf."""
+        bad = []
+        for p in self._output_ports:
+            a = np.asarray(values[p.name], dtype=float).reshape(-1)
+            if not np.isfinite(a).all():
+                names = element_names(p.name, tuple(p.shape))
+                bad += [n for n, v in zip(names, a.tolist(), strict=True) if not math.isfinite(v)]
+        return bad
 
     def _get(self, vrs: list[int], fmi_type: str, nan: Any) -> list[Any]:
         found = [self._elements.get(vr) for vr in vrs]

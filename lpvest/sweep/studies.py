@@ -158,7 +158,7 @@ def run_cosim_task(payload: CosimPayload, task: Task) -> TaskResult:
     sim = _simulation(payload)
     try:
         sim.reset(_task_parameters(task))
-        data = sim.run(payload.n_steps)
+        data = sim.run(payload.n_steps, on_discard="error")  # a task that stops early failed
     except BaseException:
         release_simulation()  # the next task starts from fresh instances
         raise

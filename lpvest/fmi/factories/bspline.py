@@ -33,8 +33,9 @@ def coefficient(name: str, spec: str) -> UnknownConstant | UnknownSpline | None:
 
 
 class SampledObserver(TimedComponent):
-    """The B-spline observer inside an FMU: one fmi2DoStep is one sample, so
-    the communication step must equal the observer's sample time ``dt``.
+    """The B-spline observer inside an FMU: one :meth:`step` is one sample, of
+    the observer's sample time ``dt`` (the FMU runs a communication step of
+    ``m`` whole samples as ``m`` steps with the inputs held, :mod:`lpvest.fmi.slave`).
 
     Time comes from the communication points: the first sample is at the
     experiment's start time ``t0`` (:meth:`reset`), and every step states the
@@ -72,8 +73,8 @@ class SampledObserver(TimedComponent):
     ) -> dict[str, np.ndarray]:
         if abs(dt - self.dt) > 1e-9 * self.dt:
             raise SamplingError(
-                f"communication step {dt!r} s differs from the observer's sample time dt = {self.dt!r} s "
-                "(one fmi2DoStep is one sample)"
+                f"step {dt!r} s differs from the observer's sample time dt = {self.dt!r} s "
+                "(one step is one sample)"
             )
         expected = self.time
         t = (expected + dt if t_end is None else float(t_end)) - dt
