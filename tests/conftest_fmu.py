@@ -11,6 +11,8 @@ from lpvest.fmi.registry import EstimatorKind
 from lpvest.fmi.spec import Parameter
 
 HERE = Path(__file__).resolve().parent
+#: The walkthrough's own plant (docs/own-plant.md).
+OWN_PLANT = HERE.parent / "examples" / "own_plant.toml"
 
 #: A two-state affine LPV plant with general noise (S != 0), input u, two
 #: scheduling components: the example systems hold no affine model.
@@ -97,3 +99,24 @@ def foreign_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         pytest.skip("the foreign test FMUs need a C compiler (cc or gcc)")
     out = tmp_path_factory.mktemp("foreign-fmus")
     return {name: build_foreign_fmu(name, out) for name in MODELS}
+
+
+@pytest.fixture(scope="session")
+def native_fmus(fmus: FmuSet, tmp_path_factory: pytest.TempPathFactory) -> FmuSet:
+    """The native backend's FMUs of the same systems (every example, the affine
+    demo with its designs at epsilon = 1, the own-plant example at epsilon = 1),
+    built once into a temporary folder; the designs made for the Python set are
+    reused (the same design cache)."""
+    import shutil
+
+    from lpvest.fmi.build import DESIGN_CACHE, build_fmus
+
+    out = tmp_path_factory.mktemp("native-fmus")
+    if (fmus.out / DESIGN_CACHE).is_dir():
+        shutil.copytree(fmus.out / DESIGN_CACHE, out / DESIGN_CACHE)
+    results, _ = build_fmus(None, out, backend="native")
+    results2, _ = build_fmus([fmus.affine_model, OWN_PLANT], out, design_options={"epsilon": 1.0}, backend="native")
+    paths = {r.plan.identifier: r.validation.path for r in results + results2}
+    problems = {r.plan.identifier: r.validation.problems for r in results + results2 if r.validation.problems}
+    assert not problems, problems
+    return FmuSet(out, fmus.affine_model, paths)
