@@ -796,3 +796,45 @@ def test_reset_starts_over_and_instances_are_independent(native_fmus):
     assert a.initialize(noise=True, seed=8) == 0
     rb = _run(b, data, ["y", "x"], 0, 10)  # b ran nothing meanwhile: a's run did not touch it
     assert np.array_equal(_run(a, data, ["y", "x"], 0, 10), ra) and np.array_equal(rb, ra)
+
+
+# -- the backend option: CLI, cache, reproduce -------------------------------------------
+
+
+def test_lpvest_build_backend_native(native_fmus, tmp_path, capsys):
+    from fmpy import read_model_description
+
+    from lpvest.cli import main
+    from tests.conftest_fmu import OWN_PLANT
+
+    assert main(["build", "--backend", "native", "--model", str(OWN_PLANT), "--kinds", "Plant,Kalman",
+                 "--out", str(tmp_path)]) == 0
+    built = sorted(p.name for p in tmp_path.glob("*.fmu"))
+    assert len(built) == 2 and all(n.endswith(("Plant.fmu", "Kalman.fmu")) for n in built)
+    for name in built:
+        assert not read_model_description(str(tmp_path / name)).coSimulation.needsExecutionTool
+        # the same bytes as the session's native build of the same plan
+        assert (tmp_path / name).read_bytes() == native_fmus[name[:-4]].read_bytes()
+    with pytest.raises(SystemExit):
+        main(["build", "--backend", "cython", "--out", str(tmp_path)])
+    assert "invalid choice: 'cython'" in capsys.readouterr().err
+
+
+def test_reproduce_with_the_native_backend(native_fmus, tmp_path):
+    from lpvest.errors import ArgumentError
+    from lpvest.experiments.fmus import ExperimentFmus, as_experiment_fmus
+    from lpvest.experiments.reproduce import reproduce
+
+    cache = ExperimentFmus(tmp_path / "cache", backend="native")
+    cache.adopt(native_fmus.paths)
+    runs = reproduce(["cox-toth-truncation", "peixoto-fig1"], tmp_path, fmus=cache, reduced=True)
+    # every FMU quantity agrees with the library within the report's tolerance (1e-12 of scale)
+    assert all(r.ok for r in runs) and {r.name for r in runs} == {"cox-toth-truncation", "peixoto-fig1"}
+    assert sorted(cache.built) == ["PeixotoEx1HinfPDEps150", "PeixotoEx1HinfRobustEps150"]  # not adopted
+    assert "(native backend)" in cache.summary()
+    with zipfile.ZipFile(cache["PeixotoEx1HinfPDEps150"]) as z:
+        assert "binaries/linux64/PeixotoEx1HinfPDEps150.so" in z.namelist()
+    with pytest.raises(ArgumentError, match="builds with backend 'native', not 'pythonfmu'"):
+        as_experiment_fmus(cache, backend="pythonfmu")
+    with pytest.raises(ArgumentError, match="backend 'cython' is not one of pythonfmu, native"):
+        ExperimentFmus(tmp_path / "other", backend="cython")

@@ -52,17 +52,21 @@ def reproduce(
     fmus: ExperimentFmus | str | Path | None = None,
     reduced: bool = False,
     echo: Callable[[str], None] | None = None,
+    backend: str | None = None,
 ) -> list[ExperimentRun]:
     """Run the experiments ``names`` into ``out/<name>/``; ``reduced`` uses each
     experiment's quicker configuration (:attr:`Experiment.reduced`); ``echo``
-    receives the printable output (tables, FMU agreement, files written)."""
+    receives the printable output (tables, FMU agreement, files written);
+    ``backend``: the FMUs' backend (``"pythonfmu"`` or ``"native"``,
+    :data:`lpvest.fmi.build.BACKENDS`; default: the given cache's, else
+    ``"pythonfmu"``)."""
     from . import registry  # looked up at call time
 
     experiments = registry()
     unknown = [n for n in names if n not in experiments]
     if unknown:
         raise LpvestError(f"no experiment {abbreviate(unknown[0], 30)} (known: {', '.join(experiments) or 'none'})")
-    cache = as_experiment_fmus(fmus)
+    cache = as_experiment_fmus(fmus, backend=backend)
     out = Path(out)
     say = echo or (lambda _text: None)
     runs = []
@@ -90,17 +94,19 @@ def reproduce_all(
     fmus: ExperimentFmus | str | Path | None = None,
     reduced: bool = False,
     echo: Callable[[str], None] | None = None,
+    backend: str | None = None,
 ) -> list[ExperimentRun]:
     """Every registered experiment, then ``out/report.md``
     (:func:`lpvest.experiments.report.write_report`). ``fmus`` defaults to the
-    cache ``out/fmu-cache``."""
+    cache ``out/fmu-cache`` (``out/fmu-cache-native`` for ``backend="native"``)."""
     from . import registry
     from .report import write_report
 
     out = Path(out)
-    cache = as_experiment_fmus(out / "fmu-cache" if fmus is None else fmus)
+    default = out / ("fmu-cache" if backend in (None, "pythonfmu") else f"fmu-cache-{backend}")
+    cache = as_experiment_fmus(default if fmus is None else fmus, backend=backend)
     t = time.perf_counter()
-    runs = reproduce(list(registry()), out, fmus=cache, reduced=reduced, echo=echo)
+    runs = reproduce(list(registry()), out, fmus=cache, reduced=reduced, echo=echo, backend=backend)
     path = write_report(runs, out, fmus=cache, seconds=time.perf_counter() - t, reduced=reduced)
     if echo is not None:
         echo(f"wrote {path}")
