@@ -41,10 +41,16 @@ def test_every_discrete_time_role_is_built_natively(fmus, native_fmus):
 
 
 def test_a_native_fmu_is_a_source_fmu_with_three_binaries(native_fmus):
+    from lpvest.fmi.native.build import RUNTIME_DIR
+
     with zipfile.ZipFile(native_fmus["PeixotoEx1HinfPD"]) as z:
         names = set(z.namelist())
         desc = z.read("sources/buildDescription.xml").decode()
         md = z.read("modelDescription.xml").decode()
+        # the runtime is the package's, byte for byte: only model_data.c is generated
+        for f in sorted(RUNTIME_DIR.iterdir()):
+            if f.suffix in (".c", ".h"):
+                assert z.read(f"sources/{f.name}") == f.read_bytes(), f.name
     assert {"binaries/linux64/PeixotoEx1HinfPD.so", "binaries/win64/PeixotoEx1HinfPD.dll",
             "binaries/darwin64/PeixotoEx1HinfPD.dylib"} <= names
     sources = sorted(n[len("sources/"):] for n in names if n.startswith("sources/") and n.endswith(".c"))
