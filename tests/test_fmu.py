@@ -33,6 +33,7 @@ EXPECTED = {
     "AffineDemoPlant", "AffineDemoScheduler", "AffineDemoSource", "AffineDemoKalman", "AffineDemoTruncatedKalman",
     "AffineDemoHinfPD", "AffineDemoHinfRobust",
     "PeixotoEx1MovingAverage",
+    "IoDemoPlant",
 }
 
 

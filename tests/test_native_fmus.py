@@ -215,6 +215,7 @@ PLANTS = {
     "CoxTothTruncationPlant": {"noise": True, "seed": 5},  # affine: x_0 ~ N(x0, P0) drawn first
     "AffineDemoPlant": {"noise": True, "seed": 11},
     "OwnPlantPlant": {"noise": True, "seed": 2},
+    "IoDemoPlant": {"noise": True, "seed": 8},  # input-output: its memory is the state
 }
 
 
@@ -227,7 +228,9 @@ def test_plant_gives_the_librarys_numbers(native_fmus, open_fmu, name, tmp_path)
     the weights alpha(p) or psi(p) does (formulas with functions); the same for
     the outputs. The drawn noise (and x_0) are the same bits in both."""
     from lpvest.systems.affine import AffineLPV
+    from lpvest.systems.innovation import LPVInputOutput
     from lpvest.systems.polytopic import PolytopicLPV
+    from tests.test_native_core import formula_bound
 
     params = PLANTS[name]
     ref = reference(native_fmus[name], tmp_path, **params)
@@ -253,7 +256,21 @@ def test_plant_gives_the_librarys_numbers(native_fmus, open_fmu, name, tmp_path)
         x = plant.get_state()["x"]
         noise = plant.get_state()["noise"]
         out = plant.step(sample)
-        if isinstance(model, PolytopicLPV):
+        if isinstance(model, LPVInputOutput):
+            # y = e + [a, b_1.., c] . memory + b_0 u, summed in the library's order; the
+            # coefficients are the library's within their formulas' bound
+            vals = dict(zip(model.space.names, (float(v) for v in sample["p"]), strict=True))
+            forms = (*model.y_coefficients, *model.u_coefficients, *model.e_coefficients)
+            co = np.array([float(f.evaluate(vals)) for f in forms])
+            dco = np.array([formula_bound(f, vals) for f in forms])
+            na, nb = len(model.y_coefficients), len(model.u_coefficients)
+            keep = [i for i in range(len(forms)) if i != na]  # b_0 multiplies u_t, not the memory
+            m = {"R": co[keep][None, :], "B0": co[na:na + 1][None, :nb], "I": np.eye(1)}
+            dm = {"R": dco[keep][None, :], "B0": dco[na:na + 1][None, :nb]}
+            u = sample.get("u", np.zeros(0))
+            terms = {"y": ("R", "B0", "I")}
+            vecs_by = {"y": (x, u, sample["e"] + noise)}
+        elif isinstance(model, PolytopicLPV):
             alpha = model.simplex_map(sample["p"])
             m = model.matrices(alpha)
             dm = {key: np.tensordot(weights_error(model.simplex_map, sample["p"]), np.abs(v), axes=1)
@@ -288,6 +305,12 @@ def test_plant_gives_the_librarys_numbers(native_fmus, open_fmu, name, tmp_path)
                           if s in dm and dm[s].size)
             carried = _abs(mats[0]) @ e
             bounds[key] = carried + g2 * size + weights
+        if isinstance(model, LPVInputOutput):  # the memory shifts; of the new values only y differs
+            nu_mem, nc = max(nb - 1, 0), len(model.e_coefficients)
+            ey, eu, ee = e[:na], e[na:na + nu_mem], e[na + nu_mem:]
+            bounds["x"] = np.concatenate([*([bounds["y"], ey[:-1]] if na else []),
+                                          *([np.zeros(1), eu[:-1]] if nu_mem else []),
+                                          *([np.zeros(1), ee[:-1]] if nc else [])])
         for o in outs:
             bound = e if o == "x" else bounds[o]
             assert np.all(np.abs(got[o][k] - out[o]) <= SAFETY * bound), (o, k, got[o][k] - out[o], bound)
@@ -650,6 +673,9 @@ SCENARIOS = {
         _init(d), d.set("p[1]", 5.0), d.set("u[1]", math.inf), d.step(0.0, 1.0), d.set("p[1]", 0.5),
         d.set("u[1]", 1.0), d.step(0.0, 1.0), bool(np.isfinite(d.vector("xhat")).all()))),
     "setting an output": ("PeixotoEx1Plant", lambda d: (_init(d), d.set("y[1]", 1.0))),
+    "an input-output plant's memory and a bad input": ("IoDemoPlant", lambda d: (
+        _init(d, **{"x0[1]": 1.0, "x0[5]": -2.0}), d.set("p[1]", 0.4), d.set("u[1]", 1.0), d.vector("y").tolist(),
+        d.step(0.0, 1.0), d.vector("x").tolist(), d.set("p[1]", -1.5), d.step(1.0, 1.0))),
     "sample_time 0": ("PeixotoEx1Plant", lambda d: (_init(d, sample_time=0.0),)),
     "a step of whole samples, then not": ("PeixotoEx1HinfPD", lambda d: (
         _init(d), d.set("p[1]", 0.3), d.set("y[1]", 1.0), d.step(0.0, 3.0), d.step(3.0, 2.5))),

@@ -23,7 +23,7 @@ from tests.native_hosts import HostDriver, sanitized_library, wine
 #: one FMU of every role and model kind, the lifecycle and sanitizer runs use them
 EVERY_ROLE = ["PeixotoEx1Plant", "CoxTothTruncationPlant", "CoxTothEx1Plant", "PeixotoEx1Scheduler",
               "AffineDemoSource", "CoxTothTruncationKalman", "CoxTothTruncationTruncatedKalman", "AffineDemoHinfPD",
-              "PeixotoEx1HinfRobust"]
+              "PeixotoEx1HinfRobust", "IoDemoPlant"]
 
 
 def _lifecycle_script(md) -> list[str]:  # noqa: ANN001

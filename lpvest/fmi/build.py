@@ -213,7 +213,7 @@ def plan_system(
     """
     from ..catalog import stored_design
     from ..modelfile import load_system
-    from ..systems import AffineLPV, InnovationLPV, LTVInputOutput, LTVStateSpace, PolytopicLPV
+    from ..systems import AffineLPV, InnovationLPV, LPVInputOutput, LTVInputOutput, LTVStateSpace, PolytopicLPV
     from ..systems.streaming import plant_supports
 
     system = load_system(source)
@@ -221,7 +221,10 @@ def plan_system(
         raise BuildError(f"{source}: a system needs a model file to be built into FMUs")
     stem = fmu_name(system.name)
     notes: list[str] = []
-    order = [system.default] + [k for k in system.models if k != system.default]
+    # the default model, else the others in file order, state-space realizations
+    # before input-output ones (a plant's state x is then the model's state)
+    others = [k for k in system.models if k != system.default]
+    order = [system.default] + sorted(others, key=lambda k: isinstance(system.models[k], LPVInputOutput))
     key = None
     for k in order:
         reason = plant_supports(system.models[k])
@@ -243,7 +246,8 @@ def plan_system(
                              step_size=0.1, stop_time=20.0, **common))
         notes.append(f"{system.name}: no Scheduler/Source (an LTV model depends on time; its input is a function of t)")
     else:
-        kind = {PolytopicLPV: "polytopic", AffineLPV: "affine", InnovationLPV: "innovation"}[type(model)]
+        kind = {PolytopicLPV: "polytopic", AffineLPV: "affine", InnovationLPV: "innovation",
+                LPVInputOutput: "input-output"}[type(model)]
         plans.append(FmuPlan(f"{stem}Plant", "Plant", "lpvest_plant.py",
                              description=f"Plant: {title} (model {key!r}, {kind} LPV)",
                              model_parameters=params, **common))

@@ -445,6 +445,29 @@ class LPVInputOutput:
         object.__setattr__(self, "noise_variance", var)
         object.__setattr__(self, "name", name)
 
+    @property
+    def n_p(self) -> int:
+        """Number of scheduling components."""
+        return self.space.dim
+
+    @property
+    def nu(self) -> int:
+        """1 when the model has input coefficients, else 0 (SISO)."""
+        return 1 if self.u_coefficients else 0
+
+    @property
+    def ny(self) -> int:
+        """1 (SISO)."""
+        return 1
+
+    @property
+    def nx(self) -> int:
+        """The memory a streaming realization keeps
+        (:class:`lpvest.systems.streaming.DiscretePlant`): the past outputs
+        ``y_(t-1..t-na)``, inputs ``u_(t-1..t-nb+1)`` and noise
+        ``e_(t-1..t-nc)``, ``na + max(nb - 1, 0) + nc`` values."""
+        return len(self.y_coefficients) + max(len(self.u_coefficients) - 1, 0) + len(self.e_coefficients)
+
     def simulate(
         self,
         p: object,

@@ -12,7 +12,9 @@ the one the batch ``simulate`` methods loop over: a Python loop over a plant
 reproduces ``simulate`` to the bit (with the noise drawn one sample at a time).
 
 - :class:`DiscretePlant` wraps a discrete-time :class:`~lpvest.systems.PolytopicLPV`,
-  :class:`~lpvest.systems.AffineLPV` or causal :class:`~lpvest.systems.InnovationLPV`.
+  :class:`~lpvest.systems.AffineLPV`, causal :class:`~lpvest.systems.InnovationLPV`
+  or :class:`~lpvest.systems.LPVInputOutput` (its memory of past ``y``, ``u``,
+  ``e`` as the state).
 - :class:`LTVPlant` wraps a continuous-time :class:`~lpvest.systems.LTVStateSpace`
   (or :class:`~lpvest.systems.LTVInputOutput`) and integrates over each step.
 
@@ -21,10 +23,11 @@ Noise convention (affine and innovation models, ``noise=True``): the stream
 the initial state when ``P0`` is not zero (``x0 + L_0 z``, ``L_0`` the
 semidefinite Cholesky factor of ``P0``), then one vector per sample
 ``k = 0, 1, ...``: ``[w_k; v_k] = L z_k`` with ``L L^T = [[Q, S], [S^T, R]]``
-(affine) or ``e_k = L z_k`` with ``L L^T = Omega`` (innovation),
+(affine) or ``e_k = L z_k`` with ``L L^T = Omega`` (innovation; input-output:
+``L = sqrt(noise_variance)``),
 ``z_k ~ N(0, I)`` (:meth:`lpvest.rng.Stream.correlated`). With
-``P0 = 0`` this is the sequence ``AffineLPV.simulate(p, u, rng=seed)`` and
-``InnovationLPV.simulate(p, u, rng=seed)`` use, so the streaming plant and the
+``P0 = 0`` this is the sequence ``AffineLPV.simulate(p, u, rng=seed)``,
+``InnovationLPV.simulate(p, u, rng=seed)`` and ``LPVInputOutput.simulate`` use, so the streaming plant and the
 batch simulation agree. External noise inputs (``w``, ``v``, ``e``) are added
 to the drawn noise.
 
@@ -41,6 +44,7 @@ Examples
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -51,7 +55,7 @@ from ..protocol import Component, Port, TimedComponent
 from ..rng import Stream
 from ..validation import as_matrix, as_vector, check_positive_definite, check_simplex
 from .affine import AffineLPV
-from .innovation import InnovationLPV, innovation_step
+from .innovation import InnovationLPV, LPVInputOutput, innovation_step
 from .ltv import LTVInputOutput, LTVStateSpace, TimeFunction
 from .polytopic import PolytopicLPV
 
@@ -193,11 +197,57 @@ class _InnovationRules(_Rules):
         return {"y": y, "x": x.copy()}, nxt
 
 
+class _InputOutputRules(_Rules):
+    """An input-output model ``y_t = e_t + sum a_i y_(t-1-i) + sum b_i u_(t-i)
+    + sum c_i e_(t-1-i)`` streamed with its memory as the state: ``x_t`` =
+    ``[y_(t-1), ..., y_(t-na), u_(t-1), ..., u_(t-nb+1), e_(t-1), ..., e_(t-nc)]``
+    (zero: from rest, as :meth:`LPVInputOutput.simulate`)."""
+
+    model: LPVInputOutput
+
+    def ports(self) -> tuple[list[Port], list[Port]]:
+        m = self.model
+        ins = [Port("p", (m.n_p,), "scheduling")] + ([Port("u", (1,), "input")] if m.nu else [])
+        return ins + [Port("e", (1,), "noise added to the drawn one")], [Port("y", (1,), "measured output")]
+
+    def noise_factor(self) -> np.ndarray:
+        return np.linalg.cholesky(np.array([[self.model.noise_variance]]))
+
+    def evaluate(self, x: np.ndarray, val: dict[str, np.ndarray], noise: np.ndarray,
+                 no_u: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        m = self.model
+        p = val["p"]
+        vals = m.space.as_dict(p)
+        a, b, c = ([float(f.evaluate(vals)) for f in fs] for fs in (m.y_coefficients, m.u_coefficients,
+                                                                      m.e_coefficients))
+        if not all(math.isfinite(v) for v in (*a, *b, *c)):
+            raise ExpressionError(f"the coefficients are not finite at p = {p.tolist()}")
+        na, nb = len(a), len(b)
+        ys, us, es = x[:na], x[na:na + max(nb - 1, 0)], x[na + max(nb - 1, 0):]
+        u = float(val["u"][0]) if nb else 0.0
+        e = float(val["e"][0] + noise[0])
+        # the order of LPVInputOutput.simulate: e_t, then the y, u and e terms
+        acc = e
+        for i in range(na):
+            acc += a[i] * ys[i]
+        if nb:
+            acc += b[0] * u
+        for i in range(1, nb):
+            acc += b[i] * us[i - 1]
+        for i in range(len(c)):
+            acc += c[i] * es[i]
+        # shift each memory by one: the newest value first
+        nxt = np.array([*([acc, *ys[:-1]] if na else []), *([u, *us[:-1]] if nb > 1 else []),
+                        *([e, *es[:-1]] if c else [])], dtype=float)
+        return {"y": np.array([acc]), "x": x.copy()}, nxt
+
+
 #: The discrete-time model classes a DiscretePlant streams, and how.
 _RULES: dict[type, type[_Rules]] = {
     PolytopicLPV: _PolytopicRules,
     AffineLPV: _AffineRules,
     InnovationLPV: _InnovationRules,
+    LPVInputOutput: _InputOutputRules,
 }
 
 
@@ -221,7 +271,7 @@ def plant_supports(model: object) -> str | None:
     -------
     str or None
         ``None``, or why neither plant streams ``model`` (e.g. an innovation
-        form whose gain uses shifted scheduling, an input-output model).
+        form whose gain uses shifted scheduling).
     """
     rules = _rules_for(model)
     if rules is not None:
@@ -234,7 +284,7 @@ def plant_supports(model: object) -> str | None:
         except DimensionError as exc:
             return str(exc)
         return None
-    return f"{type(model).__name__} is an input-output model with no state to stream (use a state-space realization)"
+    return f"{type(model).__name__} is no model a streaming plant runs"
 
 
 class DiscretePlant(Component):
@@ -242,7 +292,7 @@ class DiscretePlant(Component):
 
     Parameters
     ----------
-    model : PolytopicLPV, AffineLPV or InnovationLPV
+    model : PolytopicLPV, AffineLPV, InnovationLPV or LPVInputOutput
         An innovation-form model must have a gain of ``p_t`` only.
     noise : bool, keyword-only
         Draw the model's noise inside (affine and innovation models).
@@ -262,12 +312,14 @@ class DiscretePlant(Component):
     polytopic: inputs ``p`` (or ``alpha`` without a scheduling map), ``w``;
     outputs ``y``, ``z``, ``x``. Affine: inputs ``p``, ``u`` (if ``n_u > 0``),
     ``w``, ``v`` (added to the drawn noise); outputs ``y``, ``x``. Innovation:
-    inputs ``p``, ``u``, ``e``; outputs ``y``, ``x``.
+    inputs ``p``, ``u``, ``e``; outputs ``y``, ``x``. Input-output: inputs
+    ``p``, ``u`` (with input coefficients), ``e``; outputs ``y``, ``x`` (the
+    memory ``[y_(t-1..t-na), u_(t-1..t-nb+1), e_(t-1..t-nc)]``, zero at rest).
     """
 
     def __init__(
         self,
-        model: PolytopicLPV | AffineLPV | InnovationLPV,
+        model: PolytopicLPV | AffineLPV | InnovationLPV | LPVInputOutput,
         *,
         noise: bool = False,
         seed: int = 0,

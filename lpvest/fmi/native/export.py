@@ -179,7 +179,7 @@ def _port_offsets(ports: Sequence[Any]) -> dict[str, int]:
 
 def _plant(component: Any, ins: dict[str, int], outs: dict[str, int]) -> RoleData:
     from ...systems.affine import AffineLPV
-    from ...systems.innovation import InnovationLPV
+    from ...systems.innovation import InnovationLPV, LPVInputOutput
     from ...systems.polytopic import PolytopicLPV
 
     model = component.model
@@ -212,6 +212,16 @@ def _plant(component: Any, ins: dict[str, int], outs: dict[str, int]) -> RoleDat
                  mat=_Ints(tuple(off.get(n, -1) for n in order) + (-1, -1, -1)), map=_map(None, names),
                  n_basis=len(dep.basis), basis=_Formulas(tuple(_basis_code(b, names) for b in dep.basis)),
                  n_noise=n_noise, chol=chol, K=K, K_text=K_text)
+    elif isinstance(model, LPVInputOutput):
+        names = model.space.names
+        coeffs = (*model.y_coefficients, *model.u_coefficients, *model.e_coefficients)
+        empty = _Struct("lpv_stack", (("n_terms", 0), ("width", 0), ("rows", _doubles(np.zeros(0)))))
+        f.update(kind=3, nx=model.nx, nu=model.nu, ny=1, nz=0, nw=0, nv=0, n_p=len(names), stack=empty,
+                 mat=_Ints((-1,) * 9), map=_map(None, names), n_basis=0, basis=_Formulas(()), n_noise=1,
+                 chol=_doubles(np.linalg.cholesky(np.array([[model.noise_variance]]))),
+                 K=_Formulas(tuple(compile_formula(e, names) for e in coeffs)),
+                 K_text=_Strings(tuple(e.text for e in coeffs)),
+                 io_n=_Ints((len(model.y_coefficients), len(model.u_coefficients), len(model.e_coefficients))))
     else:
         raise NativeExportError(f"a plant of {type(model).__name__} has no native form")
     f.update(in_p=ins.get("p", -1), in_alpha=ins.get("alpha", -1), in_u=ins.get("u", -1), in_w=ins.get("w", -1),
@@ -574,7 +584,7 @@ class _Writer:
 
 
 #: The fields whose pointer arrays are written with a fixed size in the struct (ints inline)
-_INLINE_INTS = {"mat", "fmat", "pmat"}
+_INLINE_INTS = {"mat", "fmat", "pmat", "io_n"}
 
 
 def model_data_c(

@@ -253,7 +253,7 @@ int lpv_check_simplex(const double* alpha, int n, const char* name, lpv_msg* err
 int lpv_check_psd(const double* M, int n, const char* name, int semidefinite, double* sym_out, lpv_msg* err);
 
 /* Plant (lpvest.systems.streaming.DiscretePlant) */
-enum { LPV_PLANT_POLYTOPIC = 0, LPV_PLANT_AFFINE = 1, LPV_PLANT_INNOVATION = 2 };
+enum { LPV_PLANT_POLYTOPIC = 0, LPV_PLANT_AFFINE = 1, LPV_PLANT_INNOVATION = 2, LPV_PLANT_IO = 3 };
 /* matrix offsets within a stack row: polytopic A, Bw, Cz, Dz, Cy, Dy, Bu, Dzu, Dyu;
  * affine and innovation A, B, C, D, G, H (-1: absent) */
 enum { LPV_PM_A = 0, LPV_PM_BW, LPV_PM_CZ, LPV_PM_DZ, LPV_PM_CY, LPV_PM_DY, LPV_PM_BU, LPV_PM_DZU, LPV_PM_DYU };
@@ -269,8 +269,10 @@ typedef struct {
     const lpv_formula* basis;
     int n_noise;                /* the noise drawn per sample: [w; v] (affine), e (innovation) */
     const double* chol;         /* its covariance's lower Cholesky factor */
-    const lpv_formula* K;       /* innovation: the gain, nx x ny formulas of p */
+    const lpv_formula* K;       /* innovation: the gain, nx x ny formulas of p; input-output: the
+                                   coefficients a (of y), b (of u), c (of e), formulas of p */
     const char* const* K_text;  /* their text (messages) */
+    int io_n[3];                /* input-output: the numbers of a, b and c (the state: past y, u, e) */
     int in_p, in_alpha, in_u, in_w, in_v, in_e; /* input offsets (-1: absent) */
     int out_y, out_z, out_x;
 } lpv_plant_data;

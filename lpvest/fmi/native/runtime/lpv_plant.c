@@ -2,15 +2,19 @@
  * lpvest native runtime: the Plant role (lpvest.systems.streaming.DiscretePlant).
  *
  * A polytopic model (Peixoto et al. (1)), an affine model with general noise
- * (Cox & Toth (1)-(3)) or an innovation form with a gain of p_t, one sample per
- * step: the outputs y_k (and z_k) at the inputs of sample k, the state x_k; the
- * step x_{k+1}. The noise of sample k is drawn when the plant arrives at k (at
- * reset and after each step): [w; v] = L z (affine), e = L z (innovation), z from
+ * (Cox & Toth (1)-(3)), an innovation form with a gain of p_t or an input-output
+ * model (Cox & Toth (21a)), one sample per step: the outputs y_k (and z_k) at the
+ * inputs of sample k, the state x_k; the step x_{k+1}. The input-output model's
+ * state is its memory [y_{k-1..k-na}, u_{k-1..k-nb+1}, e_{k-1..k-nc}], and y_k is
+ * summed in LPVInputOutput.simulate's order: e_k, the y terms, the u terms, the e
+ * terms. The noise of sample k is drawn when the plant arrives at k (at
+ * reset and after each step): [w; v] = L z (affine), e = L z (innovation,
+ * input-output), z from
  * lpvest's stream (lpv_rng.c), after the initial state x_0 = x0 + L_0 z when the
  * affine model's P0 is not zero (lpvest.rng.Stream.gaussian_vector): the same
  * numbers as the library for the same seed.
  *
- * Parameters: x0, and P0 (affine), noise, seed (affine, innovation), the model
+ * Parameters: x0, and P0 (affine), noise, seed (affine, innovation, input-output), the model
  * file's parameters (as formulas of its matrix entries, lpv_model.entries).
  */
 #include <math.h>
@@ -52,7 +56,9 @@ static tmp_layout tmp_of(const lpv_plant_data* d) {
     l.c = l.b + big;
     l.z = l.c + big;
     l.K = l.z + (size_t)d->n_noise + (size_t)d->nx + 1;
-    l.psi = l.K + (size_t)d->nx * (size_t)d->ny;
+    size_t nK = (size_t)d->nx * (size_t)d->ny;
+    size_t n_io = (size_t)(d->io_n[0] + d->io_n[1] + d->io_n[2]);
+    l.psi = l.K + (nK > n_io ? nK : n_io);
     return l;
 }
 
@@ -81,7 +87,8 @@ static int configure(lpv_comp* c, const lpv_values* v, const double* mp, lpv_msg
     const lpv_model* m = c->model;
     const lpv_plant_data* d = PD(c);
     cfg_layout l = cfg_of(d);
-    memcpy(c->cfg + l.rows, d->stack.rows, sizeof(double) * (size_t)d->stack.n_terms * (size_t)d->stack.width);
+    if (d->stack.n_terms > 0) /* an input-output model has no matrices */
+        memcpy(c->cfg + l.rows, d->stack.rows, sizeof(double) * (size_t)d->stack.n_terms * (size_t)d->stack.width);
     lpv_apply_entries(m, 0, mp, c->cfg + l.rows);
     const double* x0 = lpv_param_reals(m, v, "x0");
     if (!x0) {
@@ -168,6 +175,53 @@ static void add_matvec(int rows, int n, const double* M, const double* x, double
     for (int i = 0; i < rows; i++) y[i] = y[i] + work[i];
 }
 
+/* input-output: y_k and the next memory (LPVInputOutput.simulate, one sample) */
+static int io_step(lpv_comp* c, const double* x, const double* in, double* out, double* nxt, lpv_msg* err) {
+    const lpv_plant_data* d = PD(c);
+    tmp_layout t = tmp_of(d);
+    const double* p = in + d->in_p;
+    int na = d->io_n[0], nb = d->io_n[1], nc = d->io_n[2];
+    double* co = c->tmp + t.K; /* a, b, c */
+    int bad = 0;
+    for (int i = 0; i < na + nb + nc; i++) {
+        co[i] = lpv_formula_eval(&d->K[i], p);
+        bad |= !isfinite(co[i]);
+    }
+    if (bad) {
+        char list[1024];
+        lpv_msgf(err, "ExpressionError: the coefficients are not finite at p = %s",
+                 lpv_repr_list(list, sizeof list, p, d->n_p));
+        return 1;
+    }
+    int nu_mem = nb > 1 ? nb - 1 : 0;
+    const double* ys = x;
+    const double* us = x + na;
+    const double* es = x + na + nu_mem;
+    const double* noise = c->st + d->nx + 1;
+    double u = nb ? in[d->in_u] : 0.0;
+    double e = in[d->in_e] + noise[0];
+    double acc = e;
+    for (int i = 0; i < na; i++) acc = acc + co[i] * ys[i];
+    if (nb) acc = acc + co[na] * u;
+    for (int i = 1; i < nb; i++) acc = acc + co[na + i] * us[i - 1];
+    for (int i = 0; i < nc; i++) acc = acc + co[na + nb + i] * es[i];
+    out[d->out_y] = acc;
+    /* each memory shifted by one, the newest value first */
+    if (na) {
+        nxt[0] = acc;
+        for (int i = 1; i < na; i++) nxt[i] = ys[i - 1];
+    }
+    if (nu_mem) {
+        nxt[na] = u;
+        for (int i = 1; i < nu_mem; i++) nxt[na + i] = us[i - 1];
+    }
+    if (nc) {
+        nxt[na + nu_mem] = e;
+        for (int i = 1; i < nc; i++) nxt[na + nu_mem + i] = es[i - 1];
+    }
+    return 0;
+}
+
 static int evaluate(lpv_comp* c, const double* in, double* out, lpv_msg* err) {
     const lpv_plant_data* d = PD(c);
     cfg_layout l = cfg_of(d);
@@ -196,6 +250,8 @@ static int evaluate(lpv_comp* c, const double* in, double* out, lpv_msg* err) {
             add_matvec(d->nz, d->nu, mats + M[LPV_PM_DZU], u, z, wa);
             add_matvec(d->nx, d->nu, mats + M[LPV_PM_BU], u, nxt, wa);
         }
+    } else if (d->kind == LPV_PLANT_IO) {
+        if (io_step(c, x, in, out, nxt, err)) return 1;
     } else {
         double* psi = c->tmp + t.psi;
         const double* p = in + d->in_p;
