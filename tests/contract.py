@@ -16,7 +16,7 @@ import faulthandler
 import gc
 import signal
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from lpvest.errors import MESSAGE_LIMIT, LpvestError
@@ -66,14 +66,20 @@ def _on_timer(signum: int, frame: object) -> None:
     raise ContractTimeout()
 
 
-def check_message(message: str, prefix: str, given: str | bytes = "") -> list[str]:
+def check_message(message: str, prefix: str, given: str | bytes = "", paths: Sequence[str] = ()) -> list[str]:
     """What is wrong with an error message (empty: nothing). ``given`` is the
-    input: what the user wrote may be quoted, even if it looks internal."""
+    input: what the user wrote may be quoted, even if it looks internal.
+    ``paths`` are folders of the test (pytest's temporary folders): the length
+    bound is measured on the message without them, so that it does not depend
+    on how long pytest's temporary path happens to be."""
     problems = []
     if len(message.splitlines()) > 1 or message.endswith(("\n", "\r")):
         problems.append("more than one line")
-    if len(message) > MESSAGE_LIMIT:
-        problems.append(f"{len(message)} characters (more than {MESSAGE_LIMIT})")
+    measured = message
+    for path in sorted(paths, key=len, reverse=True):
+        measured = measured.replace(path, "")
+    if len(measured) > MESSAGE_LIMIT:
+        problems.append(f"{len(measured)} characters without the test's folders (more than {MESSAGE_LIMIT})")
     if not message.startswith(prefix):
         problems.append(f"does not start with {prefix!r}")
     elif not message[len(prefix):].strip():
@@ -92,12 +98,13 @@ def within_contract(
     given: str | bytes = "",
     refused: Callable[[object], bool] | None = None,
     limit: float = CPU_LIMIT,
+    paths: Sequence[str] = (),
 ) -> str | None:
     """Run ``action`` under the contract; return the error message (``None``
     when the input was accepted). Raises ``AssertionError`` when the contract
     is broken; counts the outcome in :data:`TALLIES`. ``refused`` tells from
     the action's result that the input was refused without an exception (a
-    command line's exit status 2)."""
+    command line's exit status 2); ``paths`` as for :func:`check_message`."""
     tally = TALLIES.setdefault(generator, Tally())
     # no garbage collection inside the timed call: a collection of the test
     # runner's garbage would count against the input (and the timer's
@@ -115,7 +122,7 @@ def within_contract(
         raise AssertionError(f"{generator}: the input took more than {limit} s of CPU time") from None
     except error as exc:
         message = str(exc)
-        problems = check_message(message, prefix, given)
+        problems = check_message(message, prefix, given, paths)
         if problems:
             tally.bad_message += 1
             raise AssertionError(f"{generator}: {type(exc).__name__} message {message!r}: "

@@ -1,3 +1,5 @@
+import warnings
+
 import numpy as np
 import pytest
 
@@ -231,3 +233,61 @@ def test_value_of_a_constant_formula_is_finite_or_an_error():
     with pytest.raises(ExpressionError, match="has the value inf, not a finite number"):
         d.value()
     assert Expression.parse("x * 1e100 * 1e100").derivative("x").value() == pytest.approx(1e200)
+
+
+@pytest.mark.parametrize("caller", ["raise", "warn", "ignore", "call"])
+def test_evaluation_neither_depends_on_nor_changes_the_callers_floating_point_error_state(caller):
+    """Formulas give IEEE results (inf, nan) with no warning whatever numpy's error state in the
+    caller (an FMU sets "call", a user may set "raise"), and leave that state as it was; a
+    constant that is not finite is an error at parsing whatever that state."""
+    seen = []
+    f = Expression.parse("1/t + log(t) + exp(t)*exp(t) + sqrt(t - 5)")
+    with np.errstate(all=caller, call=lambda kind, flag: seen.append(kind)), warnings.catch_warnings():
+        warnings.simplefilter("error")
+        before = np.geterr()
+        assert np.isnan(f(t=0.0)) and np.isnan(f(t=np.array([0.0]))[0])  # inf - inf (1/0 + log 0)
+        assert f(t=710.0) == np.inf  # exp overflows; Python floats and numpy alike
+        np.testing.assert_array_equal(f(t=np.array([710.0, 1.0])), [np.inf, np.nan])
+        assert Expression.parse("t**0.5")(t=-1.0) != Expression.parse("t**0.5")(t=-1.0)  # nan, not complex
+        assert Expression.parse("t/2")(t=3.0) == 1.5 and Expression.parse("t*t")(t=1e200) == np.inf
+        d = Expression.parse("1e300*(1e300*t)").derivative("t")  # folds 1e300 * 1e300 = inf
+        with pytest.raises(ExpressionError, match=r"^formula 'd/dt\(1e300\*\(1e300\*t\)\)' has the value inf"):
+            d.value()
+        for text, why in (("1e308*10", "overflows"), ("1/0", "divides by zero"), ("log(0)", "takes the log of zero"),
+                          ("sqrt(-1)", "is undefined"), ("(-8)**(1/3)", "is not a real number")):
+            with pytest.raises(ExpressionError, match=why):
+                Expression.parse(text)
+        assert np.geterr() == before
+    assert seen == []  # no floating-point callback reached the caller
+
+
+def test_a_failed_evaluation_path_is_retried_in_ieee_arithmetic():
+    """Python floats raise where IEEE arithmetic gives inf; the one-sample path retries in numpy."""
+    f = Expression.parse("t / u - 2**u")
+    assert f(t=1.0, u=0.0) == np.inf and f(t=-1.0, u=0.0) == -np.inf
+    assert f(t=1.0, u=2000.0) == -np.inf  # 2**2000 overflows: OverflowError in Python
+    plain = Expression.parse("t / u - u*u")  # no numpy call: one sample of Python floats stays Python
+    assert plain(t=1.0, u=2.0) == -3.5 and type(plain(t=1.0, u=2.0)) is float
+    assert plain(t=1.0, u=0.0) == np.inf and plain(t=1.0, u=1e200) == -np.inf
+    assert type(plain(t=1.0, u=np.float64(2.0))) is not float  # a numpy value takes the general path
+    assert np.isnan(Expression.parse("u**t")(t=0.5, u=-4.0))
+    assert Expression.parse("u**t")(t=0.5, u=complex(-4.0, 0.0)) == pytest.approx(2j)  # complex in: complex out
+
+
+@pytest.mark.parametrize(("text", "var", "source"), [
+    ("t*t", "t", "t + t"), ("sin(t)*p", "p", "sin(t)"), ("0*t + p*t", "t", "p"), ("t**3", "t", "3 * t ** 2"),
+    ("exp(2*t)", "t", "exp(2 * t) * 2"), ("p/t", "t", "-p / t ** 2"), ("log(t)", "t", "1 / t"),
+    ("sqrt(t)", "t", "0.5 / sqrt(t)"), ("t - p", "p", "-1"), ("p + 3", "t", "0"),
+])
+def test_derivatives_are_written_with_zeros_and_ones_folded(text, var, source):
+    """The derivative's text (what a kernel model shows) has no 0 + x, 1 * x or constant operations."""
+    d = Expression.parse(text).derivative(var)
+    assert d.source == source and d.text == f"d/d{var}({text})"
+
+
+def test_constants_and_shift_names():
+    c = Expression.constant(2.5)
+    assert c.is_constant and c.value() == 2.5 and c.source == "2.5"
+    with pytest.raises(ExpressionError, match=r"^formula 'shift\(__x, 1\)': shift takes a variable and an integer, "
+                                              r"e\.g\. shift\(p, 1\)$"):
+        Expression.parse("shift(__x, 1)")

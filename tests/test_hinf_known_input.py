@@ -216,3 +216,132 @@ def test_a_polytopic_model_with_a_known_input_streams_and_evaluates_like_its_sim
     np.testing.assert_array_equal(out["y"], sim.y)
     np.testing.assert_array_equal(out["z"], sim.z)
     np.testing.assert_array_equal(out["x"], sim.x)
+
+
+def with_feedthrough(plant: PolytopicLPV) -> PolytopicLPV:
+    """The plant with a known input that also reaches y and z directly (Dyu, Dzu != 0, varying
+    with alpha). The design matrices (A, Bw, Cz, Dz, Cy, Dy) are unchanged, so the designs of
+    ``setup`` are designs for it (the design digest covers those only)."""
+    stacks = dict(plant.vertex_stacks())
+    stacks["Dyu"] = np.array([[[0.7], [-0.3]], [[1.5], [0.2]]])
+    stacks["Dzu"] = np.array([[[0.4], [0.0]], [[-0.2], [1.0]]])
+    return PolytopicLPV(stacks, simplex_map=plant.simplex_map, name="with-Dyu")
+
+
+@pytest.mark.parametrize("kind", [KIND_PD, KIND_ROBUST])
+def test_a_plant_with_direct_feedthrough_of_u_is_compensated_exactly(kind):
+    """Dyu u reaches the measurement and Dzu u the estimated output in the same sample: the
+    filter removes the first before (2) and adds the second back, so its error is still the
+    error of (2) on the plant without input."""
+    base, d = setup(kind)
+    plant = with_feedthrough(base)
+    T = 80
+    rng = np.random.default_rng(8)
+    p = rng.uniform(-1.0, 1.0, (T, 1))
+    alpha = plant.alpha_batch(p)
+    w = rng.standard_normal((T, plant.nw))
+    u = 10.0 * rng.standard_normal((T, 1))
+    with_u, without = plant.simulate(alpha, w, u=u), plant.simulate(alpha, w)
+    # the feedthrough is there: y and z move with u in the same sample
+    direct = np.einsum("kn,nij,kj->ki", alpha, plant.vertex_stacks()["Dyu"], u)
+    assert np.max(np.abs(direct)) > 5.0
+    f = HinfFilter(d, simplex_map=plant.simplex_map, plant=plant)
+    out_u = run_streaming(f, {"p": p, "u": u, "y": with_u.y})
+    f.reset()
+    out_0 = run_streaming(f, {"p": p, "u": np.zeros_like(u), "y": without.y})
+    e_u, e_0 = with_u.z - out_u["zhat"], without.z - out_0["zhat"]
+    # as above: the u-driven parts cancel in each step, T steps of sums of at most 2 n_x + n_y + 2 n_u products
+    size = float(np.max(np.abs(with_u.x)) + np.max(np.abs(with_u.y)) + np.max(np.abs(out_u["zhat"])))
+    assert size > 50 * float(np.max(np.abs(e_0)))
+    np.testing.assert_allclose(e_u, e_0, rtol=0, atol=roundoff(size, T, n=8))
+    np.testing.assert_allclose(e_0, oracle.simulate_error(plant, d, alpha, w), rtol=0, atol=roundoff(size, T, n=8))
+    assert np.linalg.norm(e_u) < d.gamma * np.linalg.norm(w)
+    # the batch filter: the same computation, bit for bit
+    batch = hinf_filter_batch(d, with_u.y, alpha, plant=plant, u=u)
+    np.testing.assert_array_equal(batch.zhat, out_u["zhat"])
+    np.testing.assert_array_equal(batch.xf, out_u["xf"])
+
+
+def test_a_saved_state_carries_the_copy_of_the_response_to_u():
+    base, d = setup(KIND_PD)
+    plant = with_feedthrough(base)
+    T = 20
+    rng = np.random.default_rng(3)
+    p, u = rng.uniform(-1.0, 1.0, (T, 1)), rng.standard_normal((T, 1))
+    y = plant.simulate(plant.alpha_batch(p), rng.standard_normal((T, plant.nw)), u=u).y
+    f = HinfFilter(d, simplex_map=plant.simplex_map, plant=plant)
+    first = run_streaming(f, {"p": p[:10], "u": u[:10], "y": y[:10]})
+    state = f.get_state()
+    assert sorted(state) == ["k", "xf", "xu"] and state["k"] == 10 and np.any(state["xu"] != 0)
+    rest = run_streaming(f, {"p": p[10:], "u": u[10:], "y": y[10:]})
+    g = HinfFilter(d, simplex_map=plant.simplex_map, plant=plant)
+    g.set_state(state)
+    again = run_streaming(g, {"p": p[10:], "u": u[10:], "y": y[10:]})
+    np.testing.assert_array_equal(again["zhat"], rest["zhat"])
+    whole = hinf_filter_batch(d, y, plant.alpha_batch(p), plant=plant, u=u)
+    np.testing.assert_array_equal(np.vstack([first["zhat"], rest["zhat"]]), whole.zhat)
+    with pytest.raises(DimensionError, match=r"^a HinfFilter state needs 'xf', 'xu' and 'k'; found \['k', 'xf'\]$"):
+        g.set_state({"xf": state["xf"], "k": 3})
+    with pytest.raises(DimensionError, match=r"xu has shape \(3,\); expected \(2,\)"):
+        g.set_state({**state, "xu": np.zeros(3)})
+    with pytest.raises(DimensionError, match=r"^the sample counter k of a HinfFilter state must be >= 0; found -1$"):
+        g.set_state({**state, "k": -1})
+    np.testing.assert_array_equal(g.get_state()["xu"], f.get_state()["xu"])  # refused states change nothing
+    with pytest.raises(DimensionError, match=r"inputs are \['p', 'u', 'y'\]; missing \['u'\], unknown \['w'\]"):
+        g.step({"p": p[0], "w": u[0], "y": y[0]})
+    with pytest.raises(DimensionError, match=r"u has shape \(2,\); expected \(1,\)"):
+        g.step({"p": p[0], "u": np.zeros(2), "y": y[0]})
+    with pytest.raises(ArgumentTypeError, match=r"^plant must be a PolytopicLPV; found AffineLPV$"):
+        HinfFilter(d, plant=model())
+
+
+def test_a_singular_or_exploding_filter_step_is_a_numerical_error():
+    from lpvest.errors import NumericalError
+    from lpvest.estimators.hinf import hinf_step
+
+    _, d = setup(KIND_ROBUST)
+    bad = dataclasses.replace(d, H=np.zeros_like(np.asarray(d.H)))
+    with pytest.raises(NumericalError, match=r"^H\(alpha\) is singular at alpha = None: "):
+        hinf_step(bad, np.zeros(d.nx), None, np.ones(d.ny))
+    with pytest.raises(NumericalError, match=r"^the filter state became non-finite at alpha = None$"):
+        hinf_step(dataclasses.replace(d, H=np.asarray(d.H) * 1e-300), np.full(d.nx, 1e10), None, np.ones(d.ny))
+    step = hinf_step(d, np.ones(d.nx), None, np.ones(d.ny))
+    m = d.matrices_at(None)
+    np.testing.assert_array_equal(step.zhat, m.Cf @ np.ones(d.nx) + m.Df @ np.ones(d.ny))
+    np.testing.assert_allclose(m.H @ step.xf_next, m.Af @ np.ones(d.nx) + m.Bf @ np.ones(d.ny), rtol=0,
+                               atol=roundoff(float(np.abs(m.H).sum() + np.abs(m.Af).sum() + np.abs(m.Bf).sum()),
+                                             4, n=2 * d.nx))
+
+
+def test_inputs_of_the_wrong_shape_are_named_and_the_ports_describe_themselves():
+    plant, d = setup(KIND_PD)
+    T = 4
+    alpha, y, u = np.full((T, 2), 0.5), np.zeros((T, 2)), np.zeros((T, 1))
+    with pytest.raises(DimensionError, match=r"^u is the known input of a plant: pass the plant too \(plant=\.\.\.\), "
+                                             r"or leave u out for a plant without one$"):
+        hinf_filter_batch(d, y, alpha, u=u)
+    for kw, name in (({"y": np.zeros((T, 3))}, "y"), ({"u": np.zeros((T, 2))}, "u"),
+                     ({"alpha": np.full((T, 3), 1 / 3)}, "alpha"), ({"xf0": np.zeros(3)}, "xf0")):
+        args = {"y": y, "alpha": alpha, "u": u, **kw}
+        with pytest.raises(DimensionError, match=rf"^{name} has shape "):
+            hinf_filter_batch(d, args.pop("y"), args.pop("alpha"), plant=plant, **args)
+    with pytest.raises(ModelFileError, match=r"^parameter-dependent design: designed for a plant with nz = 2"):
+        HinfFilter(d, plant=hinf_setting(model(), z=[[1.0, 0.0]]))
+    f = HinfFilter(d, simplex_map=plant.simplex_map, plant=plant)
+    assert [(q.name, q.shape, q.description) for q in f.input_ports] == [
+        ("p", (1,), "physical scheduling (p)"), ("u", (1,), "known input u_k (compensated)"),
+        ("y", (2,), "measured output y_k")]
+    g = HinfFilter(d, plant=plant)
+    assert (g.input_ports[0].name, g.input_ports[0].description) == ("alpha", "scheduling on the unit simplex")
+    with pytest.raises(DimensionError, match=r"^p has shape \(2,\); expected \(1,\)$"):
+        f.step({"p": np.zeros(2), "u": np.zeros(1), "y": np.zeros(2)})
+
+
+def test_a_singular_scheduled_filter_names_the_scheduling_point():
+    from lpvest.errors import NumericalError
+    from lpvest.estimators.hinf import hinf_step
+
+    _, d = setup(KIND_PD)
+    bad = dataclasses.replace(d, H=np.zeros_like(np.asarray(d.H)))
+    with pytest.raises(NumericalError, match=r"^H\(alpha\) is singular at alpha = \[0\.25 0\.75\]: "):
+        hinf_step(bad, np.zeros(d.nx), np.array([0.25, 0.75]), np.ones(d.ny))

@@ -35,11 +35,11 @@ from lpvest.cli import describe_model, main
 from lpvest.cosim import CoSimulationError
 from lpvest.cosim.files import load_cosim
 from lpvest.cosim.ssp import read_ssp
-from lpvest.errors import ExpressionError, ModelFileError
+from lpvest.errors import MESSAGE_LIMIT, ExpressionError, ModelFileError
 from lpvest.expressions import FUNCTIONS, Expression, shift_name
 from lpvest.modelfile import load_system
 
-from .contract import within_contract
+from .contract import check_message, within_contract
 
 ROOT = Path(__file__).resolve().parent.parent
 # hypothesis warns when it prints the 100,000-character formulas among the examples
@@ -352,7 +352,7 @@ def test_model_files_are_accepted_or_refused_by_one_line_naming_the_file(scratch
             describe_model(key, model)  # what `lpvest systems show` prints
         loaded.append(system)
 
-    within_contract("model files", load, prefix=f"{path}: ", error=ModelFileError, given=raw)
+    within_contract("model files", load, prefix=f"{path}: ", error=ModelFileError, given=raw, paths=(str(scratch),))
     if loaded:  # an accepted file: its discrete-time models simulate, or say why not
         from lpvest.experiments.simulate import simulate_system
         from lpvest.systems import LTVInputOutput, LTVStateSpace
@@ -380,14 +380,26 @@ def warm_cosim(fmus, scratch) -> None:
         assert load_cosim(path, fmu_dir=fmus.out).check()
 
 
+def test_the_length_bound_does_not_count_the_tests_temporary_folders():
+    folder = "/tmp/pytest-of-someone/pytest-12345/props0"
+    message = f"{folder}/run.toml: components.plant.fmu: " + "x" * (MESSAGE_LIMIT - 40)
+    assert len(message) > MESSAGE_LIMIT
+    assert check_message(message, f"{folder}/run.toml: ", paths=(folder,)) == []
+    too_long = message + "y" * 100
+    [problem] = check_message(too_long, f"{folder}/run.toml: ", paths=(folder,))
+    assert problem == f"{len(too_long) - len(folder)} characters without the test's folders (more than {MESSAGE_LIMIT})"
+    assert check_message(message, f"{folder}/run.toml: ")  # without paths: the whole message counts
+
+
 @settings(max_examples=examples(1200))
 @given(raw=mutated_files(COSIM_SEEDS))
 def test_cosimulation_files_are_accepted_or_refused_by_one_line_naming_the_file(fmus, scratch, warm_cosim, raw):
     path = scratch / "run.toml"
     path.write_bytes(raw)
     # load and check against the FMUs' model descriptions (no instance: thousands per run)
+    # the bound is on the message without the temporary folders, whose length is pytest's
     within_contract("co-simulation files", lambda: load_cosim(path, fmu_dir=fmus.out).check(),
-                    prefix=f"{path}: ", error=ModelFileError, given=raw)
+                    prefix=f"{path}: ", error=ModelFileError, given=raw, paths=(str(scratch), str(fmus.out)))
 
 
 T = np.array([-1.0, 0.0, 0.5, 2.0, 1e300])
@@ -456,7 +468,8 @@ def test_ssp_files_are_accepted_or_refused_by_one_line_naming_the_file(scratch, 
     with zipfile.ZipFile(path, "w") as z:
         z.writestr("SystemStructure.ssd", raw)
         z.writestr("resources/Plant.fmu", b"")
-    within_contract("SSP files", lambda: read_ssp(path), prefix=f"{path}: ", error=CoSimulationError, given=raw)
+    within_contract("SSP files", lambda: read_ssp(path), prefix=f"{path}: ", error=CoSimulationError, given=raw,
+                    paths=(str(scratch),))
 
 
 # -- command lines --------------------------------------------------------------------------------

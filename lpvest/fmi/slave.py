@@ -88,7 +88,10 @@ except ImportError:  # pragma: no cover - numpy 1.x: np.errstate
     _extobj_contextvar = _make_extobj = None
 
 #: A communication point matches the FMU's time when within this fraction of
-#: ``max(|t|, h)`` (hosts accumulate time in floating point or in integer ticks).
+#: ``max(|t|, h)`` (hosts accumulate time in floating point or in integer ticks),
+#: and within half a sample (half the step ``h`` for a component that is a function
+#: of time): far from 0 the fraction of ``|t|`` would exceed a sample, and a step of
+#: several samples must not hide a skipped one.
 _TIME_RTOL = 1e-9
 
 
@@ -628,7 +631,8 @@ class LpvestSlave(Fmi2Slave):
             return f"the communication point t = {t} and step h = {h} must be finite"
         if h <= 0:
             return f"the communication step h = {_num(h)} must be > 0"
-        if abs(t - self._time) > _TIME_RTOL * max(abs(t), abs(self._time), h):
+        unit = h if self._sample_time is None else min(h, self._sample_length())
+        if abs(t - self._time) > min(_TIME_RTOL * max(abs(t), abs(self._time), h), 0.5 * unit):
             return (f"the communication point t = {_num(t)} is not the FMU's current time {_num(self._time)} "
                     "(a skipped or repeated point; restore a state with fmi2SetFMUstate to go back)")
         if self._sample_time is not None and self._samples_in(h) is None:

@@ -1,5 +1,5 @@
 /* A stand-in for pythonfmu's export library behind the lpvest status bridge (for
- * tests/test_fmu_windows.py): it behaves as pythonfmu 0.7 does where the bridge
+ * tests/test_status_bridge.py): it behaves as pythonfmu 0.7 does where the bridge
  * depends on it, without Python. Messages a call logs are queued and handed to the
  * logger at the end of the next call that drains (every call but fmi2Instantiate,
  * fmi2Reset and fmi2FreeInstance, as pythonfmu); fmi2Instantiate and fmi2Reset log

@@ -1,0 +1,194 @@
+"""The H-infinity program's own algebra (lpvest/design/hinf.py): the dual bound on made-up
+duals, the eigenvalue check that certifies a returned point, the solver fallback, and the
+small rules around them. The designs themselves are checked against oracles in
+tests/test_hinf_design.py."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+import lpvest.design.hinf as hinf
+from lpvest import load_system
+from lpvest.design import KIND_PD, KIND_ROBUST, HinfProgram
+from lpvest.design.hinf import LMIBlock, choose_solver, multiplier
+from lpvest.errors import ArgumentError, ArgumentTypeError, DimensionError, NonFiniteError
+
+EPS = np.finfo(float).eps
+
+
+def _values(P1, P2, P3, delta=2.0):
+    """A solve's variables with one vertex (only what the check and the bound read)."""
+    return {"P1": [np.atleast_2d(P1)], "P2": [np.atleast_2d(P2)], "P3": [np.atleast_2d(P3)], "delta": delta}
+
+
+# -- the dual bound ----------------------------------------------------------------------
+
+
+def test_the_dual_bound_is_delta_plus_each_lmi_inner_product_minus_each_lyapunov_one():
+    """Weak duality for min delta s.t. M_i(x) << 0, P_j(x) >> 0: for duals Z_i, W_j >= 0 the
+    Lagrangian delta + sum <Z_i, M_i> - sum <W_j, P_j> at the primal point is the bound."""
+    M1 = np.array([[-1.0, 0.5], [0.5, -2.0]])
+    M2 = np.array([[-3.0, 0.0], [0.0, -0.25]])
+    Z1 = np.array([[0.5, 0.1], [0.1, 0.2]])
+    Z2 = np.array([[0.125, 0.0], [0.0, 4.0]])
+    values = _values([[2.0]], [[3.0]], [[0.5]], delta=7.0)
+    P = np.array([[2.0, 0.5], [0.5, 3.0]])
+    W = np.array([[0.25, -0.5], [-0.5, 1.0]])
+    lmis = [LMIBlock("Phi_111", 0, 0, 0, M1), LMIBlock("Phi_112", 0, 0, 1, M2)]
+    assert np.array_equal(hinf._lyapunov_matrices(values)[0], P)  # [[P1, P3], [P3^T, P2]]
+    fake = SimpleNamespace(_problem=SimpleNamespace(constraints=[SimpleNamespace(dual_value=d) for d in (Z1, Z2, W)]))
+    got = HinfProgram._dual_bound(fake, values, lmis)  # type: ignore[arg-type]
+    # <Z1, M1> = -0.5 + 0.1 - 0.4 = -0.8; <Z2, M2> = -0.375 - 1 = -1.375; <W, P> = 0.5 - 0.5 + 3 = 3
+    assert got == 7.0 - 0.8 - 1.375 - 3.0
+    missing = SimpleNamespace(_problem=SimpleNamespace(constraints=[SimpleNamespace(dual_value=d)
+                                                                    for d in (Z1, None, W)]))
+    assert math.isnan(HinfProgram._dual_bound(missing, values, lmis))  # type: ignore[arg-type]
+
+
+# -- the eigenvalue check ------------------------------------------------------------------
+
+
+@pytest.fixture
+def checked(monkeypatch):
+    """HinfProgram._check with the LMIs replaced by given matrices: the check's own rules."""
+    plant = load_system("peixoto-ex1").model()
+    blocks: list[np.ndarray] = []
+    monkeypatch.setattr(hinf, "lmi_matrices", lambda *a, **k: [LMIBlock(f"Phi_{i}", 0, 0, 0, m)
+                                                                   for i, m in enumerate(blocks)])
+    prog = SimpleNamespace(kind=KIND_PD, printed_phi21=False)
+
+    def run(values, *lmis):
+        blocks[:] = lmis
+        return HinfProgram._check(prog, plant, values, 1.0, 0.0)  # type: ignore[arg-type]
+
+    return run
+
+
+def test_a_point_with_negative_lmis_and_positive_lyapunov_matrices_is_certified(checked):
+    ok, lmi_margin, lyap_min, why, lmis = checked(_values(2.0, 3.0, 0.5), -np.eye(3), np.diag([-1.0, -0.5]))
+    assert ok and why == "" and len(lmis) == 2
+    assert lmi_margin == 0.5  # minus the largest LMI eigenvalue
+    assert lyap_min == pytest.approx((5 - math.sqrt(2)) / 2, rel=4 * EPS)  # eig of [[2, .5], [.5, 3]]
+
+
+@pytest.mark.parametrize(("P", "lyap"), [((1.0, 1.0, 2.0), -1.0),  # indefinite: eigenvalues 3 and -1
+                                         ((1.0, 1.0, 1.0), 0.0),   # singular: not definite
+                                         ((-1.0, -2.0, 0.0), -2.0)])
+def test_an_indefinite_or_singular_lyapunov_matrix_is_refused(checked, P, lyap):
+    ok, _, lyap_min, why, _ = checked(_values(*P), -np.eye(2))
+    assert not ok
+    assert lyap_min == pytest.approx(lyap, abs=8 * EPS)
+    assert why.startswith("largest LMI eigenvalue -1 (Phi_0), smallest Lyapunov eigenvalue ")
+
+
+def test_an_lmi_not_negative_beyond_rounding_is_refused_and_named(checked):
+    values = _values(2.0, 3.0, 0.5)
+    ok, margin, _, why, _ = checked(values, -np.eye(2), np.diag([-2.0, -1.0, 1e-3]), np.diag([-1.0, -2.0]))
+    assert not ok and margin == -1e-3
+    assert why.startswith("largest LMI eigenvalue 0.001 (Phi_1)")
+    # within 100 eps of the largest eigenvalue's size is still not < 0: refused
+    assert not checked(values, np.diag([-1.0, -50 * EPS]))[0]
+    assert checked(values, np.diag([-1.0, -1000 * EPS]))[0]
+
+
+def test_a_non_positive_gamma_squared_or_non_finite_values_are_refused(checked):
+    assert not checked(_values(2.0, 3.0, 0.5, delta=0.0), -np.eye(2))[0]
+    assert checked(_values(2.0, 3.0, 0.5, delta=1e-12), -np.eye(2))[0]
+    for bad in (_values(2.0, np.nan, 0.5), _values(2.0, 3.0, 0.5, delta=math.inf)):
+        assert checked(bad, -np.eye(2)) == (False, -math.inf, -math.inf, "the solver returned non-finite values", [])
+
+
+# -- the solver fallback --------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def ex1():
+    return load_system("peixoto-ex1").model()
+
+
+def test_an_auto_chosen_scs_point_that_fails_the_check_is_solved_by_clarabel(ex1, monkeypatch):
+    """SCS stopped after a few iterations returns a point that fails the check, twice (the
+    second time with the larger margin); a single design then falls back to Clarabel."""
+    monkeypatch.setattr(hinf, "AUTO_CLARABEL_MAX_ROWS", 0)  # AUTO takes SCS at every size
+    prog = HinfProgram.for_plant(ex1, kind=KIND_ROBUST, solver_options={"max_iters": 3})
+    assert prog.solver == "SCS" and prog.auto
+    res = prog.attempt(ex1, 150.0)
+    assert res.design is not None and res.design.solver == "CLARABEL" and res.status == "optimal"
+    tried = res.detail.split("; ")
+    assert tried[0].startswith("SCS margin 1.0e-06: ") and tried[1].startswith("SCS margin 3.0e-05: ")
+    assert tried[2] == "CLARABEL margin 1.0e-06: optimal"
+    # within a search (warm starts) there is no fallback: the search goes on with its other points
+    with prog.warm_starts():
+        res = prog.attempt(ex1, 150.0)
+    assert res.design is None and math.isinf(res.gamma) and "CLARABEL" not in res.detail
+    assert len(res.detail.split("; ")) == 2
+    # SCS asked for by name: no fallback either
+    named = HinfProgram.for_plant(ex1, kind=KIND_ROBUST, solver="scs", solver_options={"max_iters": 3})
+    assert named.solver == "SCS" and not named.auto
+    assert named.attempt(ex1, 150.0).design is None
+
+
+def test_the_solver_is_chosen_by_the_rows_of_the_lmis():
+    # 6 LMIs of size 11 (396 rows), 40 of size 20 (8,400 rows); the bound is 4,000 rows
+    assert choose_solver(2, 2, 2, 1) == "CLARABEL" and choose_solver(4, 3, 3, 5) == "SCS"
+    # 3 vertices: 18 LMIs; size 14: 18 * 105 = 1,890 rows; size 21: 18 * 231 = 4,158
+    assert choose_solver(3, 3, 1, 1) == "CLARABEL" and choose_solver(3, 4, 3, 2) == "SCS"
+    assert choose_solver(3, 3, 9, 8, KIND_ROBUST) == choose_solver(3, 3, 9, 8)
+
+
+# -- the multiplier and the arguments ---------------------------------------------------------
+
+
+def test_the_multiplier_of_epsilon_is_a_unit_direction_and_phi_is_taken_modulo_pi():
+    for eps in (-100.0, -1.0, 0.0, 0.5, 150.0):
+        a, b = multiplier(eps)
+        assert math.hypot(a, b) == pytest.approx(1.0, abs=2 * EPS) and b >= 0
+        assert a / b == pytest.approx(eps, rel=4 * EPS)  # epsilon = a / b
+    assert multiplier(math.inf) == multiplier(-math.inf) == (1.0, 0.0)
+    with pytest.raises(NonFiniteError, match=r"^epsilon is NaN$"):
+        multiplier(math.nan)
+    for phi in (0.3, -1.2, 0.3 + math.pi, -1.2 - 2 * math.pi):
+        a, b = hinf._ab_of_phi(phi)
+        p = math.atan(hinf._epsilon_of_phi(phi))
+        assert (a, b) == pytest.approx((math.sin(p), math.cos(p)), abs=8 * EPS)
+    for phi in (math.pi / 2, -math.pi / 2, 3 * math.pi / 2):
+        assert hinf._ab_of_phi(phi) == (1.0, 0.0) and hinf._epsilon_of_phi(phi) == math.inf
+
+
+def test_programs_refuse_bad_dimensions_kinds_and_margins(ex1):
+    with pytest.raises(DimensionError, match=r"^nx must be a positive integer; found 0$"):
+        HinfProgram(2, 0, 1, 1, 1)
+    with pytest.raises(DimensionError, match=r"^nw must be a positive integer; found True$"):
+        HinfProgram(2, 2, 1, 1, True)
+    with pytest.raises(ArgumentError, match=r"^kind must be 'parameter-dependent' or 'robust'; found 'pd'$"):
+        HinfProgram(2, 2, 1, 1, 1, kind="pd")
+    with pytest.raises(ArgumentError, match=r"^margin must be a positive finite number; found 0$"):
+        HinfProgram(2, 2, 1, 1, 1, margin=0)
+    with pytest.raises(ArgumentError, match=r"^margin must be a positive finite number; found inf$"):
+        HinfProgram(2, 2, 1, 1, 1, margin=math.inf)
+    prog = HinfProgram(2, 2, 1, 2, 1)
+    with pytest.raises(ArgumentError, match=r"^give exactly one of epsilon and phi$"):
+        prog.attempt(ex1)
+    with pytest.raises(ArgumentError, match=r"^give exactly one of epsilon and phi$"):
+        prog.attempt(ex1, 1.0, phi=0.5)
+    with pytest.raises(ArgumentTypeError, match=r"must be a PolytopicLPV or an AffineLPV .*; found str$"):
+        prog.attempt("plant", 1.0)  # type: ignore[arg-type]
+    other = load_system("peixoto-ex2").model()
+    if (other.n_vertices, other.nx, other.ny, other.nz, other.nw) != (2, 2, 1, 2, 1):
+        with pytest.raises(DimensionError, match=r"this program was compiled for \(2, 2, 1, 2, 1\)"):
+            prog.attempt(other, 1.0)
+
+
+def test_an_epsilon_curve_records_each_epsilon_and_its_angle(ex1):
+    from lpvest.design import epsilon_curve, search_epsilon
+
+    curve = epsilon_curve(ex1, [-0.5, 150.0, math.inf], kind=KIND_ROBUST)
+    np.testing.assert_array_equal(curve.epsilon, [-0.5, 150.0, math.inf])
+    np.testing.assert_array_equal(curve.phi, [math.atan(-0.5), math.atan(150.0), math.pi / 2])
+    assert np.all(np.isfinite(curve.gamma[1:])) and curve.best()[1] == min(curve.gamma)
+    with pytest.raises(ArgumentError, match=r"^n_grid must be an integer, at least 3; found 2$"):
+        search_epsilon(ex1, kind=KIND_ROBUST, n_grid=2)

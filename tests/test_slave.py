@@ -1,0 +1,430 @@
+"""The FMU slave base (lpvest/fmi/slave.py) in this process: step rule, inputs, state, errors.
+
+The slave runs from a resources folder written without bundling (tests/slave_harness.py), so a
+change to slave.py is seen without a rebuild; tests/test_fmu.py checks the same conventions
+through built FMUs and real FMI calls.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pythonfmu.enums import Fmi2Status
+
+from lpvest.fmi.slave import MAX_MESSAGE
+from lpvest.modelfile import load_system
+
+from .slave_harness import ERROR, OK, WARNING, Slave, edit_state, write_resources
+
+
+def theta(k):
+    return np.sin(0.25 * np.asarray(k, dtype=float))
+
+
+def paper_w(k):
+    k = np.asarray(k, dtype=float)
+    return np.where(k >= 10, np.sin(0.5 * k) * np.exp(-0.1 * k), 0.0)  # Peixoto et al., Section 4
+
+
+@pytest.fixture(scope="module")
+def resources(tmp_path_factory):
+    base = tmp_path_factory.mktemp("slave-resources")
+    return {f"{s}{r}": write_resources(s, r, base / f"{s}-{r}")
+            for s, r in [("peixoto-ex1", "Plant"), ("peixoto-ex1", "HinfPD"), ("cox-toth-truncation", "Kalman"),
+                         ("peixoto-ex1", "Scheduler")]}
+
+
+def plant(resources, **kw) -> Slave:
+    return Slave(resources["peixoto-ex1Plant"], **kw)
+
+
+def drive(s: Slave, t0: float, h: float, n: int, k0: int = 0, *, accumulate: bool = False) -> dict[str, np.ndarray]:
+    """Inputs of sample k set at t_k, outputs read before the step, one step of h."""
+    rec: dict[str, list] = {"y": [], "z": [], "x": []}
+    t = t0 + k0 * h
+    for k in range(k0, k0 + n):
+        s.set_reals({"p[1]": float(theta(k)), "w[1]": float(paper_w(k))})
+        for name, count in (("y", 1), ("z", 2), ("x", 2)):
+            rec[name].append(s.get(*[f"{name}[{i + 1}]" for i in range(count)]))
+        tk = t if accumulate else t0 + k * h
+        assert s.step(tk, h), s.errors()
+        t += h
+    return {k: np.array(v) for k, v in rec.items()}
+
+
+# -- the step rule ---------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("accumulate", [False, True])
+@pytest.mark.parametrize("t0", [0.0, 1e6, -3.5e7])
+def test_a_plant_far_from_t0_is_the_library_whatever_the_host_time_arithmetic(resources, t0, accumulate):
+    """Communication points t0 + k h (an integer counter, lpvest.cosim) or t += h (fmpy's loop)
+    are the FMU's time within the rule's relative tolerance, however far from 0."""
+    s = plant(resources)
+    assert s.initialize(t0, sample_time=0.1) == []
+    T = 60
+    got = drive(s, t0, 0.1, T, accumulate=accumulate)
+    model = load_system("peixoto-ex1").model()
+    k = np.arange(T)
+    ref = model.simulate(model.alpha_batch(theta(k)[:, None]), paper_w(k)[:, None])
+    assert np.array_equal(got["y"], ref.y) and np.array_equal(got["z"], ref.z) and np.array_equal(got["x"], ref.x)
+    assert s.take_log() == []
+
+
+@pytest.mark.parametrize(("t0", "h"), [(0.0, 0.1), (1e6, 0.1), (1e9, 0.5), (-2e10, 1.0)])
+def test_far_from_t0_a_skipped_or_repeated_point_is_refused_and_consumes_nothing(resources, t0, h):
+    a, b = plant(resources), plant(resources)
+    for s in (a, b):
+        assert s.initialize(t0, sample_time=h) == []
+        drive(s, t0, h, 12)
+    t = t0 + 12 * h
+    a.set_reals({"p[1]": 0.3, "w[1]": 0.2})
+    for bad_t, bad_h, why in [(t + h, h, "is not the FMU's current time"), (t - h, h, "is not the FMU's current time"),
+                              (t, 1.5 * h, f"is not a whole number of samples of the sample time {h:g}"),
+                              (t, 0.0, "must be > 0"),
+                              (t, -h, "must be > 0"), (t, math.nan, "must be finite"),
+                              (math.inf, h, "must be finite")]:
+        assert not a.step(bad_t, bad_h)
+        [message] = a.errors()
+        assert why in message and "fmi2DoStep refused" in message
+    # nothing consumed: the next valid step gives what an instance without the refusals gives
+    b.set_reals({"p[1]": 0.3, "w[1]": 0.2})
+    assert a.step(t, h) and b.step(t, h)
+    assert a.get("x[1]", "x[2]", "y[1]") == b.get("x[1]", "x[2]", "y[1]")
+    assert a.slave._time == t + h
+
+
+@pytest.mark.parametrize("t0", [0.0, 1e9])
+def test_a_step_of_several_samples_does_not_hide_a_skipped_sample(resources, t0):
+    """A step of m samples from a point one sample off is refused: the time-match rule allows
+    rounding, at most half a sample, whatever the length of the step."""
+    h = 0.5
+    s = plant(resources)
+    assert s.initialize(t0, sample_time=h) == []
+    drive(s, t0, h, 3)
+    t = t0 + 3 * h
+    for m in (2, 4, 8):
+        for off in (h, -h):
+            assert not s.step(t + off, m * h)
+            [message] = s.errors()
+            assert "is not the FMU's current time" in message
+    assert s.step(t, 4 * h), s.errors()
+    assert s.slave._time == t + 4 * h
+
+
+def test_the_time_match_tolerance_is_relative_to_the_larger_time(resources):
+    """A host's time that differs from the FMU's by rounding errors of its size is the same point."""
+    t0, h = 1e9, 0.5
+    s = plant(resources)
+    assert s.initialize(t0, sample_time=h) == []
+    assert s.step(t0 * (1 + 4e-16), h), s.errors()  # two ulps of t0 away
+    assert s.step((t0 + h) * (1 - 1e-10), h), s.errors()  # 0.1 s: a host's time accumulated over 1e6 steps
+
+
+def test_a_step_before_initialization_or_after_terminate_is_refused(resources):
+    s = plant(resources)
+    assert not s.step(0.0, 1.0)
+    assert s.errors() == ["[PeixotoEx1Plant] fmi2DoStep refused at t = 0 (h = 1): the FMU is not initialized yet "
+                          "(fmi2ExitInitializationMode)"]
+    assert s.initialize() == []
+    assert s.step(0.0, 1.0)
+    s.slave.terminate()
+    assert not s.step(1.0, 1.0)
+    assert "the FMU is terminated" in s.errors()[0]
+    s.set("p[1]", 0.5)
+    assert "cannot be set after fmi2Terminate" in s.errors()[0]
+
+
+def test_a_failed_initialization_refuses_every_step_and_says_why(resources):
+    s = plant(resources)
+    s.slave.setup_experiment(0.0)
+    s.set("sample_time", 0.0)
+    s.slave.exit_initialization_mode()
+    [message] = s.errors()
+    assert "sample_time = 0 must be > 0" in message
+    assert not s.step(0.0, 1.0)
+    assert "initialization failed: parameter sample_time = 0 must be > 0" in s.errors()[0]
+
+
+# -- inputs ----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("value", "why"), [(math.nan, "p[1] (theta) = nan is not finite"),
+                                            (1.5, "p[1] (theta) = 1.5 is outside its declared range [-1, 1]"),
+                                            (-1.0 - 1e-9, "is outside its declared range [-1, 1]")])
+def test_a_bad_input_is_rejected_naming_it_and_the_state_is_kept(resources, value, why):
+    s, ref = plant(resources), plant(resources)
+    for x in (s, ref):
+        assert x.initialize() == []
+        drive(x, 0.0, 1.0, 5)
+    s.set_reals({"p[1]": 0.2, "w[1]": 0.1})
+    s.set("p[1]", value)
+    [message] = s.errors()
+    assert why in message and "value rejected" in message
+    assert s.get("p[1]") == [0.2]  # the rejected value is not stored
+    assert not s.step(5.0, 1.0)
+    assert "invalid input(s) p[1]" in s.errors()[0]
+    s.set("p[1]", 0.2)  # a valid value clears the complaint
+    ref.set_reals({"p[1]": 0.2, "w[1]": 0.1})
+    assert s.step(5.0, 1.0) and ref.step(5.0, 1.0)
+    assert s.get("x[1]", "x[2]") == ref.get("x[1]", "x[2]")
+
+
+def test_an_input_on_its_bound_within_the_relative_tolerance_is_accepted(resources):
+    s = plant(resources)
+    assert s.initialize() == []
+    s.set_reals({"p[1]": 1.0 + 5e-13, "w[1]": 0.0})  # inside check_box's relative tolerance 1e-12
+    assert s.errors() == []
+    assert s.get("p[1]") == [1.0 + 5e-13]
+    assert s.step(0.0, 1.0), s.errors()
+
+
+def test_a_restored_state_with_an_input_out_of_range_is_checked_again(resources):
+    """Inputs checked at fmi2SetReal are not checked again by the component; a restored state's
+    inputs did not pass through fmi2SetReal, so they are: an out-of-range p is an error, never a
+    sample silently computed outside the scheduling box."""
+    s = plant(resources)
+    assert s.initialize() == []
+    s.set_reals({"p[1]": 0.5, "w[1]": 0.0})
+    good = s.get("y[1]")  # the inputs are now known to be in range
+    assert math.isfinite(good[0])
+    state = s.get_state()
+    bad = edit_state(state, inputs={"p": np.array([3.0]), "w": np.array([0.0])}, dirty=True)
+    s.set_state(bad)
+    s.take_log()
+    s.get("y[1]")
+    errors = s.errors()
+    assert errors and "theta" in errors[0] and "3" in errors[0]
+    assert not s.step(0.0, 1.0)
+    assert s.errors()
+    s.set_state(state)  # the good state runs again
+    assert s.get("y[1]") == good and s.step(0.0, 1.0)
+
+
+# -- outputs ---------------------------------------------------------------------------
+
+
+def test_feedthrough_outputs_hold_after_a_step_and_states_move_on(resources):
+    s = plant(resources)
+    assert s.initialize() == []
+    drive(s, 0.0, 1.0, 15)
+    s.set_reals({"p[1]": 0.4, "w[1]": -0.2})
+    y, z, x = s.get("y[1]"), s.get("z[1]", "z[2]"), s.get("x[1]", "x[2]")
+    assert s.step(15.0, 1.0)
+    model = load_system("peixoto-ex1").model()
+    m = model.at(model.alpha([0.4]))
+    assert s.get("y[1]") == y and s.get("z[1]", "z[2]") == z  # the sample just consumed
+    x_next = s.get("x[1]", "x[2]")
+    size = max(map(abs, x)) + 0.2
+    np.testing.assert_allclose(x_next, m.A @ x + m.Bw @ [-0.2], rtol=0, atol=8 * np.finfo(float).eps * size)
+    # a second step with no input set: the same inputs again (a held sample)
+    assert s.step(16.0, 1.0)
+    np.testing.assert_allclose(s.get("x[1]", "x[2]"), m.A @ x_next + m.Bw @ [-0.2], rtol=0,
+                               atol=8 * np.finfo(float).eps * (max(map(abs, x_next)) + 0.2))
+
+
+def test_a_filter_reads_its_estimate_before_the_step_and_holds_it_after(resources):
+    f = Slave(resources["peixoto-ex1HinfPD"])
+    assert f.initialize() == []
+    seen = []
+    for k in range(6):
+        f.set_reals({"p[1]": float(theta(k)), "y[1]": math.cos(k)})
+        before = f.get("zhat[1]", "zhat[2]")
+        assert f.step(float(k), 1.0)
+        assert f.get("zhat[1]", "zhat[2]") == before
+        seen.append(before)
+    from lpvest.design.result import HinfDesign
+    from lpvest.estimators.hinf import HinfFilter
+
+    design = HinfDesign.from_json((resources["peixoto-ex1HinfPD"] / "design.json").read_text())
+    lib = HinfFilter(design, simplex_map=load_system("peixoto-ex1").model().simplex_map)
+    ref = [lib.step({"p": [float(theta(k))], "y": [math.cos(k)]})["zhat"].tolist() for k in range(6)]
+    assert seen == ref
+
+
+def test_an_output_that_would_be_inf_is_an_error_naming_it_and_numpy_warnings_are_logged(resources):
+    s = plant(resources)
+    s.slave.setup_experiment(0.0)
+    s.set("x0[1]", 1.5e308)
+    s.set("x0[2]", 1.5e308)
+    s.slave.exit_initialization_mode()
+    assert s.errors() == []
+    s.set_reals({"p[1]": -1.0, "w[1]": 0.0})  # vertex 1: x2 <- x1 + 0.48 x2 overflows
+    assert s.step(0.0, 1.0)
+    assert s.take_log() == [(WARNING, "[PeixotoEx1Plant] numpy: floating-point overflow at t = 0")]
+    assert s.get("x[2]") == [math.inf]
+    log = s.take_log()
+    assert log[:-1] and all(m == (WARNING, "[PeixotoEx1Plant] numpy: floating-point invalid value at t = 1")
+                            for m in log[:-1])  # inf - inf in the outputs (0 * inf)
+    assert log[-1][0] == ERROR and log[-1][1].startswith("[PeixotoEx1Plant] fmi2GetReal: output ")
+    assert "x[2] is not finite (NaN or inf) at t = 1" in log[-1][1]
+    assert not s.step(1.0, 1.0)
+    assert "fmi2DoStep refused at t = 1 (h = 1): output " in s.errors()[-1]
+
+
+def test_wrong_variable_use_is_an_error_never_an_exception(resources):
+    s = plant(resources)
+    assert s.initialize() == []
+    assert math.isnan(s.slave.get_real([10_000])[0])
+    assert "value reference 10000 is not a Real variable" in s.errors()[0]
+    assert s.slave.get_integer([s.vr["p[1]"]]) == [0]
+    assert "is not a Integer variable" in s.errors()[0]
+    s.slave.set_real([s.vr["y[1]"]], [1.0])
+    assert "y[1] is an output; it cannot be set" in s.errors()[0]
+    s.slave.set_real([s.vr["sample_time"]], [2.0])
+    assert "is fixed: it can be set only before fmi2ExitInitializationMode" in s.errors()[0]
+    assert s.get("sample_time") == [1.0]
+
+
+def test_log_messages_are_capped_and_percent_signs_survive_the_format_string(resources):
+    s = plant(resources)
+    s.take_log()
+    s.slave._log(Fmi2Status.error, "x" * 5000)
+    [(status, text)] = s.take_log()
+    assert status == ERROR and len(text) <= MAX_MESSAGE + len("[PeixotoEx1Plant] ") and text.endswith("cut)")
+    s.slave._log(Fmi2Status.ok, "100% done")
+    assert s.take_log() == [(OK, "[PeixotoEx1Plant] 100%% done")]
+
+
+# -- state -----------------------------------------------------------------------------
+
+
+def test_a_restored_state_continues_identically_and_a_foreign_state_is_refused(resources):
+    a = Slave(resources["cox-toth-truncationKalman"])
+    assert a.initialize() == []
+    outputs = ["xhat[1]", "xhat[2]", "P[1,1]", "loglik"]
+
+    def run(s, k0, n):
+        rows = []
+        for k in range(k0, k0 + n):
+            s.set_reals({"p[1]": math.sin(k) * 0.5, "u[1]": math.cos(k), "y[1]": 0.1 * k, "y[2]": -0.2})
+            rows.append(s.get(*outputs))
+            assert s.step(float(k), 1.0), s.errors()
+        return rows
+
+    run(a, 0, 5)
+    state = a.get_state()
+    first = run(a, 5, 5)
+    a.set_state(state)
+    assert [m for m in a.take_log() if m[0] >= WARNING] == []
+    assert run(a, 5, 5) == first
+    b = Slave(resources["cox-toth-truncationKalman"], name="b")
+    b.set_state(state)  # into a fresh instance
+    assert run(b, 5, 5) == first
+    p = plant(resources)
+    p.set_state(state)
+    assert "the state belongs to 'CoxTothTruncationKalman', not to 'PeixotoEx1Plant'" in p.errors()[0]
+    p.set_state(edit_state(p.get_state(), params={"other": 1.0}))
+    assert "the state's parameters do not match this FMU" in p.errors()[0]
+
+
+# -- non-Real variables and the model description's metadata -------------------------------
+
+
+def test_string_integer_and_boolean_parameters_are_set_read_and_checked(resources, tmp_path):
+    s = Slave(resources["peixoto-ex1Scheduler"])
+    assert s.get("kind") == ["sinusoid"] and s.get("seed") == [0]
+    s.slave.setup_experiment(0.0)
+    s.set("kind", "constant")
+    s.set("seed", 7)
+    assert s.get("kind") == ["constant"] and s.get("seed") == [7]
+    s.set("seed", 2**31)
+    assert s.errors() == ["[PeixotoEx1Scheduler] parameter seed = 2147483648 is outside its declared range "
+                          "[0, 2147483647]; value rejected"]
+    assert s.get("seed") == [7]
+    s.set("seed", 8)  # a valid value clears the complaint
+    s.slave.exit_initialization_mode()
+    assert s.errors() == []
+    s.set("kind", "random")
+    assert s.errors() == ["[PeixotoEx1Scheduler] parameter kind is fixed: it can be set only before "
+                          "fmi2ExitInitializationMode"]
+    assert s.get("kind") == ["constant"]
+    plant_dir = write_resources("cox-toth-truncation", "Plant", tmp_path / "ct")
+    p = Slave(plant_dir)
+    assert p.get("noise") == [True]
+    p.slave.set_boolean([p.vr["noise"]], [False])
+    assert p.get("noise") == [False] and p.slave.parameters()["noise"] is False
+    p.slave.set_string([p.vr["noise"]], ["x"])
+    assert p.errors() == [f"[CoxTothTruncationPlant] fmi2SetString: value reference {p.vr['noise']} is not a "
+                          "String variable"]
+    assert p.slave.get_boolean([p.vr["seed"]]) == [False] and p.slave.get_string([p.vr["seed"]]) == [""]
+    assert "is not a Boolean variable" in p.errors()[0]
+
+
+def test_the_metadata_declares_ranges_dependencies_and_sampling(resources):
+    s = plant(resources)
+    meta = s.slave.fmi_metadata()
+    assert meta["timed"] is False
+    assert meta["ranges"][s.vr["p[1]"]] == (-1.0, 1.0) and meta["ranges"][s.vr["sample_time"]] == (0.0, None)
+    assert s.vr["w[1]"] not in meta["ranges"]
+    inputs = sorted([s.vr["p[1]"], s.vr["w[1]"]])
+    assert meta["dependencies"][s.vr["y[1]"]] == inputs and meta["dependencies"][s.vr["z[2]"]] == inputs
+    assert meta["dependencies"][s.vr["x[1]"]] == []  # a state depends on no input at the same instant
+    assert set(meta["dependencies"]) == {s.vr[n] for n in ("y[1]", "z[1]", "z[2]", "x[1]", "x[2]")}
+    f = Slave(resources["peixoto-ex1HinfPD"])
+    fm = f.slave.fmi_metadata()
+    assert fm["dependencies"][f.vr["zhat[1]"]] == sorted([f.vr["p[1]"], f.vr["y[1]"]])
+    assert fm["dependencies"][f.vr["xf[2]"]] == []
+    sched = Slave(resources["peixoto-ex1Scheduler"])
+    assert all(d == [] for d in sched.slave.fmi_metadata()["dependencies"].values())  # no inputs at all
+
+
+def test_the_model_description_declares_each_variable(resources):
+    import xml.etree.ElementTree as ET
+
+    s = plant(resources)
+    md = s.slave.to_xml()
+    assert md.get("modelName") == "PeixotoEx1Plant" and md.get("description").startswith("Plant: ")
+    declared = {v.get("name"): (v.get("causality"), v.get("variability"), v.get("description"), v[0].get("start"))
+                for v in md.iter("ScalarVariable")}
+    assert declared["p[1]"] == ("input", None, "scheduling (theta)", "0")
+    assert declared["w[1]"][:2] == ("input", None) and declared["w[1]"][3] == "0"
+    assert declared["y[1]"][:2] == ("output", None) and declared["x[2]"][:2] == ("output", None)
+    assert declared["sample_time"] == ("parameter", "fixed", "time between samples (s): a communication step of "
+                                       "m whole samples (m >= 1) runs m samples, the inputs held", "1")
+    assert declared["x0[2]"][:2] == ("parameter", "fixed")
+    assert ET.tostring(md).count(b"<ScalarVariable") == len(s.vr) == 10
+
+
+def test_outputs_read_before_initialization_come_from_the_start_values(resources):
+    s = plant(resources)
+    model = load_system("peixoto-ex1").model()
+    m = model.at(model.alpha([0.0]))  # p starts at 0, the point of [-1, 1] nearest 0
+    x0 = np.array([float(v) for v in s.get("x0[1]", "x0[2]")])  # the parameter's start value
+    assert s.get("y[1]") == (m.Cy @ x0).tolist() and s.get("x[1]", "x[2]") == x0.tolist()
+    s.set("x0[1]", 2.0)  # a parameter changes the preview
+    assert s.get("x[1]") == [2.0] and s.get("y[1]") == (m.Cy @ [2.0, x0[1]]).tolist()
+
+
+def test_a_host_that_skips_setup_or_rounds_the_first_point_still_steps(resources):
+    s = plant(resources)
+    s.slave.enter_initialization_mode()
+    s.slave.exit_initialization_mode()  # no fmi2SetupExperiment: start time 0
+    assert s.errors() == []
+    assert s.step(1e-12, 1.0), s.errors()  # 1e-12 is 0 to the rule's 1e-9 of the step
+    assert s.step(1.0 + 1e-12, 1.0), s.errors()
+
+
+def test_every_invalid_value_is_named_when_initialization_fails(resources):
+    s = plant(resources)
+    s.slave.setup_experiment(0.0)
+    s.set("sample_time", -1.0)
+    s.set("x0[1]", math.inf)
+    s.take_log()
+    s.slave.exit_initialization_mode()
+    assert s.errors() == ["[PeixotoEx1Plant] fmi2ExitInitializationMode: invalid values were set: parameter "
+                          "sample_time = -1 is outside its declared range [0, inf]; value rejected; parameter "
+                          "x0[1] = inf is not finite; value rejected"]
+
+
+def test_a_spec_without_a_sample_time_samples_every_second(tmp_path):
+    import json
+
+    folder = write_resources("peixoto-ex1", "Plant", tmp_path / "r")
+    spec = json.loads((folder / "lpvest_fmu.json").read_text())
+    del spec["sample_time"]
+    (folder / "lpvest_fmu.json").write_text(json.dumps(spec))
+    s = Slave(folder)
+    assert s.get("sample_time") == [1.0]
