@@ -651,6 +651,9 @@ SCENARIOS = {
     "a parameter after initialization": ("PeixotoEx1Plant", lambda d: (_init(d), d.set("x0[1]", 1.0))),
     "steps that are not the next sample": ("PeixotoEx1Plant", lambda d: (
         _init(d), d.step(0.0, 0.5), d.step(0.0, -1.0), d.step(3.0, 1.0), d.step(0.0, math.inf), d.step(0.0, 0.0))),
+    "a skipped or repeated point far from t = 0": ("PeixotoEx1Plant", lambda d: (
+        d.initialize(1e9, sample_time=0.5), d.step(1e9, 0.5), d.step(1e9 + 1.0, 0.5), d.step(1e9, 0.5),
+        d.step(1e9 + 0.5, 0.5))),
     "after fmi2Terminate": ("PeixotoEx1Plant", lambda d: (
         _init(d), d.raw("fmi2Terminate"), d.step(0.0, 1.0), d.set("p[1]", 0.1))),
     "a model parameter outside its range": ("PeixotoEx2Plant", lambda d: (_init(d, rho=30.0),)),

@@ -37,7 +37,7 @@
 #include "fmi2Functions.h"
 #include "lpv.h"
 
-/* the relative tolerance of communication points (lpvest.fmi.slave._TIME_RTOL) */
+/* the relative tolerance of communication points (lpvest.fmi.slave._TIME_RTOL), at most h / 2 */
 #define TIME_RTOL 1e-9
 
 /* why a value was rejected */
@@ -884,7 +884,9 @@ static int step_problem(instance* s, double t, double h, lpv_msg* p) {
     }
     double scale = fabs(t) > fabs(s->time) ? fabs(t) : fabs(s->time);
     if (h > scale) scale = h;
-    if (fabs(t - s->time) > TIME_RTOL * scale) {
+    double tol = TIME_RTOL * scale;
+    if (tol > 0.5 * h) tol = 0.5 * h; /* far from 0 the fraction of |t| would exceed the step */
+    if (fabs(t - s->time) > tol) {
         lpv_msgf(p,
                  "the communication point t = %s is not the FMU's current time %s (a skipped or repeated point; "
                  "restore a state with fmi2SetFMUstate to go back)",
