@@ -79,6 +79,18 @@ def _seed(text: str) -> int:
     return value
 
 
+def _workers(text: str) -> int:
+    """``reproduce --workers``: a non-negative integer (0: in this process)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of worker processes (0: none), found "
+                                         f"{abbreviate(text, 30)}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a number of worker processes (0: none), found {value}")
+    return value
+
+
 def _steps(text: str) -> int:
     """``--steps``: 2 .. MAX_STEPS samples."""
     try:
@@ -203,9 +215,11 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
     t = time.perf_counter()
     if args.name == "all":
-        runs = reproduce_all(out, fmus=fmus, reduced=args.quick, echo=echo, backend=args.backend)
+        runs = reproduce_all(out, fmus=fmus, reduced=args.quick, echo=echo, workers=args.workers,
+                             backend=args.backend)
     else:
-        runs = reproduce([args.name], out, fmus=fmus, reduced=args.quick, echo=echo, backend=args.backend)
+        runs = reproduce([args.name], out, fmus=fmus, reduced=args.quick, echo=echo, workers=args.workers,
+                         backend=args.backend)
     seconds = time.perf_counter() - t
     print(fmus.summary())
     if len(runs) > 1:
@@ -422,6 +436,7 @@ HELP: dict[str, tuple[str, str]] = {
         "Reproduce a paper example through FMUs (built into OUT/fmu-cache or reused): tables in the terminal, "
         "figures and results.json in OUT/NAME; 'all' runs every example and writes OUT/report.md.",
         "lpvest reproduce list\n  lpvest reproduce peixoto-fig1 --out out\n  lpvest reproduce all --out out --quick\n"
+        "  lpvest reproduce all --out out --workers 0   # in this process, one experiment after another\n"
         "  lpvest reproduce all --out out-native --backend native"),
     "regress": (
         "Co-simulate the FMUs of each paper example briefly and compare with the stored regression references "
@@ -506,6 +521,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="FMU cache folder (default OUT/fmu-cache): built when missing or out of date, else reused")
     p.add_argument("--quick", action="store_true",
                    help="reduced configuration: 200 Monte Carlo runs, 5 noise seeds, Example 2 at rho = 1, 11, 21")
+    p.add_argument("--workers", type=_workers, metavar="N",
+                   help="run the experiments (and Example 2's values of rho) side by side on N Dask worker "
+                        "processes (default: one per core); 0: one after another in this process. The numbers "
+                        "are the same either way")
     _backend_argument(p, "the FMUs' backend; native FMUs go to OUT/fmu-cache-native by default")
     p.set_defaults(func=cmd_reproduce)
 

@@ -104,6 +104,34 @@ def test_variant_model_file_for_example2(tmp_path):
     assert {"PeixotoEx2Rho11HinfPD", "PeixotoEx2Rho21HinfPD", "PeixotoEx1HinfRobustEps150"} <= set(CATALOG)
 
 
+def test_a_resolved_cache_serves_its_fmus_only_and_pickles(tmp_path):
+    import pickle
+
+    from lpvest.fmi.cache import FmuCacheError
+
+    cache = ExperimentFmus(tmp_path)
+    view = pickle.loads(pickle.dumps(cache.resolved(["CoxTothEx1Scheduler"])))  # what a worker gets
+    assert cache.built == ["CoxTothEx1Scheduler"]  # built here, before
+    assert type(view) is ExperimentFmus and view["CoxTothEx1Scheduler"] == tmp_path / "CoxTothEx1Scheduler.fmu"
+    with pytest.raises(FmuCacheError, match=r"CoxTothEx1Plant was not resolved for this process \(resolved: "
+                                            r"CoxTothEx1Scheduler\): declare it with the experiment"):
+        view["CoxTothEx1Plant"]
+    assert not (tmp_path / "CoxTothEx1Plant.fmu").exists()
+
+
+def test_workers_must_be_a_count(tmp_path, capsys):
+    from lpvest.errors import ArgumentError
+    from lpvest.experiments.reproduce import reproduce
+
+    with pytest.raises(ArgumentError, match=r"workers must be an integer >= 0 \(0: in this process\); found -1"):
+        reproduce(["peixoto-fig1"], tmp_path, workers=-1)
+    with pytest.raises(SystemExit) as exit_info:  # argparse's usage error: status 2
+        main(["reproduce", "all", "--out", str(tmp_path), "--workers", "two"])
+    assert exit_info.value.code == 2
+    assert "argument --workers: expected a number of worker processes (0: none), found 'two'" in \
+        capsys.readouterr().err
+
+
 def test_unknown_fmu(tmp_path):
     with pytest.raises(LpvestError, match="no experiment FMU 'PeixotoEx3Plant'"):
         ExperimentFmus(tmp_path)["PeixotoEx3Plant"]
@@ -128,12 +156,46 @@ def test_disagreement_gives_exit_status_1(monkeypatch, tmp_path, capsys):
     assert "no experiment 'nothing'" in capsys.readouterr().err
 
 
+def _without_times(value):
+    """results.json or report.md without what depends on the machine's speed and the run's
+    folder: timing keys, durations ("18.7 s"), the date, the FMU cache's built/reused counts."""
+    if isinstance(value, dict):
+        return {k: _without_times(v) for k, v in value.items() if k not in ("compile_time", "solve_time", "wall_time")}
+    if isinstance(value, list):
+        return [_without_times(v) for v in value]
+    if isinstance(value, str):
+        value = re.sub(r"\d+(\.\d+)? s\b", "<t> s", value)
+        value = re.sub(r"\d{4}-\d{2}-\d{2} \d{2}:\d{2}", "<date>", value)
+        value = re.sub(r"wall time <t> s; FMU cache [^;]*;", "<cache>;", value)
+        return re.sub(r"--out \S+`", "--out <out>`", value)
+    return value
+
+
 @pytest.mark.slow
-def test_reproduce_all_reduced_writes_everything(tmp_path, experiment_fmus):
-    """`lpvest reproduce all --quick`: every experiment, through FMUs, and the report.
-    (The full configuration is measured, not tested: see the README.)"""
+def test_reproduce_all_reduced_writes_everything(tmp_path, experiment_fmus, capfd):
+    """`lpvest reproduce all --quick`: every experiment, through FMUs, and the report,
+    on two Dask workers and in this process: the same numbers, bit for bit, and the
+    same report. (The full configuration is measured, not tested: see the README.)"""
     lines: list[str] = []
-    runs = reproduce_all(tmp_path, fmus=experiment_fmus, reduced=True, echo=lines.append)
+    serial = reproduce_all(tmp_path / "serial", fmus=experiment_fmus, reduced=True, workers=0)
+    capfd.readouterr()
+    runs = reproduce_all(tmp_path, fmus=experiment_fmus, reduced=True, echo=lines.append, workers=2)
+    for a, b in zip(serial, runs, strict=True):
+        assert _without_times(json.loads(a.results_path.read_text())) == \
+            _without_times(json.loads(b.results_path.read_text())), a.name
+    assert _without_times((tmp_path / "serial" / "report.md").read_text()) == \
+        _without_times((tmp_path / "report.md").read_text())
+    # progress: one line per finished task (4 experiments, one task for the three Sridhar
+    # experiments, Example 2's stability limits, FMU co-simulation and 3 values of rho),
+    # nothing from the workers' progress bars
+    done = [line for line in lines if re.match(r"\[[ \d]\d/10\] ", line)]
+    assert [line[:7] for line in done] == [f"[{i:>2}/10]" for i in range(1, 11)]
+    assert sum("] peixoto-example2: rho = " in line for line in done) == 3
+    assert sum("] peixoto-example2: stability limits (" in line for line in done) == 1
+    assert sum("] peixoto-example2: FMU co-simulation (" in line for line in done) == 1
+    assert sum("] sridhar-noiseless + sridhar-noisy + sridhar-sliding (" in line for line in done) == 1
+    out, err = capfd.readouterr()
+    assert "\r" not in out + err + "".join(lines)
     names = [r.name for r in runs]
     assert names == ["cox-toth-example1", "cox-toth-truncation", "peixoto-table1", "peixoto-fig1",
                      "peixoto-example2", "sridhar-noiseless", "sridhar-noisy", "sridhar-sliding"]

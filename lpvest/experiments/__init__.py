@@ -2,12 +2,22 @@
 
 Each module in this package may define ``EXPERIMENTS``, a sequence of
 :class:`Experiment`; :func:`registry` collects them, and ``lpvest reproduce
-NAME|all`` runs them. An experiment's ``run(out_dir, *, fmus=None, ...)``
-returns an :class:`ExperimentResult` (a printable table, JSON-able numbers,
-the figures it wrote, the paper-versus-ours rows of the report, and the
-record of what ran through FMUs) and writes nothing when ``out_dir`` is
-``None``. ``fmus`` is an :class:`~lpvest.experiments.fmus.ExperimentFmus`
-(the FMU cache), a cache folder, or ``None`` for the default cache.
+NAME|all`` runs them. An experiment's ``run(out_dir, *, fmus=None,
+progress=None, ...)`` returns an :class:`ExperimentResult` (a printable
+table, JSON-able numbers, the figures it wrote, the paper-versus-ours rows of
+the report, and the record of what ran through FMUs) and writes nothing when
+``out_dir`` is ``None``. ``fmus`` is an
+:class:`~lpvest.experiments.fmus.ExperimentFmus` (the FMU cache), a cache
+folder, or ``None`` for the default cache; ``progress`` shows progress bars
+(default: :func:`show_progress`).
+
+What :mod:`~lpvest.experiments.reproduce` needs to run experiments side by
+side on Dask workers is declared with each: the FMUs it runs
+(:attr:`Experiment.fmus`, built before any worker starts), the experiments
+that share a computation and so run as one task (:attr:`Experiment.group`),
+and, for an experiment made of many independent computations, its
+:class:`Split` (:attr:`Experiment.split`): tasks that run anywhere, then a
+last step on their results.
 """
 
 from __future__ import annotations
@@ -15,7 +25,8 @@ from __future__ import annotations
 import importlib
 import json
 import pkgutil
-from collections.abc import Callable, Mapping
+import sys
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -23,9 +34,32 @@ from typing import TYPE_CHECKING, Any
 from ..errors import InternalError
 
 if TYPE_CHECKING:
+    from ..sweep.tasks import Task, TaskResult
     from .fmus import FmuRun
 
-__all__ = ["Experiment", "ExperimentResult", "registry", "write_results"]
+__all__ = ["Experiment", "ExperimentResult", "Split", "registry", "show_progress", "write_results"]
+
+
+def show_progress(progress: bool | None, out_dir: Path | None) -> bool:
+    """Whether an experiment shows progress bars: ``progress`` when given, else
+    when it writes its files (a command-line run) and stderr is a terminal
+    (never a stream of carriage returns into a log file).
+
+    Parameters
+    ----------
+    progress : bool or None
+        The caller's choice; ``None``: decide as above.
+    out_dir : Path or None
+        The experiment's output folder (``None``: a headless run).
+
+    Returns
+    -------
+    bool
+        Show progress bars.
+    """
+    if progress is not None:
+        return bool(progress)
+    return out_dir is not None and sys.stderr.isatty()
 
 
 @dataclass(frozen=True)
@@ -58,11 +92,45 @@ class ExperimentResult:
 
 
 @dataclass(frozen=True)
+class Split:
+    """An experiment as independent tasks and a last step on their results:
+    ``finish([fn(shared, task) for task in tasks])`` is the experiment's
+    result, whichever process ran each task (:func:`~lpvest.sweep.tasks.map_tasks`
+    gives the same numbers serially and on Dask workers).
+
+    Parameters
+    ----------
+    fn : callable
+        Module-level task function ``fn(shared, Task) -> TaskResult``.
+    shared : object
+        What every task reads (picklable).
+    tasks : tuple of Task
+        The tasks, in the order ``finish`` takes their results.
+    finish : callable
+        ``finish(results) -> ExperimentResult``, ``results`` the
+        :class:`~lpvest.sweep.tasks.TaskResult` of each task in order; it
+        writes the experiment's files.
+    desc : str
+        What the tasks are, for a progress bar (``"Example 2: rho sweep"``).
+    labels : tuple of str
+        What each task is, for a progress line (``"rho = 3"``).
+    """
+
+    fn: Callable[[Any, Task], TaskResult]
+    shared: Any
+    tasks: tuple[Task, ...]
+    finish: Callable[[Sequence[TaskResult]], ExperimentResult]
+    desc: str
+    labels: tuple[str, ...]
+
+
+@dataclass(frozen=True)
 class Experiment:
     """A named, runnable experiment.
 
-    ``run(out_dir, *, fmus=None, **options)``; ``reduced`` holds the options of a
-    quicker configuration (``lpvest reproduce all --quick``, the tests).
+    ``run(out_dir, *, fmus=None, progress=None, **options)``; ``reduced`` holds
+    the options of a quicker configuration (``lpvest reproduce all --quick``,
+    the tests).
 
     Parameters
     ----------
@@ -71,15 +139,31 @@ class Experiment:
     title : str
         One-line title, printed when the experiment runs.
     run : callable
-        ``run(out_dir, *, fmus=None, **options) -> ExperimentResult``.
+        ``run(out_dir, *, fmus=None, progress=None, **options) -> ExperimentResult``.
     reduced : mapping, default {}
         Keyword options of the quicker configuration, passed to ``run``.
+    fmus : tuple of str, default ()
+        Identifiers of the FMUs it runs (:data:`~lpvest.experiments.fmus.CATALOG`):
+        ``lpvest reproduce`` builds them before handing the experiment to a
+        worker process, which may use no other.
+    group : str, default ""
+        Experiments of one group (registered one after another) share a
+        computation made once per process, so they run as one task, in order;
+        ``""``: none shared.
+    split : callable or None, default None
+        ``split(out_dir, *, fmus=None, progress=None, **options) -> Split``:
+        the same experiment as independent tasks and a last step, which
+        ``lpvest reproduce`` spreads over its workers; ``run`` is then
+        ``split`` with the tasks run in order.
     """
 
     name: str
     title: str
     run: Callable[..., ExperimentResult]
     reduced: Mapping[str, Any] = field(default_factory=dict)
+    fmus: tuple[str, ...] = ()
+    group: str = ""
+    split: Callable[..., Split] | None = None
 
 
 def registry() -> dict[str, Experiment]:

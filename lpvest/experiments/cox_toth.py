@@ -48,7 +48,7 @@ from ..plotting import save_figure
 from ..rng import Stream
 from ..sweep.tasks import Task, TaskResult, map_tasks
 from ..systems import AffineLPV, InnovationLPV, LPVInputOutput
-from . import Experiment, ExperimentResult
+from . import Experiment, ExperimentResult, show_progress
 from .fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
 
 if TYPE_CHECKING:
@@ -94,8 +94,10 @@ def run_example1(
     steps: int = 200,
     seed: int = 2026,
     fmus: ExperimentFmus | str | Path | None = None,
+    progress: bool | None = None,
 ) -> ExperimentResult:
-    """(21a), (21b), (21c) driven by the same ``u``, ``p``, ``e``.
+    """(21a), (21b), (21c) driven by the same ``u``, ``p``, ``e`` (``progress``:
+    nothing here takes long enough for a progress bar).
 
     ``p_t = 0.6 + 0.3 sin(0.25 t)`` (in [0.3, 0.9]: (21b) divides by
     ``p_{t+1}``), ``u_t`` standard normal from ``Stream(seed)``, ``e_t``
@@ -105,6 +107,7 @@ def run_example1(
     three with a streaming plant: (21a) has no state and (21b)'s gain needs
     ``p_{t+1}``); the library simulates all three.
     """
+    del progress
     fmus = as_experiment_fmus(fmus)
     system = load_system("cox-toth-ex1")
     io = system.model("io", LPVInputOutput)
@@ -297,6 +300,7 @@ def run_truncation(
     seed: int = 7,
     fmus: ExperimentFmus | str | Path | None = None,
     engine: Engine | None = None,
+    progress: bool | None = None,
 ) -> ExperimentResult:
     """Fading memory of the Kalman gain on ``cox-toth-truncation``, ``p_t = sin(0.25 t)``.
 
@@ -304,7 +308,8 @@ def run_truncation(
     the exact prediction-error variances; averages are over ``t >= burn_in``.
     One task per filter (:func:`prediction_error_task`), run in this process
     or, with ``engine`` (a :class:`lpvest.sweep.Engine`), on Dask workers:
-    the same numbers either way.
+    the same numbers either way. ``progress``: progress bars (default:
+    :func:`~lpvest.experiments.show_progress`).
 
     Through FMUs (:func:`truncation_cosim`): Scheduler, Source and Plant
     (noise seed ``seed``), the Kalman FMU and one TruncatedKalman FMU per
@@ -316,7 +321,7 @@ def run_truncation(
     are library-only.
     """
     fmus = as_experiment_fmus(fmus)
-    progress = out_dir is not None
+    progress = show_progress(progress, out_dir)
     model = load_system("cox-toth-truncation").model(None, AffineLPV)
     km = KalmanModel(model)
     p, u = _truncation_signals(steps)
@@ -601,11 +606,14 @@ EXPERIMENTS = [
         "cox-toth-example1",
         "Cox & Toth Example 1: (21a), (21b), (21c) give the same y",
         run_example1,
+        fmus=("CoxTothEx1Plant", "CoxTothEx1Scheduler", "CoxTothEx1Source"),
     ),
     Experiment(
         "cox-toth-truncation",
         "Cox & Toth Theorem 1 / Conjecture 1: truncated-memory Kalman gain",
         run_truncation,
         reduced={"runs": 200},
+        fmus=("CoxTothTruncationPlant", "CoxTothTruncationScheduler", "CoxTothTruncationSource",
+              "CoxTothTruncationKalman", "CoxTothTruncationTruncatedKalman"),
     ),
 ]

@@ -35,7 +35,7 @@ import numpy as np
 from ..plotting import save_figure
 from ..sweep.tasks import Task, TaskResult, map_tasks
 from ..systems import PolytopicLPV
-from . import Experiment, ExperimentResult
+from . import Experiment, ExperimentResult, Split, show_progress
 from .fmus import (
     Agreement,
     CoSimSpec,
@@ -57,6 +57,8 @@ __all__ = [
     "run_table1",
     "run_fig1",
     "run_example2",
+    "split_example2",
+    "example2_part",
     "stability_limits",
     "StabilityLimits",
     "fig1_signals",
@@ -226,10 +228,10 @@ def _fmu_run(description: str, spec: CoSimSpec, timer: Timer, runs: Sequence[Hin
 # Table 1
 # ---------------------------------------------------------------------------
 def run_table1(
-    out_dir: Path | None = None, *, fmus: ExperimentFmus | str | Path | None = None
+    out_dir: Path | None = None, *, fmus: ExperimentFmus | str | Path | None = None, progress: bool | None = None
 ) -> ExperimentResult:
     """Example 1: Theorem 1 and Corollary 1 at ``epsilon = 150`` and at the best
-    ``epsilon``, next to the paper's Table 1.
+    ``epsilon``, next to the paper's Table 1 (``progress``: no progress bar here).
 
     Table 1 is a design (LMIs), so the FMU part is the designs in use: the
     shipped ``PeixotoEx1HinfPD`` and ``PeixotoEx1HinfRobust`` FMUs, which carry
@@ -237,6 +239,7 @@ def run_table1(
     Scheduler, Source and Plant FMUs in the paper's scenario (Figs. 1-2); the
     library runs the designs found here on the same scenario.
     """
+    del progress
     fmus = as_experiment_fmus(fmus)
     from ..design import KIND_PD, KIND_ROBUST, design_hinf, search_epsilon
     from ..modelfile import load_system
@@ -381,10 +384,11 @@ def fig1_signals(steps: int = 100, *, plant: Any | None = None) -> Fig1Signals:
 
 
 def run_fig1(
-    out_dir: Path | None = None, *, steps: int = 100, fmus: ExperimentFmus | str | Path | None = None
+    out_dir: Path | None = None, *, steps: int = 100, fmus: ExperimentFmus | str | Path | None = None,
+    progress: bool | None = None,
 ) -> ExperimentResult:
     """Example 1: e_k of the PD and robust filters (epsilon = 150) in the
-    paper's scenario, co-simulated as FMUs.
+    paper's scenario, co-simulated as FMUs (``progress``: no progress bar here).
 
     The Scheduler, Source and Plant FMUs drive ``PeixotoEx1HinfPDEps150`` and
     ``PeixotoEx1HinfRobustEps150``, filter FMUs built with the paper's
@@ -397,6 +401,7 @@ def run_fig1(
     from ..design import KIND_PD, KIND_ROBUST, design_hinf
     from ..modelfile import load_system
 
+    del progress
     fmus = as_experiment_fmus(fmus)
     plant = load_system("peixoto-ex1").model(None, PolytopicLPV)
     designs = {
@@ -617,6 +622,61 @@ def example2_task(_shared: Any, task: Task) -> TaskResult:
                        "n_evaluations": float(n)}, value=design)
 
 
+def split_example2(
+    out_dir: Path | None = None,
+    *,
+    rhos: Sequence[float] = tuple(map(float, range(1, 22))),
+    progress: bool | None = None,
+    fmus: ExperimentFmus | str | Path | None = None,
+) -> Split:
+    """Example 2 as tasks, the plant's stability limits (:func:`stability_limits`),
+    the FMU co-simulation (:func:`example2_cosim`) and one design per ``rho``
+    (:func:`example2_task`), and the rest (:func:`run_example2`: the FMU
+    results against the library, the table, the figure) as the last step: what
+    ``lpvest reproduce`` spreads over its workers.
+
+    Parameters
+    ----------
+    out_dir : Path or None, default None
+        Where the last step writes the figure (``None``: nothing written).
+    rhos : sequence of float, default 1, 2, ..., 21
+        The values of ``rho``.
+    progress : bool or None, default None
+        Not used: the last step shows no progress bar (the same options as :func:`run_example2`).
+    fmus : ExperimentFmus, str, Path or None, default None
+        The FMU cache of the co-simulation (the tasks' shared data, and the last step's).
+
+    Returns
+    -------
+    Split
+        ``2 + len(rhos)`` tasks (:func:`example2_part`) and the last step.
+    """
+    del progress  # the tasks' progress is their caller's
+    rhos = tuple(float(r) for r in rhos)
+    fmu_rhos = tuple(r for r in EXAMPLE2_FMU_RHOS if r in rhos)
+    cache = as_experiment_fmus(fmus)
+    tasks = (Task(0, {"stability_limits": 1}), Task(1, {"cosim_rhos": fmu_rhos}),
+             *(Task(i + 2, {"rho": rho}) for i, rho in enumerate(rhos)))
+    finish = functools.partial(_finish_example2, out_dir, rhos, cache)
+    return Split(example2_part, cache, tasks, finish, "Example 2: rho sweep",
+                 ("stability limits", "FMU co-simulation", *(f"rho = {rho:g}" for rho in rhos)))
+
+
+def example2_part(fmus: ExperimentFmus, task: Task) -> TaskResult:
+    """A task of :func:`split_example2`: the design at ``task.point["rho"]``
+    (:func:`example2_task`); the plant's stability limits (value: the
+    :class:`StabilityLimits`) for ``{"stability_limits": 1}``; the FMU
+    co-simulation at the values of ``task.point["cosim_rhos"]`` (value: the
+    recorded results, the steps and the seconds it took)."""
+    if "rho" in task.point:
+        return example2_task(None, task)
+    if "cosim_rhos" in task.point:
+        timer = Timer()
+        res = timer.run(example2_cosim(task.point["cosim_rhos"]), fmus)
+        return TaskResult(value=(res, timer.steps, timer.seconds))
+    return TaskResult(value=stability_limits())
+
+
 def run_example2(
     out_dir: Path | None = None,
     *,
@@ -629,7 +689,8 @@ def run_example2(
 
     One compiled LMI program serves every ``rho`` (the vertex matrices are
     parameters), one per process. ``progress=None`` shows a tqdm bar when
-    stderr is a terminal. One task per ``rho`` (:func:`example2_task`), run in
+    writing files with stderr a terminal (:func:`~lpvest.experiments.show_progress`).
+    One task per ``rho`` (:func:`example2_task`, :func:`split_example2`), run in
     this process or, with ``engine`` (a :class:`lpvest.sweep.Engine`), on Dask
     workers: the same numbers either way.
 
@@ -639,22 +700,29 @@ def run_example2(
     the Plant FMU at that ``rho`` in the scenario of Figs. 1-2; its ``gamma`` is
     compared with the sweep's and ``||e||_2 / ||w||_2 <= gamma`` is checked.
     """
-    fmus = as_experiment_fmus(fmus)
-    import sys
+    split = split_example2(out_dir, rhos=rhos, fmus=fmus)
+    results = map_tasks(split.fn, split.shared, split.tasks, engine=engine, progress=show_progress(progress, out_dir),
+                        desc=split.desc)
+    return split.finish(results)
 
+
+def _finish_example2(out_dir: Path | None, rhos: tuple[float, ...], fmus: ExperimentFmus,
+                     outcomes: Sequence[TaskResult]) -> ExperimentResult:
+    """Example 2 from its tasks' results (the stability limits, the FMU
+    co-simulation, then one design per rho): the table, the FMU results against
+    the library, the figure."""
     from ..modelfile import load_system
 
+    lim: StabilityLimits = outcomes[0].value
+    res, steps, seconds = outcomes[1].value
+    curve = outcomes[2:]
     rows: list[dict[str, Any]] = []
     designs: dict[float, Any] = {}
-    show = sys.stderr.isatty() if progress is None else progress
-    curve = map_tasks(example2_task, None, [{"rho": float(rho)} for rho in rhos], engine=engine, progress=show,
-                      desc="Example 2: rho sweep")
     for rho, r in zip(rhos, curve, strict=True):
         design = r.value
         designs[float(rho)] = design
         rows.append({"rho": float(rho), "epsilon": _eps(design.epsilon), "gamma": design.gamma,
                      "status": design.status, "n_evaluations": int(r.metrics["n_evaluations"])})
-    lim = stability_limits()
     lines = [f"{'rho':>6} {'epsilon':>10} {'gamma':>9}", "-" * 27]
     for row in rows:
         eps = "inf" if row["epsilon"] is None else f"{row['epsilon']:.4g}"
@@ -676,9 +744,9 @@ def run_example2(
     lines.append(explanation)
 
     fmu_rhos = [r for r in EXAMPLE2_FMU_RHOS if r in designs]
-    timer = Timer()
     spec = example2_cosim(fmu_rhos)
-    res = timer.run(spec, fmus)
+    timer = Timer()
+    timer.steps, timer.seconds = steps, seconds
     runs: list[HinfFmuResult] = []
     fmu_rows: list[dict[str, Any]] = []
     for rho in fmu_rhos:
@@ -760,8 +828,15 @@ def _plot_example2(path: Path, rows: list[dict[str, Any]], lim: StabilityLimits)
 
 
 EXPERIMENTS = [
-    Experiment("peixoto-table1", "Peixoto et al. Table 1: H-infinity bounds, Example 1", run_table1),
-    Experiment("peixoto-fig1", "Peixoto et al. Figs. 1-2: estimation errors, Example 1", run_fig1),
+    Experiment("peixoto-table1", "Peixoto et al. Table 1: H-infinity bounds, Example 1", run_table1,
+               fmus=("PeixotoEx1Plant", "PeixotoEx1Scheduler", "PeixotoEx1Source", "PeixotoEx1HinfPD",
+                     "PeixotoEx1HinfRobust")),
+    Experiment("peixoto-fig1", "Peixoto et al. Figs. 1-2: estimation errors, Example 1", run_fig1,
+               fmus=("PeixotoEx1Plant", "PeixotoEx1Scheduler", "PeixotoEx1Source", "PeixotoEx1HinfPDEps150",
+                     "PeixotoEx1HinfRobustEps150")),
     Experiment("peixoto-example2", "Peixoto et al. Fig. 3: gamma(rho) of Theorem 1, Example 2", run_example2,
-               reduced={"rhos": EXAMPLE2_FMU_RHOS}),
+               reduced={"rhos": EXAMPLE2_FMU_RHOS},
+               fmus=("PeixotoEx2Plant", "PeixotoEx2Scheduler", "PeixotoEx2Source", "PeixotoEx2HinfPD",
+                     "PeixotoEx2Rho11HinfPD", "PeixotoEx2Rho21HinfPD"),
+               split=split_example2),
 ]

@@ -67,10 +67,12 @@ _DESIGN = ("the filter FMUs carry the LMI designs stored in models/designs (data
            "machine, never solved again), so the filter is a stable numpy recursion like the others: "
            + _NUMERIC[_NUMERIC.index("another BLAS"):]
            + "; the SHA-256 of each carried design is stored too")
-_LTV = ("the plant integrates with scipy's DOP853 (rtol 1e-12) per 1 ms step and the observer solves least-squares "
-        "problems whose estimates move by ~1e-7 relative for a 1e-13 relative change of y (measured): another scipy, "
-        "LAPACK or summation order changes the plant at ~1e-12 of scale and the estimates at ~1e-10; 1e-7 of scale "
-        "covers that and catches any change of the model, the kernel identity or the window logic")
+_LTV = ("the plant integrates with scipy's DOP853 (rtol 1e-12, one integration kept from step to step) and the "
+        "observer solves least-squares problems whose estimates move by ~1e-7 relative for a 1e-13 relative change "
+        "of y, ~1e-5 for 2e-12 (measured, the second when the plant's integration changed): rounding in another "
+        "LAPACK or summation order changes the plant at ~1e-14 of scale and the estimates at ~1e-8; 1e-7 of scale "
+        "covers that and catches any change of the model, the kernel identity or the window logic (a change of "
+        "the integration itself, e.g. its steps, moves the estimates by more: regenerate then)")
 
 
 @dataclass(frozen=True)

@@ -5,31 +5,59 @@ The FMUs come from an :class:`~lpvest.experiments.fmus.ExperimentFmus` cache
 (``OUT/fmu-cache`` from the command line), built on first use and reused while
 up to date.
 
+**Side by side.** With ``workers`` (default: one per core) the experiments
+run as tasks on the project's Dask engine (:class:`lpvest.sweep.Engine`, an
+embedded ``LocalCluster`` of worker processes): one task per experiment, one
+for each group of experiments that share a computation
+(:attr:`~lpvest.experiments.Experiment.group`: the three Sridhar experiments
+share one co-simulation), and one per task of a split experiment
+(:attr:`~lpvest.experiments.Experiment.split`: Example 2's values of
+``rho``), whose last step runs in this process when its tasks are done. The
+FMUs the experiments declare (:attr:`~lpvest.experiments.Experiment.fmus`) are
+checked first and the missing or stale ones built side by side on the
+workers, each recorded in the cache's manifest by this process only; the
+experiments' tasks then only read them.
+Every task runs with BLAS on one thread, in this process too
+(:func:`~lpvest.sweep.tasks.one_blas_thread`), so the numbers are the same,
+bit for bit, whatever the number of workers, and so is the report (but for
+the times it states). ``workers=0`` runs everything in this process, one
+experiment after another; so does a run with a single task.
+
+Progress: one line per finished task (``[ 3/27] peixoto-example2: rho = 3
+(2.1 s)``), each experiment's output when it is complete, and no progress bars
+from the workers. In this process, an experiment shows its own progress bars
+only when stderr is a terminal.
+
 Examples
 --------
 >>> from lpvest.experiments.reproduce import reproduce_all
 >>> runs = reproduce_all("out", reduced=True)                  # doctest: +SKIP
 >>> [r.name for r in runs if not r.ok]                         # doctest: +SKIP
 []
+>>> runs = reproduce_all("out", workers=0)   # in this process   # doctest: +SKIP
 """
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
-from ..errors import LpvestError, abbreviate
-from . import ExperimentResult, write_results
+from ..errors import ArgumentError, LpvestError, abbreviate
+from ..sweep.tasks import Outcome, SweepError, Task, TaskResult, one_blas_thread
+from . import Experiment, ExperimentResult, Split, write_results
 from .fmus import ExperimentFmus, as_experiment_fmus
 
-__all__ = ["ExperimentRun", "reproduce", "reproduce_all"]
+__all__ = ["ExperimentRun", "reproduce", "reproduce_all", "default_workers"]
 
 
 @dataclass(frozen=True)
 class ExperimentRun:
-    """One experiment as it ran: its result, where it wrote, how long it took."""
+    """One experiment as it ran: its result, where it wrote, how long it took
+    (a split experiment: its tasks' times and its last step's, added up)."""
 
     name: str
     title: str
@@ -45,6 +73,198 @@ class ExperimentRun:
         return self.result.fmu is None or self.result.fmu.ok
 
 
+def default_workers() -> int:
+    """Worker processes of ``lpvest reproduce`` by default: one per core."""
+    return os.cpu_count() or 1
+
+
+def _check_workers(workers: int | None) -> int:
+    if workers is None:
+        return default_workers()
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
+        raise ArgumentError(f"workers must be an integer >= 0 (0: in this process); found {workers!r}")
+    return workers
+
+
+def _groups(selected: Sequence[Experiment]) -> list[list[Experiment]]:
+    """The experiments in runs of one :attr:`~Experiment.group` (``""``: each alone)."""
+    out: list[list[Experiment]] = []
+    for exp in selected:
+        if exp.group and out and out[-1][0].group == exp.group and exp.split is None and out[-1][0].split is None:
+            out[-1].append(exp)
+        else:
+            out.append([exp])
+    return out
+
+
+# -- what a worker runs ------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Run:
+    """Experiments that run one after another in one task (one group)."""
+
+    experiments: tuple[tuple[Experiment, Path, dict], ...]  #: (experiment, folder, options)
+    fmus: ExperimentFmus  #: resolved: serves the declared FMUs only
+
+    def label(self) -> str:
+        return " + ".join(exp.name for exp, _, _ in self.experiments)
+
+
+@dataclass(frozen=True)
+class _Part:
+    """One task of a split experiment."""
+
+    name: str
+    fn: Callable[[Any, Task], TaskResult]
+    shared_key: str  #: the split's shared data in :class:`_Shared`
+    task: Task
+    label_text: str
+
+    def label(self) -> str:
+        return f"{self.name}: {self.label_text}"
+
+
+@dataclass(frozen=True)
+class _Shared:
+    jobs: tuple[_Run | _Part, ...]
+    split_data: dict[str, Any] = field(default_factory=dict)  #: split name -> its shared data
+
+
+def _run_experiments(run: _Run) -> list[tuple[str, ExperimentResult, float]]:
+    out = []
+    for exp, folder, options in run.experiments:
+        t = time.perf_counter()
+        result = exp.run(folder, fmus=run.fmus, progress=False, **options)
+        out.append((exp.name, result, time.perf_counter() - t))
+    return out
+
+
+def reproduce_task(shared: _Shared, task: Task) -> TaskResult:
+    """The task function of a parallel ``lpvest reproduce`` (a Dask worker runs
+    it): ``task.index`` names a job of ``shared``, a group of experiments or one
+    task of a split experiment."""
+    job = shared.jobs[task.index]
+    if isinstance(job, _Part):
+        return job.fn(shared.split_data[job.shared_key], job.task)
+    return TaskResult(value=_run_experiments(job))
+
+
+# -- the driver ----------------------------------------------------------------------------------------
+class _Reporter:
+    """Writes and prints each experiment when it is complete; keeps the runs."""
+
+    def __init__(self, out: Path, reduced: bool, say: Callable[[str], None]) -> None:
+        self.out, self.reduced, self.say = out, reduced, say
+        self.runs: dict[str, ExperimentRun] = {}
+
+    def options(self, exp: Experiment) -> dict:
+        return dict(exp.reduced) if self.reduced else {}
+
+    def header(self, exp: Experiment) -> str:
+        options = self.options(exp)
+        return f"== {exp.name}: {exp.title}" + (f" (reduced: {options})" if options else "")
+
+    def done(self, exp: Experiment, result: ExperimentResult, seconds: float, *, header: bool) -> None:
+        folder = self.out / exp.name
+        if header:
+            self.say(self.header(exp))
+        self.say(result.table)
+        if result.fmu is not None:
+            self.say("\n".join(result.fmu.lines()))
+        path = write_results(result, folder)
+        self.say(f"wrote {path}" + "".join(f"\nwrote {f}" for f in result.figures))
+        self.say(f"({seconds:.1f} s)")
+        self.runs[exp.name] = ExperimentRun(exp.name, exp.title, result, folder, path, seconds, self.options(exp))
+
+
+def _in_process(groups: list[list[Experiment]], cache: ExperimentFmus, rep: _Reporter) -> None:
+    for group in groups:
+        for exp in group:
+            rep.say(rep.header(exp))
+            folder = rep.out / exp.name
+            t = time.perf_counter()
+            with one_blas_thread():
+                result = exp.run(folder, fmus=cache, **rep.options(exp))
+            rep.done(exp, result, time.perf_counter() - t, header=False)
+
+
+def build_task(cache: ExperimentFmus, task: Task) -> TaskResult:
+    """Build one FMU of ``cache`` (``task.point["fmu"]``) on a worker; this
+    process records it (:meth:`~lpvest.fmi.cache.FmuCache.record`)."""
+    return TaskResult(value=cache.build_file(task.point["fmu"]))
+
+
+def _build_on_workers(engine: Any, cache: ExperimentFmus, needed: list[str], say: Callable[[str], None]) -> None:
+    """Build the missing or stale FMUs of ``needed`` side by side, recorded here one by one."""
+    stale = cache.stale(needed)
+    if not stale:
+        return
+    say(f"building {len(stale)} FMU(s) into {cache.directory} on {engine.describe()}")
+    tell = cache.progress or (lambda _text: None)
+
+    def on_outcome(outcome: Outcome) -> None:
+        identifier = stale[outcome.index]
+        if outcome.result is None:
+            raise SweepError(f"building {identifier} failed: {outcome.error}")
+        cache.record(identifier, outcome.result.value)
+        tell(f"built {identifier} ({outcome.seconds:.1f} s)")
+
+    engine.map(build_task, cache, [Task(i, {"fmu": ident}) for i, ident in enumerate(stale)], on_outcome=on_outcome)
+
+
+def _on_workers(groups: list[list[Experiment]], cache: ExperimentFmus, rep: _Reporter, workers: int) -> None:
+    from ..sweep.engine import Engine
+
+    with Engine(workers=workers) as engine:
+        _run_on(engine, groups, cache, rep)
+
+
+def _run_on(engine: Any, groups: list[list[Experiment]], cache: ExperimentFmus, rep: _Reporter) -> None:
+    needed = list(dict.fromkeys(name for group in groups for exp in group for name in exp.fmus))
+    _build_on_workers(engine, cache, needed, rep.say)
+    view = cache.resolved(needed)  # every one checked or built: the workers only read them
+    jobs: list[_Run | _Part] = []
+    split_data: dict[str, Any] = {}
+    splits: dict[str, tuple[Experiment, Split]] = {}
+    for group in groups:
+        if group[0].split is None:
+            jobs.append(_Run(tuple((exp, rep.out / exp.name, rep.options(exp)) for exp in group), view))
+    for group in groups:  # the many small tasks last: they even out the workers' loads at the end
+        exp = group[0]
+        if exp.split is not None:
+            split = exp.split(rep.out / exp.name, fmus=view, progress=False, **rep.options(exp))
+            splits[exp.name] = (exp, split)
+            split_data[exp.name] = split.shared
+            jobs += [_Part(exp.name, split.fn, exp.name, t, label)
+                     for t, label in zip(split.tasks, split.labels, strict=True)]
+    by_name = {exp.name: exp for group in groups for exp in group}
+    parts: dict[str, dict[int, Outcome]] = {name: {} for name in splits}
+    finished = [0]
+
+    def on_outcome(outcome: Outcome) -> None:
+        job = jobs[outcome.index]
+        finished[0] += 1
+        rep.say(f"[{finished[0]:>{len(str(len(jobs)))}}/{len(jobs)}] {job.label()} ({outcome.seconds:.1f} s)")
+        if outcome.result is None:
+            raise SweepError(f"{job.label()} failed: {outcome.error}")
+        if isinstance(job, _Run):
+            for name, result, seconds in outcome.result.value:
+                rep.done(by_name[name], result, seconds, header=True)
+            return
+        done = parts[job.name]
+        done[job.task.index] = outcome
+        exp, split = splits[job.name]
+        if len(done) == len(split.tasks):
+            t = time.perf_counter()
+            with one_blas_thread():
+                result = split.finish([done[task.index].result for task in split.tasks])  # type: ignore[misc]
+            seconds = sum(o.seconds for o in done.values()) + time.perf_counter() - t
+            rep.done(exp, result, seconds, header=True)
+
+    rep.say(f"{len(by_name)} experiment(s) as {len(jobs)} task(s) on {engine.describe()}")
+    engine.map(reproduce_task, _Shared(tuple(jobs), split_data), [Task(i) for i in range(len(jobs))],
+               on_outcome=on_outcome)
+
+
 def reproduce(
     names: Sequence[str],
     out: str | Path,
@@ -53,39 +273,63 @@ def reproduce(
     reduced: bool = False,
     echo: Callable[[str], None] | None = None,
     backend: str | None = None,
+    workers: int | None = None,
 ) -> list[ExperimentRun]:
-    """Run the experiments ``names`` into ``out/<name>/``; ``reduced`` uses each
-    experiment's quicker configuration (:attr:`Experiment.reduced`); ``echo``
-    receives the printable output (tables, FMU agreement, files written);
-    ``backend``: the FMUs' backend (``"pythonfmu"`` or ``"native"``,
-    :data:`lpvest.fmi.build.BACKENDS`; default: the given cache's, else
-    ``"pythonfmu"``)."""
+    """Run the experiments ``names`` into ``out/<name>/``.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Registered experiment names (:func:`~lpvest.experiments.registry`).
+    out : str or Path
+        The output folder; each experiment writes into ``out/<name>/``.
+    fmus : ExperimentFmus, str, Path or None, default None
+        The FMU cache (or its folder; ``None``: the default cache).
+    reduced : bool, default False
+        Use each experiment's quicker configuration (:attr:`Experiment.reduced`).
+    echo : callable, optional
+        Receives the printable output: tables, FMU agreement, files written,
+        and (side by side) one line per finished task.
+    backend : str or None, default None
+        The FMUs' backend (``"pythonfmu"`` or ``"native"``,
+        :data:`lpvest.fmi.build.BACKENDS`; default: the given cache's, else
+        ``"pythonfmu"``).
+    workers : int or None, default None
+        Dask worker processes (default: one per core, :func:`default_workers`);
+        ``0``: every experiment in this process, one after another. The
+        numbers are the same either way.
+
+    Returns
+    -------
+    list of ExperimentRun
+        One per experiment, in the order of ``names``.
+
+    Raises
+    ------
+    LpvestError
+        An unknown experiment name.
+    ArgumentError
+        ``workers`` is not an integer >= 0.
+    SweepError
+        An experiment failed on a worker (the message names it), or Dask
+        (the ``sweep`` extra) is missing.
+    """
     from . import registry  # looked up at call time
 
+    n_workers = _check_workers(workers)
     experiments = registry()
     unknown = [n for n in names if n not in experiments]
     if unknown:
         raise LpvestError(f"no experiment {abbreviate(unknown[0], 30)} (known: {', '.join(experiments) or 'none'})")
     cache = as_experiment_fmus(fmus, backend=backend)
-    out = Path(out)
-    say = echo or (lambda _text: None)
-    runs = []
-    for name in names:
-        exp = experiments[name]
-        options = dict(exp.reduced) if reduced else {}
-        say(f"== {exp.name}: {exp.title}" + (f" (reduced: {options})" if options else ""))
-        folder = out / name
-        t = time.perf_counter()
-        result = exp.run(folder, fmus=cache, **options)
-        seconds = time.perf_counter() - t
-        say(result.table)
-        if result.fmu is not None:
-            say("\n".join(result.fmu.lines()))
-        path = write_results(result, folder)
-        say(f"wrote {path}" + "".join(f"\nwrote {f}" for f in result.figures))
-        say(f"({seconds:.1f} s)")
-        runs.append(ExperimentRun(exp.name, exp.title, result, folder, path, seconds, options))
-    return runs
+    rep = _Reporter(Path(out), reduced, echo or (lambda _text: None))
+    groups = _groups([experiments[n] for n in names])
+    parallel = n_workers > 0 and (len(groups) > 1 or any(g[0].split is not None for g in groups))
+    if parallel:
+        _on_workers(groups, cache, rep, n_workers)
+    else:
+        _in_process(groups, cache, rep)
+    return [rep.runs[n] for n in names]
 
 
 def reproduce_all(
@@ -95,10 +339,12 @@ def reproduce_all(
     reduced: bool = False,
     echo: Callable[[str], None] | None = None,
     backend: str | None = None,
+    workers: int | None = None,
 ) -> list[ExperimentRun]:
-    """Every registered experiment, then ``out/report.md``
+    """Every registered experiment (:func:`reproduce`), then ``out/report.md``
     (:func:`lpvest.experiments.report.write_report`). ``fmus`` defaults to the
-    cache ``out/fmu-cache`` (``out/fmu-cache-native`` for ``backend="native"``)."""
+    cache ``out/fmu-cache`` (``out/fmu-cache-native`` for ``backend="native"``);
+    ``workers`` as in :func:`reproduce`."""
     from . import registry
     from .report import write_report
 
@@ -106,7 +352,8 @@ def reproduce_all(
     default = out / ("fmu-cache" if backend in (None, "pythonfmu") else f"fmu-cache-{backend}")
     cache = as_experiment_fmus(default if fmus is None else fmus, backend=backend)
     t = time.perf_counter()
-    runs = reproduce(list(registry()), out, fmus=cache, reduced=reduced, echo=echo, backend=backend)
+    runs = reproduce(list(registry()), out, fmus=cache, reduced=reduced, echo=echo, backend=backend,
+                     workers=workers)
     path = write_report(runs, out, fmus=cache, seconds=time.perf_counter() - t, reduced=reduced)
     if echo is not None:
         echo(f"wrote {path}")

@@ -27,7 +27,7 @@ window.
   centre (delay 2 s). Not in the paper.
 
 **Through FMUs** (:func:`sridhar_cosim`): the ``SridharLtvPlant`` FMU
-generates the data (DOP853 restarted at every 1 ms communication step) and
+generates the data (the model's DOP853 integration, kept from step to step) and
 feeds the ``SridharLtvBSplineObserver`` FMU, one co-simulation over [0, 20] s
 that serves the three experiments (run once per process,
 :func:`sridhar_data`). The batch fits of Sections V-A and V-B use the plant
@@ -58,7 +58,7 @@ from ..plotting import save_figure
 from ..protocol import run_streaming
 from ..sweep.tasks import Task, TaskResult, map_tasks
 from ..systems import LTVInputOutput
-from . import Experiment, ExperimentResult
+from . import Experiment, ExperimentResult, show_progress
 from .fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
 
 if TYPE_CHECKING:
@@ -157,7 +157,7 @@ T_END = 20.0
 
 
 def sridhar_cosim(t_end: float = T_END, *, window: float = 4.0, hop: float = 0.5, n_basis: int = 18) -> CoSimSpec:
-    """The plant FMU (``u = 120 sin t`` inside, DOP853 per step) feeding the
+    """The plant FMU (``u = 120 sin t`` inside, its DOP853 integration kept from step to step) feeding the
     observer FMU (``a_0`` an ``n_basis``-function quadratic B-spline per window,
     ``a_1`` an unknown constant), 1 ms steps over ``[0, t_end]``."""
     h = 1.0 / RATE
@@ -211,8 +211,9 @@ class SridharData:
 
     def batch_note(self, n: int | None = None) -> str:
         f, b = (self.fmu, self.batch) if n is None else (self.fmu.head(n), self.batch.head(n))
-        return (f"the plant FMU restarts DOP853 at every 1 ms step; one batch integration (LTVInputOutput.simulate) "
-                f"differs by max |dy| = {np.max(np.abs(f.y - b.y)):.1e}, max |dx| = {np.max(np.abs(f.x - b.x)):.1e} "
+        return (f"the plant FMU's integration (DOP853, kept from step to step) and one batch integration "
+                f"(LTVInputOutput.simulate, solve_ivp) "
+                f"differ by max |dy| = {np.max(np.abs(f.y - b.y)):.1e}, max |dx| = {np.max(np.abs(f.x - b.x)):.1e} "
                 f"(max |y| = {np.max(np.abs(b.y)):.3g}, max |x| = {np.max(np.abs(b.x)):.3g})")
 
 
@@ -275,11 +276,12 @@ def _fmu_run(data: SridharData, description: str, agreements: tuple[Agreement, .
 
 
 def run_noiseless(
-    out_dir: Path | None = None, *, fmus: ExperimentFmus | str | Path | None = None
+    out_dir: Path | None = None, *, fmus: ExperimentFmus | str | Path | None = None, progress: bool | None = None
 ) -> ExperimentResult:
     """Section V-A: window [0, 20] s, n = 86 quadratic B-splines, inner window [5, 15] s,
-    on the samples of the plant FMU (see the module documentation)."""
-    data = sridhar_data(as_experiment_fmus(fmus), progress=out_dir is not None)
+    on the samples of the plant FMU (see the module documentation). ``progress``:
+    progress bars (default: :func:`~lpvest.experiments.show_progress`)."""
+    data = sridhar_data(as_experiment_fmus(fmus), progress=show_progress(progress, out_dir))
     io, traj = _system(), data.fmu
     model = KernelModel.from_io(io, a0=UnknownSpline(86, order=3), a1=UnknownConstant())
     fit = fit_kernel_model(model, traj.t, traj.u, traj.y)
@@ -410,7 +412,7 @@ def noisy_seed_task(setup: NoisySetup, task: Task) -> TaskResult:
 
 def run_noisy(
     out_dir: Path | None = None, *, seeds: int = 20, fmus: ExperimentFmus | str | Path | None = None,
-    engine: Engine | None = None,
+    engine: Engine | None = None, progress: bool | None = None,
 ) -> ExperimentResult:
     """Section V-B: window [0, 9] s, n = 16, 30 dB output noise, inner window [1.5, 7.5] s;
     mean and spread over ``seeds`` noise realizations (seeds 0, 1, ...), on the
@@ -418,8 +420,10 @@ def run_noisy(
 
     One task per seed (:func:`noisy_seed_task`), run in this process or, with
     ``engine`` (a :class:`lpvest.sweep.Engine`), on Dask workers: the same
-    numbers either way."""
-    data = sridhar_data(as_experiment_fmus(fmus), progress=out_dir is not None)
+    numbers either way. ``progress``: progress bars (default:
+    :func:`~lpvest.experiments.show_progress`)."""
+    progress = show_progress(progress, out_dir)
+    data = sridhar_data(as_experiment_fmus(fmus), progress=progress)
     setup = noisy_setup(data)
     n9 = setup.t.size
     traj = data.fmu.head(n9)
@@ -428,7 +432,7 @@ def run_noisy(
     a0_curves = []
     a1_batch: list[float] = []
     per_seed = map_tasks(noisy_seed_task, setup, [Task(i, seed=i) for i in range(seeds)], engine=engine,
-                         progress=out_dir is not None, desc="sridhar-noisy seeds")
+                         progress=progress, desc="sridhar-noisy seeds")
     for r in per_seed:
         m = r.metrics
         runs["ls"].append({k: m[k] for k in _ERROR_KEYS} | {"penalty": 0.0})
@@ -528,12 +532,13 @@ def run_noisy(
 
 
 def run_sliding(
-    out_dir: Path | None = None, *, fmus: ExperimentFmus | str | Path | None = None
+    out_dir: Path | None = None, *, fmus: ExperimentFmus | str | Path | None = None, progress: bool | None = None
 ) -> ExperimentResult:
     """The sliding-window observer over [0, 20] s: window 4 s, hop 0.5 s,
     a_0 an 18-function quadratic B-spline per window, report at the centre;
-    the observer FMU co-simulated with the plant FMU."""
-    data = sridhar_data(as_experiment_fmus(fmus), progress=out_dir is not None)
+    the observer FMU co-simulated with the plant FMU. ``progress``: progress
+    bars (default: :func:`~lpvest.experiments.show_progress`)."""
+    data = sridhar_data(as_experiment_fmus(fmus), progress=show_progress(progress, out_dir))
     io, traj = _system(), data.fmu
     model = KernelModel.from_io(io, a0=UnknownSpline(OBSERVER["n_basis"], order=3), a1=UnknownConstant())
     obs = BSplineObserver(model, dt=1.0 / RATE, window=OBSERVER["window"], hop=OBSERVER["hop"])
@@ -595,9 +600,15 @@ def run_sliding(
     return ExperimentResult("sridhar-sliding", table, res, tuple(figures), paper, fmu)
 
 
+#: The FMUs of the shared co-simulation (:func:`sridhar_cosim`); the three
+#: experiments share it (:func:`sridhar_data`, once per process), so they run as one task.
+_FMUS = ("SridharLtvPlant", "SridharLtvBSplineObserver")
+
 EXPERIMENTS = [
-    Experiment("sridhar-noiseless", "Sridhar et al. V-A: a_0(t), a_1, y, y' noiseless (n = 86)", run_noiseless),
+    Experiment("sridhar-noiseless", "Sridhar et al. V-A: a_0(t), a_1, y, y' noiseless (n = 86)", run_noiseless,
+               fmus=_FMUS, group="sridhar"),
     Experiment("sridhar-noisy", "Sridhar et al. V-B: 30 dB output noise, 20 seeds (n = 16)", run_noisy,
-               reduced={"seeds": 5}),
-    Experiment("sridhar-sliding", "Sridhar et al.: sliding-window observer over [0, 20] s", run_sliding),
+               reduced={"seeds": 5}, fmus=_FMUS, group="sridhar"),
+    Experiment("sridhar-sliding", "Sridhar et al.: sliding-window observer over [0, 20] s", run_sliding,
+               fmus=_FMUS, group="sridhar"),
 ]

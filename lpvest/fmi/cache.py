@@ -22,6 +22,7 @@ Examples
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import json
 import os
@@ -31,7 +32,7 @@ import time
 from collections.abc import Callable, Iterable, Mapping
 from functools import cache
 from pathlib import Path
-from typing import Any
+from typing import Any, Self
 
 from ..errors import LpvestError
 
@@ -120,7 +121,9 @@ class FmuCache:
 
     ``fmus["PeixotoEx1Plant"]`` (or :meth:`path`) returns the FMU's path,
     building and validating it first when it is missing or out of date.
-    :attr:`built` and :attr:`reused` list what happened.
+    :attr:`built` and :attr:`reused` list what happened. :meth:`resolved`
+    gives a copy for other processes (it pickles) that serves the FMUs
+    checked here and builds nothing.
     """
 
     def __init__(self, directory: str | Path, *, progress: Callable[[str], None] | None = None,
@@ -134,6 +137,18 @@ class FmuCache:
         self.reused: list[str] = []
         self.build_time = 0.0
         self._checked: dict[str, Path] = {}
+        self._lock = threading.Lock()
+        #: only the checked FMUs are served (a copy made by :meth:`resolved`)
+        self._fixed = False
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        del state["_lock"]
+        state["progress"] = None  # a callback of this process
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
         self._lock = threading.Lock()
 
     # -- manifest -------------------------------------------------------------
@@ -175,39 +190,144 @@ class FmuCache:
         with self._lock:
             if identifier in self._checked:
                 return self._checked[identifier]
+            if self._fixed:
+                raise FmuCacheError(f"{identifier} was not resolved for this process (resolved: "
+                                    f"{', '.join(self._checked) or 'none'}): declare it with the experiment")
             plan = self.plan(identifier)
             want = fingerprint(plan, self.backend)
-            target = self.directory / f"{identifier}.fmu"
-            known = self._manifest().get(identifier, {})
-            if (target.is_file() and known.get("fingerprint") == want
-                    and known.get("sha256") == _file_digest(target)):
-                self.reused.append(identifier)
-            else:
-                self._build(plan, want, target)
-            self._checked[identifier] = target
-            return target
+            if not self._up_to_date(identifier, want):
+                self._build(plan, want, self.directory / f"{identifier}.fmu")
+            self._checked[identifier] = self.directory / f"{identifier}.fmu"
+            return self._checked[identifier]
+
+    def _up_to_date(self, identifier: str, want: str) -> bool:
+        """Whether the FMU file is the one recorded with the fingerprint ``want`` (then it counts as reused)."""
+        target = self.directory / f"{identifier}.fmu"
+        known = self._manifest().get(identifier, {})
+        if target.is_file() and known.get("fingerprint") == want and known.get("sha256") == _file_digest(target):
+            self.reused.append(identifier)
+            return True
+        return False
+
+    def stale(self, identifiers: Iterable[str]) -> list[str]:
+        """Which of ``identifiers`` need a build; the others are checked (as :meth:`path` does).
+
+        With :meth:`build_file` (in other processes) and :meth:`record`
+        (here), the stale FMUs can be built side by side.
+
+        Parameters
+        ----------
+        identifiers : iterable of str
+            FMUs of this cache.
+
+        Returns
+        -------
+        list of str
+            The missing or out-of-date ones, in the given order.
+        """
+        out = []
+        with self._lock:
+            for identifier in dict.fromkeys(identifiers):
+                if identifier in self._checked:
+                    continue
+                if self._up_to_date(identifier, fingerprint(self.plan(identifier), self.backend)):
+                    self._checked[identifier] = self.directory / f"{identifier}.fmu"
+                else:
+                    out.append(identifier)
+        return out
+
+    def build_file(self, identifier: str) -> dict[str, Any]:
+        """Build and validate one FMU into the cache folder and record nothing
+        (another process may :meth:`record` it); safe side by side for different FMUs.
+
+        Parameters
+        ----------
+        identifier : str
+            An FMU of this cache.
+
+        Returns
+        -------
+        dict
+            The manifest entry for :meth:`record` (``fingerprint``, ``sha256``,
+            ``built``) and ``seconds``, the build's time.
+
+        Raises
+        ------
+        FmuCacheError
+            The built FMU fails validation.
+        """
+        from .build import build_fmu, validate_fmus
+
+        plan = self.plan(identifier)
+        want = fingerprint(plan, self.backend)
+        t = time.perf_counter()
+        path = build_fmu(plan, self.directory)
+        (check,) = validate_fmus([path])
+        if not check.ok:
+            raise FmuCacheError(f"{identifier}: the built FMU fails validation: " + "; ".join(check.problems))
+        return {"fingerprint": want, "sha256": _file_digest(path), "built": time.strftime("%Y-%m-%dT%H:%M:%S"),
+                "seconds": time.perf_counter() - t}
+
+    def record(self, identifier: str, entry: Mapping[str, Any]) -> Path:
+        """Record an FMU that :meth:`build_file` built (in this or another process).
+
+        Parameters
+        ----------
+        identifier : str
+            The FMU.
+        entry : mapping
+            What :meth:`build_file` returned.
+
+        Returns
+        -------
+        Path
+            The FMU's path, now checked.
+        """
+        with self._lock:
+            self._record(identifier, {k: entry[k] for k in ("fingerprint", "sha256", "built")})
+            self.built.append(identifier)
+            self.build_time += float(entry["seconds"])
+            self._checked[identifier] = self.directory / f"{identifier}.fmu"
+            return self._checked[identifier]
 
     __getitem__ = path
 
     def paths(self, identifiers: Iterable[str]) -> dict[str, Path]:
         return {i: self.path(i) for i in identifiers}
 
-    def _build(self, plan: Any, want: str, target: Path) -> None:
-        from .build import backend_of, build_fmu, validate_fmus
+    def resolved(self, identifiers: Iterable[str]) -> Self:
+        """A copy that serves ``identifiers``, built or checked here first, and
+        nothing else: what another process (a Dask worker) gets, so that no two
+        processes build into one folder. It pickles (without :attr:`progress`).
 
-        backend = backend_of(plan, self.backend)
+        Parameters
+        ----------
+        identifiers : iterable of str
+            The FMUs the other process may use.
+
+        Returns
+        -------
+        FmuCache
+            Of the same class; its :meth:`path` raises
+            :class:`FmuCacheError` for any other identifier.
+        """
+        paths = self.paths(identifiers)
+        view = copy.copy(self)
+        view.__setstate__({**self.__getstate__(), "_checked": paths, "_fixed": True, "built": [], "reused": [],
+                           "build_time": 0.0})
+        return view
+
+    def _build(self, plan: Any, want: str, target: Path) -> None:
+        from .build import backend_of
+
         if self.progress is not None:
+            backend = backend_of(plan, self.backend)
             self.progress(f"building {plan.identifier} into {self.directory}" + (
                 f" ({backend})" if self.backend != "pythonfmu" else ""))
-        t = time.perf_counter()
-        path = build_fmu(plan, self.directory, backend=backend)
-        (check,) = validate_fmus([path])
-        if not check.ok:
-            raise FmuCacheError(f"{plan.identifier}: the built FMU fails validation: " + "; ".join(check.problems))
-        self.build_time += time.perf_counter() - t
-        self._record(plan.identifier, {"fingerprint": want, "sha256": _file_digest(path),
-                                       "built": time.strftime("%Y-%m-%dT%H:%M:%S")})
-        assert path == target
+        entry = self.build_file(plan.identifier)
+        assert entry["fingerprint"] == want
+        self._record(plan.identifier, {k: entry[k] for k in ("fingerprint", "sha256", "built")})
+        self.build_time += entry["seconds"]
         self.built.append(plan.identifier)
 
     def adopt(self, paths: Mapping[str, str | Path]) -> None:

@@ -31,7 +31,8 @@ from ..errors import LpvestError
 if TYPE_CHECKING:
     from .engine import Engine
 
-__all__ = ["Task", "TaskResult", "Outcome", "SweepError", "execute", "map_tasks", "task_seeds", "digest"]
+__all__ = ["Task", "TaskResult", "Outcome", "SweepError", "execute", "map_tasks", "one_blas_thread", "task_seeds",
+           "digest"]
 
 
 def digest(identity: Mapping[str, Any]) -> str:
@@ -177,6 +178,18 @@ def _blas_controller() -> Any:
     return ThreadpoolController()
 
 
+def one_blas_thread() -> Any:
+    """A context manager that runs BLAS on one thread, as on a Dask worker
+    (whose nanny sets ``OMP/OPENBLAS/MKL_NUM_THREADS=1``; see :func:`execute`).
+
+    Returns
+    -------
+    context manager
+        ``with one_blas_thread(): ...`` (threadpoolctl's limit).
+    """
+    return _blas_controller().limit(limits=1, user_api="blas")
+
+
 def execute(fn: Callable[[Any, Task], TaskResult], shared: Any, task: Task) -> Outcome:
     """Run ``fn(shared, task)``; an exception becomes a failed :class:`Outcome`
     whose ``error`` is ``"ExceptionType: message"`` (one line).
@@ -205,7 +218,7 @@ def execute(fn: Callable[[Any, Task], TaskResult], shared: Any, task: Task) -> O
     """
     t0 = time.perf_counter()
     try:
-        with _blas_controller().limit(limits=1, user_api="blas"):
+        with one_blas_thread():
             result = fn(shared, task)
         if not isinstance(result, TaskResult):
             raise TypeError(f"{getattr(fn, '__name__', fn)} returned {type(result).__name__}, not a TaskResult")

@@ -27,6 +27,7 @@ from .innovation import (
 )
 from .ltv import (
     LTVInputOutput as LTVInputOutput,
+    LTVSolution as LTVSolution,
     LTVStateSpace as LTVStateSpace,
     LTVTrajectory as LTVTrajectory,
     TimeFunction as TimeFunction,
@@ -53,6 +54,7 @@ __all__ = [
     "InnovationTrajectory",
     "LPVInputOutput",
     "LTVInputOutput",
+    "LTVSolution",
     "LTVStateSpace",
     "LTVTrajectory",
     "TimeFunction",

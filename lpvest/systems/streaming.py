@@ -56,7 +56,7 @@ from ..rng import Stream
 from ..validation import as_matrix, as_vector, check_positive_definite, check_simplex
 from .affine import AffineLPV
 from .innovation import InnovationLPV, LPVInputOutput, innovation_step
-from .ltv import LTVInputOutput, LTVStateSpace, TimeFunction
+from .ltv import LTVInputOutput, LTVSolution, LTVStateSpace, TimeFunction
 from .polytopic import PolytopicLPV
 
 __all__ = ["DiscretePlant", "LTVPlant", "plant_supports"]
@@ -426,9 +426,18 @@ class DiscretePlant(Component):
 class LTVPlant(TimedComponent):
     """A continuous-time SISO LTV plant integrated over each communication step.
 
-    The state is integrated with scipy's DOP853 (``rtol``, ``atol``) from the
-    current time to the end of each step, restarted at every communication
-    point, so any step size is accurate to the tolerances.
+    The state follows the model's :class:`~lpvest.systems.ltv.LTVSolution`:
+    one DOP853 integration (``rtol``, ``atol``) kept from step to step, whose
+    own steps do not depend on the communication points (a 1 ms step mostly
+    costs one interpolation of the integrator's dense output), so any step
+    size reads the same trajectory, accurate to the tolerances. A new
+    integration starts where the applied input changes: at a step whose held
+    input ``u`` differs from the last one (``use_model_input=False``), and
+    after :meth:`set_state` of a state this plant did not reach itself. A
+    saved state restores exactly (:meth:`get_state` records where the
+    integration last started; the restored plant replays at most
+    :attr:`~lpvest.systems.ltv.LTVSolution.RESTART` integrator steps from
+    there).
 
     Input: with ``use_model_input=True`` (the default when the model declares an
     input, e.g. Sridhar et al.'s ``u = 120 sin t``) the plant applies that
@@ -492,6 +501,7 @@ class LTVPlant(TimedComponent):
     def _reset(self) -> None:
         self._t = self.t0
         self._x = self._x0.copy()
+        self._solution: LTVSolution | None = None
 
     def _read(self, inputs: Mapping[str, Any]) -> TimeFunction | float:
         if "u" not in inputs:
@@ -503,28 +513,25 @@ class LTVPlant(TimedComponent):
         return u
 
     def _evaluate(self, u: TimeFunction | float) -> tuple[dict[str, np.ndarray], TimeFunction | float]:
-        u_now = float(u(self._t)) if isinstance(u, TimeFunction) else u
+        u_now = u.at(self._t) if isinstance(u, TimeFunction) else u
         y = self.model.C(self._t) @ self._x
         return {"y": np.asarray(y, dtype=float).reshape(1), "x": self._x.copy(), "u_applied": np.array([u_now])}, u
 
+    def _follows(self, u: TimeFunction | float) -> bool:
+        """Whether the current integration applies ``u`` (the same function, or the same held value to the bit)."""
+        sol = self._solution
+        if sol is None:
+            return False
+        if isinstance(u, TimeFunction) or isinstance(sol.u, TimeFunction):
+            return sol.u is u
+        return float(sol.u).hex() == float(u).hex()
+
     def _commit(self, u: TimeFunction | float, t_end: float = 0.0) -> None:
-        """Integrate from the current time to ``t_end`` (the master's communication point)."""
-        from scipy.integrate import solve_ivp
-
-        A, B = self.model.A, self.model.B
-        if isinstance(u, TimeFunction):
-
-            def rhs(t: float, x: np.ndarray) -> np.ndarray:
-                return A(t) @ x + B(t)[:, 0] * float(u(t))
-        else:
-
-            def rhs(t: float, x: np.ndarray) -> np.ndarray:
-                return A(t) @ x + B(t)[:, 0] * u
-
-        sol = solve_ivp(rhs, (self._t, t_end), self._x, method="DOP853", rtol=self.rtol, atol=self.atol)
-        if not sol.success or not np.all(np.isfinite(sol.y[:, -1])):
-            raise ExpressionError(f"integration from t = {self._t:g} to {t_end:g} failed: {sol.message}")
-        self._x = sol.y[:, -1].copy()
+        """Advance to ``t_end`` (the master's communication point) on the model's solution."""
+        if not self._follows(u):
+            self._solution = self.model.solution(self._t, self._x, u=u, rtol=self.rtol, atol=self.atol)
+        assert self._solution is not None
+        self._x = self._solution(t_end)
         self._t = t_end
 
     def get_state(self) -> dict[str, Any]:
@@ -534,10 +541,39 @@ class LTVPlant(TimedComponent):
         -------
         state : dict of str to object
             ``"t"``: the current time (float), ``"x"``: the state (ndarray,
-            shape (n,)).
+            shape (n,)); and, once the plant has stepped, where its integration
+            last started: ``"anchor_t"`` (float), ``"anchor_x"`` (ndarray,
+            shape (n,)) and ``"anchor_u"``, the held input it applies (float;
+            NaN for the model's input function).
         """
-        return {"t": self._t, "x": self._x.copy()}
+        state: dict[str, Any] = {"t": self._t, "x": self._x.copy()}
+        sol = self._solution
+        if sol is not None:
+            t_a, x_a = sol.anchor
+            state.update(anchor_t=t_a, anchor_x=x_a,
+                         anchor_u=float("nan") if isinstance(sol.u, TimeFunction) else float(sol.u))
+        return state
 
     def _set_state(self, state: Mapping[str, Any]) -> None:
         self._x = as_vector(state["x"], "state x", self.model.n).copy()
         self._t = float(state["t"])
+        self._solution = None
+        if "anchor_t" not in state:
+            return  # the next step integrates from (t, x)
+        u: TimeFunction | float
+        if self.use_model_input:
+            assert self.model.input is not None
+            u = self.model.input
+        else:
+            u = float(state["anchor_u"])
+            if not np.isfinite(u):
+                return
+        t_a = float(state["anchor_t"])
+        x_a = as_vector(state["anchor_x"], "state anchor_x", self.model.n)
+        if not t_a <= self._t:
+            raise DimensionError(f"state anchor_t = {t_a!r} lies after the state's time t = {self._t!r}")
+        sol = self.model.solution(t_a, x_a, u=u, rtol=self.rtol, atol=self.atol)
+        # the same integration as the plant that saved the state: replay it, unless
+        # the state is not on it (then the next step starts a new one at (t, x))
+        if np.array_equal(sol(self._t), self._x):
+            self._solution = sol
