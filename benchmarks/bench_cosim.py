@@ -1,7 +1,7 @@
 """Per-step cost of lpvest's streaming components and FMUs against minimal numpy loops; a script, not a test.
 
     .venv/bin/python benchmarks/bench_cosim.py [--steps 10000] [--repeat 3] [--fmus DIR]
-                                               [--profile] [--out FILE.json]
+                                               [--native-fmus DIR] [--profile] [--out FILE.json]
 
 The system: Peixoto et al. Example 1, the scheduler (``theta = sin(0.25 t)``),
 the source (``w_k = sin(0.5 k) exp(-0.1 k)`` from ``k = 10``), the plant and
@@ -25,6 +25,16 @@ every sample:
    stepping, so other numbers: only its time per step is reported), in a
    subprocess.
 
+Rows 2 and 3 run twice, side by side: with the pythonfmu FMUs and with the
+native ones (``lpvest build --backend native``: C, no Python in the step).
+libcosim's fixed-step algorithm hands every step to a worker thread; on a
+small virtual machine the cross-core wake-ups dominate, so libcosim also
+runs pinned to one core (``taskset -c 0``), and once more with four copies of
+a trivial foreign C FMU (``tests/data/foreign/all_types.c``): libcosim's own
+cost per step, which no FMU can go below. Each native FMU is also stepped
+alone in a bare C host (``benchmarks/native_step.c``): set inputs, doStep,
+get outputs, and doStep alone.
+
 And the Kalman filter alone: :class:`lpvest.estimators.kalman.LPVKalmanFilter`
 stepped on the Cox & Toth truncation model against a minimal numpy step of
 (4a)-(4e) that computes the same outputs (filtered and predicted moments,
@@ -32,25 +42,32 @@ innovation, gain, innovation covariance, log-likelihood).
 
 Everything runs in this one process, alternately, ``--repeat`` times; the
 best time of each is reported per step, with the ratios to the minimal loop
-(issue targets: in-process <= 2, co-simulation <= 4, Kalman step <= 1.5).
+(issue targets: in-process <= 2, co-simulation <= 4, Kalman step <= 1.5;
+native FMUs: co-simulation <= 1, libcosim <= 0.25, HinfPD doStep in the C
+host <= 0.5 us).
 The in-process and co-simulation runs record the same numbers bit for bit,
 the minimal loops agree with them to rounding (checked). ``--profile`` adds
 a cProfile listing of one co-simulation run (the FMUs' Python code runs in
 this interpreter, so it shows up there).
 
 The FMUs come from ``--fmus DIR`` (default ``fmu-build``, as written by
-``lpvest build``); missing ones are built there first.
+``lpvest build``) and ``--native-fmus DIR`` (default ``fmu-build-native``,
+``lpvest build --backend native``); missing ones are built there first.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import shutil
+import sys
 import time
 import zipfile
 from pathlib import Path
 
 import numpy as np
+
+HERE = Path(__file__).resolve().parent
 
 ROLES = ("Scheduler", "Source", "Plant", "HinfPD")
 CONNECTIONS = [
@@ -62,13 +79,13 @@ CONNECTIONS = [
 RECORD = ["sched.p", "src.w", "plant.y", "plant.z", "filter.zhat", "filter.xf"]
 
 
-def fmu_paths(folder: Path) -> dict[str, Path]:
+def fmu_paths(folder: Path, backend: str = "pythonfmu") -> dict[str, Path]:
     paths = {role: folder / f"PeixotoEx1{role}.fmu" for role in ROLES}
     if not all(p.is_file() for p in paths.values()):
         from lpvest.fmi.build import build_fmus
 
-        print(f"building the Peixoto Example 1 FMUs into {folder} ...")
-        build_fmus(["peixoto-ex1"], folder)
+        print(f"building the Peixoto Example 1 FMUs ({backend}) into {folder} ...")
+        build_fmus(["peixoto-ex1"], folder, backend=backend)
     return paths
 
 
@@ -203,10 +220,9 @@ def kalman_steps(steps: int) -> tuple[float, float, float]:
     return t_lib, t_min, float(np.max(np.abs(np.array(lib) - np.array(mine))))
 
 
-def libcosim_per_step(paths: dict[str, Path], steps: int) -> float:
-    """Seconds per step of the four FMUs in a libcosim execution (a subprocess)."""
-    import subprocess
-    import sys
+def libcosim_per_step(paths: dict[str, Path], steps: int, *, pin: bool = False) -> float:
+    """Seconds per step of the four FMUs in a libcosim execution (a subprocess;
+    ``pin``: on one core, ``taskset -c 0``)."""
     import textwrap
 
     code = textwrap.dedent(f"""
@@ -228,8 +244,44 @@ def libcosim_per_step(paths: dict[str, Path], steps: int) -> float:
         ex.step({steps})
         print("RESULT", (time.perf_counter() - t) / {steps})
     """)
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=1800, check=True)
+    return _libcosim_run(code, pin)
+
+
+def _libcosim_run(code: str, pin: bool) -> float:
+    import subprocess
+
+    cmd = [sys.executable, "-c", code]
+    if pin:
+        cmd = ["taskset", "-c", "0", *cmd]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=1800, check=True)
     return float(next(x for x in proc.stdout.splitlines() if x.startswith("RESULT")).split()[1])
+
+
+def libcosim_floor_per_step(steps: int, *, pin: bool = False) -> float:
+    """Seconds per step of four unconnected copies of a trivial foreign C FMU
+    (``AllTypes``, tests/data/foreign) in libcosim: libcosim's own cost."""
+    import tempfile
+    import textwrap
+
+    sys.path.insert(0, str(HERE.parent))
+    from tests.foreign_fmus import build_foreign_fmu
+
+    fmu = build_foreign_fmu("AllTypes", Path(tempfile.mkdtemp(prefix="lpvest-bench-")))
+    code = textwrap.dedent(f"""
+        import time
+        from libcosimpy.CosimExecution import CosimExecution
+        from libcosimpy.CosimSlave import CosimLocalSlave
+        from libcosimpy.CosimLogging import log_output_level, CosimLogLevel
+        log_output_level(CosimLogLevel.ERROR)
+        ex = CosimExecution.from_step_size(step_size=int(1e9))
+        for i in range(4):
+            ex.add_local_slave(CosimLocalSlave(fmu_path={str(fmu)!r}, instance_name=f"c{{i}}"))
+        ex.step(10)
+        t = time.perf_counter()
+        ex.step({steps})
+        print("RESULT", (time.perf_counter() - t) / {steps})
+    """)
+    return _libcosim_run(code, pin)
 
 
 def profile(paths: dict[str, Path], steps: int) -> None:
@@ -248,16 +300,24 @@ def main() -> int:
     parser.add_argument("--steps", type=int, default=10_000, help="communication steps (default 10000)")
     parser.add_argument("--repeat", type=int, default=3, help="runs of each side (default 3; the best counts)")
     parser.add_argument("--fmus", default="fmu-build", help="folder of the built FMUs (default fmu-build)")
+    parser.add_argument("--native-fmus", default="fmu-build-native",
+                        help="folder of the native FMUs (default fmu-build-native)")
     parser.add_argument("--profile", action="store_true", help="print a cProfile listing of one co-simulation")
     parser.add_argument("--out", help="write the measurements as JSON")
     args = parser.parse_args()
 
+    sys.path.insert(0, str(HERE))
+    from native_bench import step_times
+
     paths = fmu_paths(Path(args.fmus))
+    native = fmu_paths(Path(args.native_fmus), "native")
     with zipfile.ZipFile(paths["HinfPD"]) as z:
         design_json = z.read("resources/design.json").decode()
+    with zipfile.ZipFile(native["HinfPD"]) as z:
+        assert z.read("resources/design.json").decode() == design_json, "the two HinfPD FMUs carry other designs"
 
-    co_runs, co_setup, ip_runs, min_runs, kf_lib, kf_min = [], [], [], [], [], []
-    co_out = ip_out = min_out = None
+    co_runs, co_setup, nat_runs, ip_runs, min_runs, kf_lib, kf_min = [], [], [], [], [], [], []
+    co_out = nat_out = ip_out = min_out = None
     kf_diff = 0.0
     for _ in range(args.repeat):
         min_out, run = minimal_loop(design_json, args.steps)
@@ -265,30 +325,53 @@ def main() -> int:
         co_out, setup, run = cosimulation(paths, args.steps)
         co_runs.append(run)
         co_setup.append(setup)
+        nat_out, _, run = cosimulation(native, args.steps)
+        nat_runs.append(run)
         ip_out, run = in_process(design_json, args.steps)
         ip_runs.append(run)
         lib, mine, kf_diff = kalman_steps(min(args.steps, 5000))
         kf_lib.append(lib)
         kf_min.append(mine)
-    lc = libcosim_per_step(paths, args.steps)
-    assert co_out is not None and ip_out is not None and min_out is not None
+    pin = shutil.which("taskset") is not None
+    lc = {"pythonfmu": libcosim_per_step(paths, args.steps), "native": libcosim_per_step(native, args.steps),
+          "floor": libcosim_floor_per_step(args.steps)}
+    if pin:
+        lc |= {"native pinned": libcosim_per_step(native, args.steps, pin=True),
+               "floor pinned": libcosim_floor_per_step(args.steps, pin=True)}
+    c_host = {role: step_times(native[role], steps=max(args.steps * 10, 10_000), repeat=5) for role in ROLES}
+    assert co_out is not None and nat_out is not None and ip_out is not None and min_out is not None
     identical = bool(np.array_equal(co_out, ip_out))
     # the minimal loop sums the vertex matrices in another order: rounding only
     agree = float(np.max(np.abs(min_out - ip_out)))
+    # the native FMUs: the same equations in C (tests/test_native_fmus.py derives the bounds per role)
+    nat_agree = float(np.max(np.abs(nat_out - ip_out)))
     n = args.steps + 1  # samples recorded (the last one without a step)
-    co_us, ip_us, min_us = (min(r) / n * 1e6 for r in (co_runs, ip_runs, min_runs))
-    lc_us = lc * 1e6
+    co_us, nat_us, ip_us, min_us = (min(r) / n * 1e6 for r in (co_runs, nat_runs, ip_runs, min_runs))
+    lc_us = {k: v * 1e6 for k, v in lc.items()}
     kf_n = min(args.steps, 5000)
     kf_lib_us, kf_min_us = min(kf_lib) / kf_n * 1e6, min(kf_min) / kf_n * 1e6
+
+    def ratio(us: float, target: str = "") -> str:
+        return f"{us:8.1f} us/step   {us / min_us:5.2f} x minimal" + (f" (target <= {target})" if target else "")
+
     print(f"Peixoto Example 1, scheduler + source + plant + HinfPD, {args.steps} steps, best of {args.repeat}")
-    print(f"  minimal numpy loop (reference):        {min_us:8.1f} us/step")
-    print(f"  in-process (lpvest components):        {ip_us:8.1f} us/step   {ip_us / min_us:5.2f} x minimal "
-          "(target <= 2)")
-    print(f"  co-simulation (4 FMUs, lpvest.cosim):  {co_us:8.1f} us/step   {co_us / min_us:5.2f} x minimal "
-          f"(target <= 4; set-up {min(co_setup):.2f} s)")
-    print(f"  libcosim (4 FMUs, Jacobi, subprocess): {lc_us:8.1f} us/step   {lc_us / min_us:5.2f} x minimal")
+    print(f"  minimal numpy loop (reference):               {min_us:8.1f} us/step")
+    print(f"  in-process (lpvest components):               {ratio(ip_us, '2')}")
+    print(f"  co-simulation, lpvest.cosim, pythonfmu FMUs:  {ratio(co_us, '4')} (set-up {min(co_setup):.2f} s)")
+    print(f"  co-simulation, lpvest.cosim, native FMUs:     {ratio(nat_us, '1')}")
+    print(f"  libcosim (Jacobi, subprocess), pythonfmu:     {ratio(lc_us['pythonfmu'])}")
+    print(f"  libcosim (Jacobi, subprocess), native:        {ratio(lc_us['native'], '0.25')}")
+    print(f"  libcosim, four trivial C FMUs (its own cost): {ratio(lc_us['floor'])}")
+    if pin:
+        print(f"  libcosim pinned to one core, native:          {ratio(lc_us['native pinned'], '0.25')}")
+        print(f"  libcosim pinned, four trivial C FMUs:         {ratio(lc_us['floor pinned'])}")
     print(f"  identical results in-process vs co-simulation: {identical}" + ("" if identical else
-          f" (largest difference {np.max(np.abs(co_out - ip_out)):.3g})") + f"; minimal loop within {agree:.1e}")
+          f" (largest difference {np.max(np.abs(co_out - ip_out)):.3g})") + f"; minimal loop within {agree:.1e}; "
+          f"native FMUs within {nat_agree:.1e}")
+    print("native FMUs alone in a bare C host (benchmarks/native_step.c), ns per sample:")
+    for role, (full, step) in c_host.items():
+        target = " (target <= 500)" if role == "HinfPD" else ""
+        print(f"  {role:<10} set + doStep + get {full:8.0f}   doStep {step:8.0f}{target}")
     print(f"Kalman filter (Cox & Toth truncation model), {kf_n} steps")
     print(f"  minimal numpy (4a)-(4e) step:          {kf_min_us:8.1f} us/step")
     print(f"  LPVKalmanFilter.step:                  {kf_lib_us:8.1f} us/step   {kf_lib_us / kf_min_us:5.2f} x minimal "
@@ -296,14 +379,19 @@ def main() -> int:
     if args.out:
         Path(args.out).write_text(json.dumps({
             "steps": args.steps, "repeat": args.repeat, "minimal_us_per_step": min_us,
-            "cosim_us_per_step": co_us, "inprocess_us_per_step": ip_us, "libcosim_us_per_step": lc_us,
+            "cosim_us_per_step": co_us, "inprocess_us_per_step": ip_us, "libcosim_us_per_step": lc_us["pythonfmu"],
             "inprocess_ratio": ip_us / min_us, "cosim_ratio": co_us / min_us, "cosim_setup_s": min(co_setup),
             "identical": identical, "minimal_agreement": agree, "kalman_us_per_step": kf_lib_us,
             "kalman_minimal_us_per_step": kf_min_us, "kalman_ratio": kf_lib_us / kf_min_us,
+            "native_cosim_us_per_step": nat_us, "native_cosim_ratio": nat_us / min_us,
+            "native_agreement": nat_agree, "libcosim_us": lc_us,
+            "libcosim_ratio": {k: v / min_us for k, v in lc_us.items()},
+            "c_host_ns": {role: {"set_step_get": full, "step": step} for role, (full, step) in c_host.items()},
         }, indent=2))
     if args.profile:
         profile(paths, args.steps)
-    return 0 if identical and agree < 1e-12 and kf_diff < 1e-12 else 1
+    scale = max(1.0, float(np.max(np.abs(ip_out))))
+    return 0 if identical and agree < 1e-12 and kf_diff < 1e-12 and nat_agree <= 1e-12 * scale else 1
 
 
 if __name__ == "__main__":

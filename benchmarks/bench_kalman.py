@@ -28,6 +28,13 @@ simulated from the model. Rows:
 The benchmark also checks that lpvest and filterpy agree on the estimates,
 and that the scan agrees with the sequential recursion.
 
+Side by side with ``lpvest step``, the row ``native FMU doStep (C host)``: the
+same model as a native Kalman FMU (``lpvest build --backend native``; built
+into ``--native-fmus DIR``, default ``fmu-build-native/bench-kalman``) stepped
+in a bare C host (``benchmarks/native_step.c``: no Python in that process;
+the issue's target is <= 2 us for n_x <= 4), and ``native FMU set+step+get``
+with the inputs set and every output read each sample.
+
 Two further tables: the per-call time of ``method="scan"`` and
 ``"sequential"`` against the number of samples ``T`` (where ``"auto"``
 should switch: :data:`~lpvest.estimators.kalman.SCAN_MIN_SAMPLES`), and
@@ -35,7 +42,7 @@ against larger ``n_x``.
 
 Run::
 
-    .venv/bin/python benchmarks/bench_kalman.py [--steps 2000] [--repeat 8]
+    .venv/bin/python benchmarks/bench_kalman.py [--steps 2000] [--repeat 8] [--native-fmus DIR]
 """
 
 from __future__ import annotations
@@ -49,7 +56,10 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -224,6 +234,25 @@ def bench(nx: int, ny: int, steps: int, repeat: int, seed: int) -> dict[str, flo
     return {name: 1e6 * t / steps for name, t in best.items()}
 
 
+def native_kalman(nx: int, ny: int, seed: int, folder: Path, steps: int, repeat: int) -> dict[str, float]:
+    """Microseconds per sample of the native Kalman FMU of :func:`bench`'s model
+    (the same draws) in the bare C host."""
+    from lpvest import SystemFile, save_system
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from native_bench import build_native, step_times
+
+    model = random_model(nx, ny, 1, np.random.default_rng(seed))
+    name = f"bench-kalman-nx{nx}-ny{ny}-seed{seed}"
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / f"{name}.toml"
+        save_system(SystemFile(name=name, title=f"bench_kalman's random model, n_x = {nx}, n_y = {ny}",
+                               models={"plant": model}, default="plant", scheduling=model.space), path)
+        (fmu,) = build_native([path], folder, roles=["Kalman"]).values()
+    full, step = step_times(fmu, steps=max(20 * steps, 10_000), repeat=repeat)
+    return {"native FMU doStep (C host)": step / 1e3, "native FMU set+step+get": full / 1e3}
+
+
 def bench_cross(nx: int, ny: int, steps: int, repeat: int, seed: int) -> dict[str, float]:
     """Microseconds per step with a cross-covariance S != 0 (the decorrelation
     has work to do): the streaming step loop against the batch methods."""
@@ -318,15 +347,20 @@ def main() -> None:
                         help="larger n_x for the scan/sequential comparison")
     parser.add_argument("--taus", type=int, nargs="+", default=[1, 10, 50],
                         help="memories for the truncated-filter rows (n_x = 4, n_y = 1)")
+    parser.add_argument("--native-fmus", default="fmu-build-native/bench-kalman",
+                        help="folder of the native Kalman FMUs of the benchmark's models")
     args = parser.parse_args()
     print(f"microseconds per step, best of {args.repeat} interleaved rounds, {args.steps} steps")
     for ny in args.ny:
         print(f"\nn_y = {ny}, n_u = 1")
         header = f"{'':28}" + "".join(f"{'n_x = ' + str(n):>12}" for n in (2, 4, 10))
         print(header)
-        res = {nx: bench(nx, ny, args.steps, args.repeat, args.seed) for nx in (2, 4, 10)}
+        res = {nx: bench(nx, ny, args.steps, args.repeat, args.seed)
+               | native_kalman(nx, ny, args.seed, Path(args.native_fmus), args.steps, args.repeat)
+               for nx in (2, 4, 10)}
         for name in res[2]:
-            print(f"{name:<28}" + "".join(f"{res[nx][name]:>12.1f}" for nx in (2, 4, 10)))
+            digits = 2 if name.startswith("native") else 1
+            print(f"{name:<28}" + "".join(f"{res[nx][name]:>12.{digits}f}" for nx in (2, 4, 10)))
         print(f"{'kalman_step / filterpy (given)':<28}" + "".join(
             f"{res[nx]['lpvest kalman_step (given)'] / res[nx]['filterpy (matrices given)']:>12.2f}"
             for nx in (2, 4, 10)))
@@ -334,6 +368,8 @@ def main() -> None:
             f"{res[nx]['lpvest step'] / res[nx]['filterpy (matrices given)']:>12.2f}" for nx in (2, 4, 10)))
         print(f"{'step / filterpy + at(p)':<28}" + "".join(
             f"{res[nx]['lpvest step'] / res[nx]['filterpy + model.at(p)']:>12.2f}" for nx in (2, 4, 10)))
+        print(f"{'step / native doStep':<28}" + "".join(
+            f"{res[nx]['lpvest step'] / res[nx]['native FMU doStep (C host)']:>12.0f}" for nx in (2, 4, 10)))
         for num, den in (
             ("lpvest step", "lpvest batch (auto)"),
             ("lpvest run_streaming", "lpvest batch (auto)"),

@@ -2,7 +2,9 @@
 
 A thin adapter over :class:`lpvest.systems.streaming.DiscretePlant`: a
 polytopic model (Peixoto et al. (1)), an affine model with general noise
-(Cox & Toth (1)-(3)) or an innovation-form model with a gain of ``p_t``.
+(Cox & Toth (1)-(3)), an innovation-form model with a gain of ``p_t`` or an
+input-output model (Cox & Toth (21a); its state ``x`` is the memory of past
+``y``, ``u`` and ``e``).
 
 Inputs ``p[j]`` (``alpha[i]`` for a polytopic model without a scheduling map),
 ``u[i]``, ``w[i]`` (and ``v[i]`` / ``e[i]``: external noise added to the drawn
@@ -21,7 +23,7 @@ the model file's own parameters (e.g. ``rho``).
 from lpvest.fmi.slave import LpvestSlave
 from lpvest.fmi.spec import Parameter
 from lpvest.systems.affine import AffineLPV
-from lpvest.systems.innovation import InnovationLPV
+from lpvest.systems.innovation import InnovationLPV, LPVInputOutput
 from lpvest.systems.streaming import DiscretePlant
 
 
@@ -31,15 +33,16 @@ class LpvestPlant(LpvestSlave):
     def declare(self):
         model = self.model()
         pars = self.model_parameters()
-        if isinstance(model, AffineLPV | InnovationLPV):
+        if isinstance(model, AffineLPV | InnovationLPV | LPVInputOutput):
             pars.append(Parameter("noise", True, "draw the model's noise inside the FMU"))
             pars.append(Parameter("seed", 0, "seed of the noise generator", minimum=0))
-            x0 = model.x0
-        else:
-            x0 = [0.0] * model.nx
+        x0 = model.x0 if isinstance(model, AffineLPV | InnovationLPV) else [0.0] * model.nx
         if isinstance(model, AffineLPV):
             pars.append(Parameter("x0", [float(v) for v in x0], "mean of the initial state x_0"))
             pars.append(Parameter("P0", model.P0.tolist(), "covariance of the initial state x_0 (drawn when noise)"))
+        elif isinstance(model, LPVInputOutput):
+            pars.append(Parameter("x0", [float(v) for v in x0],
+                                  "initial memory: y, u, e before t = 0, newest first (zero: from rest)"))
         else:
             pars.append(Parameter("x0", [float(v) for v in x0], "initial state"))
         return pars

@@ -5,10 +5,12 @@
     lpvest systems                          the example systems, one line each
     lpvest systems show NAME|FILE.toml      dimensions, matrices, scheduling map
     lpvest simulate NAME|FILE.toml          simulate one model: CSV, plot, summary
-    lpvest reproduce NAME|all --out DIR     reproduce paper examples through FMUs (all: + DIR/report.md)
+    lpvest reproduce NAME|all --out DIR [--backend native]
+                                            reproduce paper examples through FMUs (all: + DIR/report.md)
     lpvest regress [--update]               FMU co-simulations against tests/data/reference
     lpvest build [--out DIR] [--model FILE.toml ...] [--kinds ROLES] [--design [ROLE=]FILE.json]
-                                            build and validate the FMUs
+                 [--backend pythonfmu|native]
+                                            build and validate the FMUs (native: C, no Python needed)
     lpvest design NAME|FILE.toml [--kind pd|robust] [--epsilon E|--search] [--solver S] --out FILE.json
                                             design an H-infinity filter, write it as JSON
     lpvest cosim FILE.toml [--out DIR] [--fmus DIR]    co-simulate FMUs described in a file: CSV, plot, summary
@@ -182,6 +184,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _backend_argument(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("--backend", choices=("pythonfmu", "native"), default="pythonfmu",
+                   help=f"{what}: pythonfmu (default; runs in a host's Python) or native (C, no Python needed: "
+                        "every discrete-time role; the LTV plant and the B-spline observer stay pythonfmu)")
+
+
 def cmd_reproduce(args: argparse.Namespace) -> int:
     from .experiments import registry
     from .experiments.fmus import ExperimentFmus
@@ -198,17 +206,20 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         raise ArgumentError(f"no experiment {abbreviate(args.name, 30)} (known: {', '.join(experiments) or 'none'}; "
                             "or all, list)")
     out = _out_dir(args.out)
-    fmus = ExperimentFmus(Path(args.fmus) if args.fmus else out / "fmu-cache",
-                          progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+    default = "fmu-cache" if args.backend == "pythonfmu" else f"fmu-cache-{args.backend}"
+    fmus = ExperimentFmus(Path(args.fmus) if args.fmus else out / default,
+                          progress=lambda msg: print(msg, file=sys.stderr, flush=True), backend=args.backend)
 
     def echo(text: str) -> None:
         print(text, flush=True)
 
     t = time.perf_counter()
     if args.name == "all":
-        runs = reproduce_all(out, fmus=fmus, reduced=args.quick, echo=echo, workers=args.workers)
+        runs = reproduce_all(out, fmus=fmus, reduced=args.quick, echo=echo, workers=args.workers,
+                             backend=args.backend)
     else:
-        runs = reproduce([args.name], out, fmus=fmus, reduced=args.quick, echo=echo, workers=args.workers)
+        runs = reproduce([args.name], out, fmus=fmus, reduced=args.quick, echo=echo, workers=args.workers,
+                         backend=args.backend)
     seconds = time.perf_counter() - t
     print(fmus.summary())
     if len(runs) > 1:
@@ -273,7 +284,8 @@ def cmd_build(args: argparse.Namespace) -> int:
     with warnings.catch_warnings(record=True) as caught:  # what the FMUs lack: printed as notes below
         warnings.simplefilter("always", BuildWarning)
         results, notes = build_fmus(sources, out, roles=roles, designs=designs, design_options=options,
-                                    progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+                                    progress=lambda msg: print(msg, file=sys.stderr, flush=True),
+                                    backend=args.backend)
     for w in caught:
         if issubclass(w.category, BuildWarning):
             notes.append(str(w.message))
@@ -424,7 +436,8 @@ HELP: dict[str, tuple[str, str]] = {
         "Reproduce a paper example through FMUs (built into OUT/fmu-cache or reused): tables in the terminal, "
         "figures and results.json in OUT/NAME; 'all' runs every example and writes OUT/report.md.",
         "lpvest reproduce list\n  lpvest reproduce peixoto-fig1 --out out\n  lpvest reproduce all --out out --quick\n"
-        "  lpvest reproduce all --out out --workers 0   # in this process, one experiment after another"),
+        "  lpvest reproduce all --out out --workers 0   # in this process, one experiment after another\n"
+        "  lpvest reproduce all --out out-native --backend native"),
     "regress": (
         "Co-simulate the FMUs of each paper example briefly and compare with the stored regression references "
         "(tests/data/reference); --update rewrites them after a deliberate change.",
@@ -434,7 +447,8 @@ HELP: dict[str, tuple[str, str]] = {
         "An H-infinity filter FMU carries a design: the one given with --design, the one stored with an example "
         "system (models/designs), or one solved at build time.",
         "lpvest build\n  lpvest build --out my-fmus --model my_plant.toml\n"
-        "  lpvest build --model my_plant.toml --kinds Plant,HinfPD --design pd.json"),
+        "  lpvest build --model my_plant.toml --kinds Plant,HinfPD --design pd.json\n"
+        "  lpvest build --backend native --out fmu-native"),
     "design": (
         "Design an H-infinity filter by LMIs (Peixoto et al. Theorem 1, or Corollary 1 with --kind robust) and "
         "write it as JSON, for `lpvest build --design`; the best epsilon unless --epsilon is given.",
@@ -511,6 +525,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run the experiments (and Example 2's values of rho) side by side on N Dask worker "
                         "processes (default: one per core); 0: one after another in this process. The numbers "
                         "are the same either way")
+    _backend_argument(p, "the FMUs' backend; native FMUs go to OUT/fmu-cache-native by default")
     p.set_defaults(func=cmd_reproduce)
 
     from .experiments.regression import add_arguments as regress_arguments
@@ -535,6 +550,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "the best one")
     p.add_argument("--solver", metavar="NAME",
                    help="H-infinity filters designed at build time: cvxpy solver, or AUTO (default)")
+    _backend_argument(p, "the FMU backend")
     p.set_defaults(func=cmd_build)
 
     p = sub.add_parser("design", help="design an H-infinity filter (LMIs) and write it as JSON for `lpvest build "

@@ -24,7 +24,9 @@ Kinds (per component ``j``; ``t`` is the time of the communication point, and
 ============  ==============================================================
 
 Before ``onset`` every kind except ``table`` holds ``offset`` (``0`` for
-``zero``). Randomness comes from ``numpy.random.default_rng(seed)``.
+``zero``). Randomness comes from ``lpvest.rng.Stream(seed)`` (the same numbers
+in the native FMUs): ``gaussian`` draws ``n`` normals per point, ``random``
+``n`` uniforms per step, ``U(-1, 1) = -1 + 2 u``.
 
 Examples
 --------
@@ -45,6 +47,7 @@ import numpy as np
 
 from .errors import DimensionError, LpvestError, abbreviate
 from .protocol import Port, TimedComponent
+from .rng import Stream
 
 __all__ = [
     "SIGNAL_KINDS",
@@ -154,7 +157,7 @@ class SignalSpec:
     onset : float, default 0.0
         The time the signal starts at (``zero`` and ``table`` ignore it).
     seed : int, default 0
-        The seed of ``numpy.random.default_rng`` (random kinds).
+        The seed of the random kinds' stream (:class:`lpvest.rng.Stream`).
     table_times : ndarray, shape (m,) or None, default None
         The ``table`` kind's strictly increasing times; ``None`` for other kinds.
     table_values : ndarray, shape (m, n) or None, default None
@@ -408,7 +411,7 @@ class SignalGenerator:
             The start time.
         """
         spec = self.spec
-        self._rng = np.random.default_rng(spec.seed)
+        self._rng = Stream(spec.seed)
         self._t = float(t0)
         if spec.kind == "random":
             self._value = np.clip(spec.offset, spec.lower, spec.upper).astype(float)
@@ -421,7 +424,7 @@ class SignalGenerator:
         spec = self.spec
         if self._t < spec.onset:
             return spec.offset.copy()
-        return spec.offset + spec.std * self._rng.standard_normal(spec.n)
+        return spec.offset + spec.std * self._rng.normal(spec.n)
 
     @property
     def time(self) -> float:
@@ -458,7 +461,7 @@ class SignalGenerator:
         self._t = t
         if spec.kind == "random":
             if t >= spec.onset:
-                step = spec.rate * h * self._rng.uniform(-1.0, 1.0, spec.n)
+                step = spec.rate * h * (-1.0 + 2.0 * self._rng.uniform(spec.n))
                 self._value = np.clip(self._value + step, spec.lower, spec.upper)
         elif spec.kind == "gaussian":
             self._value = self._gaussian()
@@ -473,10 +476,10 @@ class SignalGenerator:
         -------
         state : dict
             ``"t"``: the current time (float), ``"value"``: the current value
-            (ndarray, shape (n,)), ``"rng"``: the random generator's
-            ``bit_generator.state`` (dict).
+            (ndarray, shape (n,)), ``"rng"``: the random stream's state
+            (:attr:`lpvest.rng.Stream.state`, a dict).
         """
-        return {"t": self._t, "value": self._value.copy(), "rng": self._rng.bit_generator.state}
+        return {"t": self._t, "value": self._value.copy(), "rng": self._rng.state}
 
     def set_state(self, state: dict[str, Any]) -> None:
         """Restore a state from :meth:`get_state`; the generator continues as the
@@ -497,8 +500,8 @@ class SignalGenerator:
             raise DimensionError(f"signal state value has shape {value.shape}; expected ({self.spec.n},)")
         self._t = float(state["t"])
         self._value = value.copy()
-        rng = np.random.default_rng()
-        rng.bit_generator.state = state["rng"]
+        rng = Stream(None)
+        rng.state = state["rng"]
         self._rng = rng
 
 

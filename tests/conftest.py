@@ -19,6 +19,7 @@ from .conftest_fmu import (  # noqa: E402
     experiment_fmus as experiment_fmus,
     fmus as fmus,
     foreign_fmus as foreign_fmus,
+    native_fmus as native_fmus,
 )
 
 # -- property-based tests (hypothesis): fixed seed in CI ---------------------------------------

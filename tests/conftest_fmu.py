@@ -11,6 +11,8 @@ from lpvest.fmi.registry import EstimatorKind
 from lpvest.fmi.spec import Parameter
 
 HERE = Path(__file__).resolve().parent
+#: The walkthrough's own plant (docs/own-plant.md).
+OWN_PLANT = HERE.parent / "examples" / "own_plant.toml"
 
 #: A two-state affine LPV plant with general noise (S != 0), input u, two
 #: scheduling components: the example systems hold no affine model.
@@ -36,6 +38,27 @@ R = [[0.01]]
 S = [[0.005], [0.0]]
 """
 
+#: A SISO input-output model (Cox & Toth (21a)'s form) with functions in its
+#: coefficients: the example systems stream a state-space realization instead.
+IO_TOML = """
+[system]
+name = "io-demo"
+title = "SISO LPV input-output test plant"
+default = "io"
+
+[scheduling]
+names = ["p"]
+lower = [-1.0]
+upper = [1.0]
+
+[models.io]
+type = "lpv-io"
+y = ["-0.5 * p", "0.1 * cos(p)"]
+u = [0, "p", 0.2]
+e = ["0.3 * sin(p)"]
+noise_variance = 0.5
+"""
+
 #: The test-only estimator kind (a moving average, tests/fmu_movavg.py).
 MOVING_AVERAGE = EstimatorKind(
     "MovingAverage",
@@ -58,8 +81,9 @@ class FmuSet:
 
 @pytest.fixture(scope="session")
 def fmus(tmp_path_factory: pytest.TempPathFactory) -> FmuSet:
-    """Every example system's FMUs, the affine demo's, and the moving-average
-    estimator FMU for peixoto-ex1, built once into a temporary folder."""
+    """Every example system's FMUs, the affine demo's, the input-output demo's
+    plant, and the moving-average estimator FMU for peixoto-ex1, built once
+    into a temporary folder."""
     from lpvest.fmi.build import build_fmu, build_fmus, plan_system
 
     out = tmp_path_factory.mktemp("fmus")
@@ -68,7 +92,10 @@ def fmus(tmp_path_factory: pytest.TempPathFactory) -> FmuSet:
     results, _ = build_fmus(None, out)
     # its H-infinity filters designed at one epsilon (a search of this 4-vertex plant takes minutes)
     results2, _ = build_fmus([model], out, design_options={"epsilon": 1.0})
-    paths = {r.plan.identifier: r.validation.path for r in results + results2}
+    io = out / "io_demo.toml"
+    io.write_text(IO_TOML)
+    results3, _ = build_fmus([io], out, roles=["Plant"])
+    paths = {r.plan.identifier: r.validation.path for r in results + results2 + results3}
     plans, _ = plan_system("peixoto-ex1", kinds=[MOVING_AVERAGE])
     est = next(p for p in plans if p.role == "MovingAverage")
     paths[est.identifier] = build_fmu(est, out)
@@ -97,3 +124,27 @@ def foreign_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         pytest.skip("the foreign test FMUs need a C compiler (cc or gcc)")
     out = tmp_path_factory.mktemp("foreign-fmus")
     return {name: build_foreign_fmu(name, out) for name in MODELS}
+
+
+@pytest.fixture(scope="session")
+def native_fmus(fmus: FmuSet, tmp_path_factory: pytest.TempPathFactory) -> FmuSet:
+    """The native backend's FMUs of the same systems (every example, the affine
+    demo with its designs at epsilon = 1, the own-plant example at epsilon = 1,
+    the input-output demo's plant),
+    built once into a temporary folder; the designs made for the Python set are
+    reused (the same design cache)."""
+    import shutil
+
+    from lpvest.fmi.build import DESIGN_CACHE, build_fmus
+
+    out = tmp_path_factory.mktemp("native-fmus")
+    if (fmus.out / DESIGN_CACHE).is_dir():
+        shutil.copytree(fmus.out / DESIGN_CACHE, out / DESIGN_CACHE)
+    results, _ = build_fmus(None, out, backend="native")
+    results2, _ = build_fmus([fmus.affine_model, OWN_PLANT], out, design_options={"epsilon": 1.0}, backend="native")
+    results3, _ = build_fmus([fmus.out / "io_demo.toml"], out, roles=["Plant"], backend="native")
+    done = results + results2 + results3
+    paths = {r.plan.identifier: r.validation.path for r in done}
+    problems = {r.plan.identifier: r.validation.problems for r in done if r.validation.problems}
+    assert not problems, problems
+    return FmuSet(out, fmus.affine_model, paths)

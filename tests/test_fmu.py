@@ -18,6 +18,7 @@ import pytest
 
 from lpvest import load_system
 from lpvest.fmi.build import validate_fmus
+from lpvest.rng import Stream
 from tests.fmu_driver import Driver
 from tests.tolerances import roundoff
 
@@ -32,6 +33,7 @@ EXPECTED = {
     "AffineDemoPlant", "AffineDemoScheduler", "AffineDemoSource", "AffineDemoKalman", "AffineDemoTruncatedKalman",
     "AffineDemoHinfPD", "AffineDemoHinfRobust",
     "PeixotoEx1MovingAverage",
+    "IoDemoPlant",
 }
 
 
@@ -240,7 +242,7 @@ def test_cox_toth_plant_equals_the_input_output_realization(fmus, rng):
     assert d.initialize(seed=11) == 0
     got = run_plant(d, {"p": p, "u": u, "e": np.zeros((T, 1))}, ["y", "x"])
     d.free()
-    e = np.random.default_rng(11).standard_normal((T, 1))  # Omega = 1: the documented draw order
+    e = Stream(11).normal((T, 1))  # Omega = 1: the documented draw order
     ref_c = system.model("augmented").simulate(p, u, rng=11)
     assert np.array_equal(got["y"], ref_c.y)
     ref_a = system.model("io").simulate(p, u, e=e)
@@ -354,7 +356,7 @@ def test_source_default_is_the_papers_disturbance_and_gaussian_is_seeded(fmus):
         u.append(d.get("u[1]"))
         assert d.step(float(k), 1.0) == 0
     d.free()
-    assert np.array_equal(u, 2.0 * np.random.default_rng(9).standard_normal((40, 1))[:, 0])
+    assert np.array_equal(u, 2.0 * Stream(9).normal((40, 1))[:, 0])
 
 
 def test_moving_average_estimator_fmu_matches_the_protocol(fmus, rng):

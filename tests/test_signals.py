@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from lpvest import load_system
+from lpvest.rng import Stream
 from lpvest.signals import (
     SchedulerComponent,
     SignalError,
@@ -40,8 +41,18 @@ def test_deterministic_kinds_follow_their_formula(kind, options, formula):
 def test_gaussian_is_the_seeded_standard_normal_stream():
     spec = SignalSpec.build("gaussian", 2, std=[1.0, 3.0], offset=[0.0, 1.0], seed=7)
     got = sample_signal(spec, np.arange(50.0))
-    expected = np.array([0.0, 1.0]) + np.array([1.0, 3.0]) * np.random.default_rng(7).standard_normal((50, 2))
+    expected = np.array([0.0, 1.0]) + np.array([1.0, 3.0]) * Stream(7).normal((50, 2))
     assert np.array_equal(got, expected)
+
+
+def test_random_walk_steps_are_the_streams_uniforms():
+    """``U(-1, 1) = -1 + 2 u`` with ``u`` the stream's uniforms (what numpy's
+    ``uniform(-1, 1)`` computes from the same raw words)."""
+    spec = SignalSpec.build("random", 2, rate=[1.0, 0.5], offset=0.0, seed=9)
+    got = sample_signal(spec, np.arange(20.0))
+    u = -1.0 + 2.0 * Stream(9).uniform((19, 2))
+    assert np.array_equal(got[1:], np.cumsum(np.array([1.0, 0.5]) * 1.0 * u, axis=0))
+    assert np.array_equal(u, np.random.default_rng(9).uniform(-1.0, 1.0, (19, 2)))
 
 
 def test_random_walk_respects_rate_and_bounds(rng):

@@ -62,9 +62,45 @@ def test_which_models_stream():
     system = load_system("cox-toth-ex1")
     assert plant_supports(system.model("augmented")) is None
     assert "p_(t+1)" in plant_supports(system.model("minimal"))
-    assert "input-output model" in plant_supports(system.model("io"))
+    assert plant_supports(system.model("io")) is None  # its memory of past y, u, e is the state
     with pytest.raises(ExpressionError, match="p_\\(t\\+1\\)"):
         DiscretePlant(system.model("minimal"))
+
+
+def test_input_output_plant_is_bit_for_bit_simulate(rng):
+    """(21a) streamed: y_t and the drawn e_t are LPVInputOutput.simulate's, to
+    the bit, with the noise drawn (the same stream) and with e given; the state
+    is the memory [y_(t-1), u_(t-1), e_(t-1)]; a saved state goes back exactly."""
+    model = load_system("cox-toth-ex1").model("io")
+    T = 120
+    k = np.arange(T)
+    p = (0.5 + 0.4 * np.sin(0.3 * k))[:, None]
+    u = rng.standard_normal((T, 1))
+    ref = model.simulate(p, u, rng=7)
+    plant = DiscretePlant(model, noise=True, seed=7)
+    assert [q.name for q in plant.input_ports] == ["p", "u", "e"] and model.nx == 3
+    got = run_streaming(plant, {"p": p, "u": u, "e": np.zeros((T, 1))})
+    assert np.array_equal(got["y"], ref.y)
+    assert np.array_equal(got["x"][1:], np.column_stack([ref.y[:-1, 0], u[:-1, 0], ref.e[:-1, 0]]))
+    e = rng.standard_normal((T, 1))
+    plant = DiscretePlant(model)
+    assert np.array_equal(run_streaming(plant, {"p": p, "u": u, "e": e})["y"], model.simulate(p, u, e=e).y)
+    plant.reset()
+    for t in range(5):
+        plant.step({"p": p[t], "u": u[t], "e": e[t]})
+    state = plant.get_state()
+    first = [plant.step({"p": p[t], "u": u[t], "e": e[t]})["y"] for t in range(5, 9)]
+    plant.set_state(state)
+    assert np.array_equal([plant.step({"p": p[t], "u": u[t], "e": e[t]})["y"] for t in range(5, 9)], first)
+
+
+def test_input_output_plant_refuses_coefficients_that_are_not_finite():
+    from lpvest import LPVInputOutput, SchedulingSpace
+
+    model = LPVInputOutput(SchedulingSpace(["p"], [-1.0], [1.0]), ["1 / p"], [1.0])
+    plant = DiscretePlant(model)
+    with pytest.raises(ExpressionError, match=r"the coefficients are not finite at p = \[0.0\]"):
+        plant.step({"p": [0.0], "u": [1.0], "e": [0.0]})
 
 
 def test_ltv_plant_step_size_does_not_matter():

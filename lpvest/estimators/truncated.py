@@ -619,6 +619,11 @@ class TruncatedKalmanFilter(Component):
         return self._tau
 
     @property
+    def kalman_model(self) -> KalmanModel:
+        """The compiled model the recursion runs on."""
+        return self._km
+
+    @property
     def start(self) -> np.ndarray:
         """``P^_0`` of (6a)."""
         return self._start

@@ -45,6 +45,7 @@ from ..estimators.kalman import KalmanModel, kalman_filter
 from ..estimators.truncated import assumption_bounds
 from ..modelfile import load_system
 from ..plotting import save_figure
+from ..rng import Stream
 from ..sweep.tasks import Task, TaskResult, map_tasks
 from ..systems import AffineLPV, InnovationLPV, LPVInputOutput
 from . import Experiment, ExperimentResult, show_progress
@@ -99,8 +100,9 @@ def run_example1(
     nothing here takes long enough for a progress bar).
 
     ``p_t = 0.6 + 0.3 sin(0.25 t)`` (in [0.3, 0.9]: (21b) divides by
-    ``p_{t+1}``), ``u_t`` standard normal from ``default_rng(seed)``, ``e_t``
-    standard normal from ``default_rng(seed + 1)``. Through FMUs: the
+    ``p_{t+1}``), ``u_t`` standard normal from ``Stream(seed)``, ``e_t``
+    standard normal from ``Stream(seed + 1)`` (:class:`lpvest.rng.Stream`: the
+    numbers the Source and Plant FMUs draw). Through FMUs: the
     Scheduler, Source and Plant FMUs co-simulate (21c) (the only one of the
     three with a streaming plant: (21a) has no state and (21b)'s gain needs
     ``p_{t+1}``); the library simulates all three.
@@ -112,8 +114,8 @@ def run_example1(
     minimal, augmented = system.model("minimal", InnovationLPV), system.model("augmented", InnovationLPV)
     k = np.arange(steps + 1)
     p = (0.6 + 0.3 * np.sin(0.25 * k))[:, None]  # one extra sample: (21b) needs p_{t+1}
-    u = np.random.default_rng(seed).standard_normal((steps, 1))
-    e = np.random.default_rng(seed + 1).standard_normal((steps, 1))
+    u = Stream(seed).normal((steps, 1))
+    e = Stream(seed + 1).normal((steps, 1))
     y_io = io.simulate(p[:steps], u, e=e).y
     y_min = minimal.simulate(p, u, e=e).y
     aug = augmented.simulate(p[:steps], u, e=e)

@@ -212,11 +212,20 @@ class ExperimentFmus(FmuCache):
         raise FmuCacheError(f"{identifier}: the builder plans no such FMU for {entry.system_name}")  # pragma: no cover
 
 
-def as_experiment_fmus(fmus: ExperimentFmus | str | Path | None) -> ExperimentFmus:
-    """``fmus`` itself, a cache in the given folder, or the default cache."""
+def as_experiment_fmus(fmus: ExperimentFmus | str | Path | None, *, backend: str | None = None) -> ExperimentFmus:
+    """``fmus`` itself, a cache in the given folder, or the default cache
+    (``<default>-native`` for the native backend), building with ``backend``
+    (default: a given cache's own, else ``"pythonfmu"``)."""
     if isinstance(fmus, ExperimentFmus):
+        if backend is not None and fmus.backend != backend:
+            raise ArgumentError(f"the FMU cache {fmus.directory} builds with backend {fmus.backend!r}, "
+                                f"not {backend!r}")
         return fmus
-    return ExperimentFmus(default_cache_dir() if fmus is None else fmus)
+    backend = backend or "pythonfmu"
+    if fmus is None:
+        folder = default_cache_dir()
+        fmus = folder if backend == "pythonfmu" else folder.with_name(f"{folder.name}-{backend}")
+    return ExperimentFmus(fmus, backend=backend)
 
 
 # ---------------------------------------------------------------------------

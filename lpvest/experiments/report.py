@@ -57,6 +57,7 @@ def render_report(
         "# lpvest: the three papers reproduced through FMUs",
         "",
         f"`lpvest reproduce all --out {out.as_posix()}`" + (" `--quick`" if reduced else "")
+        + (f" `--backend {fmus.backend}`" if fmus is not None and fmus.backend != "pythonfmu" else "")
         + f" · lpvest {__version__} · Python {platform.python_version()} · {time.strftime('%Y-%m-%d %H:%M')}",
         "",
     ]

@@ -272,6 +272,7 @@ def reproduce(
     fmus: ExperimentFmus | str | Path | None = None,
     reduced: bool = False,
     echo: Callable[[str], None] | None = None,
+    backend: str | None = None,
     workers: int | None = None,
 ) -> list[ExperimentRun]:
     """Run the experiments ``names`` into ``out/<name>/``.
@@ -289,6 +290,10 @@ def reproduce(
     echo : callable, optional
         Receives the printable output: tables, FMU agreement, files written,
         and (side by side) one line per finished task.
+    backend : str or None, default None
+        The FMUs' backend (``"pythonfmu"`` or ``"native"``,
+        :data:`lpvest.fmi.build.BACKENDS`; default: the given cache's, else
+        ``"pythonfmu"``).
     workers : int or None, default None
         Dask worker processes (default: one per core, :func:`default_workers`);
         ``0``: every experiment in this process, one after another. The
@@ -316,7 +321,7 @@ def reproduce(
     unknown = [n for n in names if n not in experiments]
     if unknown:
         raise LpvestError(f"no experiment {abbreviate(unknown[0], 30)} (known: {', '.join(experiments) or 'none'})")
-    cache = as_experiment_fmus(fmus)
+    cache = as_experiment_fmus(fmus, backend=backend)
     rep = _Reporter(Path(out), reduced, echo or (lambda _text: None))
     groups = _groups([experiments[n] for n in names])
     parallel = n_workers > 0 and (len(groups) > 1 or any(g[0].split is not None for g in groups))
@@ -333,18 +338,22 @@ def reproduce_all(
     fmus: ExperimentFmus | str | Path | None = None,
     reduced: bool = False,
     echo: Callable[[str], None] | None = None,
+    backend: str | None = None,
     workers: int | None = None,
 ) -> list[ExperimentRun]:
     """Every registered experiment (:func:`reproduce`), then ``out/report.md``
     (:func:`lpvest.experiments.report.write_report`). ``fmus`` defaults to the
-    cache ``out/fmu-cache``; ``workers`` as in :func:`reproduce`."""
+    cache ``out/fmu-cache`` (``out/fmu-cache-native`` for ``backend="native"``);
+    ``workers`` as in :func:`reproduce`."""
     from . import registry
     from .report import write_report
 
     out = Path(out)
-    cache = as_experiment_fmus(out / "fmu-cache" if fmus is None else fmus)
+    default = out / ("fmu-cache" if backend in (None, "pythonfmu") else f"fmu-cache-{backend}")
+    cache = as_experiment_fmus(default if fmus is None else fmus, backend=backend)
     t = time.perf_counter()
-    runs = reproduce(list(registry()), out, fmus=cache, reduced=reduced, echo=echo, workers=workers)
+    runs = reproduce(list(registry()), out, fmus=cache, reduced=reduced, echo=echo, backend=backend,
+                     workers=workers)
     path = write_report(runs, out, fmus=cache, seconds=time.perf_counter() - t, reduced=reduced)
     if echo is not None:
         echo(f"wrote {path}")

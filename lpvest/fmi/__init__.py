@@ -7,7 +7,10 @@
   ``fmus/`` (imports pythonfmu; only the FMUs and the builder import it);
 - :mod:`lpvest.fmi.naming`, :mod:`lpvest.fmi.spec`, :mod:`lpvest.fmi.state`,
   :mod:`lpvest.fmi.factories`: numpy-only pieces the FMUs use at run time;
-- :mod:`lpvest.fmi.bundle`: what an FMU carries and how it loads it.
+- :mod:`lpvest.fmi.bundle`: what an FMU carries and how it loads it;
+- :mod:`lpvest.fmi.native`: the native backend (``backend="native"`` of
+  :func:`lpvest.fmi.build.build_fmus`): every discrete-time role as C, one
+  runtime in ``native/runtime/`` and a generated ``model_data.c`` per FMU.
 
 Importing this package imports neither fmpy nor pythonfmu.
 """

@@ -213,7 +213,7 @@ def plan_system(
     """
     from ..catalog import stored_design
     from ..modelfile import load_system
-    from ..systems import AffineLPV, InnovationLPV, LTVInputOutput, LTVStateSpace, PolytopicLPV
+    from ..systems import AffineLPV, InnovationLPV, LPVInputOutput, LTVInputOutput, LTVStateSpace, PolytopicLPV
     from ..systems.streaming import plant_supports
 
     system = load_system(source)
@@ -221,7 +221,10 @@ def plan_system(
         raise BuildError(f"{source}: a system needs a model file to be built into FMUs")
     stem = fmu_name(system.name)
     notes: list[str] = []
-    order = [system.default] + [k for k in system.models if k != system.default]
+    # the default model, else the others in file order, state-space realizations
+    # before input-output ones (a plant's state x is then the model's state)
+    others = [k for k in system.models if k != system.default]
+    order = [system.default] + sorted(others, key=lambda k: isinstance(system.models[k], LPVInputOutput))
     key = None
     for k in order:
         reason = plant_supports(system.models[k])
@@ -243,7 +246,8 @@ def plan_system(
                              step_size=0.1, stop_time=20.0, **common))
         notes.append(f"{system.name}: no Scheduler/Source (an LTV model depends on time; its input is a function of t)")
     else:
-        kind = {PolytopicLPV: "polytopic", AffineLPV: "affine", InnovationLPV: "innovation"}[type(model)]
+        kind = {PolytopicLPV: "polytopic", AffineLPV: "affine", InnovationLPV: "innovation",
+                LPVInputOutput: "input-output"}[type(model)]
         plans.append(FmuPlan(f"{stem}Plant", "Plant", "lpvest_plant.py",
                              description=f"Plant: {title} (model {key!r}, {kind} LPV)",
                              model_parameters=params, **common))
@@ -447,7 +451,8 @@ def _roots(plan: FmuPlan) -> list[SourceRoot]:
     return roots
 
 
-def _slave_class_name(script: Path) -> str:
+def slave_class_name(script: Path) -> str:
+    """The one slave class a role script defines (its name)."""
     import ast
 
     tree = ast.parse(script.read_text(encoding="utf-8"), str(script))
@@ -463,12 +468,14 @@ def _bundle(plan: FmuPlan) -> Bundle:
     if plan.estimator is not None:
         start.append(plan.estimator.factory.partition(":")[0])
     return make_bundle(identifier=plan.identifier, script=Path(plan.script).stem,
-                       slave_class=_slave_class_name(script), start=start, roots=_roots(plan),
+                       slave_class=slave_class_name(script), start=start, roots=_roots(plan),
                        version=__version__, declared=plan.requirements)
 
 
-def _design_text(plan: FmuPlan, progress: Callable[[str], None] | None) -> tuple[str | bytes, str]:
-    """The design the FMU carries (text or bytes) and where it came from."""
+def design_text(plan: FmuPlan, progress: Callable[[str], None] | None) -> tuple[str | bytes, str]:
+    """The design the FMU carries (text or bytes) and where it came from: the
+    plan's design file (checked against the model), a design kept from an
+    earlier build, or one made now."""
     from ..modelfile import load_system
     from .state import encode_state
 
@@ -594,7 +601,7 @@ def _stage(plan: FmuPlan, staging: Path, progress: Callable[[str], None] | None)
     if plan.estimator is not None:
         spec["estimator"] = plan.estimator.to_json() | {"factory": bundle.reference(plan.estimator.factory)}
         if plan.estimator.design:
-            design, origin = _design_text(plan, progress)
+            design, origin = design_text(plan, progress)
             if isinstance(design, str):  # a JSON document (e.g. an HinfDesign): kept readable
                 (staging / "design.json").write_text(design, encoding="utf-8")
                 spec["design_format"] = "text"
@@ -637,13 +644,28 @@ def _instantiate(bundle: Bundle, staging: Path) -> Any:
 
 
 def _model_description(plan: FmuPlan, bundle: Bundle, staging: Path, guid: str) -> tuple[bytes, int, int, int]:
-    slave = _instantiate(bundle, staging)
+    return model_description_xml(plan, _instantiate(bundle, staging), guid)
+
+
+def model_description_xml(
+    plan: FmuPlan, slave: Any, guid: str, *, native: bool = False, finish: Callable[[Element], None] | None = None
+) -> tuple[bytes, int, int, int]:
+    """The model description of ``plan``'s FMU from its instantiated slave
+    (pythonfmu's ``to_xml``, completed: declared ranges, dependencies,
+    ``InitialUnknowns``, discrete outputs, ``guid``, no time stamp), and its
+    numbers of inputs, outputs and parameters.
+
+    ``native``: the same variables for the native backend's FMU
+    (:mod:`lpvest.fmi.native`), which needs no execution tool; ``finish``
+    completes the root element before it is written (the native builder lists
+    the source files there).
+    """
     meta = slave.fmi_metadata()
     from pythonfmu.default_experiment import DefaultExperiment
 
     slave.default_experiment = DefaultExperiment(start_time=0.0, stop_time=plan.stop_time, step_size=plan.step_size)
     options = {
-        "needsExecutionTool": True,  # a Python interpreter
+        "needsExecutionTool": not native,  # a Python interpreter
         # a discrete-time component steps by its sample time only
         "canHandleVariableCommunicationStepSize": meta["timed"] and (
             plan.estimator is None or plan.estimator.sample_time is None),
@@ -682,8 +704,28 @@ def _model_description(plan: FmuPlan, bundle: Bundle, staging: Path, guid: str) 
             if deps is not None:
                 unknown.set("dependencies", " ".join(str(d + 1) for d in deps))
             SubElement(initial, "Unknown", {"index": unknown.get("index", "")})
+    if finish is not None:
+        finish(root)
     xml = parseString(tostring(root, "UTF-8")).toprettyxml(encoding="UTF-8")
     return xml, counts["input"], counts["output"], counts["parameter"]
+
+
+def write_fmu_zip(target: Path, entries: Mapping[str, tuple[bytes, bool]]) -> Path:
+    """Write an FMU (a zip file) reproducibly: entries sorted by name, a fixed
+    time stamp and permissions (``entries``: name -> (bytes, executable)),
+    through a partial file renamed at the end."""
+    partial = target.with_name(f".{target.name}.part")
+    with zipfile.ZipFile(partial, "w") as z:
+        for name in sorted(entries):
+            data, executable = entries[name]
+            write_zip_entry(z, name, data, executable)
+    partial.replace(target)
+    return target
+
+
+def sha256_hex(data: bytes) -> str:
+    """The SHA-256 of ``data`` in hex (what manifests record)."""
+    return _sha(data)
 
 
 def write_zip_entry(z: zipfile.ZipFile, name: str, data: bytes, executable: bool = False) -> None:
@@ -711,10 +753,43 @@ def write_zip_entry(z: zipfile.ZipFile, name: str, data: bytes, executable: bool
     z.writestr(info, data, compresslevel=9)
 
 
-def build_fmu(plan: FmuPlan, out_dir: str | Path, *, progress: Callable[[str], None] | None = None) -> Path:
+#: The FMU backends, by the function that builds one FMU (``"module:function"``, as the
+#: estimator registry names factories, so that this module imports neither backend's
+#: machinery): ``pythonfmu`` (the default) and ``native`` (C, :mod:`lpvest.fmi.native`).
+BACKENDS: dict[str, str] = {
+    "pythonfmu": "lpvest.fmi.build:build_fmu",
+    "native": "lpvest.fmi.native.build:build_native_fmu",
+}
+#: ``role, script -> reason or None``: which roles the native backend builds
+_NATIVE_SUPPORT = "lpvest.fmi.native.export:native_unsupported"
+
+
+def check_backend(backend: str) -> str:
+    """``backend`` if it is one of :data:`BACKENDS`, else an :class:`ArgumentError` naming them."""
+    if backend not in BACKENDS:
+        raise ArgumentError(f"backend {backend!r} is not one of {', '.join(BACKENDS)}")
+    return backend
+
+
+def backend_of(plan: FmuPlan, backend: str) -> str:
+    """The backend that builds ``plan`` when ``backend`` is asked for: the
+    native backend builds every discrete-time role; the continuous-time LTV
+    plant and the B-spline observer stay pythonfmu FMUs."""
+    if check_backend(backend) == "native" and resolve(_NATIVE_SUPPORT)(plan.role, plan.script) is not None:
+        return "pythonfmu"
+    return backend
+
+
+def build_fmu(
+    plan: FmuPlan, out_dir: str | Path, *, progress: Callable[[str], None] | None = None, backend: str = "pythonfmu"
+) -> Path:
     """Build one FMU into ``out_dir`` (``<identifier>.fmu``); returns its path.
 
+    ``backend``: ``"pythonfmu"`` (default) or ``"native"`` (:data:`BACKENDS`;
+    a role without a native runtime is refused there, :func:`backend_of`).
     The same inputs give a byte-identical file (see the module documentation)."""
+    if check_backend(backend) != "pythonfmu":
+        return Path(resolve(BACKENDS[backend])(plan, out_dir, progress=progress))
     import pythonfmu
 
     out = Path(out_dir)
@@ -776,9 +851,15 @@ def build_fmus(
     designs: Mapping[str, str | Path] | None = None,
     progress: Callable[[str], None] | None = None,
     design_options: Mapping[str, Any] | None = None,
+    backend: str = "pythonfmu",
 ) -> tuple[list[BuildResult], list[str]]:
     """Build and validate the FMUs of the given system files (default: every
     example system). Returns the results and the planning notes.
+
+    ``backend``: ``"pythonfmu"`` (default) or ``"native"``: every
+    discrete-time role as C; the roles the native backend does not build (the
+    continuous-time LTV plant, the B-spline observer) are pythonfmu FMUs, with
+    a note.
 
     ``roles`` keeps only the FMUs of these roles (``Plant``, ``HinfPD``, ...);
     ``designs`` maps a role to a design file to carry (see :func:`plan_system`);
@@ -790,6 +871,7 @@ def build_fmus(
     problem; the others are built and validated."""
     from ..errors import LpvestError
 
+    check_backend(backend)
     results: list[BuildResult] = []
     notes: list[str] = []
     wanted = None if roles is None else set(roles)
@@ -804,10 +886,13 @@ def build_fmus(
             solving = plan.estimator is not None and bool(plan.estimator.design) and plan.design is None
             if solving:
                 plan = dataclasses.replace(plan, design_options=options, design_cache=cache)
+            used = backend_of(plan, backend)
+            if used != backend:
+                notes.append(f"{plan.identifier}: {resolve(_NATIVE_SUPPORT)(plan.role, plan.script)}")
             if progress is not None:
                 progress(f"building {plan.identifier} ({n}/{len(plans)})")
             try:
-                path = build_fmu(plan, out_dir, progress=progress)
+                path = build_fmu(plan, out_dir, progress=progress, backend=used)
             except LpvestError as exc:
                 if not solving:  # a bad input (a design file for another plant, ...): one error, as always
                     raise

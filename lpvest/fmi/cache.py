@@ -62,14 +62,23 @@ def _solver_versions() -> str:
     return ";".join(out)
 
 
-def fingerprint(plan: Any) -> str:
+def fingerprint(plan: Any, backend: str = "pythonfmu") -> str:
     """SHA-256 of everything an FMU of ``plan`` (a :class:`~lpvest.fmi.build.FmuPlan`)
     is made from: the inputs its manifest records (:func:`lpvest.fmi.build.manifest_inputs`:
-    plan, model file, carried code, design file, pythonfmu, compiler), and for a
-    design solved at build time the versions of the solver stack."""
-    from .build import manifest_inputs
+    plan, model file, carried code, design file, pythonfmu, compiler; for the
+    native backend :func:`lpvest.fmi.native.build.native_manifest_inputs`: plan,
+    model file, the C runtime, zig and its flags), and for a design solved at
+    build time the versions of the solver stack."""
+    from .build import backend_of, manifest_inputs
 
-    inputs = manifest_inputs(plan)
+    if backend_of(plan, backend) == "native":
+        from .native.build import native_manifest_inputs
+
+        inputs = native_manifest_inputs(plan)
+        if plan.design is not None:
+            inputs["design_file_sha256"] = hashlib.sha256(Path(plan.design).read_bytes()).hexdigest()
+    else:
+        inputs = manifest_inputs(plan)
     if plan.estimator is not None and plan.estimator.design and plan.design is None:
         inputs["solvers"] = _solver_versions()
     return hashlib.sha256((CACHE_FORMAT + json.dumps(inputs, sort_keys=True)).encode()).hexdigest()
@@ -106,6 +115,9 @@ class FmuCache:
         ``manifest.json``.
     progress : callable, optional
         Called with a message before each build (the CLI prints it).
+    backend : str, default "pythonfmu"
+        The FMU backend (:data:`lpvest.fmi.build.BACKENDS`); ``"native"``
+        builds every discrete-time role as C (the others stay pythonfmu FMUs).
 
     ``fmus["PeixotoEx1Plant"]`` (or :meth:`path`) returns the FMU's path,
     building and validating it first when it is missing or out of date.
@@ -114,9 +126,13 @@ class FmuCache:
     checked here and builds nothing.
     """
 
-    def __init__(self, directory: str | Path, *, progress: Callable[[str], None] | None = None) -> None:
+    def __init__(self, directory: str | Path, *, progress: Callable[[str], None] | None = None,
+                 backend: str = "pythonfmu") -> None:
+        from .build import check_backend
+
         self.directory = Path(directory)
         self.progress = progress
+        self.backend = check_backend(backend)
         self.built: list[str] = []
         self.reused: list[str] = []
         self.build_time = 0.0
@@ -178,7 +194,7 @@ class FmuCache:
                 raise FmuCacheError(f"{identifier} was not resolved for this process (resolved: "
                                     f"{', '.join(self._checked) or 'none'}): declare it with the experiment")
             plan = self.plan(identifier)
-            want = fingerprint(plan)
+            want = fingerprint(plan, self.backend)
             if not self._up_to_date(identifier, want):
                 self._build(plan, want, self.directory / f"{identifier}.fmu")
             self._checked[identifier] = self.directory / f"{identifier}.fmu"
@@ -214,7 +230,7 @@ class FmuCache:
             for identifier in dict.fromkeys(identifiers):
                 if identifier in self._checked:
                     continue
-                if self._up_to_date(identifier, fingerprint(self.plan(identifier))):
+                if self._up_to_date(identifier, fingerprint(self.plan(identifier), self.backend)):
                     self._checked[identifier] = self.directory / f"{identifier}.fmu"
                 else:
                     out.append(identifier)
@@ -243,7 +259,7 @@ class FmuCache:
         from .build import build_fmu, validate_fmus
 
         plan = self.plan(identifier)
-        want = fingerprint(plan)
+        want = fingerprint(plan, self.backend)
         t = time.perf_counter()
         path = build_fmu(plan, self.directory)
         (check,) = validate_fmus([path])
@@ -302,8 +318,12 @@ class FmuCache:
         return view
 
     def _build(self, plan: Any, want: str, target: Path) -> None:
+        from .build import backend_of
+
         if self.progress is not None:
-            self.progress(f"building {plan.identifier} into {self.directory}")
+            backend = backend_of(plan, self.backend)
+            self.progress(f"building {plan.identifier} into {self.directory}" + (
+                f" ({backend})" if self.backend != "pythonfmu" else ""))
         entry = self.build_file(plan.identifier)
         assert entry["fingerprint"] == want
         self._record(plan.identifier, {k: entry[k] for k in ("fingerprint", "sha256", "built")})
@@ -322,8 +342,8 @@ class FmuCache:
                 target = self.directory / f"{identifier}.fmu"
                 target.parent.mkdir(parents=True, exist_ok=True)
                 shutil.copy2(src, target)
-                self._record(identifier, {"fingerprint": fingerprint(plan), "sha256": _file_digest(target),
-                                          "built": "adopted from " + str(src)})
+                self._record(identifier, {"fingerprint": fingerprint(plan, self.backend),
+                                          "sha256": _file_digest(target), "built": "adopted from " + str(src)})
 
     def summary(self) -> str:
         """One line: how many FMUs were built and reused, and where."""
@@ -332,4 +352,5 @@ class FmuCache:
             parts.append(f"built {len(self.built)} ({self.build_time:.1f} s)")
         if self.reused:
             parts.append(f"reused {len(self.reused)} up-to-date")
-        return f"FMU cache {self.directory}: " + (", ".join(parts) if parts else "nothing used yet")
+        backend = "" if self.backend == "pythonfmu" else f" ({self.backend} backend)"
+        return f"FMU cache {self.directory}{backend}: " + (", ".join(parts) if parts else "nothing used yet")

@@ -342,6 +342,34 @@ class LpvestSlave(Fmi2Slave):
             causality = Fmi2Causality.input if kind == "input" else Fmi2Causality.output
             self._register(element, causality=causality, description=desc)
 
+    def variable_table(self) -> dict[str, Any]:
+        """For the native backend's exporter (:mod:`lpvest.fmi.native`): what
+        this FMU's variables are, so that the native FMU of the role declares and
+        checks exactly these.
+
+        Returns
+        -------
+        dict
+            ``"variables"``: per value reference (in order) a dict with
+            ``name``, ``kind`` (``parameter``/``input``/``output``),
+            ``owner`` (its parameter or port), ``index`` (element in it),
+            ``type`` (``Real``, ...), ``minimum``, ``maximum``, ``tol``
+            (the accepted excess over the range) and ``what`` (how messages
+            name it); ``"parameters"``: the :class:`Parameter` definitions in
+            declaration order; ``"inputs"``/``"outputs"``: the ports;
+            ``"timed"``; ``"sample_time"``: the parameter that is the sample
+            time, or ``None``.
+        """
+        variables = []
+        for vr in sorted(self._elements):
+            e = self._elements[vr]
+            variables.append({"name": e.name, "kind": e.kind, "owner": e.owner, "index": e.index,
+                              "type": e.fmi_type, "minimum": e.minimum, "maximum": e.maximum, "tol": e.tol,
+                              "what": e.what()})
+        return {"variables": variables, "parameters": list(self._param_defs.values()),
+                "inputs": list(self._input_ports), "outputs": list(self._output_ports),
+                "timed": self._timed, "sample_time": self._sample_time}
+
     def fmi_metadata(self) -> dict[str, Any]:
         """For the builder: per variable its declared range, per output the
         inputs it depends on (value references), whether the component keeps

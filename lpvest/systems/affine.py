@@ -20,8 +20,9 @@ import numpy as np
 from .._linalg import MatrixStack
 from ..errors import DimensionError, ExpressionError, abbreviate
 from ..expressions import Expression
+from ..rng import Stream, as_stream
 from ..scheduling import BasisFunction, SchedulingSpace
-from ..validation import as_matrix, as_rng, as_signal, as_vector, check_positive_definite
+from ..validation import as_matrix, as_signal, as_vector, check_positive_definite
 from .text import dependence_table, describe_dependence, format_matrix, matrix_table, number
 
 __all__ = [
@@ -386,17 +387,19 @@ class NoiseCovariance:
     def joint(self) -> np.ndarray:
         return np.block([[self.Q, self.S], [self.S.T, self.R]])
 
-    def sample(self, rng: np.random.Generator, size: int) -> tuple[np.ndarray, np.ndarray]:
+    def sample(self, rng: Stream | np.random.Generator | int, size: int) -> tuple[np.ndarray, np.ndarray]:
         """Draw ``size`` samples of ``(w, v)``.
 
         Each sample is ``[w; v] = L z`` with ``L L^T = [[Q, S], [S^T, R]]``
-        (Cholesky) and ``z ~ N(0, I)``.
+        (Cholesky) and ``z ~ N(0, I)`` from lpvest's stream
+        (:meth:`lpvest.rng.Stream.correlated`).
 
         Parameters
         ----------
-        rng : numpy.random.Generator
+        rng : lpvest.rng.Stream, numpy.random.Generator or int
             The random source (``size`` standard normal vectors of length
-            ``n_w + n_v`` are drawn from it).
+            ``n_w + n_v`` are drawn from it; a Generator or seed as
+            :func:`lpvest.rng.as_stream` takes it).
         size : int
             The number of samples.
 
@@ -408,7 +411,7 @@ class NoiseCovariance:
             Measurement noise samples.
         """
         L = np.linalg.cholesky(self.joint)
-        z = rng.standard_normal((size, L.shape[0])) @ L.T
+        z = as_stream(rng).correlated(L, size)
         nw = self.Q.shape[0]
         return z[:, :nw], z[:, nw:]
 
@@ -711,9 +714,9 @@ class AffineLPV:
         if w is None:
             # the initial state first, then the noise in time order: the same
             # draws as the streaming plant (lpvest.systems.streaming.DiscretePlant)
-            gen = as_rng(rng)
+            gen = as_stream(rng)
             if x0 is None:
-                x0 = gen.multivariate_normal(self.x0, self.P0) if np.any(self.P0) else self.x0
+                x0 = gen.gaussian_vector(self.x0, self.P0) if np.any(self.P0) else self.x0
             w, v = self.noise.sample(gen, T)
         else:
             w = as_signal(w, "w", self.nw, T)

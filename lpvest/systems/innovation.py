@@ -26,8 +26,9 @@ import numpy as np
 
 from ..errors import DimensionError, ExpressionError, NumericalError, abbreviate, shorten
 from ..expressions import Expression, FormulaMatrix, shift_name
+from ..rng import as_stream
 from ..scheduling import SchedulingSpace
-from ..validation import as_matrix, as_rng, as_signal, as_vector, check_positive_definite
+from ..validation import as_matrix, as_signal, as_vector, check_positive_definite
 from .affine import AffineDependence
 from .text import dependence_table, describe_dependence, format_matrix, formula_value, matrix_table, number
 
@@ -285,7 +286,7 @@ class InnovationLPV:
         u = as_signal(u if u is not None else np.zeros((T, self.nu)), "u", self.nu, T)
         if e is None:
             L = np.linalg.cholesky(self.innovation_covariance)
-            e = as_rng(rng).standard_normal((T, self.ny)) @ L.T
+            e = as_stream(rng).correlated(L, T)
         else:
             e = as_signal(e, "e", self.ny, T)
         m, K = self._along(p, T)
@@ -444,6 +445,29 @@ class LPVInputOutput:
         object.__setattr__(self, "noise_variance", var)
         object.__setattr__(self, "name", name)
 
+    @property
+    def n_p(self) -> int:
+        """Number of scheduling components."""
+        return self.space.dim
+
+    @property
+    def nu(self) -> int:
+        """1 when the model has input coefficients, else 0 (SISO)."""
+        return 1 if self.u_coefficients else 0
+
+    @property
+    def ny(self) -> int:
+        """1 (SISO)."""
+        return 1
+
+    @property
+    def nx(self) -> int:
+        """The memory a streaming realization keeps
+        (:class:`lpvest.systems.streaming.DiscretePlant`): the past outputs
+        ``y_(t-1..t-na)``, inputs ``u_(t-1..t-nb+1)`` and noise
+        ``e_(t-1..t-nc)``, ``na + max(nb - 1, 0) + nc`` values."""
+        return len(self.y_coefficients) + max(len(self.u_coefficients) - 1, 0) + len(self.e_coefficients)
+
     def simulate(
         self,
         p: object,
@@ -479,7 +503,7 @@ class LPVInputOutput:
         for t in range(T):
             self.space.check(p[t], what=f"scheduling value at t={t}:")
         u = as_signal(u, "u", 1, T)[:, 0]
-        ev: np.ndarray = (as_rng(rng).standard_normal(T) * np.sqrt(self.noise_variance) if e is None
+        ev: np.ndarray = (as_stream(rng).normal(T) * np.sqrt(self.noise_variance) if e is None
                           else as_signal(e, "e", 1, T)[:, 0])
         vals = self.space.as_dict(p)
 

@@ -12,17 +12,22 @@ the one the batch ``simulate`` methods loop over: a Python loop over a plant
 reproduces ``simulate`` to the bit (with the noise drawn one sample at a time).
 
 - :class:`DiscretePlant` wraps a discrete-time :class:`~lpvest.systems.PolytopicLPV`,
-  :class:`~lpvest.systems.AffineLPV` or causal :class:`~lpvest.systems.InnovationLPV`.
+  :class:`~lpvest.systems.AffineLPV`, causal :class:`~lpvest.systems.InnovationLPV`
+  or :class:`~lpvest.systems.LPVInputOutput` (its memory of past ``y``, ``u``,
+  ``e`` as the state).
 - :class:`LTVPlant` wraps a continuous-time :class:`~lpvest.systems.LTVStateSpace`
   (or :class:`~lpvest.systems.LTVInputOutput`) and integrates over each step.
 
-Noise convention (affine and innovation models, ``noise=True``): the generator
-``numpy.random.default_rng(seed)`` first draws the initial state when ``P0``
-is not zero, then one vector per sample ``k = 0, 1, ...``:
-``[w_k; v_k] = L z_k`` with ``L L^T = [[Q, S], [S^T, R]]`` (affine) or
-``e_k = L z_k`` with ``L L^T = Omega`` (innovation), ``z_k ~ N(0, I)``. With
-``P0 = 0`` this is the sequence ``AffineLPV.simulate(p, u, rng=seed)`` and
-``InnovationLPV.simulate(p, u, rng=seed)`` use, so the streaming plant and the
+Noise convention (affine and innovation models, ``noise=True``): the stream
+``lpvest.rng.Stream(seed)`` (the same numbers in the native FMUs) first draws
+the initial state when ``P0`` is not zero (``x0 + L_0 z``, ``L_0`` the
+semidefinite Cholesky factor of ``P0``), then one vector per sample
+``k = 0, 1, ...``: ``[w_k; v_k] = L z_k`` with ``L L^T = [[Q, S], [S^T, R]]``
+(affine) or ``e_k = L z_k`` with ``L L^T = Omega`` (innovation; input-output:
+``L = sqrt(noise_variance)``),
+``z_k ~ N(0, I)`` (:meth:`lpvest.rng.Stream.correlated`). With
+``P0 = 0`` this is the sequence ``AffineLPV.simulate(p, u, rng=seed)``,
+``InnovationLPV.simulate(p, u, rng=seed)`` and ``LPVInputOutput.simulate`` use, so the streaming plant and the
 batch simulation agree. External noise inputs (``w``, ``v``, ``e``) are added
 to the drawn noise.
 
@@ -39,6 +44,7 @@ Examples
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -46,9 +52,10 @@ import numpy as np
 
 from ..errors import DimensionError, ExpressionError
 from ..protocol import Component, Port, TimedComponent
+from ..rng import Stream
 from ..validation import as_matrix, as_vector, check_positive_definite, check_simplex
 from .affine import AffineLPV
-from .innovation import InnovationLPV, innovation_step
+from .innovation import InnovationLPV, LPVInputOutput, innovation_step
 from .ltv import LTVInputOutput, LTVSolution, LTVStateSpace, TimeFunction
 from .polytopic import PolytopicLPV
 
@@ -74,7 +81,7 @@ class _Rules:
         return None
 
     def initial_state(self, x0: np.ndarray | None, P0: np.ndarray | None, noise: bool,
-                      rng: np.random.Generator) -> np.ndarray:
+                      rng: Stream) -> np.ndarray:
         return np.zeros(self.model.nx) if x0 is None else x0.copy()
 
     def check(self, val: dict[str, np.ndarray]) -> None:
@@ -139,10 +146,10 @@ class _AffineRules(_Rules):
         return np.linalg.cholesky(self.model.noise.joint)
 
     def initial_state(self, x0: np.ndarray | None, P0: np.ndarray | None, noise: bool,
-                      rng: np.random.Generator) -> np.ndarray:
+                      rng: Stream) -> np.ndarray:
         mean = self.model.x0 if x0 is None else x0
         if noise and P0 is not None and np.any(P0):
-            return np.asarray(rng.multivariate_normal(mean, P0), dtype=float)
+            return rng.gaussian_vector(mean, P0)
         return mean.copy()
 
     def evaluate(self, x: np.ndarray, val: dict[str, np.ndarray], noise: np.ndarray,
@@ -176,7 +183,7 @@ class _InnovationRules(_Rules):
         return np.linalg.cholesky(self.model.innovation_covariance)
 
     def initial_state(self, x0: np.ndarray | None, P0: np.ndarray | None, noise: bool,
-                      rng: np.random.Generator) -> np.ndarray:
+                      rng: Stream) -> np.ndarray:
         return (self.model.x0 if x0 is None else x0).copy()
 
     def evaluate(self, x: np.ndarray, val: dict[str, np.ndarray], noise: np.ndarray,
@@ -190,11 +197,57 @@ class _InnovationRules(_Rules):
         return {"y": y, "x": x.copy()}, nxt
 
 
+class _InputOutputRules(_Rules):
+    """An input-output model ``y_t = e_t + sum a_i y_(t-1-i) + sum b_i u_(t-i)
+    + sum c_i e_(t-1-i)`` streamed with its memory as the state: ``x_t`` =
+    ``[y_(t-1), ..., y_(t-na), u_(t-1), ..., u_(t-nb+1), e_(t-1), ..., e_(t-nc)]``
+    (zero: from rest, as :meth:`LPVInputOutput.simulate`)."""
+
+    model: LPVInputOutput
+
+    def ports(self) -> tuple[list[Port], list[Port]]:
+        m = self.model
+        ins = [Port("p", (m.n_p,), "scheduling")] + ([Port("u", (1,), "input")] if m.nu else [])
+        return ins + [Port("e", (1,), "noise added to the drawn one")], [Port("y", (1,), "measured output")]
+
+    def noise_factor(self) -> np.ndarray:
+        return np.linalg.cholesky(np.array([[self.model.noise_variance]]))
+
+    def evaluate(self, x: np.ndarray, val: dict[str, np.ndarray], noise: np.ndarray,
+                 no_u: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        m = self.model
+        p = val["p"]
+        vals = m.space.as_dict(p)
+        a, b, c = ([float(f.evaluate(vals)) for f in fs] for fs in (m.y_coefficients, m.u_coefficients,
+                                                                      m.e_coefficients))
+        if not all(math.isfinite(v) for v in (*a, *b, *c)):
+            raise ExpressionError(f"the coefficients are not finite at p = {p.tolist()}")
+        na, nb = len(a), len(b)
+        ys, us, es = x[:na], x[na:na + max(nb - 1, 0)], x[na + max(nb - 1, 0):]
+        u = float(val["u"][0]) if nb else 0.0
+        e = float(val["e"][0] + noise[0])
+        # the order of LPVInputOutput.simulate: e_t, then the y, u and e terms
+        acc = e
+        for i in range(na):
+            acc += a[i] * ys[i]
+        if nb:
+            acc += b[0] * u
+        for i in range(1, nb):
+            acc += b[i] * us[i - 1]
+        for i in range(len(c)):
+            acc += c[i] * es[i]
+        # shift each memory by one: the newest value first
+        nxt = np.array([*([acc, *ys[:-1]] if na else []), *([u, *us[:-1]] if nb > 1 else []),
+                        *([e, *es[:-1]] if c else [])], dtype=float)
+        return {"y": np.array([acc]), "x": x.copy()}, nxt
+
+
 #: The discrete-time model classes a DiscretePlant streams, and how.
 _RULES: dict[type, type[_Rules]] = {
     PolytopicLPV: _PolytopicRules,
     AffineLPV: _AffineRules,
     InnovationLPV: _InnovationRules,
+    LPVInputOutput: _InputOutputRules,
 }
 
 
@@ -218,7 +271,7 @@ def plant_supports(model: object) -> str | None:
     -------
     str or None
         ``None``, or why neither plant streams ``model`` (e.g. an innovation
-        form whose gain uses shifted scheduling, an input-output model).
+        form whose gain uses shifted scheduling).
     """
     rules = _rules_for(model)
     if rules is not None:
@@ -231,7 +284,7 @@ def plant_supports(model: object) -> str | None:
         except DimensionError as exc:
             return str(exc)
         return None
-    return f"{type(model).__name__} is an input-output model with no state to stream (use a state-space realization)"
+    return f"{type(model).__name__} is no model a streaming plant runs"
 
 
 class DiscretePlant(Component):
@@ -239,7 +292,7 @@ class DiscretePlant(Component):
 
     Parameters
     ----------
-    model : PolytopicLPV, AffineLPV or InnovationLPV
+    model : PolytopicLPV, AffineLPV, InnovationLPV or LPVInputOutput
         An innovation-form model must have a gain of ``p_t`` only.
     noise : bool, keyword-only
         Draw the model's noise inside (affine and innovation models).
@@ -259,12 +312,14 @@ class DiscretePlant(Component):
     polytopic: inputs ``p`` (or ``alpha`` without a scheduling map), ``w``;
     outputs ``y``, ``z``, ``x``. Affine: inputs ``p``, ``u`` (if ``n_u > 0``),
     ``w``, ``v`` (added to the drawn noise); outputs ``y``, ``x``. Innovation:
-    inputs ``p``, ``u``, ``e``; outputs ``y``, ``x``.
+    inputs ``p``, ``u``, ``e``; outputs ``y``, ``x``. Input-output: inputs
+    ``p``, ``u`` (with input coefficients), ``e``; outputs ``y``, ``x`` (the
+    memory ``[y_(t-1..t-na), u_(t-1..t-nb+1), e_(t-1..t-nc)]``, zero at rest).
     """
 
     def __init__(
         self,
-        model: PolytopicLPV | AffineLPV | InnovationLPV,
+        model: PolytopicLPV | AffineLPV | InnovationLPV | LPVInputOutput,
         *,
         noise: bool = False,
         seed: int = 0,
@@ -297,7 +352,7 @@ class DiscretePlant(Component):
     # -- the protocol -----------------------------------------------------------------
     def _reset(self) -> None:
         """Back to sample 0: initial state, generator re-seeded, first noise drawn."""
-        self._rng = np.random.default_rng(self.seed)
+        self._rng = Stream(self.seed)
         self._k = 0
         self._x = np.asarray(self._rules.initial_state(self._x0, self._P0, self.noise, self._rng), dtype=float)
         self._noise = self._draw()
@@ -309,7 +364,7 @@ class DiscretePlant(Component):
         n = self._chol.shape[0]
         if not self.noise:
             return np.zeros(n)
-        return (self._rng.standard_normal((1, n)) @ self._chol.T)[0]
+        return self._rng.correlated(self._chol, 1)[0]
 
     def _read(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
         val = {}
@@ -348,14 +403,14 @@ class DiscretePlant(Component):
         state : dict of str to object
             ``"x"``: the state (ndarray, shape (n_x,)), ``"k"``: the sample
             index (int), ``"noise"``: the model noise drawn for the current
-            sample (ndarray), ``"rng"``: the generator's ``bit_generator.state``
+            sample (ndarray), ``"rng"``: the stream's state (:attr:`lpvest.rng.Stream.state`)
             (dict).
         """
         return {
             "x": self._x.copy(),
             "k": self._k,
             "noise": self._noise.copy(),
-            "rng": self._rng.bit_generator.state,
+            "rng": self._rng.state,
         }
 
     def _set_state(self, state: Mapping[str, Any]) -> None:
@@ -363,8 +418,8 @@ class DiscretePlant(Component):
         noise = np.asarray(state["noise"], dtype=float)
         if noise.shape != self._noise.shape:
             raise DimensionError(f"state noise has shape {noise.shape}; expected {self._noise.shape}")
-        rng = np.random.default_rng()
-        rng.bit_generator.state = state["rng"]
+        rng = Stream(None)
+        rng.state = state["rng"]
         self._x, self._k, self._noise, self._rng = x.copy(), int(state["k"]), noise.copy(), rng
 
 

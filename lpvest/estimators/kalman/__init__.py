@@ -67,7 +67,7 @@ Examples
 >>> y = model.simulate(p, u, rng=0).y
 >>> res = kalman_filter(model, p, u, y)
 >>> res.filtered_means.shape, round(res.log_likelihood, 4)
-((50, 2), -94.4371)
+((50, 2), -111.2149)
 """
 
 from __future__ import annotations

@@ -274,6 +274,24 @@ class KalmanModel:
             },
         )
 
+    @property
+    def packing(self) -> tuple[np.ndarray, tuple[tuple[int, int], ...], tuple[int, int]]:
+        """How one sample's packed matrix is computed: ``F(p) = (z(p) @ packed).reshape(shape)``
+        with ``z = [1, psi_1, ..., psi_k, psi_i psi_j for (i, j) in pairs]``
+        (1-based ``i <= j``); the native backend carries these numbers.
+
+        Returns
+        -------
+        packed : ndarray, shape (n_z, rows * cols)
+            The coefficients (read-only).
+        pairs : tuple of (int, int)
+            The products of basis functions in ``z``, in order.
+        shape : (int, int)
+            ``(2 n_x + n_y, 3 n_x + n_u + n_y)``.
+        """
+        c = self._c  # type: ignore[attr-defined]  # set in _compile (frozen)
+        return c["packed"], tuple(c["pairs"]), tuple(c["shape"])
+
     # -- dimensions -----------------------------------------------------------
     @property
     def nx(self) -> int:

@@ -1,0 +1,303 @@
+/*
+ * A minimal FMI 2.0 co-simulation host in C, for the tests and as an example for
+ * people writing their own (docs/fmus.md, "A host in C"): it loads an FMU's
+ * library (dlopen / LoadLibrary), looks up the FMI functions and runs a script of
+ * FMI calls read from standard input, one per line, printing every status and
+ * value. No Python anywhere.
+ *
+ * usage: native_host LIBRARY GUID RESOURCES_URI < script
+ *
+ * Script lines (ID: an instance number 0..7):
+ *   instantiate ID NAME LOGGING     fmi2Instantiate (LOGGING 0 or 1)
+ *   setup ID T0 | enter ID | exit ID | terminate ID | reset ID | free ID
+ *   set_real ID VR VALUE            (VALUE as strtod reads it: 0.5, nan, inf)
+ *   set_integer ID VR VALUE | set_boolean ID VR 0|1 | set_string ID VR TEXT
+ *   get_real ID VR [VR ...]         prints: REAL v1 v2 ... (%.17g)
+ *   get_integer ID VR | get_boolean ID VR | get_string ID VR
+ *   step ID T H                     fmi2DoStep(T, H)
+ *   time ID                         fmi2GetRealStatus(fmi2LastSuccessfulTime): TIME t
+ *   get_state ID SLOT | set_state ID SLOT | free_state ID SLOT
+ *   serialize ID SLOT               serialize the state in SLOT and deserialize it into SLOT again
+ *   unload / load                   close and open the library again
+ * Each call prints "STATUS <command> <status>". The logger prints
+ * "LOG <status> <category> <message>".
+ */
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#ifdef _WIN32
+#include <windows.h>
+typedef HMODULE Library;
+static Library open_library(const char* path) { return LoadLibraryA(path); }
+static void* symbol(Library lib, const char* name) { return (void*)GetProcAddress(lib, name); }
+static void close_library(Library lib) { FreeLibrary(lib); }
+#else
+#include <dlfcn.h>
+typedef void* Library;
+static Library open_library(const char* path) { return dlopen(path, RTLD_NOW | RTLD_LOCAL); }
+static void* symbol(Library lib, const char* name) { return dlsym(lib, name); }
+static void close_library(Library lib) { dlclose(lib); }
+#endif
+
+typedef void* fmi2Component;
+typedef void* fmi2FMUstate;
+typedef unsigned int fmi2ValueReference;
+typedef void (*Logger)(void*, const char*, int, const char*, const char*, ...);
+typedef struct {
+    Logger logger;
+    void* (*allocate)(size_t, size_t);
+    void (*release)(void*);
+    void* step_finished;
+    void* env;
+} Callbacks;
+
+typedef fmi2Component (*Instantiate)(const char*, int, const char*, const char*, const Callbacks*, int, int);
+typedef void (*FreeInstance)(fmi2Component);
+typedef int (*Setup)(fmi2Component, int, double, double, int, double);
+typedef int (*Mode)(fmi2Component);
+typedef int (*SetReal)(fmi2Component, const fmi2ValueReference*, size_t, const double*);
+typedef int (*GetReal)(fmi2Component, const fmi2ValueReference*, size_t, double*);
+typedef int (*SetInteger)(fmi2Component, const fmi2ValueReference*, size_t, const int*);
+typedef int (*GetInteger)(fmi2Component, const fmi2ValueReference*, size_t, int*);
+typedef int (*SetString)(fmi2Component, const fmi2ValueReference*, size_t, const char* const*);
+typedef int (*GetString)(fmi2Component, const fmi2ValueReference*, size_t, const char**);
+typedef int (*DoStep)(fmi2Component, double, double, int);
+typedef int (*GetRealStatus)(fmi2Component, int, double*);
+typedef int (*GetState)(fmi2Component, fmi2FMUstate*);
+typedef int (*SetState)(fmi2Component, fmi2FMUstate);
+typedef int (*FreeState)(fmi2Component, fmi2FMUstate*);
+typedef int (*StateSize)(fmi2Component, fmi2FMUstate, size_t*);
+typedef int (*Serialize)(fmi2Component, fmi2FMUstate, char*, size_t);
+typedef int (*Deserialize)(fmi2Component, const char*, size_t, fmi2FMUstate*);
+
+static struct {
+    Library lib;
+    Instantiate instantiate;
+    FreeInstance free_instance;
+    Setup setup;
+    Mode enter, exit, terminate, reset;
+    SetReal set_real;
+    GetReal get_real;
+    SetInteger set_integer, set_boolean;
+    GetInteger get_integer, get_boolean;
+    SetString set_string;
+    GetString get_string;
+    DoStep do_step;
+    GetRealStatus get_real_status;
+    GetState get_state;
+    SetState set_state;
+    FreeState free_state;
+    StateSize state_size;
+    Serialize serialize;
+    Deserialize deserialize;
+} F;
+
+static void logger(void* env, const char* name, int status, const char* category, const char* message, ...) {
+    (void)env, (void)name;
+    va_list ap;
+    va_start(ap, message);
+    printf("LOG %d %s ", status, category ? category : "");
+    vprintf(message, ap);
+    printf("\n");
+    va_end(ap);
+}
+
+static int load(const char* path) {
+    F.lib = open_library(path);
+    if (!F.lib) return 0;
+#define SYM(field, name)                                  \
+    F.field = (void*)0;                                   \
+    *(void**)(&F.field) = symbol(F.lib, name);            \
+    if (!F.field) {                                       \
+        printf("MISSING %s\n", name);                     \
+        return 0;                                         \
+    }
+    SYM(instantiate, "fmi2Instantiate")
+    SYM(free_instance, "fmi2FreeInstance")
+    SYM(setup, "fmi2SetupExperiment")
+    SYM(enter, "fmi2EnterInitializationMode")
+    SYM(exit, "fmi2ExitInitializationMode")
+    SYM(terminate, "fmi2Terminate")
+    SYM(reset, "fmi2Reset")
+    SYM(set_real, "fmi2SetReal")
+    SYM(get_real, "fmi2GetReal")
+    SYM(set_integer, "fmi2SetInteger")
+    SYM(get_integer, "fmi2GetInteger")
+    SYM(set_boolean, "fmi2SetBoolean")
+    SYM(get_boolean, "fmi2GetBoolean")
+    SYM(set_string, "fmi2SetString")
+    SYM(get_string, "fmi2GetString")
+    SYM(do_step, "fmi2DoStep")
+    SYM(get_real_status, "fmi2GetRealStatus")
+    SYM(get_state, "fmi2GetFMUstate")
+    SYM(set_state, "fmi2SetFMUstate")
+    SYM(free_state, "fmi2FreeFMUstate")
+    SYM(state_size, "fmi2SerializedFMUstateSize")
+    SYM(serialize, "fmi2SerializeFMUstate")
+    SYM(deserialize, "fmi2DeSerializeFMUstate")
+    return 1;
+}
+
+#define N_INSTANCES 8
+#define N_SLOTS 8
+
+int main(int argc, char** argv) {
+    if (argc != 4) {
+        fprintf(stderr, "usage: native_host LIBRARY GUID RESOURCES_URI < script\n");
+        return 2;
+    }
+    setvbuf(stdout, NULL, _IOLBF, 1 << 16);
+    if (!load(argv[1])) {
+        printf("LOADFAIL\n");
+        return 3;
+    }
+    Callbacks cb = {logger, calloc, free, NULL, NULL};
+    fmi2Component c[N_INSTANCES] = {0};
+    fmi2FMUstate states[N_INSTANCES][N_SLOTS] = {{0}};
+    char line[4096];
+    while (fgets(line, sizeof line, stdin)) {
+        char cmd[64] = {0};
+        int id = 0, n = 0;
+        if (sscanf(line, "%63s%n", cmd, &n) != 1) continue;
+        char* rest = line + n;
+        if (strcmp(cmd, "unload") == 0) {
+            close_library(F.lib);
+            printf("STATUS unload 0\n");
+            fflush(stdout);
+            continue;
+        }
+        if (strcmp(cmd, "load") == 0) {
+            printf("STATUS load %d\n", load(argv[1]) ? 0 : 4);
+            fflush(stdout);
+            continue;
+        }
+        int m = 0;
+        if (sscanf(rest, "%d%n", &id, &m) != 1 || id < 0 || id >= N_INSTANCES) {
+            printf("BADLINE %s", line);
+            fflush(stdout);
+            continue;
+        }
+        rest += m;
+        int st = 0;
+        if (strcmp(cmd, "instantiate") == 0) {
+            char name[256];
+            int logging = 0;
+            sscanf(rest, "%255s %d", name, &logging);
+            c[id] = F.instantiate(name, 1, argv[2], argv[3], &cb, 0, logging);
+            printf("STATUS instantiate %s\n", c[id] ? "0" : "null");
+            fflush(stdout);
+            continue;
+        } else if (strcmp(cmd, "free") == 0) {
+            for (int slot = 0; slot < N_SLOTS; slot++) /* an instance's states go with it */
+                if (states[id][slot]) F.free_state(c[id], &states[id][slot]);
+            F.free_instance(c[id]);
+            c[id] = NULL;
+            printf("STATUS free 0\n");
+            fflush(stdout);
+            continue;
+        } else if (strcmp(cmd, "setup") == 0) {
+            st = F.setup(c[id], 0, 0.0, strtod(rest, NULL), 0, 0.0);
+        } else if (strcmp(cmd, "enter") == 0) {
+            st = F.enter(c[id]);
+        } else if (strcmp(cmd, "exit") == 0) {
+            st = F.exit(c[id]);
+        } else if (strcmp(cmd, "terminate") == 0) {
+            st = F.terminate(c[id]);
+        } else if (strcmp(cmd, "reset") == 0) {
+            st = F.reset(c[id]);
+        } else if (strcmp(cmd, "set_real") == 0) {
+            char* end;
+            fmi2ValueReference vr = (fmi2ValueReference)strtoul(rest, &end, 10);
+            double v = strtod(end, NULL);
+            st = F.set_real(c[id], &vr, 1, &v);
+        } else if (strcmp(cmd, "set_integer") == 0 || strcmp(cmd, "set_boolean") == 0) {
+            char* end;
+            fmi2ValueReference vr = (fmi2ValueReference)strtoul(rest, &end, 10);
+            int v = (int)strtol(end, NULL, 10);
+            st = (cmd[4] == 'i' ? F.set_integer : F.set_boolean)(c[id], &vr, 1, &v);
+        } else if (strcmp(cmd, "set_string") == 0) {
+            char* end;
+            fmi2ValueReference vr = (fmi2ValueReference)strtoul(rest, &end, 10);
+            while (*end == ' ') end++;
+            end[strcspn(end, "\r\n")] = '\0';
+            const char* v = end;
+            st = F.set_string(c[id], &vr, 1, &v);
+        } else if (strcmp(cmd, "get_real") == 0) {
+            fmi2ValueReference vrs[512];
+            double v[512];
+            size_t k = 0;
+            char* p = rest;
+            char* end;
+            while (k < 512) {
+                unsigned long x = strtoul(p, &end, 10);
+                if (end == p) break;
+                vrs[k++] = (fmi2ValueReference)x;
+                p = end;
+            }
+            st = F.get_real(c[id], vrs, k, v);
+            printf("REAL");
+            for (size_t i = 0; i < k; i++) printf(" %.17g", v[i]);
+            printf("\n");
+        } else if (strcmp(cmd, "get_integer") == 0 || strcmp(cmd, "get_boolean") == 0) {
+            fmi2ValueReference vr = (fmi2ValueReference)strtoul(rest, NULL, 10);
+            int v = 0;
+            st = (cmd[4] == 'i' ? F.get_integer : F.get_boolean)(c[id], &vr, 1, &v);
+            printf("INT %d\n", v);
+        } else if (strcmp(cmd, "get_string") == 0) {
+            fmi2ValueReference vr = (fmi2ValueReference)strtoul(rest, NULL, 10);
+            const char* v = "";
+            st = F.get_string(c[id], &vr, 1, &v);
+            printf("STRING %s\n", v ? v : "(null)");
+        } else if (strcmp(cmd, "step") == 0) {
+            char* end;
+            double t = strtod(rest, &end);
+            double h = strtod(end, NULL);
+            st = F.do_step(c[id], t, h, 1);
+        } else if (strcmp(cmd, "time") == 0) {
+            double t = 0.0;
+            st = F.get_real_status(c[id], 2, &t);
+            printf("TIME %.17g\n", t);
+        } else if (strcmp(cmd, "get_state") == 0 || strcmp(cmd, "set_state") == 0 || strcmp(cmd, "free_state") == 0 ||
+                   strcmp(cmd, "serialize") == 0) {
+            int slot = atoi(rest);
+            if (slot < 0 || slot >= N_SLOTS) {
+                printf("BADLINE %s", line);
+                fflush(stdout);
+                continue;
+            }
+            if (cmd[0] == 'g') st = F.get_state(c[id], &states[id][slot]);
+            else if (cmd[0] == 's' && cmd[1] == 'e' && cmd[2] == 't') st = F.set_state(c[id], states[id][slot]);
+            else if (cmd[0] == 'f') st = F.free_state(c[id], &states[id][slot]);
+            else {
+                size_t size = 0;
+                st = F.state_size(c[id], states[id][slot], &size);
+                char* bytes = (char*)malloc(size ? size : 1);
+                if (!st) st = F.serialize(c[id], states[id][slot], bytes, size);
+                fmi2FMUstate copy = NULL;
+                if (!st) st = F.deserialize(c[id], bytes, size, &copy);
+                free(bytes);
+                if (!st) {
+                    F.free_state(c[id], &states[id][slot]);
+                    states[id][slot] = copy;
+                }
+                printf("SIZE %lu\n", (unsigned long)size);
+            }
+        } else {
+            printf("BADLINE %s", line);
+            fflush(stdout);
+            continue;
+        }
+        printf("STATUS %s %d\n", cmd, st);
+        fflush(stdout); /* a pipe: every answer now (Windows' C runtime buffers whole blocks, even "by line") */
+    }
+    for (int i = 0; i < N_INSTANCES; i++)
+        if (c[i]) {
+            for (int s = 0; s < N_SLOTS; s++)
+                if (states[i][s]) F.free_state(c[i], &states[i][s]);
+            F.free_instance(c[i]);
+        }
+    printf("DONE\n");
+    return 0;
+}

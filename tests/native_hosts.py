@@ -1,0 +1,160 @@
+"""Hosts without Python for the native FMUs: the C host of tests/data/native_host.c,
+compiled for Linux (plain, or with AddressSanitizer and UndefinedBehaviorSanitizer)
+and for Windows (run under wine where it is installed), driven line by line
+through a pipe with the interface of tests/fmu_driver.Driver."""
+
+from __future__ import annotations
+
+import functools
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import zipfile
+from pathlib import Path
+
+import numpy as np
+from fmpy import read_model_description
+
+from tests.native_helpers import c_compiler
+
+HOST_SOURCE = Path(__file__).resolve().parent / "data" / "native_host.c"
+SANITIZERS = ("-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer")
+
+
+@functools.cache
+def host_exe(kind: str = "plain") -> Path:
+    """The C host compiled once per session: ``plain`` (cc), ``sanitized``
+    (cc with ASan and UBSan) or ``windows`` (zig, x86_64-windows-gnu)."""
+    out = Path(tempfile.mkdtemp(prefix="lpvest-host-"))
+    if kind == "windows":
+        exe = out / "native_host.exe"
+        cmd = [sys.executable, "-m", "ziglang", "cc", "-target", "x86_64-windows-gnu", "-std=c99", "-O2", "-Wall",
+               "-Wextra", "-Werror", "-o", str(exe), str(HOST_SOURCE)]
+    else:
+        exe = out / "native_host"
+        flags = SANITIZERS if kind == "sanitized" else ()
+        cmd = [*c_compiler(), "-std=c99", "-O1", "-g", "-Wall", "-Wextra", "-Werror", *flags, "-o", str(exe),
+               str(HOST_SOURCE), "-ldl"]
+    subprocess.run(cmd, check=True, capture_output=True)
+    return exe
+
+
+def sanitized_library(fmu: Path, folder: Path) -> Path:
+    """The FMU's source files (sources/ of the source FMU) compiled into a shared
+    library with ASan and UBSan (cc), as a tool's own compiler would build them."""
+    with zipfile.ZipFile(fmu) as z:
+        sources = [n for n in z.namelist() if n.startswith("sources/")]
+        z.extractall(folder, sources)
+    src = folder / "sources"
+    out = folder / f"{fmu.stem}.so"
+    cmd = [*c_compiler(), "-std=c99", "-O1", "-g", "-fPIC", "-shared", "-ffp-contract=off", "-Wall", "-Wextra",
+           "-Werror", *SANITIZERS, "-o", str(out), *sorted(str(f) for f in src.glob("*.c")), "-lm"]
+    subprocess.run(cmd, check=True, capture_output=True, cwd=src)
+    return out
+
+
+def wine() -> str | None:
+    """The wine program, or None."""
+    return shutil.which("wine") or shutil.which("wine64")
+
+
+class HostDriver:
+    """One instance of an FMU in the C host (a process of its own, started with
+    an empty environment: no PYTHONPATH, no LD_LIBRARY_PATH, nothing of
+    Python's), with the methods of tests/fmu_driver.Driver the tests use."""
+
+    def __init__(self, fmu: Path, *, kind: str = "plain", library: Path | None = None) -> None:
+        self.md = read_model_description(str(fmu))
+        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
+        self.types = {v.name: v.type for v in self.md.modelVariables}
+        self.folder = Path(tempfile.mkdtemp(prefix="lpvest-hosted-"))
+        with zipfile.ZipFile(fmu) as z:
+            z.extractall(self.folder)
+        ident = self.md.coSimulation.modelIdentifier
+        uri = (self.folder / "resources").as_uri()
+        env: dict[str, str] = {}
+        if kind == "windows":
+            lib = "Z:" + str(self.folder / "binaries" / "win64" / f"{ident}.dll").replace("/", "\\")
+            wine_exe = wine()
+            assert wine_exe is not None
+            cmd = [wine_exe, str(host_exe("windows")), lib, self.md.guid, uri]
+            env = {"WINEDEBUG": "-all", "HOME": os.environ.get("HOME", "/root"),
+                   "PATH": "/usr/bin:/bin"}  # wine itself needs its home and its programs
+        else:
+            lib = str(library or self.folder / "binaries" / "linux64" / f"{ident}.so")
+            cmd = [str(host_exe(kind)), lib, self.md.guid, uri]
+            if kind == "sanitized":
+                env = {"ASAN_OPTIONS": "detect_leaks=1:abort_on_error=0:exitcode=23",
+                       "UBSAN_OPTIONS": "print_stacktrace=1:halt_on_error=1:exitcode=24"}
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                     text=True, env=env, bufsize=1)
+        self.messages: list[tuple[int, str, str]] = []
+        assert self.call("instantiate 0 host 0")[0] == 0, self.messages
+
+    def call(self, line: str) -> tuple[int, list[str]]:
+        """Send one script line; its status and the value lines it printed."""
+        assert self.proc.stdin is not None and self.proc.stdout is not None
+        self.proc.stdin.write(line + "\n")
+        self.proc.stdin.flush()
+        cmd = line.split()[0]
+        values: list[str] = []
+        while True:
+            out = self.proc.stdout.readline()
+            if not out:
+                raise RuntimeError(f"the host ended at {line!r}: {self.proc.stderr.read() if self.proc.stderr else ''}")
+            out = out.rstrip("\n")
+            if out.startswith("LOG "):
+                _, status, category, message = out.split(" ", 3)
+                self.messages.append((int(status), category, message))
+            elif out.startswith("STATUS "):
+                _, name, status = out.split(" ")
+                assert name == cmd, (line, out)
+                return (-1 if status == "null" else int(status)), values
+            else:
+                values.append(out)
+
+    def initialize(self, start_time: float = 0.0, **params: float | int | bool | str) -> int:
+        st = self.call(f"setup 0 {start_time!r}")[0]
+        st = max(st, self.call("enter 0")[0])
+        for name, value in params.items():
+            st = max(st, self.set(name, value))
+        return max(st, self.call("exit 0")[0])
+
+    def set(self, name: str, value: float | int | bool | str) -> int:
+        t = self.types[name]
+        if t == "Real":
+            return self.call(f"set_real 0 {self.vr[name]} {float(value)!r}")[0]
+        if t == "String":
+            return self.call(f"set_string 0 {self.vr[name]} {value}")[0]
+        return self.call(f"set_{t.lower()} 0 {self.vr[name]} {int(value)}")[0]
+
+    def set_vector(self, base: str, values) -> int:  # noqa: ANN001
+        values = np.atleast_1d(np.asarray(values, dtype=float))
+        return max(self.set(f"{base}[{i + 1}]", float(v)) for i, v in enumerate(values))
+
+    def vector(self, base: str) -> np.ndarray:
+        from lpvest.fmi.naming import parse_element
+
+        names = sorted((n for n in self.vr if n.startswith(base + "[")), key=lambda n: parse_element(n)[1])
+        if not names and base in self.vr:
+            names = [base]
+        _, lines = self.call("get_real 0 " + " ".join(str(self.vr[n]) for n in names))
+        return np.array([float(v) for v in lines[0].split()[1:]])
+
+    def step(self, t: float, h: float) -> int:
+        return self.call(f"step 0 {t!r} {h!r}")[0]
+
+    def errors(self) -> list[str]:
+        return [m for s, _, m in self.messages if s >= 3]
+
+    def close(self) -> int:
+        """End the host (freeing the instance); its exit code."""
+        assert self.proc.stdin is not None
+        self.proc.stdin.write("free 0\n")
+        self.proc.stdin.close()
+        self.proc.wait(timeout=120)
+        self.stderr = self.proc.stderr.read() if self.proc.stderr else ""
+        shutil.rmtree(self.folder, ignore_errors=True)
+        return self.proc.returncode

@@ -1,0 +1,303 @@
+"""The native FMUs in hosts with no Python: the C host (plain, and with the
+runtime built from the source FMU under AddressSanitizer and
+UndefinedBehaviorSanitizer), the win64 binary in the C host cross-compiled for
+Windows under wine, libcosim, fmpy's simulate_fmu; the source FMU built by
+fmpy; byte-identical builds."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+import textwrap
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy import read_model_description
+
+from tests.native_hosts import HostDriver, sanitized_library, wine
+
+#: one FMU of every role and model kind, the lifecycle and sanitizer runs use them
+EVERY_ROLE = ["PeixotoEx1Plant", "CoxTothTruncationPlant", "CoxTothEx1Plant", "PeixotoEx1Scheduler",
+              "AffineDemoSource", "CoxTothTruncationKalman", "CoxTothTruncationTruncatedKalman", "AffineDemoHinfPD",
+              "PeixotoEx1HinfRobust", "IoDemoPlant"]
+
+
+def _lifecycle_script(md) -> list[str]:  # noqa: ANN001
+    """Every call sequence FMI 2.0 allows, and the wrong ones an FMU must
+    survive, for one FMU (its value references from ``md``)."""
+    ins = [v for v in md.modelVariables if v.causality == "input"]
+    outs = " ".join(str(v.valueReference) for v in md.modelVariables if v.causality == "output")
+    pars = [v for v in md.modelVariables if v.causality == "parameter"]
+    set_inputs = []
+    for k, v in enumerate(ins):
+        lo = float(v.min) if v.min is not None else -1.0
+        hi = float(v.max) if v.max is not None else 1.0
+        set_inputs.append(f"set_real 0 {v.valueReference} {lo + (hi - lo) * (0.3 + 0.1 * (k % 5))!r}")
+    if any(v.name.startswith("alpha[") for v in ins):
+        set_inputs += [f"set_real 0 {v.valueReference} {1.0 / sum(1 for w in ins if w.name.startswith('alpha['))!r}"
+                       for v in ins if v.name.startswith("alpha[")]
+    step = [*set_inputs, f"get_real 0 {outs}"]
+    real_par = next((v for v in pars if v.type == "Real"), None)
+    lines = [
+        "instantiate 0 a 1", "free 0",  # instantiate -> free
+        "instantiate 0 a 0", "setup 0 0", "free 0",  # free in setup
+        "instantiate 0 a 0", "setup 0 0", "enter 0", f"get_real 0 {outs}", "free 0",  # outputs before init
+        "instantiate 0 a 1", "setup 0 0", "enter 0", "exit 0",
+        *step, "step 0 0 1", *step, "get_state 0 0", "step 0 1 1", *step, "step 0 2 2",  # two samples at once
+        "set_state 0 0", "time 0", "serialize 0 0", "set_state 0 0", *step, "step 0 1 1",
+        "step 0 7 1", "step 0 2 0.5", "step 0 2 -1", "step 0 2 nan",  # refused steps
+        *(f"set_real 0 {v.valueReference} nan" for v in ins[:1]),  # a bad input, then a step
+        "step 0 2 1", *set_inputs, "step 0 2 1",
+        *( [f"set_real 0 {real_par.valueReference} 1"] if real_par is not None else []),  # a parameter when fixed
+        "get_real 0 999999", "get_integer 0 999999", "get_string 0 999999",  # unknown references
+        "reset 0", "setup 0 0", "enter 0", "exit 0", *step, "step 0 0 1",  # reset and run again
+        "instantiate 1 b 0", "setup 1 0", "enter 1", "exit 1", "step 1 0 1",  # a second instance
+        "get_state 1 1", "free 1",  # freed with a state taken
+        "terminate 0", "step 0 1 1", "free 0",  # terminate, a step after it, free
+        "instantiate 0 c 0", "setup 0 0", "enter 0", "exit 0", "get_state 0 2", "free 0",
+        "unload", "load", "instantiate 0 d 0", "setup 0 0", "enter 0", "exit 0", *step, "step 0 0 1", "free 0",
+    ]
+    return lines
+
+
+def _run_script(exe_args: list[str], lines: list[str], env: dict[str, str]) -> subprocess.CompletedProcess:
+    return subprocess.run(exe_args, input="\n".join(lines) + "\n", capture_output=True, text=True, env=env,
+                          timeout=600, check=False)
+
+
+@pytest.mark.parametrize("name", EVERY_ROLE)
+def test_every_call_sequence_runs_clean_under_address_and_undefined_behaviour_sanitizers(native_fmus, name,
+                                                                                         tmp_path):
+    """The runtime and the FMU's model data, compiled from the source FMU's
+    sources/ with -fsanitize=address,undefined, in the C host compiled the same
+    way: every call sequence (instantiate -> free, free in setup, outputs before
+    initialization, states, serialization, refused steps, bad input, reset, two
+    instances, terminate, the library closed and opened again) with no memory
+    error, no leak, no undefined behaviour."""
+    from tests.native_hosts import host_exe
+
+    if shutil.which("cc") is None and shutil.which("gcc") is None:
+        pytest.skip("no C compiler with sanitizers (cc, gcc) on this machine")
+    lib = sanitized_library(native_fmus[name], tmp_path)
+    md = read_model_description(str(native_fmus[name]))
+    env = {"ASAN_OPTIONS": "detect_leaks=1:exitcode=23", "UBSAN_OPTIONS": "print_stacktrace=1:halt_on_error=1"}
+    proc = _run_script([str(host_exe("sanitized")), str(lib), md.guid, "file:///nonexistent"],
+                       _lifecycle_script(md), env)
+    assert proc.returncode == 0, proc.stderr[-4000:]
+    assert "ERROR: AddressSanitizer" not in proc.stderr and "runtime error" not in proc.stderr, proc.stderr[-4000:]
+    out = proc.stdout.splitlines()
+    assert out[-1] == "DONE"
+    statuses = [line.split() for line in out if line.startswith("STATUS")]
+    # the refused steps and the bad calls are errors (3), everything else OK
+    steps = [s[2] for s in statuses if s[1] == "step"]
+    # four samples, then the refused steps (a Scheduler or Source, a function of time, takes h = 0.5)
+    half = "0" if md.coSimulation.canHandleVariableCommunicationStepSize else "3"
+    assert steps[:8] == ["0"] * 4 + ["3", half, "3", "3"]
+    assert all(s[2] in ("0", "3") for s in statuses)
+    if any(v.causality == "input" for v in md.modelVariables):  # the NaN input was rejected, named
+        assert any(line.startswith("LOG 3") and "is not finite; value rejected" in line for line in out)
+
+
+@pytest.mark.parametrize("name", EVERY_ROLE)
+def test_the_c_host_runs_every_role_with_an_empty_environment(native_fmus, name):
+    """The zig-built linux64 binary in the plain C host under ``env -i``: the
+    lifecycle script runs to the end with the expected statuses, nothing on stderr."""
+    from tests.native_hosts import host_exe
+
+    md = read_model_description(str(native_fmus[name]))
+    folder = Path(native_fmus[name]).with_suffix("")
+    with zipfile.ZipFile(native_fmus[name]) as z:
+        z.extractall(folder)
+    lib = folder / "binaries" / "linux64" / f"{md.coSimulation.modelIdentifier}.so"
+    proc = _run_script(["env", "-i", str(host_exe("plain")), str(lib), md.guid, (folder / "resources").as_uri()],
+                       _lifecycle_script(md), {})
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+    assert proc.stdout.splitlines()[-1] == "DONE"
+
+
+# -- Windows: the win64 binary under wine ---------------------------------------------------------
+
+
+@pytest.mark.skipif(wine() is None, reason="wine is not installed (apt-get install wine64): the win64 binary "
+                                           "is checked by its imports and exports only (test_native_fmus)")
+@pytest.mark.parametrize("test, name", [("plant", "PeixotoEx1Plant"), ("plant", "CoxTothTruncationPlant"),
+                                        ("kalman", "CoxTothTruncationKalman"), ("hinf", "AffineDemoHinfPD"),
+                                        ("truncated", "steady-state, tau = 2")])
+def test_the_win64_binary_gives_the_librarys_numbers_under_wine(native_fmus, test, name, tmp_path):
+    """The C host cross-compiled for Windows (zig) runs the win64 DLL under wine;
+    the numbers are checked against the library with the role's bound, as for
+    the Linux binary (the C runtime's functions, msvcrt's, within FUNC_ULPS)."""
+    from tests import test_native_fmus as t
+
+    opened = []
+
+    def opener(path: Path):
+        d = HostDriver(path, kind="windows")
+        opened.append(d)
+        return d
+
+    run = {"plant": t.test_plant_gives_the_librarys_numbers, "kalman": t.test_kalman_filter_gives_the_librarys_numbers,
+           "hinf": t.test_hinf_filter_gives_the_librarys_numbers,
+           "truncated": t.test_truncated_kalman_filter_gives_the_librarys_numbers}[test]
+    try:
+        run(native_fmus, opener, name, tmp_path)
+    finally:
+        for d in opened:
+            d.close()
+
+
+# -- libcosim, fmpy's simulate_fmu -----------------------------------------------------------------
+
+
+def test_every_native_fmu_loads_and_steps_in_libcosim(native_fmus):
+    """Every native FMU, one libcosim execution after another in one process,
+    twice over, each with its own sample time."""
+    names = sorted(n for n, p in native_fmus.paths.items()
+                   if not read_model_description(str(p)).coSimulation.needsExecutionTool)
+    steps = {n: float(read_model_description(str(native_fmus[n])).defaultExperiment.stepSize) for n in names}
+    code = textwrap.dedent(f"""
+        import json, math
+        from libcosimpy.CosimExecution import CosimExecution
+        from libcosimpy.CosimSlave import CosimLocalSlave
+        from libcosimpy.CosimObserver import CosimObserver
+        from libcosimpy.CosimLogging import log_output_level, CosimLogLevel
+        log_output_level(CosimLogLevel.ERROR)
+        paths = {json.dumps({n: str(native_fmus[n]) for n in names})}
+        steps = {json.dumps(steps)}
+        out = {{}}
+        for round_ in range(2):
+            for name, path in paths.items():
+                ex = CosimExecution.from_step_size(step_size=int(round(steps[name] * 1e9)))
+                i = ex.add_local_slave(CosimLocalSlave(fmu_path=path, instance_name=name))
+                refs = [v.reference for v in ex.slave_variables(i) if v.causality == 2]
+                obs = CosimObserver.create_last_value()
+                ex.add_observer(obs)
+                ok = ex.step(5)
+                values = obs.last_real_values(i, refs) if refs else []
+                out[f"{{round_}}:{{name}}"] = bool(ok) and all(math.isfinite(v) for v in values)
+                del ex
+        print("RESULT" + json.dumps(out))
+    """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, check=False)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    result = json.loads(next(x for x in proc.stdout.splitlines() if x.startswith("RESULT"))[len("RESULT"):])
+    assert result == {f"{r}:{n}": True for r in range(2) for n in names}
+
+
+def test_libcosim_connects_the_native_scheduler_source_and_plant_like_the_library(native_fmus):
+    """Scheduler -> Plant and Source -> Plant in libcosim with the native FMUs:
+    the plant state and output equal the library's simulation (the bound of
+    the Python FMUs' test: the same recursion in another order)."""
+    from tests.test_fmu_hosts import test_libcosim_connects_scheduler_source_and_plant_like_the_library as run
+
+    run(native_fmus)
+
+
+@pytest.mark.parametrize("name", ["CoxTothTruncationKalman", "PeixotoEx1HinfPD"])
+def test_plain_simulate_fmu_records_the_estimate_of_sample_k_one_row_later(native_fmus, name):
+    """fmpy's simulate_fmu sets the inputs of sample k at t_k, steps and records
+    at t_k + h: the row at t_(k+1) holds, to the bit, what the native filter
+    outputs for sample k before its step (which test_native_fmus checks against
+    the library), as for the Python FMUs."""
+    from fmpy import simulate_fmu
+
+    from tests.fmu_driver import Driver
+    from tests.test_fmu_filters import FILTERS, FMU_PATHS
+
+    FMU_PATHS.update(native_fmus.paths)
+    make, params, data_fn, T, h = FILTERS[name]
+    data = data_fn(T)
+    names, cols = ["time"], [np.arange(T) * h]
+    for port, arr in data.items():
+        for i in range(arr.shape[1]):
+            names.append(f"{port}[{i + 1}]")
+            cols.append(arr[:, i])
+    table = np.zeros(T, dtype=[(n, float) for n in names])
+    for n, c in zip(names, cols, strict=True):
+        table[n] = c
+    outputs = [v.name for v in read_model_description(str(native_fmus[name])).modelVariables
+               if v.causality == "output"]
+    res = simulate_fmu(str(native_fmus[name]), input=table, output=outputs, output_interval=h, stop_time=T * h,
+                       start_values=params)
+    direct = [o for o in outputs if not o.startswith("xf[")]  # the H-infinity filter's state is at its row's time
+    d = Driver(native_fmus[name])
+    assert d.initialize(**params) == 0
+    for k in range(T):
+        for port, arr in data.items():
+            d.set_vector(port, arr[k])
+        before = d.outputs(outputs)
+        assert d.step(k * h, h) == 0
+        assert np.array_equal(np.array([res[o][k + 1] for o in direct]), before[:len(direct)]), k
+        assert np.array_equal(np.array([res[o][k] for o in outputs[len(direct):]]), before[len(direct):]), k
+    d.free()
+
+
+# -- the source FMU, reproducible builds --------------------------------------------------------
+
+
+@pytest.mark.skipif(shutil.which("cmake") is None, reason="fmpy builds source FMUs with cmake, which is missing")
+@pytest.mark.parametrize("test, name", [("plant", "CoxTothEx1Plant"), ("hinf", "PeixotoEx1HinfPD")])
+def test_the_source_fmu_builds_with_fmpy_and_gives_the_librarys_numbers(native_fmus, test, name, tmp_path):
+    """sources/ and its build description are all a tool needs: fmpy's
+    build_platform_binary compiles the linux64 binary with cmake and the host's
+    compiler, and that binary gives the library's numbers (the role's bound)."""
+    from fmpy.build import build_platform_binary
+
+    from tests import test_native_fmus as t
+
+    folder = tmp_path / "unzipped"
+    with zipfile.ZipFile(native_fmus[name]) as z:
+        z.extractall(folder)
+    shutil.rmtree(folder / "binaries")
+    (tmp_path / "build").mkdir()
+    build_platform_binary(folder, tmp_path / "build")
+    built = folder / "binaries" / "linux64" / f"{name}.so"
+    assert built.is_file()
+    rebuilt = tmp_path / f"{name}.fmu"
+    with zipfile.ZipFile(rebuilt, "w") as z:
+        for f in sorted(folder.rglob("*")):
+            if f.is_file():
+                z.write(f, f.relative_to(folder).as_posix())
+    run = {"plant": t.test_plant_gives_the_librarys_numbers, "hinf": t.test_hinf_filter_gives_the_librarys_numbers}
+    from tests.fmu_driver import Driver
+
+    class Rebuilt:
+        def __getitem__(self, key: str) -> Path:
+            return rebuilt
+
+    opened = []
+
+    def opener(path: Path):
+        d = Driver(path)
+        opened.append(d)
+        return d
+
+    try:
+        run[test](Rebuilt(), opener, name, tmp_path / "ref")
+    finally:
+        for d in opened:
+            d.free()
+
+
+def test_the_same_inputs_give_a_byte_identical_native_fmu(tmp_path):
+    """Two builds of the same plans in two processes and two folders: the same bytes."""
+    code = textwrap.dedent("""
+        import sys
+        from lpvest.fmi.build import build_fmu, plan_system
+        plans, _ = plan_system("peixoto-ex1")
+        for p in plans:
+            if p.role in ("Plant", "HinfPD"):
+                build_fmu(p, sys.argv[1], backend="native")
+        plans, _ = plan_system("cox-toth-truncation")
+        build_fmu(next(p for p in plans if p.role == "TruncatedKalman"), sys.argv[1], backend="native")
+    """)
+    for folder in ("one", "two"):
+        subprocess.run([sys.executable, "-c", code, str(tmp_path / folder)], check=True, capture_output=True)
+    names = sorted(f.name for f in (tmp_path / "one").glob("*.fmu"))
+    assert names == ["CoxTothTruncationTruncatedKalman.fmu", "PeixotoEx1HinfPD.fmu", "PeixotoEx1Plant.fmu"]
+    for n in names:
+        assert (tmp_path / "one" / n).read_bytes() == (tmp_path / "two" / n).read_bytes(), n
