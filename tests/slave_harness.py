@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from lpvest.fmi.build import _design_text, manifest_inputs_version, plan_system, scripts_dir
+from lpvest.fmi.build import design_text, manifest_inputs_version, plan_system, scripts_dir
 from lpvest.fmi.spec import SPEC_FILE, SPEC_FORMAT
 from lpvest.fmi.state import decode_state, encode_state
 
@@ -41,7 +41,7 @@ def write_resources(system: str, role: str, folder: Path) -> Path:
     if plan.estimator is not None:
         spec["estimator"] = plan.estimator.to_json() | {"factory": plan.estimator.factory}
         if plan.estimator.design:
-            design, origin = _design_text(plan, None)
+            design, origin = design_text(plan, None)
             if isinstance(design, str):
                 (folder / "design.json").write_text(design, encoding="utf-8")
                 spec["design_format"] = "text"
