@@ -33,7 +33,8 @@ def resources(tmp_path_factory):
     base = tmp_path_factory.mktemp("slave-resources")
     return {f"{s}{r}": write_resources(s, r, base / f"{s}-{r}")
             for s, r in [("peixoto-ex1", "Plant"), ("peixoto-ex1", "HinfPD"), ("cox-toth-truncation", "Kalman"),
-                         ("peixoto-ex1", "Scheduler")]}
+                         ("peixoto-ex1", "Scheduler"), ("sridhar-ltv", "Plant"), ("sridhar-ltv", "BSplineObserver"),
+                         ("peixoto-ex2", "Plant")]}
 
 
 def plant(resources, **kw) -> Slave:
@@ -428,3 +429,140 @@ def test_a_spec_without_a_sample_time_samples_every_second(tmp_path):
     (folder / "lpvest_fmu.json").write_text(json.dumps(spec))
     s = Slave(folder)
     assert s.get("sample_time") == [1.0]
+
+
+# -- timed components, several samples per step, model parameters ---------------------------
+
+
+@pytest.mark.parametrize("read_before_step", [True, False])
+def test_a_timed_scheduler_far_from_t0_is_the_library_signal_at_the_hosts_points(resources, read_before_step):
+    """A function of time (no sample time) ends each step exactly at the host's point t + h, not at
+    its own sum of steps: far from 0 the two differ in the last bits of p = sin(0.25 t)."""
+    from lpvest.signals import SchedulerComponent, SignalSpec
+
+    t0, h, n = 1e6, 0.1, 40
+    s = Slave(resources["peixoto-ex1Scheduler"])
+    assert s.initialize(t0) == []
+    plant_model = load_system("peixoto-ex1").model()
+    ref = SchedulerComponent(SignalSpec.build("sinusoid", 1, amplitude=1.0, omega=0.25), plant_model.space,
+                             plant_model.simplex_map)
+    ref.reset(t0)
+    got, want = [], []
+    for k in range(n):
+        t = t0 + k * h  # the host's points: an integer counter
+        if read_before_step or k == n - 1:
+            got.append(s.get("p[1]", "alpha[1]", "alpha[2]"))
+            out = ref.outputs({})
+            want.append([*out["p"].tolist(), *out["alpha"].tolist()])
+        assert s.step(t, h), s.errors()
+        ref.step({}, dt=h, t_end=t + h)
+    assert got == want
+    assert s.take_log() == []
+
+
+def test_a_timed_plant_stepped_without_reading_its_outputs_takes_the_inputs_set(resources):
+    """A host that sets the inputs and steps without reading any output (the outputs are not
+    computed before the step) moves the plant as one that reads them each time."""
+    a, b = Slave(resources["sridhar-ltvPlant"]), Slave(resources["sridhar-ltvPlant"], name="b")
+    for s in (a, b):
+        assert s.initialize(0.0, use_model_input=False) == []
+    for k in range(6):
+        u = math.cos(k)
+        a.set_reals({"u[1]": u})
+        b.set_reals({"u[1]": u})
+        assert b.get("u_applied[1]") == [u]
+        assert a.step(0.1 * k, 0.1), a.errors()
+        assert b.step(0.1 * k, 0.1), b.errors()
+    assert a.get("x[1]", "x[2]") == b.get("x[1]", "x[2]")
+    assert a.get("x[1]", "x[2]") != [0.0, 0.0]  # the inputs moved it
+
+
+def test_a_step_of_several_samples_of_a_timed_observer_is_that_many_steps_of_one(resources):
+    """The B-spline observer has a sample time: a communication step of m samples runs m samples,
+    the inputs held, as m steps of one sample do."""
+    a, b = Slave(resources["sridhar-ltvBSplineObserver"]), Slave(resources["sridhar-ltvBSplineObserver"], name="b")
+    for s in (a, b):
+        assert s.initialize(0.0, window=0.2, hop=0.05) == []
+    dt, m = 0.001, 4
+    names = ["t_est[1]", "yhat[1]", "xhat[1]", "xhat[2]", "valid[1]"]
+    for j in range(100):
+        u, y = math.sin(3.0 * j * m * dt), math.cos(2.0 * j * m * dt)
+        a.set_reals({"u[1]": u, "y[1]": y})
+        assert a.step(j * m * dt, m * dt), a.errors()
+        for i in range(m):
+            b.set_reals({"u[1]": u, "y[1]": y})
+            assert b.step((j * m + i) * dt, dt), b.errors()
+    got = a.get(*names)
+    assert got[-1] == 1.0  # the observer has estimates
+    np.testing.assert_array_equal(got, b.get(*names))
+
+
+def test_a_sample_of_a_long_step_that_fails_names_every_bad_output_and_consumes_nothing(resources):
+    """A step of several samples whose second sample overflows is refused naming the sample and
+    the outputs that are not finite; the instance stays where it was."""
+    s = plant(resources)
+    s.slave.setup_experiment(0.0)
+    s.set("x0[1]", 1.5e308)
+    s.set("x0[2]", 1.5e308)
+    s.slave.exit_initialization_mode()
+    s.set_reals({"p[1]": -1.0, "w[1]": 0.0})
+    before = s.get("x[1]", "x[2]")
+    s.take_log()
+    assert not s.step(0.0, 3.0)
+    errors = s.errors()
+    # vertex 1: A = [[0.43, 0], [1, 0.48]]: sample 2 has x1 = 0.43 * 1.5e308 (finite) and x2 = inf;
+    # z = x and y = x1 + 0 * x2 = nan (0 * inf): every output but x1
+    assert errors == ["[PeixotoEx1Plant] fmi2DoStep refused at t = 0 (h = 3, 3 samples): sample 2 of 3 (at t = 1): "
+                      "output y[1], z[1], z[2], x[2] is not finite (NaN or inf); nothing consumed"]
+    assert s.get("x[1]", "x[2]") == before and s.slave._time == 0.0
+    assert s.step(0.0, 1.0), s.errors()  # one sample still goes
+
+
+def test_a_value_a_host_cannot_pass_as_a_real_is_an_error_naming_the_call(resources):
+    s = plant(resources)
+    assert s.initialize() == []
+    s.slave.set_real([s.vr["w[1]"]], ["fast"])
+    [message] = s.errors()
+    assert message.startswith("[PeixotoEx1Plant] fmi2SetReal: TypeError: ")
+
+
+def test_an_input_set_before_initialization_is_checked_with_the_relative_tolerance(resources):
+    s = plant(resources)
+    s.slave.setup_experiment(0.0)
+    s.set("p[1]", 1.0 + 5e-13)  # inside the relative tolerance 1e-12 of the bound 1
+    assert s.errors() == []
+    s.set("p[1]", 1.0 + 5e-12)
+    assert s.errors() == ["[PeixotoEx1Plant] input p[1] (theta) = 1.000000000005 is outside its declared range "
+                          "[-1, 1]; value rejected"]
+
+
+def test_the_step_rule_says_how_to_go_back_to_an_earlier_point(resources):
+    s = plant(resources)
+    assert s.initialize() == []
+    assert s.step(0.0, 1.0)
+    assert not s.step(0.0, 1.0)
+    assert s.errors() == ["[PeixotoEx1Plant] fmi2DoStep refused at t = 0 (h = 1): the communication point t = 0 is "
+                          "not the FMU's current time 1 (a skipped or repeated point; restore a state with "
+                          "fmi2SetFMUstate to go back)"]
+
+
+def test_a_model_parameter_is_an_fmu_parameter_that_changes_the_plant(resources):
+    """peixoto-ex2's plant has the model parameter rho: the FMU declares it with the model file's
+    value, and a value set before initialization gives the plant of the library at that rho."""
+    s = Slave(resources["peixoto-ex2Plant"])
+    system = load_system("peixoto-ex2")
+    assert s.get("rho") == [float(system.parameters["rho"])]
+    rho = float(system.parameters["rho"]) + 2.0  # inside its declared range [1, 21]
+    assert s.initialize(rho=rho) == []
+    k = np.arange(8)
+    p = 0.5 * np.sin(0.25 * k)
+    got = []
+    for j in k:
+        s.set_reals({"p[1]": float(p[j]), "w[1]": float(paper_w(j + 10))})
+        got.append(s.get("y[1]"))
+        assert s.step(float(j), 1.0), s.errors()
+    model = load_system("peixoto-ex2", parameters={"rho": rho}).model()
+    ref = model.simulate(model.alpha_batch(p[:, None]), paper_w(k + 10)[:, None])
+    assert np.array_equal(np.array(got), ref.y)
+    default = system.model()
+    assert not np.array_equal(default.simulate(default.alpha_batch(p[:, None]), paper_w(k + 10)[:, None]).y, ref.y)
