@@ -566,3 +566,68 @@ def test_a_model_parameter_is_an_fmu_parameter_that_changes_the_plant(resources)
     assert np.array_equal(np.array(got), ref.y)
     default = system.model()
     assert not np.array_equal(default.simulate(default.alpha_batch(p[:, None]), paper_w(k + 10)[:, None]).y, ref.y)
+
+
+def test_a_restored_state_tells_the_status_bridge_its_time(resources):
+    """fmi2GetRealStatus(fmi2LastSuccessfulTime) after fmi2SetFMUstate is the restored time: the
+    slave states it in a message of the category the status bridge consumes (status_bridge.c)."""
+    s = plant(resources)
+    assert s.initialize(2.5, sample_time=0.5) == []
+    drive(s, 2.5, 0.5, 3)
+    state = s.get_state()
+    drive(s, 2.5, 0.5, 2, k0=3)
+    s.slave.log_queue.clear()
+    s.set_state(state)
+    assert [(m.category, m.msg) for m in s.slave.log_queue] == [("lpvest.time", repr(2.5 + 3 * 0.5))]
+
+
+def test_many_outputs_that_are_not_finite_are_named_five_then_an_ellipsis(resources):
+    k = Slave(resources["cox-toth-truncationKalman"])
+    assert k.initialize(0.0, **{"x0[1]": 1.7e308, "x0[2]": -1.7e308}) == []
+    k.set_reals({"p[1]": 1.0, "u[1]": 0.0, "y[1]": -1.7e308, "y[2]": 1.7e308})
+    names = [n for n in k.vr if k.slave._elements[k.vr[n]].kind == "output"]
+    values = k.get(*names)
+    bad = [n for n, v in zip(names, values, strict=True) if not math.isfinite(v)]
+    assert len(bad) > 5
+    assert k.errors()[-1] == (f"[CoxTothTruncationKalman] fmi2GetReal: output {', '.join(bad[:5])} ... is not finite "
+                              "(NaN or inf) at t = 0")
+
+
+def test_the_range_tolerance_is_relative_to_the_bounds_of_a_wide_range(tmp_path):
+    """A scheduling box [0, 1e6]: a value 5e-7 above 1e6 is rounding (1e-12 of the bound) and
+    accepted, 2e-6 above is outside; before and after initialization alike."""
+    model = tmp_path / "wide.toml"
+    model.write_text("""
+[system]
+name = "wide"
+title = "a one-state polytopic plant scheduled over [0, 1e6]"
+[scheduling]
+names = ["theta"]
+lower = [0.0]
+upper = [1e6]
+[models.plant]
+type = "polytopic"
+[models.plant.map]
+kind = "formulas"
+alpha = ["1 - theta/1e6", "theta/1e6"]
+[[models.plant.vertex]]
+A = [[0.5]]
+[[models.plant.vertex]]
+A = [[0.1]]
+[models.plant.common]
+Bw = [[1.0]]
+Cz = [[1.0]]
+Dz = [[0.0]]
+Cy = [[1.0]]
+Dy = [[1.0]]
+""")
+    s = Slave(write_resources(str(model), "Plant", tmp_path / "r"))
+    s.slave.setup_experiment(0.0)
+    s.set("p[1]", 1e6 + 5e-7)
+    assert s.errors() == []
+    s.slave.exit_initialization_mode()
+    for value in (1e6 + 5e-7, 1e6 + 2e-6):
+        s.set("p[1]", value)
+    assert s.errors() == [f"[{s.slave.modelName}] input p[1] (theta) = 1000000.000002 is outside its declared range "
+                          "[0, 1000000]; value rejected"]
+    assert s.get("p[1]") == [1e6 + 5e-7]
