@@ -73,7 +73,7 @@ class Model:
         """Compute the outputs from the inputs and the state."""
 
     #: what fmi2GetBooleanStatus(fmi2Terminated) and fmi2GetRealStatus(fmi2LastSuccessfulTime)
-    #: answer after a step (None: the query returns fmi2Error, as an FMU that does not say)
+    #: answer after a step (None: the query returns fmi2Discard, "not available", FMI 2.0 4.2.3)
     terminated: bool | None = None
     last_successful_time: float | None = None
 
@@ -105,6 +105,8 @@ class FakeSlave:
     def _record(self, what: str, detail: Any = None) -> int:
         CALLS.append((self.name, what, detail))
         status = self.FAIL.get((self.name, what), 0)
+        if callable(status) and not isinstance(status, BaseException):
+            status = status()  # a status that depends on the calls so far
         if isinstance(status, BaseException):
             raise status
         if status and self.logger is not None:
@@ -142,7 +144,7 @@ class FakeSlave:
         assert component is self.component
         self._record("getBooleanStatus", kind)
         if self.model.terminated is None:
-            return 3
+            return 2
         out._obj.value = self.model.terminated  # out is ctypes.byref(fmi2Boolean)
         return 0
 
@@ -150,7 +152,7 @@ class FakeSlave:
         assert component is self.component
         self._record("getRealStatus", kind)
         if self.model.last_successful_time is None:
-            return 3
+            return 2
         out._obj.value = self.model.last_successful_time
         return 0
 

@@ -5,11 +5,14 @@ the master over real FMUs."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
 from lpvest.cosim import AlgebraicLoopError, Component, CoSimulation, CoSimulationError, simulate
 from lpvest.cosim.master import DiscardedStep, DiscardedStepWarning, step_count, whole_steps
+from lpvest.errors import shorten
 
 from . import fake_fmu
 from .fake_fmu import CALLS, FakeSlave, Model, write_fmu
@@ -213,6 +216,9 @@ def test_run_arguments_are_checked(fmus):
      "components.src"),
     ("gain", "set", 2, r"^component gain: setting inputs during initialization at t = 0 returned discard",
      "components.gain"),
+    ("gain", "set", lambda: 3 if any(w == "doStep" for _, w, _ in CALLS) else 0,
+     r"^component gain: setting inputs at t = 0.1 returned error \(\[ERROR\] set failed in gain 100%\)$",
+     "components.gain"),
     ("gain", "exitInitializationMode", 3, r"^component gain: exitInitializationMode failed at t = 0: ",
      "components.gain"),
     ("src", "setReal", 3, r"^component src: setting k = 3.0 failed: .* \(\[ERROR\] setReal failed in src 100%\)$",
@@ -340,6 +346,12 @@ def test_set_up_errors_name_the_connection_or_component(fmus, tmp_path):
     with pytest.raises(CoSimulationError, match=r"^recorded variable 'srcy': expected 'component.variable'$") as info:
         CoSimulation.check(comps, [], step_size=1.0, record=["src.y", "srcy"])
     assert info.value.where == "record[2]"
+    many = [Component(f"component_number_{i:02d}", fmus["src"]) for i in range(12)]
+    known = ", ".join(c.name for c in many)
+    with pytest.raises(CoSimulationError, match=r"^connection target 'other.u': no component 'other' \(components: "
+                       + re.escape(shorten(known, 60)) + r"\)$"):  # the list cut to about 60 characters
+        CoSimulation.check(many, ["component_number_00.y -> other.u"], step_size=1.0)
+    assert Component("none", fmus["src"], None).parameters == {}
     with pytest.raises(CoSimulationError, match=r"^component names are not unique: \['src'\]$"):
         CoSimulation.check([comps[0], comps[0]], [], step_size=1.0)
     with pytest.raises(CoSimulationError, match=r"^component name '1x' is not an identifier$") as info:
@@ -433,7 +445,7 @@ class Stopper(Model):
 
 
 class Mute(Stopper):
-    """Discards as Stopper does, and answers no status query."""
+    """Discards as Stopper does, and answers no status query (fmi2Discard: not available)."""
 
     terminated = None
     last_successful_time = None
