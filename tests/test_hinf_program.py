@@ -192,3 +192,23 @@ def test_an_epsilon_curve_records_each_epsilon_and_its_angle(ex1):
     assert np.all(np.isfinite(curve.gamma[1:])) and curve.best()[1] == min(curve.gamma)
     with pytest.raises(ArgumentError, match=r"^n_grid must be an integer, at least 3; found 2$"):
         search_epsilon(ex1, kind=KIND_ROBUST, n_grid=2)
+
+
+@pytest.mark.parametrize("n", [2, 3, 5])
+def test_the_stability_check_covers_vertices_edges_the_barycentre_and_the_interior(n):
+    """A(alpha) is checked on these points of the unit simplex before a design is tried: each on
+    the simplex, every vertex, every edge finely, the barycentre and (beyond two vertices, where
+    the edge is the whole simplex) 64 interior points."""
+    pts = hinf._simplex_points(n)
+    assert np.all(pts >= 0) and np.allclose(pts.sum(axis=1), 1.0, rtol=0, atol=4 * n * np.finfo(float).eps)
+    per_edge = 101 if n <= 4 else 21
+    edges = n * (n - 1) // 2
+    interior = 64 if n > 2 else 0
+    assert pts.shape == (n + edges * (per_edge - 2) + 1 + interior, n)
+    np.testing.assert_array_equal(pts[:n], np.eye(n))
+    on_edges = pts[n:n + edges * (per_edge - 2)]
+    assert np.all(np.count_nonzero(on_edges, axis=1) == 2)
+    assert len({tuple(np.flatnonzero(p)) for p in on_edges}) == edges  # every pair of vertices
+    np.testing.assert_array_equal(pts[n + edges * (per_edge - 2)], np.full(n, 1.0 / n))
+    assert np.all(pts[len(pts) - interior:] > 0)  # strictly inside
+    assert len({tuple(p) for p in pts[len(pts) - interior:]}) == interior
