@@ -212,3 +212,18 @@ def test_the_stability_check_covers_vertices_edges_the_barycentre_and_the_interi
     np.testing.assert_array_equal(pts[n + edges * (per_edge - 2)], np.full(n, 1.0 / n))
     assert np.all(pts[len(pts) - interior:] > 0)  # strictly inside
     assert len({tuple(p) for p in pts[len(pts) - interior:]}) == interior
+
+
+def test_a_solves_lyapunov_blocks_are_symmetric_and_a_program_for_another_kind_is_refused(ex1):
+    """P(alpha) = [[P1, P3], [P3^T, P2]] must be symmetric for its eigenvalue check (eigvalsh reads
+    one triangle) to certify anything: P1 and P2 are symmetric variables, exactly."""
+    from lpvest.design import design_hinf
+
+    prog = HinfProgram.for_plant(ex1, kind=KIND_PD)
+    assert prog.attempt(ex1, 1.0).design is not None
+    for name in ("P1", "P2"):
+        for var in prog._var[name]:
+            assert np.array_equal(var.value, var.value.T), name
+    with pytest.raises(ArgumentError, match=r"^the program is for a parameter-dependent filter, not "
+                                            r"'robust_but_with..._here' \(42 characters\)$"):
+        design_hinf(ex1, kind="robust_but_with_a_very_long_kind_name_here", program=prog, epsilon=1.0)

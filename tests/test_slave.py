@@ -631,3 +631,105 @@ Dy = [[1.0]]
     assert s.errors() == [f"[{s.slave.modelName}] input p[1] (theta) = 1000000.000002 is outside its declared range "
                           "[0, 1000000]; value rejected"]
     assert s.get("p[1]") == [1e6 + 5e-7]
+
+
+# -- a component that is not an lpvest Component (duck-typed) -------------------------------
+
+
+class _Duck:
+    """A component that is not an :class:`lpvest.protocol.Component`: ports, ``outputs``,
+    ``step``, ``reset`` and its state only (no ``prepare``/``advance``, no ``timed``). ``fail``:
+    ``("raise" | "nan", n)`` makes its n-th step raise or return NaN outputs."""
+
+    def __init__(self, inner, extra: bool, fail):
+        from lpvest.protocol import Port
+
+        self.inner, self.fail, self.steps = inner, fail, 0
+        self.input_ports = tuple(inner.input_ports)
+        self.output_ports = tuple(inner.output_ports) + ((Port("extra", (1,), "one more"),) if extra else ())
+
+    def outputs(self, inputs):
+        return self.inner.outputs(inputs)
+
+    def step(self, inputs):
+        self.steps += 1
+        if self.fail == ("raise", self.steps):
+            raise ValueError(f"step {self.steps} went wrong")
+        out = self.inner.step(inputs)
+        return {k: np.full_like(v, np.nan) for k, v in out.items()} if self.fail == ("nan", self.steps) else out
+
+    def reset(self):
+        self.inner.reset()
+        self.steps = 0
+
+    def get_state(self):
+        return self.inner.get_state(), self.steps
+
+    def set_state(self, state):
+        self.inner.set_state(state[0])
+        self.steps = state[1]
+
+
+def foreign(resources, fail=None, name: str = "foreign") -> Slave:
+    """peixoto-ex1's plant slave whose component is a :class:`_Duck`, with two parameters more:
+    ``limit`` (an Integer with only a maximum) and ``extra`` (one output more: other ports)."""
+    from lpvest.fmi.spec import Parameter
+
+    from .slave_harness import _script
+
+    class ForeignPlant(_script("lpvest_plant.py").LpvestPlant):
+        def declare(self):
+            return [*super().declare(), Parameter("limit", 3, "an Integer with only a maximum", maximum=5),
+                    Parameter("extra", False, "one output more (other ports: another FMU)")]
+
+        def make_component(self, params):
+            return _Duck(super().make_component(params), params["extra"], fail)
+
+    s = Slave.__new__(Slave)
+    s.slave = ForeignPlant(instance_name=name, resources=str(resources["peixoto-ex1Plant"]))
+    s.vr = {v.name: vr for vr, v in s.slave.vars.items()}
+    return s
+
+
+def test_a_component_that_is_not_an_lpvest_component_runs_a_step_of_m_samples_as_m_steps(resources):
+    a, b, ref = foreign(resources), foreign(resources, name="b"), plant(resources)
+    for s in (a, b, ref):
+        assert s.initialize() == []
+    for j in range(4):
+        inputs = {"p[1]": float(theta(j)), "w[1]": float(paper_w(j + 10))}
+        a.set_reals(inputs)
+        assert a.step(3.0 * j, 3.0), a.errors()
+        for i in range(3):
+            for s in (b, ref):
+                s.set_reals(inputs)
+                assert s.step(3.0 * j + i, 1.0), s.errors()
+    assert a.get("x[1]", "x[2]") == b.get("x[1]", "x[2]") == ref.get("x[1]", "x[2]")
+
+
+@pytest.mark.parametrize(("fail", "why"), [(("raise", 2), "ValueError: step 2 went wrong"),
+                                           (("nan", 2), "output y[1], z[1], z[2], x[1], x[2] is not finite "
+                                                        "(NaN or inf)")])
+def test_a_foreign_components_failing_later_sample_is_named_and_consumes_nothing(resources, fail, why):
+    s, ref = foreign(resources, fail), plant(resources)
+    for x in (s, ref):
+        assert x.initialize() == []
+        x.set_reals({"p[1]": 0.5, "w[1]": 0.25})
+    assert not s.step(0.0, 3.0)
+    assert s.errors() == [f"[PeixotoEx1Plant] fmi2DoStep refused at t = 0 (h = 3, 3 samples): sample 2 of 3 "
+                          f"(at t = 1): {why}; nothing consumed"]
+    assert s.slave._time == 0.0 and s.get("x[1]", "x[2]") == ref.get("x[1]", "x[2]")
+
+
+def test_parameters_are_checked_against_a_one_sided_range_and_may_not_change_the_ports(resources):
+    s = foreign(resources)
+    s.slave.setup_experiment(0.0)
+    s.set("limit", 7)
+    # an FMI Integer is 32 bits: without a declared minimum, the range starts at -2**31
+    assert s.errors() == ["[PeixotoEx1Plant] parameter limit = 7 is outside its declared range [-2147483648, 5]; "
+                          "value rejected"]
+    s.set("limit", 5)
+    s.set("extra", True)
+    s.slave.exit_initialization_mode()
+    assert s.errors() == ["[PeixotoEx1Plant] fmi2ExitInitializationMode: these parameters change the FMU's inputs "
+                          "or outputs; rebuild the FMU instead"]
+    assert not s.step(0.0, 1.0)
