@@ -15,7 +15,7 @@ import lpvest.design.hinf as hinf
 from lpvest import load_system
 from lpvest.design import KIND_PD, KIND_ROBUST, HinfProgram
 from lpvest.design.hinf import LMIBlock, choose_solver, multiplier
-from lpvest.errors import ArgumentError, ArgumentTypeError, DimensionError, NonFiniteError
+from lpvest.errors import ArgumentError, ArgumentTypeError, DimensionError, LMIInfeasibleError, NonFiniteError
 
 EPS = np.finfo(float).eps
 
@@ -227,3 +227,24 @@ def test_a_solves_lyapunov_blocks_are_symmetric_and_a_program_for_another_kind_i
     with pytest.raises(ArgumentError, match=r"^the program is for a parameter-dependent filter, not "
                                             r"'robust_but_with..._here' \(42 characters\)$"):
         design_hinf(ex1, kind="robust_but_with_a_very_long_kind_name_here", program=prog, epsilon=1.0)
+
+
+def test_an_epsilon_search_with_no_certified_point_says_so_naming_the_program_and_the_plant(ex1, monkeypatch):
+    """Every grid point's solve fails (a made-up infeasible attempt): the search raises with the
+    program's kind and solver, the plant, how many epsilons were tried and the solves' detail."""
+    tried = []
+
+    def attempt(self, plant, epsilon=None, *, phi=None, **options):
+        tried.append(phi)
+        return hinf.DesignAttempt(None, "infeasible", math.inf, "made-up solve: infeasible")
+
+    monkeypatch.setattr(HinfProgram, "attempt", attempt)
+    with pytest.raises(LMIInfeasibleError) as info:
+        hinf.search_epsilon(ex1, n_grid=6)
+    assert str(info.value) == ("parameter-dependent H-infinity LMIs for peixoto-ex1/plant at every epsilon tried "
+                               "(6 values), solver CLARABEL: no certified solution (made-up solve: infeasible)")
+    assert info.value.status == "infeasible" and info.value.detail == "made-up solve: infeasible"
+    # the grid: 6 angles phi = atan(epsilon) a sixth of pi apart, epsilon = inf (phi = pi/2) among them
+    angles = np.sort(tried)
+    assert len(tried) == 6 and angles[-1] == math.pi / 2
+    np.testing.assert_allclose(np.diff(angles), math.pi / 6, rtol=0, atol=8 * EPS)
