@@ -72,7 +72,13 @@ class Model:
     def outputs(self) -> None:
         """Compute the outputs from the inputs and the state."""
 
-    def step(self, t: float, h: float) -> int:
+    #: what fmi2GetBooleanStatus(fmi2Terminated) and fmi2GetRealStatus(fmi2LastSuccessfulTime)
+    #: answer after a step (None: the query returns fmi2Discard, "not available", FMI 2.0 4.2.3)
+    terminated: bool | None = None
+    last_successful_time: float | None = None
+
+    def step(self, t: float, h: float) -> int | None:
+        """Advance from ``t`` by ``h``; a status other than 0 (fmi2OK) is what fmi2DoStep returns."""
         return 0
 
 
@@ -93,11 +99,14 @@ class FakeSlave:
             "fmi2GetReal": self._get, "fmi2GetInteger": self._get, "fmi2GetBoolean": self._get,
             "fmi2SetReal": self._set, "fmi2SetInteger": self._set, "fmi2SetBoolean": self._set,
             "fmi2DoStep": self._do_step,
+            "fmi2GetBooleanStatus": self._boolean_status, "fmi2GetRealStatus": self._real_status,
         }
 
     def _record(self, what: str, detail: Any = None) -> int:
         CALLS.append((self.name, what, detail))
         status = self.FAIL.get((self.name, what), 0)
+        if callable(status) and not isinstance(status, BaseException):
+            status = status()  # a status that depends on the calls so far
         if isinstance(status, BaseException):
             raise status
         if status and self.logger is not None:
@@ -125,8 +134,26 @@ class FakeSlave:
         status = self._record("doStep", t)
         if status:
             return status
-        self.model.step(t, h)
+        status = self.model.step(t, h) or 0
+        if status:
+            return status
         self.model.time = t + h
+        return 0
+
+    def _boolean_status(self, component: Any, kind: int, out: Any) -> int:
+        assert component is self.component
+        self._record("getBooleanStatus", kind)
+        if self.model.terminated is None:
+            return 2
+        out._obj.value = self.model.terminated  # out is ctypes.byref(fmi2Boolean)
+        return 0
+
+    def _real_status(self, component: Any, kind: int, out: Any) -> int:
+        assert component is self.component
+        self._record("getRealStatus", kind)
+        if self.model.last_successful_time is None:
+            return 2
+        out._obj.value = self.model.last_successful_time
         return 0
 
     # the object methods the master calls (fmpy raises on an error status; so do these)

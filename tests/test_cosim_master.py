@@ -5,11 +5,14 @@ the master over real FMUs."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
 from lpvest.cosim import AlgebraicLoopError, Component, CoSimulation, CoSimulationError, simulate
-from lpvest.cosim.master import step_count, whole_steps
+from lpvest.cosim.master import DiscardedStep, DiscardedStepWarning, step_count, whole_steps
+from lpvest.errors import shorten
 
 from . import fake_fmu
 from .fake_fmu import CALLS, FakeSlave, Model, write_fmu
@@ -213,6 +216,9 @@ def test_run_arguments_are_checked(fmus):
      "components.src"),
     ("gain", "set", 2, r"^component gain: setting inputs during initialization at t = 0 returned discard",
      "components.gain"),
+    ("gain", "set", lambda: 3 if any(w == "doStep" for _, w, _ in CALLS) else 0,
+     r"^component gain: setting inputs at t = 0.1 returned error \(\[ERROR\] set failed in gain 100%\)$",
+     "components.gain"),
     ("gain", "exitInitializationMode", 3, r"^component gain: exitInitializationMode failed at t = 0: ",
      "components.gain"),
     ("src", "setReal", 3, r"^component src: setting k = 3.0 failed: .* \(\[ERROR\] setReal failed in src 100%\)$",
@@ -321,7 +327,7 @@ def test_set_up_errors_name_the_connection_or_component(fmus, tmp_path):
     cases = [
         (["src.y"], r"^connection 'src.y': expected 'comp.output -> comp.input'$", "connections[1]"),
         (["src.y -> gain.nope"], r"^connection target 'gain.nope': gain has no variable 'nope'$", "connections[1]"),
-        (["src.y -> other.u"], r"^connection target 'other.u': no component 'other' \(components: src, gain\)$",
+        (["src.y -> other.u"], r"^connection target 'other.u': no component 'other' \(components: src, gain, vec\)$",
          "connections[1]"),
         (["gain.y -> gain.u", "src.y -> gain.u"], r"^gain.u is driven twice \(by gain.y and src.y\)$",
          "connections[2]"),
@@ -329,11 +335,23 @@ def test_set_up_errors_name_the_connection_or_component(fmus, tmp_path):
         (["src.y -> gain.y"], r"^connection target gain.y is not an input \(output\)$", "connections[1]"),
         (["src.n -> gain.u"], r"^connection src.n -> gain.u: types Integer and Real$", "connections[1]"),
         (["srcy -> gain.u"], r"^connection source 'srcy': expected 'component.variable'$", "connections[1]"),
+        (["vec.s -> gain.u"], r"^connection vec.s -> gain.u: a String variable cannot be connected \(the master "
+                              r"exchanges Real, Integer, Boolean and Enumeration values\)$", "connections[1]"),
     ]
+    comps = [*comps, Component("vec", fmus["vec"])]
     for conns, match, where in cases:
         with pytest.raises(CoSimulationError, match=match) as info:
             CoSimulation.check(comps, conns, step_size=1.0)
         assert info.value.where == where
+    with pytest.raises(CoSimulationError, match=r"^recorded variable 'srcy': expected 'component.variable'$") as info:
+        CoSimulation.check(comps, [], step_size=1.0, record=["src.y", "srcy"])
+    assert info.value.where == "record[2]"
+    many = [Component(f"component_number_{i:02d}", fmus["src"]) for i in range(12)]
+    known = ", ".join(c.name for c in many)
+    with pytest.raises(CoSimulationError, match=r"^connection target 'other.u': no component 'other' \(components: "
+                       + re.escape(shorten(known, 60)) + r"\)$"):  # the list cut to about 60 characters
+        CoSimulation.check(many, ["component_number_00.y -> other.u"], step_size=1.0)
+    assert Component("none", fmus["src"], None).parameters == {}
     with pytest.raises(CoSimulationError, match=r"^component names are not unique: \['src'\]$"):
         CoSimulation.check([comps[0], comps[0]], [], step_size=1.0)
     with pytest.raises(CoSimulationError, match=r"^component name '1x' is not an identifier$") as info:
@@ -410,3 +428,58 @@ def test_an_input_can_be_given_a_start_value(fmus):
     with CoSimulation([Component("gain", fmus["gain"], {"u": 4.0, "k": 0.5})], [], step_size=1.0) as sim:
         res = sim.run(1)
     assert res["gain.y"].tolist() == [2.0, 2.0]
+
+
+class Stopper(Model):
+    """Discards the step from t = 0.3 (fmi2Discard), saying it asks to end the simulation."""
+
+    variables = [("u", "input", "Real", 0.0, None), ("x", "output", "Real", 0.0, "")]
+    terminated = True
+    last_successful_time = 0.35
+
+    def step(self, t, h):
+        if t >= 0.3 - 1e-12:
+            return 2  # fmi2Discard
+        self["x"] = self["u"]
+        return 0
+
+
+class Mute(Stopper):
+    """Discards as Stopper does, and answers no status query (fmi2Discard: not available)."""
+
+    terminated = None
+    last_successful_time = None
+
+
+@pytest.fixture
+def stoppers(fmus, tmp_path, monkeypatch):
+    monkeypatch.setitem(FakeSlave.MODELS, "Stopper", Stopper)
+    monkeypatch.setitem(FakeSlave.MODELS, "Mute", Mute)
+    return {"stopper": write_fmu(tmp_path, "Stopper", Stopper.variables),
+            "mute": write_fmu(tmp_path, "Mute", Mute.variables)}
+
+
+def test_a_discarded_step_stops_the_run_at_its_point_and_says_what_the_component_reported(fmus, stoppers):
+    comps = [Component("src", fmus["src"], {"k": 3.0}), Component("stop", stoppers["stopper"])]
+    with CoSimulation(comps, ["src.y -> stop.u"], step_size=0.1) as sim:
+        with pytest.warns(DiscardedStepWarning) as caught:
+            res = sim.run(10)
+        message = ("component stop: doStep at t = 0.3 returned discard: it asks to end the simulation (last "
+                   "successful time 0.35); the run stops at t = 0.3 after 3 of 10 steps (no log message)")
+        assert [str(w.message) for w in caught] == [message]
+        assert sim.discarded == DiscardedStep("stop", 3 * 0.1, 3, 0.35, True, message)  # t_3 = t_0 + 3 h
+    # the rows up to the discarded step's point, each as a run of 3 steps gives them
+    t = 0.0 + np.arange(4) * 0.1  # t_k = t_0 + k h, as the master computes them
+    np.testing.assert_array_equal(res["time"], t)
+    np.testing.assert_array_equal(res["stop.x"], [0.0, *(3.0 * t[:3])])  # x_{k+1} = u_k = y_k = 3 t_k
+    assert res.dtype.names == ("time", "src.y", "src.n", "src.on", "stop.x")
+
+
+def test_a_discard_from_a_component_that_does_not_say_why_and_on_discard_error(fmus, stoppers):
+    comps = [Component("src", fmus["src"]), Component("mute", stoppers["mute"])]
+    with pytest.warns(DiscardedStepWarning, match=r"^component mute: doStep at t = 0.3 returned discard: it does "
+                      r"not say whether it asks to end the simulation; the run stops at t = 0.3 after 3 of 5 steps"):
+        res = simulate(comps, ["src.y -> mute.u"], step_size=0.1, n_steps=5)
+    assert len(res) == 4
+    with pytest.raises(CoSimulationError, match=r"^component mute: doStep at t = 0.3 returned discard \("):
+        simulate(comps, ["src.y -> mute.u"], step_size=0.1, n_steps=5, on_discard="error")

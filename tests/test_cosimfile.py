@@ -164,8 +164,8 @@ ERRORS = [
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Scheduler"', 'parameters = { omega = [0.3] }'),
      "components.sched.fmu: missing (expected a built FMU's name or a path to an .fmu file)"),
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Scheduler"', 'fmu = "PeixotoEx9Scheduler"'),
-     "components.sched.fmu: no FMU PeixotoEx9Scheduler.fmu in {fmu_dir} (build the FMUs with "
-     "`lpvest build --out {fmu_dir}`, or point --fmus or fmu_dir at their folder)"),
+     "components.sched.fmu: no FMU PeixotoEx9Scheduler.fmu in {fmu_dir} (build the FMUs into that folder "
+     "with `lpvest build --out FOLDER`, or point --fmus or fmu_dir at theirs)"),
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Scheduler"', 'fmu = "nowhere/Sched.fmu"'),
      "components.sched.fmu: expected an FMU file, found no file {missing}"),
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Plant"', 'fmu = "PeixotoEx1Plant"\nparameters = 3'),

@@ -291,3 +291,26 @@ def test_constants_and_shift_names():
     with pytest.raises(ExpressionError, match=r"^formula 'shift\(__x, 1\)': shift takes a variable and an integer, "
                                               r"e\.g\. shift\(p, 1\)$"):
         Expression.parse("shift(__x, 1)")
+
+
+@pytest.mark.parametrize(("formula", "shown"), [("sin(p) + t**2", "2 * t"), ("t**2 + sin(p)", "2 * t"),
+                                                ("sin(p) - t**2", "-(2 * t)"), ("t**2 - sin(p)", "2 * t")])
+def test_a_derivative_drops_the_terms_that_do_not_depend_on_the_variable(formula, shown):
+    d = Expression.parse(formula, allowed=["t", "p"]).derivative("t")
+    assert d.source == shown
+    assert d.evaluate({"t": 1.5, "p": 0.3}) == (-1 if formula.startswith("sin(p) -") else 1) * 3.0
+
+
+def test_messages_about_names_and_numbers_abbreviate_what_is_long():
+    with pytest.raises(ExpressionError) as info:
+        Expression.parse("a_very_long_unknown_name_of_thirty_c", allowed=["t", "p"])
+    assert str(info.value) == ("formula 'a_very_long_unknown_name_of_thirty_c' uses unknown name 'a_very_lon...y_c' "
+                               "(36 characters) (known: p, t)")  # the name cut to about 24 characters
+    known = [f"name_{i:02d}_long" for i in range(10)]
+    with pytest.raises(ExpressionError) as info:
+        Expression.parse("q", allowed=["t", "p", *known])
+    assert str(info.value) == ("formula 'q' uses unknown name 'q' (known: name_00_long, name_01_long, name_02_l..."
+                               "9_long, p, t (144 characters))")  # the known names cut to about 60 characters
+    with pytest.raises(ExpressionError) as info:
+        Expression.parse("1e999")
+    assert str(info.value) == "formula '1e999': the number inf is not finite in floating point (largest about 1.8e308)"

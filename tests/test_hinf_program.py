@@ -15,7 +15,7 @@ import lpvest.design.hinf as hinf
 from lpvest import load_system
 from lpvest.design import KIND_PD, KIND_ROBUST, HinfProgram
 from lpvest.design.hinf import LMIBlock, choose_solver, multiplier
-from lpvest.errors import ArgumentError, ArgumentTypeError, DimensionError, NonFiniteError
+from lpvest.errors import ArgumentError, ArgumentTypeError, DimensionError, LMIInfeasibleError, NonFiniteError
 
 EPS = np.finfo(float).eps
 
@@ -192,3 +192,59 @@ def test_an_epsilon_curve_records_each_epsilon_and_its_angle(ex1):
     assert np.all(np.isfinite(curve.gamma[1:])) and curve.best()[1] == min(curve.gamma)
     with pytest.raises(ArgumentError, match=r"^n_grid must be an integer, at least 3; found 2$"):
         search_epsilon(ex1, kind=KIND_ROBUST, n_grid=2)
+
+
+@pytest.mark.parametrize("n", [2, 3, 5])
+def test_the_stability_check_covers_vertices_edges_the_barycentre_and_the_interior(n):
+    """A(alpha) is checked on these points of the unit simplex before a design is tried: each on
+    the simplex, every vertex, every edge finely, the barycentre and (beyond two vertices, where
+    the edge is the whole simplex) 64 interior points."""
+    pts = hinf._simplex_points(n)
+    assert np.all(pts >= 0) and np.allclose(pts.sum(axis=1), 1.0, rtol=0, atol=4 * n * np.finfo(float).eps)
+    per_edge = 101 if n <= 4 else 21
+    edges = n * (n - 1) // 2
+    interior = 64 if n > 2 else 0
+    assert pts.shape == (n + edges * (per_edge - 2) + 1 + interior, n)
+    np.testing.assert_array_equal(pts[:n], np.eye(n))
+    on_edges = pts[n:n + edges * (per_edge - 2)]
+    assert np.all(np.count_nonzero(on_edges, axis=1) == 2)
+    assert len({tuple(np.flatnonzero(p)) for p in on_edges}) == edges  # every pair of vertices
+    np.testing.assert_array_equal(pts[n + edges * (per_edge - 2)], np.full(n, 1.0 / n))
+    assert np.all(pts[len(pts) - interior:] > 0)  # strictly inside
+    assert len({tuple(p) for p in pts[len(pts) - interior:]}) == interior
+
+
+def test_a_solves_lyapunov_blocks_are_symmetric_and_a_program_for_another_kind_is_refused(ex1):
+    """P(alpha) = [[P1, P3], [P3^T, P2]] must be symmetric for its eigenvalue check (eigvalsh reads
+    one triangle) to certify anything: P1 and P2 are symmetric variables, exactly."""
+    from lpvest.design import design_hinf
+
+    prog = HinfProgram.for_plant(ex1, kind=KIND_PD)
+    assert prog.attempt(ex1, 1.0).design is not None
+    for name in ("P1", "P2"):
+        for var in prog._var[name]:
+            assert np.array_equal(var.value, var.value.T), name
+    with pytest.raises(ArgumentError, match=r"^the program is for a parameter-dependent filter, not "
+                                            r"'robust_but_with..._here' \(42 characters\)$"):
+        design_hinf(ex1, kind="robust_but_with_a_very_long_kind_name_here", program=prog, epsilon=1.0)
+
+
+def test_an_epsilon_search_with_no_certified_point_says_so_naming_the_program_and_the_plant(ex1, monkeypatch):
+    """Every grid point's solve fails (a made-up infeasible attempt): the search raises with the
+    program's kind and solver, the plant, how many epsilons were tried and the solves' detail."""
+    tried = []
+
+    def attempt(self, plant, epsilon=None, *, phi=None, **options):
+        tried.append(phi)
+        return hinf.DesignAttempt(None, "infeasible", math.inf, "made-up solve: infeasible")
+
+    monkeypatch.setattr(HinfProgram, "attempt", attempt)
+    with pytest.raises(LMIInfeasibleError) as info:
+        hinf.search_epsilon(ex1, n_grid=6)
+    assert str(info.value) == ("parameter-dependent H-infinity LMIs for peixoto-ex1/plant at every epsilon tried "
+                               "(6 values), solver CLARABEL: no certified solution (made-up solve: infeasible)")
+    assert info.value.status == "infeasible" and info.value.detail == "made-up solve: infeasible"
+    # the grid: 6 angles phi = atan(epsilon) a sixth of pi apart, epsilon = inf (phi = pi/2) among them
+    angles = np.sort(tried)
+    assert len(tried) == 6 and angles[-1] == math.pi / 2
+    np.testing.assert_allclose(np.diff(angles), math.pi / 6, rtol=0, atol=8 * EPS)

@@ -1,5 +1,6 @@
 """Model files: round trip and every validation error path."""
 
+import re
 import textwrap
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from lpvest import (
     load_system,
     loads_system,
 )
+from lpvest.errors import shorten
 
 EXAMPLES = [e.name for e in example_systems()]
 
@@ -227,9 +229,14 @@ def test_invalid_toml_syntax(tmp_path):
         load_system(path)
 
 
-def test_missing_file_and_unknown_example(tmp_path):
-    with pytest.raises(ModelFileError, match="nothere.toml: no such model file"):
-        load_system(tmp_path / "nothere.toml")
+def test_missing_file_and_unknown_example(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ModelFileError, match="^nothere.toml: no such model file$"):
+        load_system("nothere.toml")
+    # a long path is shortened (errors.shorten), whatever pytest's temporary folder is
+    missing = tmp_path / "nothere.toml"
+    with pytest.raises(ModelFileError, match=f"^{re.escape(shorten(str(missing), 120))}: no such model file$"):
+        load_system(missing)
     with pytest.raises(ModelFileError, match="no example system 'peixoto-ex9' \\(examples: cox-toth-ex1, "):
         load_system("peixoto-ex9")
 

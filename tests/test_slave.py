@@ -33,7 +33,8 @@ def resources(tmp_path_factory):
     base = tmp_path_factory.mktemp("slave-resources")
     return {f"{s}{r}": write_resources(s, r, base / f"{s}-{r}")
             for s, r in [("peixoto-ex1", "Plant"), ("peixoto-ex1", "HinfPD"), ("cox-toth-truncation", "Kalman"),
-                         ("peixoto-ex1", "Scheduler")]}
+                         ("peixoto-ex1", "Scheduler"), ("sridhar-ltv", "Plant"), ("sridhar-ltv", "BSplineObserver"),
+                         ("peixoto-ex2", "Plant")]}
 
 
 def plant(resources, **kw) -> Slave:
@@ -428,3 +429,307 @@ def test_a_spec_without_a_sample_time_samples_every_second(tmp_path):
     (folder / "lpvest_fmu.json").write_text(json.dumps(spec))
     s = Slave(folder)
     assert s.get("sample_time") == [1.0]
+
+
+# -- timed components, several samples per step, model parameters ---------------------------
+
+
+@pytest.mark.parametrize("read_before_step", [True, False])
+def test_a_timed_scheduler_far_from_t0_is_the_library_signal_at_the_hosts_points(resources, read_before_step):
+    """A function of time (no sample time) ends each step exactly at the host's point t + h, not at
+    its own sum of steps: far from 0 the two differ in the last bits of p = sin(0.25 t)."""
+    from lpvest.signals import SchedulerComponent, SignalSpec
+
+    t0, h, n = 1e6, 0.1, 40
+    s = Slave(resources["peixoto-ex1Scheduler"])
+    assert s.initialize(t0) == []
+    plant_model = load_system("peixoto-ex1").model()
+    ref = SchedulerComponent(SignalSpec.build("sinusoid", 1, amplitude=1.0, omega=0.25), plant_model.space,
+                             plant_model.simplex_map)
+    ref.reset(t0)
+    got, want = [], []
+    for k in range(n):
+        t = t0 + k * h  # the host's points: an integer counter
+        if read_before_step or k == n - 1:
+            got.append(s.get("p[1]", "alpha[1]", "alpha[2]"))
+            out = ref.outputs({})
+            want.append([*out["p"].tolist(), *out["alpha"].tolist()])
+        assert s.step(t, h), s.errors()
+        ref.step({}, dt=h, t_end=t + h)
+    assert got == want
+    assert s.take_log() == []
+
+
+def test_a_timed_plant_stepped_without_reading_its_outputs_takes_the_inputs_set(resources):
+    """A host that sets the inputs and steps without reading any output (the outputs are not
+    computed before the step) moves the plant as one that reads them each time."""
+    a, b = Slave(resources["sridhar-ltvPlant"]), Slave(resources["sridhar-ltvPlant"], name="b")
+    for s in (a, b):
+        assert s.initialize(0.0, use_model_input=False) == []
+    for k in range(6):
+        u = math.cos(k)
+        a.set_reals({"u[1]": u})
+        b.set_reals({"u[1]": u})
+        assert b.get("u_applied[1]") == [u]
+        assert a.step(0.1 * k, 0.1), a.errors()
+        assert b.step(0.1 * k, 0.1), b.errors()
+    assert a.get("x[1]", "x[2]") == b.get("x[1]", "x[2]")
+    assert a.get("x[1]", "x[2]") != [0.0, 0.0]  # the inputs moved it
+
+
+def test_a_step_of_several_samples_of_a_timed_observer_is_that_many_steps_of_one(resources):
+    """The B-spline observer has a sample time: a communication step of m samples runs m samples,
+    the inputs held, as m steps of one sample do."""
+    a, b = Slave(resources["sridhar-ltvBSplineObserver"]), Slave(resources["sridhar-ltvBSplineObserver"], name="b")
+    for s in (a, b):
+        assert s.initialize(0.0, window=0.2, hop=0.05) == []
+    dt, m = 0.001, 4
+    names = ["t_est[1]", "yhat[1]", "xhat[1]", "xhat[2]", "valid[1]"]
+    for j in range(100):
+        u, y = math.sin(3.0 * j * m * dt), math.cos(2.0 * j * m * dt)
+        a.set_reals({"u[1]": u, "y[1]": y})
+        assert a.step(j * m * dt, m * dt), a.errors()
+        for i in range(m):
+            b.set_reals({"u[1]": u, "y[1]": y})
+            assert b.step((j * m + i) * dt, dt), b.errors()
+    got = a.get(*names)
+    assert got[-1] == 1.0  # the observer has estimates
+    np.testing.assert_array_equal(got, b.get(*names))
+
+
+def test_a_sample_of_a_long_step_that_fails_names_every_bad_output_and_consumes_nothing(resources):
+    """A step of several samples whose second sample overflows is refused naming the sample and
+    the outputs that are not finite; the instance stays where it was."""
+    s = plant(resources)
+    s.slave.setup_experiment(0.0)
+    s.set("x0[1]", 1.5e308)
+    s.set("x0[2]", 1.5e308)
+    s.slave.exit_initialization_mode()
+    s.set_reals({"p[1]": -1.0, "w[1]": 0.0})
+    before = s.get("x[1]", "x[2]")
+    s.take_log()
+    assert not s.step(0.0, 3.0)
+    errors = s.errors()
+    # vertex 1: A = [[0.43, 0], [1, 0.48]]: sample 2 has x1 = 0.43 * 1.5e308 (finite) and x2 = inf;
+    # z = x and y = x1 + 0 * x2 = nan (0 * inf): every output but x1
+    assert errors == ["[PeixotoEx1Plant] fmi2DoStep refused at t = 0 (h = 3, 3 samples): sample 2 of 3 (at t = 1): "
+                      "output y[1], z[1], z[2], x[2] is not finite (NaN or inf); nothing consumed"]
+    assert s.get("x[1]", "x[2]") == before and s.slave._time == 0.0
+    assert s.step(0.0, 1.0), s.errors()  # one sample still goes
+
+
+def test_a_value_a_host_cannot_pass_as_a_real_is_an_error_naming_the_call(resources):
+    s = plant(resources)
+    assert s.initialize() == []
+    s.slave.set_real([s.vr["w[1]"]], ["fast"])
+    [message] = s.errors()
+    assert message.startswith("[PeixotoEx1Plant] fmi2SetReal: TypeError: ")
+
+
+def test_an_input_set_before_initialization_is_checked_with_the_relative_tolerance(resources):
+    s = plant(resources)
+    s.slave.setup_experiment(0.0)
+    s.set("p[1]", 1.0 + 5e-13)  # inside the relative tolerance 1e-12 of the bound 1
+    assert s.errors() == []
+    s.set("p[1]", 1.0 + 5e-12)
+    assert s.errors() == ["[PeixotoEx1Plant] input p[1] (theta) = 1.000000000005 is outside its declared range "
+                          "[-1, 1]; value rejected"]
+
+
+def test_the_step_rule_says_how_to_go_back_to_an_earlier_point(resources):
+    s = plant(resources)
+    assert s.initialize() == []
+    assert s.step(0.0, 1.0)
+    assert not s.step(0.0, 1.0)
+    assert s.errors() == ["[PeixotoEx1Plant] fmi2DoStep refused at t = 0 (h = 1): the communication point t = 0 is "
+                          "not the FMU's current time 1 (a skipped or repeated point; restore a state with "
+                          "fmi2SetFMUstate to go back)"]
+
+
+def test_a_model_parameter_is_an_fmu_parameter_that_changes_the_plant(resources):
+    """peixoto-ex2's plant has the model parameter rho: the FMU declares it with the model file's
+    value, and a value set before initialization gives the plant of the library at that rho."""
+    s = Slave(resources["peixoto-ex2Plant"])
+    system = load_system("peixoto-ex2")
+    assert s.get("rho") == [float(system.parameters["rho"])]
+    rho = float(system.parameters["rho"]) + 2.0  # inside its declared range [1, 21]
+    assert s.initialize(rho=rho) == []
+    k = np.arange(8)
+    p = 0.5 * np.sin(0.25 * k)
+    got = []
+    for j in k:
+        s.set_reals({"p[1]": float(p[j]), "w[1]": float(paper_w(j + 10))})
+        got.append(s.get("y[1]"))
+        assert s.step(float(j), 1.0), s.errors()
+    model = load_system("peixoto-ex2", parameters={"rho": rho}).model()
+    ref = model.simulate(model.alpha_batch(p[:, None]), paper_w(k + 10)[:, None])
+    assert np.array_equal(np.array(got), ref.y)
+    default = system.model()
+    assert not np.array_equal(default.simulate(default.alpha_batch(p[:, None]), paper_w(k + 10)[:, None]).y, ref.y)
+
+
+def test_a_restored_state_tells_the_status_bridge_its_time(resources):
+    """fmi2GetRealStatus(fmi2LastSuccessfulTime) after fmi2SetFMUstate is the restored time: the
+    slave states it in a message of the category the status bridge consumes (status_bridge.c)."""
+    s = plant(resources)
+    assert s.initialize(2.5, sample_time=0.5) == []
+    drive(s, 2.5, 0.5, 3)
+    state = s.get_state()
+    drive(s, 2.5, 0.5, 2, k0=3)
+    s.slave.log_queue.clear()
+    s.set_state(state)
+    assert [(m.category, m.msg) for m in s.slave.log_queue] == [("lpvest.time", repr(2.5 + 3 * 0.5))]
+
+
+def test_many_outputs_that_are_not_finite_are_named_five_then_an_ellipsis(resources):
+    k = Slave(resources["cox-toth-truncationKalman"])
+    assert k.initialize(0.0, **{"x0[1]": 1.7e308, "x0[2]": -1.7e308}) == []
+    k.set_reals({"p[1]": 1.0, "u[1]": 0.0, "y[1]": -1.7e308, "y[2]": 1.7e308})
+    names = [n for n in k.vr if k.slave._elements[k.vr[n]].kind == "output"]
+    values = k.get(*names)
+    bad = [n for n, v in zip(names, values, strict=True) if not math.isfinite(v)]
+    assert len(bad) > 5
+    assert k.errors()[-1] == (f"[CoxTothTruncationKalman] fmi2GetReal: output {', '.join(bad[:5])} ... is not finite "
+                              "(NaN or inf) at t = 0")
+
+
+def test_the_range_tolerance_is_relative_to_the_bounds_of_a_wide_range(tmp_path):
+    """A scheduling box [0, 1e6]: a value 5e-7 above 1e6 is rounding (1e-12 of the bound) and
+    accepted, 2e-6 above is outside; before and after initialization alike."""
+    model = tmp_path / "wide.toml"
+    model.write_text("""
+[system]
+name = "wide"
+title = "a one-state polytopic plant scheduled over [0, 1e6]"
+[scheduling]
+names = ["theta"]
+lower = [0.0]
+upper = [1e6]
+[models.plant]
+type = "polytopic"
+[models.plant.map]
+kind = "formulas"
+alpha = ["1 - theta/1e6", "theta/1e6"]
+[[models.plant.vertex]]
+A = [[0.5]]
+[[models.plant.vertex]]
+A = [[0.1]]
+[models.plant.common]
+Bw = [[1.0]]
+Cz = [[1.0]]
+Dz = [[0.0]]
+Cy = [[1.0]]
+Dy = [[1.0]]
+""")
+    s = Slave(write_resources(str(model), "Plant", tmp_path / "r"))
+    s.slave.setup_experiment(0.0)
+    s.set("p[1]", 1e6 + 5e-7)
+    assert s.errors() == []
+    s.slave.exit_initialization_mode()
+    for value in (1e6 + 5e-7, 1e6 + 2e-6):
+        s.set("p[1]", value)
+    assert s.errors() == [f"[{s.slave.modelName}] input p[1] (theta) = 1000000.000002 is outside its declared range "
+                          "[0, 1000000]; value rejected"]
+    assert s.get("p[1]") == [1e6 + 5e-7]
+
+
+# -- a component that is not an lpvest Component (duck-typed) -------------------------------
+
+
+class _Duck:
+    """A component that is not an :class:`lpvest.protocol.Component`: ports, ``outputs``,
+    ``step``, ``reset`` and its state only (no ``prepare``/``advance``, no ``timed``). ``fail``:
+    ``("raise" | "nan", n)`` makes its n-th step raise or return NaN outputs."""
+
+    def __init__(self, inner, extra: bool, fail):
+        from lpvest.protocol import Port
+
+        self.inner, self.fail, self.steps = inner, fail, 0
+        self.input_ports = tuple(inner.input_ports)
+        self.output_ports = tuple(inner.output_ports) + ((Port("extra", (1,), "one more"),) if extra else ())
+
+    def outputs(self, inputs):
+        return self.inner.outputs(inputs)
+
+    def step(self, inputs):
+        self.steps += 1
+        if self.fail == ("raise", self.steps):
+            raise ValueError(f"step {self.steps} went wrong")
+        out = self.inner.step(inputs)
+        return {k: np.full_like(v, np.nan) for k, v in out.items()} if self.fail == ("nan", self.steps) else out
+
+    def reset(self):
+        self.inner.reset()
+        self.steps = 0
+
+    def get_state(self):
+        return self.inner.get_state(), self.steps
+
+    def set_state(self, state):
+        self.inner.set_state(state[0])
+        self.steps = state[1]
+
+
+def foreign(resources, fail=None, name: str = "foreign") -> Slave:
+    """peixoto-ex1's plant slave whose component is a :class:`_Duck`, with two parameters more:
+    ``limit`` (an Integer with only a maximum) and ``extra`` (one output more: other ports)."""
+    from lpvest.fmi.spec import Parameter
+
+    from .slave_harness import _script
+
+    class ForeignPlant(_script("lpvest_plant.py").LpvestPlant):
+        def declare(self):
+            return [*super().declare(), Parameter("limit", 3, "an Integer with only a maximum", maximum=5),
+                    Parameter("extra", False, "one output more (other ports: another FMU)")]
+
+        def make_component(self, params):
+            return _Duck(super().make_component(params), params["extra"], fail)
+
+    s = Slave.__new__(Slave)
+    s.slave = ForeignPlant(instance_name=name, resources=str(resources["peixoto-ex1Plant"]))
+    s.vr = {v.name: vr for vr, v in s.slave.vars.items()}
+    return s
+
+
+def test_a_component_that_is_not_an_lpvest_component_runs_a_step_of_m_samples_as_m_steps(resources):
+    a, b, ref = foreign(resources), foreign(resources, name="b"), plant(resources)
+    for s in (a, b, ref):
+        assert s.initialize() == []
+    for j in range(4):
+        inputs = {"p[1]": float(theta(j)), "w[1]": float(paper_w(j + 10))}
+        a.set_reals(inputs)
+        assert a.step(3.0 * j, 3.0), a.errors()
+        for i in range(3):
+            for s in (b, ref):
+                s.set_reals(inputs)
+                assert s.step(3.0 * j + i, 1.0), s.errors()
+    assert a.get("x[1]", "x[2]") == b.get("x[1]", "x[2]") == ref.get("x[1]", "x[2]")
+
+
+@pytest.mark.parametrize(("fail", "why"), [(("raise", 2), "ValueError: step 2 went wrong"),
+                                           (("nan", 2), "output y[1], z[1], z[2], x[1], x[2] is not finite "
+                                                        "(NaN or inf)")])
+def test_a_foreign_components_failing_later_sample_is_named_and_consumes_nothing(resources, fail, why):
+    s, ref = foreign(resources, fail), plant(resources)
+    for x in (s, ref):
+        assert x.initialize() == []
+        x.set_reals({"p[1]": 0.5, "w[1]": 0.25})
+    assert not s.step(0.0, 3.0)
+    assert s.errors() == [f"[PeixotoEx1Plant] fmi2DoStep refused at t = 0 (h = 3, 3 samples): sample 2 of 3 "
+                          f"(at t = 1): {why}; nothing consumed"]
+    assert s.slave._time == 0.0 and s.get("x[1]", "x[2]") == ref.get("x[1]", "x[2]")
+
+
+def test_parameters_are_checked_against_a_one_sided_range_and_may_not_change_the_ports(resources):
+    s = foreign(resources)
+    s.slave.setup_experiment(0.0)
+    s.set("limit", 7)
+    # an FMI Integer is 32 bits: without a declared minimum, the range starts at -2**31
+    assert s.errors() == ["[PeixotoEx1Plant] parameter limit = 7 is outside its declared range [-2147483648, 5]; "
+                          "value rejected"]
+    s.set("limit", 5)
+    s.set("extra", True)
+    s.slave.exit_initialization_mode()
+    assert s.errors() == ["[PeixotoEx1Plant] fmi2ExitInitializationMode: these parameters change the FMU's inputs "
+                          "or outputs; rebuild the FMU instead"]
+    assert not s.step(0.0, 1.0)

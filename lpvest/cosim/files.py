@@ -576,8 +576,9 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
             if not _is_file(fmu_path):
                 shown = _path_text(folder, 80)
                 name_shown = f"{fmu}.fmu" if len(fmu) <= 40 else abbreviate(f"{fmu}.fmu", 40)
-                raise r.error(f"{where}.fmu", f"no FMU {name_shown} in {shown} (build the FMUs "
-                              f"with `lpvest build --out {shown}`, or point --fmus or fmu_dir at their folder)")
+                # the folder named once: a message's length must not grow twice with a long path
+                raise r.error(f"{where}.fmu", f"no FMU {name_shown} in {shown} (build the FMUs into that "
+                              f"folder with `lpvest build --out FOLDER`, or point --fmus or fmu_dir at theirs)")
         params = spec.get("parameters", {})
         if not isinstance(params, dict):
             raise r.error(f"{where}.parameters", f"expected a table of start values, found {describe_value(params)}")
