@@ -30,12 +30,13 @@ import sys
 import time
 import warnings
 import zipfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
 import numpy as np
 
+from ._interrupt import exit_status, handling_signals
 from .errors import ArgumentError, LpvestError, OutputError, abbreviate, shorten
 
 __all__ = ["main", "describe_model"]
@@ -371,7 +372,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                         progress=False if args.no_progress else None, plot=not args.no_plot)
     except SweepInterrupted as exc:
         print(f"lpvest: {exc}", file=sys.stderr)
-        return 130
+        return exit_status(exc)
     print(res.report())
     return 1 if res.failures else 0
 
@@ -581,7 +582,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     debug = getattr(args, "debug", False)
     try:
-        return int(args.func(args))
+        with handling_signals():  # Ctrl-C and SIGTERM raise Interrupted (exit 130, 143)
+            return int(args.func(args))
     except BrokenPipeError:  # e.g. `lpvest systems show X | head`: the reader left
         import os
 
@@ -594,9 +596,26 @@ def main(argv: Sequence[str] | None = None) -> int:
             traceback.print_exc()
         print(f"lpvest: error: {_one_line(exc)}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("lpvest: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        name = getattr(exc, "name", "SIGINT")
+        kept = _KEPT.get(args.command)
+        print(f"lpvest: interrupted ({name})" + (f": {kept(args)}" if kept else ""), file=sys.stderr)
+        return exit_status(exc)
+
+
+#: What an interrupted command leaves behind and how to go on, one line.
+_KEPT: dict[str, Callable[[argparse.Namespace], str]] = {
+    "design": lambda a: "nothing was written (an interrupted solve is never a design); run the same command "
+                        "again to design anew",
+    "build": lambda a: f"the FMUs and designs finished so far are in {a.out} (designs in {a.out}/.designs), the "
+                       "interrupted one was not kept; run the same command again to resume (it reuses those "
+                       "designs)",
+    "cosim": lambda a: f"the co-simulation stopped, no result was written to {a.out}; run the same command again",
+    "sweep": lambda a: "the tasks finished so far are written; run the same sweep again to resume",
+    "simulate": lambda a: "run the same command again",
+    "systems": lambda a: "nothing was written",
+    "validate": lambda a: "nothing was written",
+}
 
 
 def _one_line(exc: BaseException) -> str:

@@ -44,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from .._interrupt import interruptible, raise_if_pending
 from ..errors import LpvestError, abbreviate, shorten
 
 __all__ = [
@@ -806,6 +807,7 @@ class CoSimulation:
         try:
             return fn()
         except (FMICallException, OSError, Exception) as exc:
+            raise_if_pending()  # a signal's KeyboardInterrupt, swallowed by the FMU: not its failure
             if isinstance(exc, LpvestError):
                 raise
             at = "" if t is None else f" at t = {t:g}"
@@ -822,6 +824,7 @@ class CoSimulation:
                        lambda s=setters[_CALL[v.type]], r=v.vr, x=x: s([r], [x]),
                        where=f"components.{unit.spec.name}.parameters.{par}")
 
+    @interruptible
     def run(
         self,
         n_steps: int | None = None,
@@ -983,6 +986,7 @@ class CoSimulation:
         return DiscardedStep(name, t, k, last, terminated, message)
 
     def _fail(self, unit: _Unit, what: str, status: int, t: float) -> None:
+        raise_if_pending()  # a signal's KeyboardInterrupt raised inside the FMU (pythonfmu: fatal)
         label = ["ok", "warning", "discard", "error", "fatal", "pending"][status] if 0 <= status < 6 else "?"
         log = _log_text(unit)
         raise CoSimulationError(f"component {unit.spec.name}: {what} at t = {t:g} returned {label} ({log})",

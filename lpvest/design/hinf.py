@@ -95,6 +95,8 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
+import signal
+import threading
 import time
 import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -547,6 +549,7 @@ class HinfProgram:
         if self.auto:
             self.solver = choose_solver(n_vertices, nx, nz, nw, kind)
         self._warm = False  # warm starts only inside a search (HinfProgram.warm_starts)
+        self._abandoned: threading.Thread | None = None  # an interrupted solve, still running
         self._returned_point = False  # the last solve returned a point (last_variables)
         self.margin = float(margin)
         self.solver_options = dict(solver_options or {})
@@ -694,12 +697,35 @@ class HinfProgram:
                 # data and the search alone)
                 options = {"warm_start": self._warm and solver == "SCS", **_DEFAULT_OPTIONS.get(solver, {}),
                            **(self.solver_options if solver == self.solver else {})}
-                self._problem.solve(solver=solver, **options)
+                self._solve_interruptibly(solver, options)
             status, message = str(self._problem.status), ""
         except cp.error.SolverError as exc:
             status, message = "solver_error", f" ({exc})"
         self._returned_point = status in _ACCEPTED
         return status, time.perf_counter() - t0, message
+
+    def _solve_interruptibly(self, solver: str, options: Mapping[str, Any]) -> None:
+        """``problem.solve`` on a worker thread (:func:`lpvest._interrupt.call_interruptibly`):
+        Ctrl-C or SIGTERM stops the wait at once; the abandoned solve may still
+        write into this program, which is then never used again (it leaves the
+        program cache, and a later solve here first waits for it to end). SCS
+        catches SIGINT itself and returns "interrupted": that is raised too."""
+        from .._interrupt import call_interruptibly, hold
+
+        if self._abandoned is not None:
+            self._abandoned.join()  # an interrupted solve still writes into the problem
+            self._abandoned = None
+        target = _interruptible_scs() if solver == "SCS" else solver
+
+        def run() -> None:
+            hold("solve")
+            self._problem.solve(solver=target, **options)
+
+        def abandon(thread: threading.Thread) -> None:
+            self._abandoned = thread
+            _cached_program.cache_clear()
+
+        call_interruptibly(run, on_abandon=abandon)
 
     @contextlib.contextmanager
     def warm_starts(self) -> Iterator[None]:
@@ -974,6 +1000,35 @@ def _infeasible_message(plant: PolytopicLPV, prog: HinfProgram, where: str, deta
     if len(reason) > 170:
         reason = reason[:167] + "..."
     return f"{prog.kind} H-infinity LMIs for {name} at {where}, solver {prog.solver}: no certified solution ({reason})"
+
+
+#: SCS's status when its own SIGINT handler stopped it (``SCS_SIGINT`` in scs.h).
+_SCS_SIGINT = -5
+
+
+@functools.lru_cache(maxsize=1)
+def _interruptible_scs() -> Any:
+    """cvxpy's SCS interface, except that a solve SCS stopped on SIGINT (its
+    own handler catches the signal while it iterates, so Python's never runs)
+    raises :class:`lpvest._interrupt.Interrupted` instead of being one more
+    failed point of a search (cvxpy reports it as a solver error). The same
+    data, options and warm starts as ``solver="SCS"``."""
+    from cvxpy.reductions.solvers.conic_solvers.scs_conif import SCS
+
+    from .._interrupt import Interrupted
+
+    class InterruptibleSCS(SCS):
+        def name(self) -> str:
+            return "LPVEST_SCS"
+
+        def solve_via_data(self, data: Any, warm_start: bool, verbose: bool, solver_opts: Any,
+                           solver_cache: Any = None) -> Any:
+            results = super().solve_via_data(data, warm_start, verbose, solver_opts, solver_cache)
+            if results["info"]["status_val"] == _SCS_SIGINT:
+                raise Interrupted(signal.SIGINT)
+            return results
+
+    return InterruptibleSCS()
 
 
 @functools.lru_cache(maxsize=16)

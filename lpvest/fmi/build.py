@@ -747,11 +747,15 @@ def build_fmu(plan: FmuPlan, out_dir: str | Path, *, progress: Callable[[str], N
                     _warn_without_bridge(platform)
                 entries[name] = (lib.read_bytes(), True)
         partial = out / f".{plan.identifier}.fmu.part"
-        with zipfile.ZipFile(partial, "w") as z:
-            for name in sorted(entries):
-                data, executable = entries[name]
-                write_zip_entry(z, name, data, executable)
-        partial.replace(target)
+        try:
+            with zipfile.ZipFile(partial, "w") as z:
+                for name in sorted(entries):
+                    data, executable = entries[name]
+                    write_zip_entry(z, name, data, executable)
+            partial.replace(target)
+        except BaseException:  # Ctrl-C, a full disk: no half-written FMU is left behind
+            partial.unlink(missing_ok=True)
+            raise
     return target
 
 

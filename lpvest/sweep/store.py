@@ -315,8 +315,15 @@ class SweepStore:
             pq.write_table(t, tmp)
             tmp.replace(path)
         failed = sum(r["status"] != "ok" for r in self.rows.values())
-        self._write_json(self._header() | {
+        self._finished = self._header() | {
             "complete": complete and len(self.rows) == len(self.tasks),
             "finished": len(self.rows), "failed": failed, "resumed": self.resumed,
-            "last_run": {"seconds": round(seconds, 3), "engine": engine}})
+            "last_run": {"seconds": round(seconds, 3), "engine": engine}}
+        self._write_json(self._finished)
         return table
+
+    def mark_complete(self) -> None:
+        """``sweep.json`` says complete: every task is written and so is what
+        follows them (the figures). Only after :meth:`finish` with
+        ``complete=False`` and every task finished."""
+        self._write_json(self._finished | {"complete": len(self.rows) == len(self.tasks)})
