@@ -335,6 +335,25 @@ def test_lpvest_build_for_a_users_model_file(fmus, tmp_path, capsys):
     assert (out / "AffineDemoHinfPD.fmu").read_bytes() == first
 
 
+@pytest.mark.slow
+def test_two_builds_of_a_users_plant_with_an_epsilon_search_give_the_same_fmu_bytes(tmp_path):
+    """Each build searches epsilon anew (no shared design cache): the FMU carries the design
+    without the solver's timings (which differ from solve to solve), so the bytes agree."""
+    from lpvest.design import HinfDesign
+    from lpvest.fmi.build import build_fmus
+
+    model = Path(__file__).resolve().parent.parent / "examples" / "own_plant.toml"
+    fmus = [build_fmus([model], tmp_path / f"build{i}", roles=["HinfPD"])[0][0].validation.path for i in (1, 2)]
+    assert fmus[0].read_bytes() == fmus[1].read_bytes()
+    with zipfile.ZipFile(fmus[0]) as z:
+        text = z.read("resources/design.json").decode()
+    assert "solve_time" not in text and "compile_time" not in text
+    design = HinfDesign.from_json(text)  # still a design: the timings read as unknown
+    assert np.isnan(design.solve_time) and np.isnan(design.compile_time) and np.isfinite(design.gamma)
+    cached = next((tmp_path / "build1" / ".designs").glob("*.json")).read_text()
+    assert HinfDesign.from_json(cached).solve_time > 0  # the cache outside the FMU keeps them
+
+
 def test_a_design_that_fails_leaves_the_other_fmus_built(tmp_path, capsys):
     # an unstable plant: no H-infinity filter exists, the Kalman filters do
     text = AFFINE_TOML.replace('A = { "1" = [[0.5, 0.1], [0.0, 0.4]]', 'A = { "1" = [[1.5, 0.1], [0.0, 0.4]]')

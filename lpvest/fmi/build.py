@@ -469,6 +469,7 @@ def _bundle(plan: FmuPlan) -> Bundle:
 
 def _design_text(plan: FmuPlan, progress: Callable[[str], None] | None) -> tuple[str | bytes, str]:
     """The design the FMU carries (text or bytes) and where it came from."""
+    from ..design.result import without_timings
     from ..modelfile import load_system
     from .state import encode_state
 
@@ -485,7 +486,7 @@ def _design_text(plan: FmuPlan, progress: Callable[[str], None] | None) -> tuple
 
         HinfDesign.from_json(text).check_model(hinf_setting(model), source=str(plan.design),
                                                plant_name=plan.system_name)
-        return text, f"file {plan.design.name}"
+        return text, f"file {plan.design.name}"  # carried as given: the same file, the same bytes
     options = dict(plan.design_options)
     settings = "".join(f", {k} = {v}" for k, v in sorted(options.items()))
     origin = f"designed at build time by {plan.estimator.design}{settings}"
@@ -493,7 +494,7 @@ def _design_text(plan: FmuPlan, progress: Callable[[str], None] | None) -> tuple
     if cached is not None and cached.is_file():
         if progress is not None:
             progress(f"{plan.identifier}: design reused from {cached}")
-        return cached.read_text(encoding="utf-8"), origin
+        return without_timings(cached.read_text(encoding="utf-8")), origin
     if progress is not None:
         progress(f"{plan.identifier}: designing ({plan.estimator.design}{settings})")
     design = resolve(plan.estimator.design)(model, progress=progress is not None, **options)
@@ -502,8 +503,8 @@ def _design_text(plan: FmuPlan, progress: Callable[[str], None] | None) -> tuple
         cached.parent.mkdir(parents=True, exist_ok=True)
         partial = cached.with_suffix(".part")
         partial.write_text(made, encoding="utf-8")
-        partial.replace(cached)
-    return made, origin
+        partial.replace(cached)  # with the solver's timings; the FMU carries the design without them
+    return without_timings(made) if isinstance(made, str) else made, origin
 
 
 def _design_cache_file(plan: FmuPlan) -> Path | None:
