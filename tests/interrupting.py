@@ -14,6 +14,14 @@ ROOT = Path(__file__).resolve().parent.parent
 TIMEOUT = 300.0  # seconds before a hung command is killed (never reached when the command works)
 
 
+def _default_sigint() -> None:
+    """In the child, before it runs: SIGINT at its default. A process started
+    in the background by a shell without job control (``./dev test &``, a CI
+    script) inherits SIGINT *ignored*, and Python keeps it ignored: the
+    command then never sees the test's Ctrl-C and runs to its end (status 0)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def lpvest_command(*args: str) -> list[str]:
     return [sys.executable, "-m", "lpvest.cli", *args]
 
@@ -26,7 +34,7 @@ def interrupt_at(cmd: list[str], moment: str, tmp_path: Path, *, signum: int = s
     ready = tmp_path / f"ready-{moment}-{os.getpid()}-{len(list(tmp_path.iterdir()))}"
     env = {**os.environ, "LPVEST_TEST_HOLD": moment, "LPVEST_TEST_READY": str(ready)}
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=cwd,
-                            start_new_session=group)
+                            start_new_session=group, preexec_fn=_default_sigint)
     try:
         # the event: the line in the ready file (or the command ending without reaching it)
         while proc.poll() is None and not (ready.is_file() and ready.read_text().endswith("\n")):

@@ -21,7 +21,7 @@ import textwrap
 import pyarrow.parquet as pq
 import pytest
 
-from tests.interrupting import ROOT, TIMEOUT, interrupt_at, lpvest_command as _lpvest
+from tests.interrupting import ROOT, TIMEOUT, _default_sigint, interrupt_at, lpvest_command as _lpvest
 from tests.test_sweep import _write
 
 
@@ -93,7 +93,7 @@ def test_scs_stopped_by_its_own_sigint_handler_is_an_interruption_not_a_failed_p
         """)
     ready = tmp_path / "ready"
     proc = subprocess.Popen([sys.executable, "-c", script, str(ready)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, cwd=ROOT)
+                            stderr=subprocess.PIPE, text=True, cwd=ROOT, preexec_fn=_default_sigint)
     try:
         while proc.poll() is None and not (ready.is_file() and ready.read_text().endswith("\n")):
             try:
