@@ -26,6 +26,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
+import re
 import sys
 import time
 import warnings
@@ -55,16 +57,57 @@ def _parse_params(items: Sequence[str] | None) -> dict[str, float]:
     return out
 
 
-def _out_dir(path: str, option: str = "--out") -> Path:
-    """The output folder, created; one line naming the option if it cannot be."""
+def _out_dir(path: str | Path, option: str = "--out") -> Path:
+    """The output folder, created and writable, before any slow work; one line
+    naming the option (and the part of the path in the way) if it cannot be.
+    Every command that writes uses it."""
     out = Path(path)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        reason = "it is a file, not a folder" if isinstance(exc, FileExistsError) else exc.strerror or exc
+        if isinstance(exc, FileExistsError | NotADirectoryError):
+            blocker = next((p for p in (out, *out.parents) if p.exists() and not p.is_dir()), out)
+            reason = f"{shorten(str(blocker), 60)} is a file, not a folder"
+        else:
+            reason = str(exc.strerror or exc)
         raise OutputError(f"{option} {shorten(str(out), 60)}: cannot create the output folder ({reason})"
                           ) from None
+    if not os.access(out, os.W_OK | os.X_OK):
+        raise OutputError(f"{option} {shorten(str(out), 60)}: cannot write in the output folder (permission denied)")
     return out
+
+
+def _out_file(path: str, option: str = "--out") -> Path:
+    """An output file: its folder as :func:`_out_dir`, and not a folder itself."""
+    out = Path(path)
+    if out.is_dir():
+        raise OutputError(f"{option} {shorten(str(out), 60)}: is a folder; expected a file name")
+    _out_dir(out.parent if str(out.parent) else ".", option)
+    return out
+
+
+def _number(text: str) -> float:
+    """A number option (``--epsilon``): any float, ``inf`` and ``-inf`` included,
+    never nan."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, found {abbreviate(text, 30)}") from None
+    if value != value:
+        raise argparse.ArgumentTypeError(f"expected a number (inf and -inf allowed), found {text}")
+    return value
+
+
+def _workers(text: str) -> int:
+    """``--workers``: 0 (this process) or a number of worker processes."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected 0 (run in this process) or a number of worker processes, "
+                                         f"found {abbreviate(text, 30)}")
+    return value
 
 
 def _seed(text: str) -> int:
@@ -130,6 +173,8 @@ def cmd_systems(args: argparse.Namespace) -> int:
         raise ArgumentError("systems: expected one example name or model file, e.g. `lpvest systems show "
                             "peixoto-ex1` (or nothing, to list the examples)")
     system = load_system(words[0], parameters=_parse_params(args.param))
+    keys = [args.model] if args.model else list(system.models)
+    chosen = {key: system.model(key) for key in keys}  # a wrong --model fails before anything is printed
     print(f"{system.name}: {system.title}")
     if system.source:
         print(f"  source: {system.source}")
@@ -146,9 +191,8 @@ def cmd_systems(args: argparse.Namespace) -> int:
         s = system.scheduling
         box = ", ".join(f"{n} in [{lo:g}, {hi:g}]" for n, lo, hi in zip(s.names, s.lower, s.upper, strict=True))
         print(f"  scheduling: {box}")
-    keys = [args.model] if args.model else list(system.models)
-    for key in keys:
-        print(describe_model(key, system.model(key)))
+    for key, model in chosen.items():
+        print(describe_model(key, model))
     return 0
 
 
@@ -244,9 +288,10 @@ def _design_args(items: Sequence[str] | None) -> dict[str, Path]:
 def cmd_build(args: argparse.Namespace) -> int:
     import warnings
 
-    from .fmi.build import BuildWarning, build_fmus, format_table
+    from .design.hinf import check_solver
+    from .fmi.build import BuildWarning, build_fmus, format_table, known_roles
 
-    out = Path(args.out)
+    out = _out_dir(args.out)
     sources = args.model or None
     designs = _design_args(args.design)
     if designs and (not sources or len(sources) != 1):
@@ -254,11 +299,14 @@ def cmd_build(args: argparse.Namespace) -> int:
     roles = None
     if args.kinds:
         roles = [r.strip() for item in args.kinds for r in item.split(",") if r.strip()]
+        unknown = [r for r in roles if r not in known_roles()]
+        if unknown:
+            raise ArgumentError(f"--kinds: no role {abbreviate(unknown[0], 30)} (roles: {', '.join(known_roles())})")
     options: dict[str, Any] = {}
     if args.epsilon is not None:
         options["epsilon"] = args.epsilon
     if args.solver is not None:
-        options["solver"] = args.solver
+        options["solver"] = check_solver(args.solver)
     with warnings.catch_warnings(record=True) as caught:  # what the FMUs lack: printed as notes below
         warnings.simplefilter("always", BuildWarning)
         results, notes = build_fmus(sources, out, roles=roles, designs=designs, design_options=options,
@@ -279,7 +327,7 @@ def cmd_build(args: argparse.Namespace) -> int:
 
 
 def cmd_design(args: argparse.Namespace) -> int:
-    from .design.hinf import design_hinf, search_epsilon
+    from .design.hinf import check_solver, design_hinf, search_epsilon
     from .design.result import KIND_PD, KIND_ROBUST
     from .modelfile import load_system
     from .systems.affine import AffineLPV
@@ -291,6 +339,8 @@ def cmd_design(args: argparse.Namespace) -> int:
         raise LpvestError(f"{system.name}: model {args.model or system.default!r} is {type(model).__name__}; "
                           "an H-infinity design needs a polytopic plant or an affine model with general noise")
     kind = {"pd": KIND_PD, "robust": KIND_ROBUST}[args.kind]
+    check_solver(args.solver)
+    out = _out_file(args.out)  # before the solve: an unwritable place fails now, not after it
     t = time.perf_counter()
     if args.epsilon is not None:
         design = design_hinf(model, epsilon=args.epsilon, kind=kind, solver=args.solver)
@@ -301,8 +351,6 @@ def cmd_design(args: argparse.Namespace) -> int:
     # the design names the system (and the parameters) it was made for
     label = system.name + (f" ({', '.join(f'{k} = {v:g}' for k, v in params.items())})" if params else "")
     design = dataclasses.replace(design, plant=label)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
     design.to_json(out)
     eps = "inf" if design.epsilon == float("inf") else f"{design.epsilon:.6g}"
     print(f"{system.name}: {kind} H-infinity filter, gamma = {design.gamma:.6g} at epsilon = {eps} "
@@ -317,7 +365,7 @@ def cmd_cosim(args: argparse.Namespace) -> int:
 
     spec = load_cosim(args.file, fmu_dir=args.fmus)
     if args.ssp:
-        path = spec.to_ssp(args.ssp)
+        path = spec.to_ssp(_out_file(args.ssp, "--ssp"))
         print(f"wrote {path}: {len(spec.components)} components, {len(spec.connections)} connections, "
               f"step {spec.step_size:g}, t = {spec.start_time:g} .. {spec.stop_time:g}")
         print("note: fmpy's simulate_ssp and libcosim step all components in parallel (Jacobi): each connection "
@@ -365,7 +413,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         raise LpvestError("give a sweep file (SPEC.toml; see examples/sweep_kalman.toml), or --list")
     if args.scheduler is not None and args.workers is not None:
         raise LpvestError("--workers starts a local cluster; --scheduler uses an existing one: give one of them")
-    out = Path(args.out) if args.out else Path("out") / f"sweep-{Path(args.spec).stem}"
+    out = _out_dir(Path(args.out) if args.out else Path("out") / f"sweep-{Path(args.spec).stem}")
     try:
         res = run_sweep(args.spec, out, scheduler=args.scheduler, workers=args.workers, fmus=args.fmus,
                         ship_fmus=not args.shared_fmus, overwrite=args.overwrite, retry_failed=args.retry_failed,
@@ -388,11 +436,31 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 
 class _Parser(argparse.ArgumentParser):
-    """An argument parser whose usage errors are one line (and status 2)."""
+    """An argument parser whose usage errors are one line (and status 2), and
+    for which ``-1e300``, ``-.5`` and ``-inf`` are numbers (argparse's own test,
+    ``-1`` and ``-1.5`` only, took the others for options: "expected one
+    argument")."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = _NEGATIVE_NUMBER
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        # an unknown option before the command: say so, not "arguments are required: COMMAND"
+        words = list(sys.argv[1:] if args is None else args)
+        first = words[0].split("=", 1)[0] if words else ""
+        if self.prog == "lpvest" and first.startswith("-") and first not in self._option_string_actions:
+            self.error(f"unrecognized option {abbreviate(words[0], 30)} before the command (a command's options "
+                       "go after it)")
+        return super().parse_known_args(args, namespace)
 
     def error(self, message: str) -> NoReturn:
         text = " ".join(message.split())
         self.exit(2, f"{self.prog}: error: {shorten(text, 240)} (see {self.prog} --help)\n")
+
+
+#: What argparse should take for a negative number (not an option).
+_NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.IGNORECASE)
 
 
 #: Description and examples of each subcommand, for ``lpvest COMMAND --help``
@@ -405,7 +473,7 @@ HELP: dict[str, tuple[str, str]] = {
         "  lpvest systems show my_plant.toml --model plant"),
     "simulate": (
         "Simulate one model of an example system or a model file with default signals (a scheduling sinusoid "
-        "spanning 90 %% of the box, the model's own noise, seeded) and write a CSV, a plot and a summary.",
+        "spanning 90 % of the box, the model's own noise, seeded) and write a CSV, a plot and a summary.",
         "lpvest simulate cox-toth-ex1 --model io --schedule \"0.5 + 0.3*sin(k)\" --out out/sim\n"
         "  lpvest simulate peixoto-ex2 --param rho=10 --steps 200\n"
         "  lpvest simulate my_plant.toml --schedule \"sin(0.1*k)\" --schedule \"0.5\"   # two scheduling components"),
@@ -514,7 +582,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--design", action="append", metavar="[ROLE=]FILE.json",
                    help="carry this design (from `lpvest design`) in the H-infinity filter FMU instead of "
                         "solving one; the role follows the design's kind unless given; needs one --model")
-    p.add_argument("--epsilon", type=float, metavar="E",
+    p.add_argument("--epsilon", type=_number, metavar="E",
                    help="H-infinity filters designed at build time: design at this epsilon instead of searching "
                         "the best one")
     p.add_argument("--solver", metavar="NAME",
@@ -529,7 +597,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--kind", choices=["pd", "robust"], default="pd",
                    help="pd: gain-scheduled (Theorem 1, default); robust: constant (Corollary 1)")
     group = p.add_mutually_exclusive_group()
-    group.add_argument("--epsilon", type=float, help="design at this epsilon")
+    group.add_argument("--epsilon", type=_number, help="design at this epsilon (any real number, inf allowed)")
     group.add_argument("--search", action="store_true", help="search the best epsilon over the real line (default)")
     p.add_argument("--solver", default="AUTO",
                    help="cvxpy solver, or AUTO (default): Clarabel for small LMI programs, SCS for large ones")
@@ -549,7 +617,7 @@ def build_parser() -> argparse.ArgumentParser:
                                      "on Dask: Parquet summary, Zarr trajectories, a figure per metric; resumable")
     p.add_argument("spec", nargs="?", metavar="SPEC.toml", help="sweep file (see examples/sweep_kalman.toml)")
     p.add_argument("--out", help="output folder (default out/sweep-<SPEC>); a rerun of the same spec resumes there")
-    p.add_argument("--workers", type=int, metavar="N",
+    p.add_argument("--workers", type=_workers, metavar="N",
                    help="worker processes of the local Dask cluster (default: one per core; 0: run in this process)")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="run on an existing Dask cluster (e.g. tcp://10.0.0.5:8786; its workers need lpvest)")

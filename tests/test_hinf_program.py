@@ -192,3 +192,15 @@ def test_an_epsilon_curve_records_each_epsilon_and_its_angle(ex1):
     assert np.all(np.isfinite(curve.gamma[1:])) and curve.best()[1] == min(curve.gamma)
     with pytest.raises(ArgumentError, match=r"^n_grid must be an integer, at least 3; found 2$"):
         search_epsilon(ex1, kind=KIND_ROBUST, n_grid=2)
+
+
+@pytest.mark.parametrize("solver", ["BOGUS", "OSQP", 3])
+def test_a_solver_that_cannot_solve_lmis_is_refused_before_compiling(solver):
+    """An unknown name, or an installed solver without semidefinite cones (OSQP): one
+    ArgumentError naming the solvers that can, not cvxpy's SolverError after the compile."""
+    from lpvest.design.hinf import sdp_solvers
+
+    assert {"CLARABEL", "SCS"} <= set(sdp_solvers()) and "OSQP" not in sdp_solvers()
+    with pytest.raises(ArgumentError, match=r"solver .*: expected AUTO or an installed cvxpy solver of "
+                                            r"semidefinite programs \(CLARABEL, SCS"):
+        HinfProgram(2, 2, 1, 1, 2, solver=solver)

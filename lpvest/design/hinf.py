@@ -133,6 +133,8 @@ __all__ = [
     "DEFAULT_MARGIN",
     "AUTO_CLARABEL_MAX_ROWS",
     "choose_solver",
+    "check_solver",
+    "sdp_solvers",
 ]
 
 #: Solver used unless told otherwise: ``"AUTO"`` picks by problem size (see
@@ -152,6 +154,33 @@ _DEFAULT_OPTIONS: dict[str, dict[str, Any]] = {"CLARABEL": {"max_threads": 1}}
 RETRY_MARGIN_FACTOR = 30.0
 
 _ACCEPTED = ("optimal", "optimal_inaccurate")
+
+
+def sdp_solvers() -> list[str]:
+    """The installed cvxpy solvers that handle semidefinite constraints (the
+    LMIs), e.g. ``["CLARABEL", "SCS"]``."""
+    from cvxpy.reductions.solvers import defines
+
+    return [name for name in defines.INSTALLED_CONIC_SOLVERS
+            if any(c.__name__ in ("PSD", "SvecPSD") for c in defines.SOLVER_MAP_CONIC[name].SUPPORTED_CONSTRAINTS)]
+
+
+def check_solver(solver: object) -> str:
+    """``solver`` upper-cased if it is ``"AUTO"`` or an installed solver of
+    semidefinite programs; else :class:`~lpvest.errors.ArgumentError` naming
+    them (before anything is compiled or solved).
+
+    Examples
+    --------
+    >>> check_solver("clarabel")
+    'CLARABEL'
+    """
+    name = str(solver).upper() if isinstance(solver, str) else ""
+    known = sdp_solvers()
+    if name != "AUTO" and name not in known:
+        raise ArgumentError(f"solver {abbreviate(solver, 30)}: expected AUTO or an installed cvxpy solver of "
+                            f"semidefinite programs ({', '.join(known) or 'none installed'})")
+    return name
 
 
 def choose_solver(n_vertices: int, nx: int, nz: int, nw: int, kind: str = KIND_PD) -> str:
@@ -544,7 +573,7 @@ class HinfProgram:
         t0 = time.perf_counter()
         self.n_vertices, self.nx, self.ny, self.nz, self.nw = (int(v) for v in dims.values())
         self.kind = kind
-        self.solver = str(solver).upper()
+        self.solver = check_solver(solver)
         self.auto = self.solver == "AUTO"  #: the solver was chosen by size (with a Clarabel fallback)
         if self.auto:
             self.solver = choose_solver(n_vertices, nx, nz, nw, kind)
@@ -1054,6 +1083,7 @@ def _program_for(
         return program
     if kind not in (KIND_PD, KIND_ROBUST):
         raise ArgumentError(f"kind must be {KIND_PD!r} or {KIND_ROBUST!r}; found {abbreviate(kind, 30)}")
+    check_solver(solver)
     _check_margin(margin)
     dims = (plant.n_vertices, plant.nx, plant.ny, plant.nz, plant.nw)
     opts = tuple(sorted((solver_options or {}).items()))

@@ -80,6 +80,7 @@ from .registry import EstimatorKind, estimator_kinds, resolve
 from .spec import SPEC_FILE, SPEC_FORMAT
 
 __all__ = [
+    "known_roles",
     "FmuPlan",
     "BuildResult",
     "BuildError",
@@ -196,6 +197,14 @@ def _estimator_step(kind: EstimatorKind, default: float) -> float:
         if par.name == kind.sample_time:
             return float(par.start)
     raise BuildError(f"estimator {kind.role}: sample_time names {kind.sample_time!r}, which is not a parameter")
+
+
+def known_roles() -> list[str]:
+    """Every FMU role a build can make: the plant, its signal sources and each
+    estimator kind (:func:`lpvest.fmi.registry.estimator_kinds`)."""
+    from .registry import estimator_kinds
+
+    return ["Plant", "Scheduler", "Source", *(k.role for k in estimator_kinds())]
 
 
 def plan_system(
@@ -476,16 +485,7 @@ def _design_text(plan: FmuPlan, progress: Callable[[str], None] | None) -> tuple
     assert plan.estimator is not None and plan.estimator.design is not None
     model = load_system(plan.system_path).model(plan.model_key)
     if plan.design is not None:
-        from ..design.result import HinfDesign
-
-        try:
-            text = plan.design.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise BuildError(f"{plan.design}: cannot be read: {exc.strerror}") from exc
-        from ..systems.polytopic import hinf_setting
-
-        HinfDesign.from_json(text).check_model(hinf_setting(model), source=str(plan.design),
-                                               plant_name=plan.system_name)
+        text = _check_design_file(plan, model)
         return text, f"file {plan.design.name}"  # carried as given: the same file, the same bytes
     options = dict(plan.design_options)
     settings = "".join(f", {k} = {v}" for k, v in sorted(options.items()))
@@ -505,6 +505,24 @@ def _design_text(plan: FmuPlan, progress: Callable[[str], None] | None) -> tuple
         partial.write_text(made, encoding="utf-8")
         partial.replace(cached)  # with the solver's timings; the FMU carries the design without them
     return without_timings(made) if isinstance(made, str) else made, origin
+
+
+def _check_design_file(plan: FmuPlan, model: Any = None) -> str:
+    """The text of ``plan.design``, checked against the plan's model (its
+    dimensions and digest); :class:`BuildError` or the design's own error."""
+    from ..design.result import HinfDesign
+    from ..modelfile import load_system
+    from ..systems.polytopic import hinf_setting
+
+    assert plan.design is not None
+    try:
+        text = plan.design.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise BuildError(f"{plan.design}: cannot be read: {exc.strerror}") from exc
+    if model is None:
+        model = load_system(plan.system_path).model(plan.model_key)
+    HinfDesign.from_json(text).check_model(hinf_setting(model), source=str(plan.design), plant_name=plan.system_name)
+    return text
 
 
 def _design_cache_file(plan: FmuPlan) -> Path | None:
@@ -805,6 +823,9 @@ def build_fmus(
         notes += more
         if wanted is not None:
             plans = [p for p in plans if p.role in wanted]
+        for plan in plans:  # a design file for another plant is refused before anything is built
+            if plan.design is not None and plan.estimator is not None:
+                _check_design_file(plan)
         for n, plan in enumerate(plans, 1):
             solving = plan.estimator is not None and bool(plan.estimator.design) and plan.design is None
             if solving:
