@@ -89,6 +89,9 @@ class SweepResult:
         One line on what each task runs (from the study).
     figures : tuple of Path, default ()
         The metric figures written (``out/figures/<metric>.png``).
+    repaired : tuple of str, default ()
+        What the rerun found damaged in ``out`` (a part file, trajectories
+        whose SHA-256 differs from the one recorded) and ran again, one line each.
     """
 
     out: Path
@@ -103,6 +106,7 @@ class SweepResult:
     engine: str
     description: str
     figures: tuple[Path, ...] = ()
+    repaired: tuple[str, ...] = ()
 
     @property
     def failures(self) -> list[tuple[int, str]]:
@@ -144,6 +148,7 @@ class SweepResult:
         n_seeds = len(spec.seeds.keys) if spec.seeds else 1
         shape = f"{n_points} point(s) x {n_seeds} seed(s)" if spec.seeds else f"{n_points} point(s)"
         lines = [f"sweep {spec.origin}: {self.description}; {self.n_tasks} tasks ({shape})"]
+        lines += [f"repaired: {note}" for note in self.repaired]
         if self.ran:
             lines.append(f"ran {self.ran} task(s) in {self.seconds:.1f} s ({self.engine}); {self.resumed} "
                          f"finished earlier (resumed); {len(self.failures)} failed")
@@ -283,6 +288,8 @@ def run_sweep(
     store = SweepStore(out, spec, prepared, tasks, key, overwrite=overwrite, retry_failed=retry_failed,
                        flush_every=flush_every, flush_seconds=flush_seconds)
     pending = store.pending()
+    for note in store.notes:  # at once, in case the run is interrupted before its report
+        print(f"lpvest: repaired: {note}", file=sys.stderr, flush=True)
     show = sys.stderr.isatty() if progress is None else progress
     desc = f"sweep {Path(spec.origin).name}"
 
@@ -337,7 +344,8 @@ def run_sweep(
         raise SweepInterrupted(Path(out), len(store.rows), len(tasks), signum=exit_status(exc) - 128,
                                finishing=True) from None
     return SweepResult(Path(out), spec, summary, prepared.metrics, len(tasks), len(store.rows) - store.resumed,
-                       store.resumed, len(store.rows) == len(tasks), seconds, label, prepared.description, figures)
+                       store.resumed, len(store.rows) == len(tasks), seconds, label, prepared.description, figures,
+                       tuple(store.notes))
 
 
 def _peek(path: Path) -> dict[str, Any]:
