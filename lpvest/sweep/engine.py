@@ -77,6 +77,21 @@ def _run(task: Task, fn: Callable[[Any, Task], TaskResult], shared: Any) -> Outc
     return execute(fn, shared, task)
 
 
+class _AbandonedGathers(logging.Filter):
+    """Drops tornado's log of an ``as_completed`` callback whose gather failed
+    because the cluster closed under it: after an interruption (or an error)
+    the engine cancels the pending tasks and closes the cluster while results
+    may still be on their way; that failure is expected and its traceback,
+    printed after "interrupted", was only noise (and made the Ctrl-C test of
+    ``lpvest sweep`` fail on a loaded machine: "Traceback" in stderr)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return "as_completed._track_future" not in record.getMessage()
+
+
+_ABANDONED_GATHERS = _AbandonedGathers()
+
+
 class Engine:
     """Where sweep tasks run: an embedded ``LocalCluster`` or an existing Dask cluster.
 
@@ -155,6 +170,9 @@ class Engine:
         if self.quiet:
             for name in ("distributed", "distributed.nanny", "distributed.worker", "distributed.scheduler"):
                 logging.getLogger(name).setLevel(logging.ERROR)
+        tornado_log = logging.getLogger("tornado.application")
+        if _ABANDONED_GATHERS not in tornado_log.filters:
+            tornado_log.addFilter(_ABANDONED_GATHERS)
         try:
             if self.scheduler is None:
                 n = self.workers or os.cpu_count() or 1
@@ -306,6 +324,7 @@ class Engine:
                     future.release()
         except BaseException:
             client.cancel([f for f in futures if index_of[f.key] not in outcomes] + [shared_future], force=True)
+            ac.clear()
             raise
         finally:
             bar.close()
