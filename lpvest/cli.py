@@ -110,6 +110,11 @@ def _workers(text: str) -> int:
     return value
 
 
+def _echo(message: str) -> None:
+    """A progress line on stderr (plain lines: readable in a redirected log)."""
+    print(message, file=sys.stderr, flush=True)
+
+
 def _seed(text: str) -> int:
     """``--seed``: a non-negative integer (numpy's seeds)."""
     try:
@@ -310,7 +315,7 @@ def cmd_build(args: argparse.Namespace) -> int:
     with warnings.catch_warnings(record=True) as caught:  # what the FMUs lack: printed as notes below
         warnings.simplefilter("always", BuildWarning)
         results, notes = build_fmus(sources, out, roles=roles, designs=designs, design_options=options,
-                                    progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+                                    progress=None if args.quiet else _echo)
     for w in caught:
         if issubclass(w.category, BuildWarning):
             notes.append(str(w.message))
@@ -345,7 +350,7 @@ def cmd_design(args: argparse.Namespace) -> int:
     if args.epsilon is not None:
         design = design_hinf(model, epsilon=args.epsilon, kind=kind, solver=args.solver)
     else:
-        design = search_epsilon(model, kind=kind, solver=args.solver).design
+        design = search_epsilon(model, kind=kind, solver=args.solver, progress=not args.quiet).design
     seconds = time.perf_counter() - t
     params = _parse_params(args.param)
     # the design names the system (and the parameters) it was made for
@@ -374,7 +379,7 @@ def cmd_cosim(args: argparse.Namespace) -> int:
     out = _out_dir(args.out)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result = spec.run(progress=None)
+        result = spec.run(progress=False if args.quiet else None)
     for w in caught:  # e.g. a component discarded a step: the run stopped there
         print(f"lpvest: warning: {' '.join(str(w.message).split())}", file=sys.stderr)
     stem = spec.path.stem
@@ -417,7 +422,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     try:
         res = run_sweep(args.spec, out, scheduler=args.scheduler, workers=args.workers, fmus=args.fmus,
                         ship_fmus=not args.shared_fmus, overwrite=args.overwrite, retry_failed=args.retry_failed,
-                        progress=False if args.no_progress else None, plot=not args.no_plot)
+                        progress=False if args.no_progress or args.quiet else None, plot=not args.no_plot)
     except SweepInterrupted as exc:
         print(f"lpvest: {exc}", file=sys.stderr)
         return exit_status(exc)
@@ -587,6 +592,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "the best one")
     p.add_argument("--solver", metavar="NAME",
                    help="H-infinity filters designed at build time: cvxpy solver, or AUTO (default)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines or bars (results and errors only)")
     p.set_defaults(func=cmd_build)
 
     p = sub.add_parser("design", help="design an H-infinity filter (LMIs) and write it as JSON for `lpvest build "
@@ -602,6 +608,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--solver", default="AUTO",
                    help="cvxpy solver, or AUTO (default): Clarabel for small LMI programs, SCS for large ones")
     p.add_argument("--out", required=True, metavar="DESIGN.json", help="the design file to write")
+    p.add_argument("--quiet", action="store_true", help="no progress lines or bars (results and errors only)")
     p.set_defaults(func=cmd_design)
 
     p = sub.add_parser("cosim", help="co-simulate FMUs described in a TOML file; CSV, plot, summary (or --ssp)")
@@ -611,6 +618,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="folder of the FMUs named in the file (default: the file's fmu_dir, else fmu-build)")
     p.add_argument("--ssp", metavar="OUT.ssp", help="write the system as an SSP file (FMUs included) and stop")
     p.add_argument("--no-plot", action="store_true", help="write the CSV only")
+    p.add_argument("--quiet", action="store_true", help="no progress lines or bars (results and errors only)")
     p.set_defaults(func=cmd_cosim)
 
     p = sub.add_parser("sweep", help="run a co-simulation (or an experiment's Monte Carlo) over seeds and parameters "
@@ -630,6 +638,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-plot", action="store_true", help="no figures")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--list", action="store_true", help="list the experiments that can be swept")
+    p.add_argument("--quiet", action="store_true", help="no progress lines or bars (results and errors only)")
     p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("validate", help="validate FMUs with fmpy (exit status 1 on any problem)")

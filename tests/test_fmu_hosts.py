@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -328,11 +329,21 @@ def test_lpvest_build_for_a_users_model_file(fmus, tmp_path, capsys):
     assert f"{len(names)} FMU(s)" in text and "all valid" in text
     assert "building AffineDemoHinfPD (6/7)" in captured.err  # progress per FMU
     assert "AffineDemoHinfPD: designing (lpvest.fmi.designs:hinf_pd, epsilon = 1.0)" in captured.err
+    # each design's gamma, epsilon and solver once; no progress bar into a redirected stream
+    designed = [line for line in captured.err.splitlines() if line.startswith("AffineDemoHinfPD: designed: ")]
+    assert len(designed) == 1 and re.fullmatch(r"AffineDemoHinfPD: designed: gamma = [0-9.e+-]+ at epsilon = 1 "
+                                               r"\((CLARABEL|SCS), [0-9.]+ s\)", designed[0]), captured.err
+    assert "\r" not in captured.err
     first = (out / "AffineDemoHinfPD.fmu").read_bytes()
     # a rebuild reuses the designs made at build time (out/.designs): no solve, the same FMU
     assert main(args + ["--kinds", "HinfPD"]) == 0
-    assert "AffineDemoHinfPD: design reused from" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "AffineDemoHinfPD: design reused from" in err and designed[0].split(": designed")[1] in err
     assert (out / "AffineDemoHinfPD.fmu").read_bytes() == first
+    # --quiet: the table and the verdict, no progress lines
+    assert main(args + ["--kinds", "HinfPD", "--quiet"]) == 0
+    quiet = capsys.readouterr()
+    assert quiet.err == "" and "1 FMU(s)" in quiet.out
 
 
 @pytest.mark.slow

@@ -100,3 +100,21 @@ def test_a_truncated_sweep_json_without_parts_of_this_sweep_is_refused_with_its_
                                          r"holds \(this one: [0-9a-f]{12}\): choose another output folder, or "
                                          r"overwrite them"):
         run_sweep(spec, out, workers=0, progress=False, plot=False)
+
+
+def test_the_summary_carries_each_metrics_definition_and_pandas_reads_it(clean):
+    import pandas as pd
+    import pyarrow.parquet as pq
+
+    _, res = clean
+    path = res.out / "summary.parquet"
+    definitions = json.loads(pq.read_schema(path).metadata[b"lpvest_metrics"])
+    # tests/test_sweep.py SPEC: the [metrics] table, as written
+    assert definitions == {
+        "rms": {"kind": "rms_error", "estimate": "kalman.xhat", "truth": "plant.x", "start": 0},
+        "peak": {"kind": "max_abs_error", "estimate": "kalman.xhat", "truth": "plant.x", "start": 5},
+        "trace_P": {"kind": "final_trace", "of": "kalman.P", "start": 0},
+        "loglik": {"kind": "final", "of": "kalman.loglik", "start": 0},
+    }
+    frame = pd.read_parquet(path)  # pandas comes with the sweep extra
+    assert list(frame["task"]) == list(range(N)) and frame["rms"].notna().all()

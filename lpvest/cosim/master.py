@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 import re
 import shutil
+import sys
 import tempfile
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
@@ -918,7 +919,8 @@ class CoSimulation:
         extra = [(i, buf, j) for i, (buf, j) in enumerate(rec_cols) if buf is not self._store_c]
         extra_data = np.empty((n_steps + 1, len(extra))) if extra else None
         steppers = [(u.funcs["fmi2DoStep"], u.fmu.component, u) for u in self._units]
-        show = progress if progress is not None else n_steps > 20_000
+        # by default a bar for long runs, and only on a terminal (never carriage returns into a log)
+        show = progress if progress is not None else n_steps > 20_000 and sys.stderr.isatty()
         bar = None
         if show:
             from tqdm import tqdm

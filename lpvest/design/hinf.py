@@ -1380,7 +1380,7 @@ def search_epsilon(
         raise LMIInfeasibleError(_infeasible_message(plant, prog, "every epsilon", unstable), status="infeasible",
                                  detail=unstable)
     points: dict[float, DesignAttempt] = {}
-    bar = _progress_bar(progress, f"epsilon search ({prog.kind}, {prog.solver})")
+    bar = _progress_bar(progress, f"epsilon search ({prog.kind}, {prog.solver})", n_grid)
 
     def evaluate(phi: float) -> float:
         key = _canonical_phi(phi)
@@ -1388,6 +1388,9 @@ def search_epsilon(
             points[key] = prog.attempt(plant, phi=key)
             if bar is not None:
                 best = min(p.gamma for p in points.values())
+                if bar.n >= bar.total:  # the grid is done: each refinement step adds one
+                    bar.total = bar.n + 1
+                    bar.set_description_str(f"epsilon search ({prog.kind}, {prog.solver}), refining", refresh=False)
                 bar.set_postfix_str(f"best gamma {best:.6g}", refresh=False)
                 bar.update(1)
         return points[key].gamma
@@ -1398,12 +1401,17 @@ def search_epsilon(
         return _search(plant, prog, evaluate, points, n_grid, n_refine, xatol)
 
 
-def _progress_bar(progress: bool, desc: str) -> Any:
-    if not progress:
+def _progress_bar(progress: bool, desc: str, total: int) -> Any:
+    """A bar of the designs solved, out of ``total`` (the grid; a refinement
+    raises it by one a step), with its ETA; it stays when done. Only on a
+    terminal: never carriage returns into a redirected log."""
+    import sys
+
+    if not progress or not sys.stderr.isatty():
         return None
     from tqdm import tqdm
 
-    return tqdm(desc=desc, unit="design", leave=False)
+    return tqdm(desc=desc, total=total, unit="design", leave=True)
 
 
 def _search(

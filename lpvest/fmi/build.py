@@ -492,19 +492,35 @@ def _design_text(plan: FmuPlan, progress: Callable[[str], None] | None) -> tuple
     origin = f"designed at build time by {plan.estimator.design}{settings}"
     cached = _design_cache_file(plan)
     if cached is not None and cached.is_file():
+        text = cached.read_text(encoding="utf-8")
         if progress is not None:
-            progress(f"{plan.identifier}: design reused from {cached}")
-        return without_timings(cached.read_text(encoding="utf-8")), origin
+            progress(f"{plan.identifier}: design reused from {cached}{_design_summary(text)}")
+        return without_timings(text), origin
     if progress is not None:
         progress(f"{plan.identifier}: designing ({plan.estimator.design}{settings})")
     design = resolve(plan.estimator.design)(model, progress=progress is not None, **options)
     made: str | bytes = design if isinstance(design, str) else encode_state(design)
+    if progress is not None and isinstance(made, str):
+        progress(f"{plan.identifier}: designed{_design_summary(made)}")
     if cached is not None and isinstance(made, str):
         cached.parent.mkdir(parents=True, exist_ok=True)
         partial = cached.with_suffix(".part")
         partial.write_text(made, encoding="utf-8")
         partial.replace(cached)  # with the solver's timings; the FMU carries the design without them
     return without_timings(made) if isinstance(made, str) else made, origin
+
+
+def _design_summary(text: str) -> str:
+    """``": gamma = ..., epsilon = ..., solver ... (... s)"`` of an H-infinity design's
+    JSON text; empty for another format."""
+    try:
+        data = json.loads(text)
+        eps = "inf" if data["epsilon"] is None else f"{data['epsilon']:.6g}"
+        solver = data["solver"]
+        seconds = f", {solver['solve_time']:.1f} s" if "solve_time" in solver else ""
+        return f": gamma = {data['gamma']:.7g} at epsilon = {eps} ({solver['name']}{seconds})"
+    except (ValueError, KeyError, TypeError):
+        return ""
 
 
 def _check_design_file(plan: FmuPlan, model: Any = None) -> str:
