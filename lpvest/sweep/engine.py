@@ -324,7 +324,6 @@ class Engine:
                     future.release()
         except BaseException:
             client.cancel([f for f in futures if index_of[f.key] not in outcomes] + [shared_future], force=True)
-            ac.clear()
             raise
         finally:
             bar.close()
