@@ -15,16 +15,16 @@ import numpy as np
 import pytest
 
 from lpvest.sweep import SweepError, run_sweep
-from tests.test_interrupt import cox_fmus  # noqa: F401 - the module fixture
 from tests.test_sweep import _write
 
 N = 6
 
 
 @pytest.fixture(scope="module")
-def clean(cox_fmus, tmp_path_factory):  # noqa: F811
+def clean(fmus, tmp_path_factory):
+    # the session's FMUs (tests/conftest_fmu.py), as tests/test_sweep.py uses
     folder = tmp_path_factory.mktemp("store")
-    spec = _write(folder / "spec", cox_fmus, n=N)
+    spec = _write(folder / "spec", fmus, n=N)
     res = run_sweep(spec, folder / "clean", workers=0, progress=False, plot=False, flush_every=2)
     assert res.complete and not res.failures and len(list((folder / "clean" / "parts").glob("part-*.parquet"))) == 3
     return spec, res
