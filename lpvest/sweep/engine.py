@@ -109,7 +109,11 @@ class Engine:
     start_timeout : float
         Seconds to wait for the cluster to start, or to connect to it.
     quiet : bool
-        Silence Dask's log messages below ERROR (a killed worker, a restart).
+        Silence Dask's log messages below ERROR in this process (a killed
+        worker, a restart), and below CRITICAL in the local cluster's worker
+        processes: a worker's errors are the tasks' (recorded as their
+        outcome) or the cluster closing under it (its heartbeat failing after
+        Ctrl-C, on a loaded machine), which is no news.
 
     Examples
     --------
@@ -180,7 +184,7 @@ class Engine:
                 with dask.config.set(LOCAL_WORKER_CONFIG):
                     self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                                  dashboard_address=":0", preload=["lpvest.sweep._worker"],
-                                                 silence_logs=logging.ERROR if self.quiet else logging.WARNING)
+                                                 silence_logs=logging.CRITICAL if self.quiet else logging.WARNING)
                 self._client = Client(self._cluster, timeout=self.start_timeout)
             else:
                 self._client = Client(self.scheduler, timeout=self.start_timeout)
