@@ -106,7 +106,10 @@ def test_scs_stopped_by_its_own_sigint_handler_is_an_interruption_not_a_failed_p
         if proc.poll() is None:  # pragma: no cover
             proc.kill()
     assert proc.returncode == 0, stderr
-    assert stdout.strip() == "interrupted Interrupted", (stdout, stderr)
+    # when the signal lands while SCS iterates, SCS prints "Failure:interrupted" (its C code, stdout)
+    # first: 1 run in 50 under load did, and a signal sent seconds later always does
+    assert stdout.splitlines()[-1] == "interrupted Interrupted", (stdout, stderr)
+    assert set(stdout.splitlines()[:-1]) <= {"Failure:interrupted"}, (stdout, stderr)
 
 
 # ---------------------------------------------------------------------------
