@@ -41,7 +41,7 @@ from collections.abc import Callable, Iterator
 from typing import Any, TypeVar
 
 __all__ = ["Interrupted", "handling_signals", "raise_if_pending", "call_interruptibly", "hold", "holds",
-           "interruptible", "exit_status"]
+           "interruptible", "exit_status", "abandoned_calls"]
 
 T = TypeVar("T")
 
@@ -153,6 +153,7 @@ def call_interruptibly(fn: Callable[[], T], *, on_abandon: Callable[[threading.T
     try:
         worker.join()  # interruptible: the handler raises here
     except BaseException:
+        _abandoned.append(worker)
         if on_abandon is not None:
             on_abandon(worker)
         raise
@@ -164,6 +165,18 @@ def call_interruptibly(fn: Callable[[], T], *, on_abandon: Callable[[threading.T
 def holds(moment: str) -> bool:
     """Whether the test hook holds at ``moment``."""
     return os.environ.get("LPVEST_TEST_HOLD") == moment
+
+
+_abandoned: list[threading.Thread] = []
+
+
+def abandoned_calls() -> bool:
+    """Whether a call :func:`call_interruptibly` abandoned is still running.
+    A process that exits then should leave with ``os._exit`` (after flushing
+    its output): a native solver still running while the interpreter and the
+    C++ runtime shut down can abort the process ("terminate called without
+    an active exception", SIGABRT) instead of the exit status it chose."""
+    return any(t.is_alive() for t in _abandoned)
 
 
 def hold(moment: str) -> None:

@@ -38,7 +38,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from ._interrupt import exit_status, handling_signals
+from ._interrupt import abandoned_calls, exit_status, handling_signals
 from .errors import ArgumentError, LpvestError, OutputError, abbreviate, shorten
 
 __all__ = ["main", "describe_model"]
@@ -654,6 +654,18 @@ def _version() -> str:
     return __version__
 
 
+def run(argv: Sequence[str] | None = None) -> int:
+    """:func:`main` for the console script: after an interruption that left a
+    native solve running, the process leaves at once with the status (see
+    :func:`lpvest._interrupt.abandoned_calls`)."""
+    status = main(argv)
+    if abandoned_calls():
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+    return status
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -705,4 +717,4 @@ def _one_line(exc: BaseException) -> str:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    sys.exit(run())
