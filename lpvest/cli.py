@@ -28,16 +28,19 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
+import re
 import sys
 import time
 import warnings
 import zipfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
 import numpy as np
 
+from ._interrupt import abandoned_calls, exit_status, handling_signals
 from .errors import ArgumentError, LpvestError, OutputError, abbreviate, shorten
 
 __all__ = ["main", "describe_model"]
@@ -56,16 +59,62 @@ def _parse_params(items: Sequence[str] | None) -> dict[str, float]:
     return out
 
 
-def _out_dir(path: str, option: str = "--out") -> Path:
-    """The output folder, created; one line naming the option if it cannot be."""
+def _out_dir(path: str | Path, option: str = "--out") -> Path:
+    """The output folder, created and writable, before any slow work; one line
+    naming the option (and the part of the path in the way) if it cannot be.
+    Every command that writes uses it."""
     out = Path(path)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        reason = "it is a file, not a folder" if isinstance(exc, FileExistsError) else exc.strerror or exc
+        if isinstance(exc, FileExistsError | NotADirectoryError):
+            blocker = next((p for p in (out, *out.parents) if p.exists() and not p.is_dir()), out)
+            reason = f"{shorten(str(blocker), 60)} is a file, not a folder"
+        else:
+            reason = str(exc.strerror or exc)
         raise OutputError(f"{option} {shorten(str(out), 60)}: cannot create the output folder ({reason})"
                           ) from None
+    if not os.access(out, os.W_OK | os.X_OK):
+        raise OutputError(f"{option} {shorten(str(out), 60)}: cannot write in the output folder (permission denied)")
     return out
+
+
+def _out_file(path: str, option: str = "--out") -> Path:
+    """An output file: its folder as :func:`_out_dir`, and not a folder itself."""
+    out = Path(path)
+    if out.is_dir():
+        raise OutputError(f"{option} {shorten(str(out), 60)}: is a folder; expected a file name")
+    _out_dir(out.parent if str(out.parent) else ".", option)
+    return out
+
+
+def _number(text: str) -> float:
+    """A number option (``--epsilon``): any float, ``inf`` and ``-inf`` included,
+    never nan."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, found {abbreviate(text, 30)}") from None
+    if value != value:
+        raise argparse.ArgumentTypeError(f"expected a number (inf and -inf allowed), found {text}")
+    return value
+
+
+def _workers(text: str) -> int:
+    """``--workers``: 0 (this process) or a number of worker processes."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected 0 (run in this process) or a number of worker processes, "
+                                         f"found {abbreviate(text, 30)}")
+    return value
+
+
+def _echo(message: str) -> None:
+    """A progress line on stderr (plain lines: readable in a redirected log)."""
+    print(message, file=sys.stderr, flush=True)
 
 
 def _seed(text: str) -> int:
@@ -76,18 +125,6 @@ def _seed(text: str) -> int:
         raise argparse.ArgumentTypeError(f"expected a non-negative integer, found {abbreviate(text, 30)}") from None
     if value < 0:
         raise argparse.ArgumentTypeError(f"expected a non-negative integer, found {value}")
-    return value
-
-
-def _workers(text: str) -> int:
-    """``reproduce --workers``: a non-negative integer (0: in this process)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of worker processes (0: none), found "
-                                         f"{abbreviate(text, 30)}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected a number of worker processes (0: none), found {value}")
     return value
 
 
@@ -143,6 +180,8 @@ def cmd_systems(args: argparse.Namespace) -> int:
         raise ArgumentError("systems: expected one example name or model file, e.g. `lpvest systems show "
                             "peixoto-ex1` (or nothing, to list the examples)")
     system = load_system(words[0], parameters=_parse_params(args.param))
+    keys = [args.model] if args.model else list(system.models)
+    chosen = {key: system.model(key) for key in keys}  # a wrong --model fails before anything is printed
     print(f"{system.name}: {system.title}")
     if system.source:
         print(f"  source: {system.source}")
@@ -159,9 +198,8 @@ def cmd_systems(args: argparse.Namespace) -> int:
         s = system.scheduling
         box = ", ".join(f"{n} in [{lo:g}, {hi:g}]" for n, lo, hi in zip(s.names, s.lower, s.upper, strict=True))
         print(f"  scheduling: {box}")
-    keys = [args.model] if args.model else list(system.models)
-    for key in keys:
-        print(describe_model(key, system.model(key)))
+    for key, model in chosen.items():
+        print(describe_model(key, model))
     return 0
 
 
@@ -266,9 +304,10 @@ def _design_args(items: Sequence[str] | None) -> dict[str, Path]:
 def cmd_build(args: argparse.Namespace) -> int:
     import warnings
 
-    from .fmi.build import BuildWarning, build_fmus, format_table
+    from .design.hinf import check_solver
+    from .fmi.build import BuildWarning, build_fmus, format_table, known_roles
 
-    out = Path(args.out)
+    out = _out_dir(args.out)
     sources = args.model or None
     designs = _design_args(args.design)
     if designs and (not sources or len(sources) != 1):
@@ -276,16 +315,18 @@ def cmd_build(args: argparse.Namespace) -> int:
     roles = None
     if args.kinds:
         roles = [r.strip() for item in args.kinds for r in item.split(",") if r.strip()]
+        unknown = [r for r in roles if r not in known_roles()]
+        if unknown:
+            raise ArgumentError(f"--kinds: no role {abbreviate(unknown[0], 30)} (roles: {', '.join(known_roles())})")
     options: dict[str, Any] = {}
     if args.epsilon is not None:
         options["epsilon"] = args.epsilon
     if args.solver is not None:
-        options["solver"] = args.solver
+        options["solver"] = check_solver(args.solver)
     with warnings.catch_warnings(record=True) as caught:  # what the FMUs lack: printed as notes below
         warnings.simplefilter("always", BuildWarning)
         results, notes = build_fmus(sources, out, roles=roles, designs=designs, design_options=options,
-                                    progress=lambda msg: print(msg, file=sys.stderr, flush=True),
-                                    backend=args.backend)
+                                    progress=None if args.quiet else _echo, backend=args.backend)
     for w in caught:
         if issubclass(w.category, BuildWarning):
             notes.append(str(w.message))
@@ -302,7 +343,7 @@ def cmd_build(args: argparse.Namespace) -> int:
 
 
 def cmd_design(args: argparse.Namespace) -> int:
-    from .design.hinf import design_hinf, search_epsilon
+    from .design.hinf import check_solver, design_hinf, search_epsilon
     from .design.result import KIND_PD, KIND_ROBUST
     from .modelfile import load_system
     from .systems.affine import AffineLPV
@@ -314,18 +355,18 @@ def cmd_design(args: argparse.Namespace) -> int:
         raise LpvestError(f"{system.name}: model {args.model or system.default!r} is {type(model).__name__}; "
                           "an H-infinity design needs a polytopic plant or an affine model with general noise")
     kind = {"pd": KIND_PD, "robust": KIND_ROBUST}[args.kind]
+    check_solver(args.solver)
+    out = _out_file(args.out)  # before the solve: an unwritable place fails now, not after it
     t = time.perf_counter()
     if args.epsilon is not None:
         design = design_hinf(model, epsilon=args.epsilon, kind=kind, solver=args.solver)
     else:
-        design = search_epsilon(model, kind=kind, solver=args.solver).design
+        design = search_epsilon(model, kind=kind, solver=args.solver, progress=not args.quiet).design
     seconds = time.perf_counter() - t
     params = _parse_params(args.param)
     # the design names the system (and the parameters) it was made for
     label = system.name + (f" ({', '.join(f'{k} = {v:g}' for k, v in params.items())})" if params else "")
     design = dataclasses.replace(design, plant=label)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
     design.to_json(out)
     eps = "inf" if design.epsilon == float("inf") else f"{design.epsilon:.6g}"
     print(f"{system.name}: {kind} H-infinity filter, gamma = {design.gamma:.6g} at epsilon = {eps} "
@@ -340,7 +381,7 @@ def cmd_cosim(args: argparse.Namespace) -> int:
 
     spec = load_cosim(args.file, fmu_dir=args.fmus)
     if args.ssp:
-        path = spec.to_ssp(args.ssp)
+        path = spec.to_ssp(_out_file(args.ssp, "--ssp"))
         print(f"wrote {path}: {len(spec.components)} components, {len(spec.connections)} connections, "
               f"step {spec.step_size:g}, t = {spec.start_time:g} .. {spec.stop_time:g}")
         print("note: fmpy's simulate_ssp and libcosim step all components in parallel (Jacobi): each connection "
@@ -349,7 +390,7 @@ def cmd_cosim(args: argparse.Namespace) -> int:
     out = _out_dir(args.out)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result = spec.run(progress=None)
+        result = spec.run(progress=False if args.quiet else None)
     for w in caught:  # e.g. a component discarded a step: the run stopped there
         print(f"lpvest: warning: {' '.join(str(w.message).split())}", file=sys.stderr)
     stem = spec.path.stem
@@ -388,14 +429,14 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         raise LpvestError("give a sweep file (SPEC.toml; see examples/sweep_kalman.toml), or --list")
     if args.scheduler is not None and args.workers is not None:
         raise LpvestError("--workers starts a local cluster; --scheduler uses an existing one: give one of them")
-    out = Path(args.out) if args.out else Path("out") / f"sweep-{Path(args.spec).stem}"
+    out = _out_dir(Path(args.out) if args.out else Path("out") / f"sweep-{Path(args.spec).stem}")
     try:
         res = run_sweep(args.spec, out, scheduler=args.scheduler, workers=args.workers, fmus=args.fmus,
                         ship_fmus=not args.shared_fmus, overwrite=args.overwrite, retry_failed=args.retry_failed,
-                        progress=False if args.no_progress else None, plot=not args.no_plot)
+                        progress=False if args.no_progress or args.quiet else None, plot=not args.no_plot)
     except SweepInterrupted as exc:
         print(f"lpvest: {exc}", file=sys.stderr)
-        return 130
+        return exit_status(exc)
     print(res.report())
     return 1 if res.failures else 0
 
@@ -411,11 +452,31 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 
 class _Parser(argparse.ArgumentParser):
-    """An argument parser whose usage errors are one line (and status 2)."""
+    """An argument parser whose usage errors are one line (and status 2), and
+    for which ``-1e300``, ``-.5`` and ``-inf`` are numbers (argparse's own test,
+    ``-1`` and ``-1.5`` only, took the others for options: "expected one
+    argument")."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = _NEGATIVE_NUMBER
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        # an unknown option before the command: say so, not "arguments are required: COMMAND"
+        words = list(sys.argv[1:] if args is None else args)
+        first = words[0].split("=", 1)[0] if words else ""
+        if self.prog == "lpvest" and first.startswith("-") and first not in self._option_string_actions:
+            self.error(f"unrecognized option {abbreviate(words[0], 30)} before the command (a command's options "
+                       "go after it)")
+        return super().parse_known_args(args, namespace)
 
     def error(self, message: str) -> NoReturn:
         text = " ".join(message.split())
         self.exit(2, f"{self.prog}: error: {shorten(text, 240)} (see {self.prog} --help)\n")
+
+
+#: What argparse should take for a negative number (not an option).
+_NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.IGNORECASE)
 
 
 #: Description and examples of each subcommand, for ``lpvest COMMAND --help``
@@ -428,7 +489,7 @@ HELP: dict[str, tuple[str, str]] = {
         "  lpvest systems show my_plant.toml --model plant"),
     "simulate": (
         "Simulate one model of an example system or a model file with default signals (a scheduling sinusoid "
-        "spanning 90 %% of the box, the model's own noise, seeded) and write a CSV, a plot and a summary.",
+        "spanning 90 % of the box, the model's own noise, seeded) and write a CSV, a plot and a summary.",
         "lpvest simulate cox-toth-ex1 --model io --schedule \"0.5 + 0.3*sin(k)\" --out out/sim\n"
         "  lpvest simulate peixoto-ex2 --param rho=10 --steps 200\n"
         "  lpvest simulate my_plant.toml --schedule \"sin(0.1*k)\" --schedule \"0.5\"   # two scheduling components"),
@@ -545,12 +606,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--design", action="append", metavar="[ROLE=]FILE.json",
                    help="carry this design (from `lpvest design`) in the H-infinity filter FMU instead of "
                         "solving one; the role follows the design's kind unless given; needs one --model")
-    p.add_argument("--epsilon", type=float, metavar="E",
+    p.add_argument("--epsilon", type=_number, metavar="E",
                    help="H-infinity filters designed at build time: design at this epsilon instead of searching "
                         "the best one")
     p.add_argument("--solver", metavar="NAME",
                    help="H-infinity filters designed at build time: cvxpy solver, or AUTO (default)")
     _backend_argument(p, "the FMU backend")
+    p.add_argument("--quiet", action="store_true", help="no progress lines or bars (results and errors only)")
     p.set_defaults(func=cmd_build)
 
     p = sub.add_parser("design", help="design an H-infinity filter (LMIs) and write it as JSON for `lpvest build "
@@ -561,11 +623,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--kind", choices=["pd", "robust"], default="pd",
                    help="pd: gain-scheduled (Theorem 1, default); robust: constant (Corollary 1)")
     group = p.add_mutually_exclusive_group()
-    group.add_argument("--epsilon", type=float, help="design at this epsilon")
+    group.add_argument("--epsilon", type=_number, help="design at this epsilon (any real number, inf allowed)")
     group.add_argument("--search", action="store_true", help="search the best epsilon over the real line (default)")
     p.add_argument("--solver", default="AUTO",
                    help="cvxpy solver, or AUTO (default): Clarabel for small LMI programs, SCS for large ones")
     p.add_argument("--out", required=True, metavar="DESIGN.json", help="the design file to write")
+    p.add_argument("--quiet", action="store_true", help="no progress lines or bars (results and errors only)")
     p.set_defaults(func=cmd_design)
 
     p = sub.add_parser("cosim", help="co-simulate FMUs described in a TOML file; CSV, plot, summary (or --ssp)")
@@ -575,13 +638,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="folder of the FMUs named in the file (default: the file's fmu_dir, else fmu-build)")
     p.add_argument("--ssp", metavar="OUT.ssp", help="write the system as an SSP file (FMUs included) and stop")
     p.add_argument("--no-plot", action="store_true", help="write the CSV only")
+    p.add_argument("--quiet", action="store_true", help="no progress lines or bars (results and errors only)")
     p.set_defaults(func=cmd_cosim)
 
     p = sub.add_parser("sweep", help="run a co-simulation (or an experiment's Monte Carlo) over seeds and parameters "
                                      "on Dask: Parquet summary, Zarr trajectories, a figure per metric; resumable")
     p.add_argument("spec", nargs="?", metavar="SPEC.toml", help="sweep file (see examples/sweep_kalman.toml)")
     p.add_argument("--out", help="output folder (default out/sweep-<SPEC>); a rerun of the same spec resumes there")
-    p.add_argument("--workers", type=int, metavar="N",
+    p.add_argument("--workers", type=_workers, metavar="N",
                    help="worker processes of the local Dask cluster (default: one per core; 0: run in this process)")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="run on an existing Dask cluster (e.g. tcp://10.0.0.5:8786; its workers need lpvest)")
@@ -594,6 +658,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-plot", action="store_true", help="no figures")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--list", action="store_true", help="list the experiments that can be swept")
+    p.add_argument("--quiet", action="store_true", help="no progress lines or bars (results and errors only)")
     p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("validate", help="validate FMUs with fmpy (exit status 1 on any problem)")
@@ -609,12 +674,25 @@ def _version() -> str:
     return __version__
 
 
+def run(argv: Sequence[str] | None = None) -> int:
+    """:func:`main` for the console script: after an interruption that left a
+    native solve running, the process leaves at once with the status (see
+    :func:`lpvest._interrupt.abandoned_calls`)."""
+    status = main(argv)
+    if abandoned_calls():
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+    return status
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     debug = getattr(args, "debug", False)
     try:
-        return int(args.func(args))
+        with handling_signals():  # Ctrl-C and SIGTERM raise Interrupted (exit 130, 143)
+            return int(args.func(args))
     except BrokenPipeError:  # e.g. `lpvest systems show X | head`: the reader left
         import os
 
@@ -627,9 +705,26 @@ def main(argv: Sequence[str] | None = None) -> int:
             traceback.print_exc()
         print(f"lpvest: error: {_one_line(exc)}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("lpvest: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        name = getattr(exc, "name", "SIGINT")
+        kept = _KEPT.get(args.command)
+        print(f"lpvest: interrupted ({name})" + (f": {kept(args)}" if kept else ""), file=sys.stderr)
+        return exit_status(exc)
+
+
+#: What an interrupted command leaves behind and how to go on, one line.
+_KEPT: dict[str, Callable[[argparse.Namespace], str]] = {
+    "design": lambda a: "nothing was written (an interrupted solve is never a design); run the same command "
+                        "again to design anew",
+    "build": lambda a: f"the FMUs and designs finished so far are in {a.out} (designs in {a.out}/.designs), the "
+                       "interrupted one was not kept; run the same command again to resume (it reuses those "
+                       "designs)",
+    "cosim": lambda a: f"the co-simulation stopped, no result was written to {a.out}; run the same command again",
+    "sweep": lambda a: "the tasks finished so far are written; run the same sweep again to resume",
+    "simulate": lambda a: "run the same command again",
+    "systems": lambda a: "nothing was written",
+    "validate": lambda a: "nothing was written",
+}
 
 
 def _one_line(exc: BaseException) -> str:
@@ -642,4 +737,4 @@ def _one_line(exc: BaseException) -> str:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    sys.exit(run())

@@ -13,7 +13,7 @@ ROOT = Path(__file__).resolve().parent.parent / "lpvest"
 
 #: Layers from the bottom; a module may import only from its own layer or below.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("lpvest._version", "lpvest.errors"),
+    ("lpvest._version", "lpvest.errors", "lpvest._interrupt"),
     ("lpvest.protocol", "lpvest._linalg", "lpvest.validation", "lpvest.tomlfiles", "lpvest.rng"),
     ("lpvest.expressions", "lpvest.scheduling", "lpvest.signals"),
     ("lpvest.systems",),

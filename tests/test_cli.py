@@ -112,7 +112,7 @@ def _run(*argv, cwd=None):
          "lpvest simulate: error: argument --steps: expected 2 to 1,000,000 samples, found 1 "
          "(see lpvest simulate --help)"),
         (["simulate", "peixoto-ex1", "--out", "/dev/null"],
-         "lpvest: error: --out /dev/null: cannot create the output folder (it is a file, not a folder)"),
+         "lpvest: error: --out /dev/null: cannot create the output folder (/dev/null is a file, not a folder)"),
         (["simulate", "cox-toth-ex1", "--schedule", "1/k", "--out", "OUT"],
          "lpvest: error: schedule: formula '1/k' is inf at k = 0"),
         (["simulate", "peixoto-ex1", "--schedule", "9**9**9", "--out", "OUT"],
@@ -129,6 +129,30 @@ def _run(*argv, cwd=None):
          "lpvest: error: ROOT/models/peixoto_ex2.toml: parameters.rho (override): expected a finite number, found nan"),
         (["reproduce", "nothing"], "lpvest: error: no experiment 'nothing' (known: "),
         (["bogus"], "lpvest: error: argument COMMAND: invalid choice: 'bogus' (choose from "),
+        # issue 21: refused before any slow work, one line naming the culprit
+        (["design", "peixoto-ex1", "--out", "README.md/d.json"],
+         "lpvest: error: --out README.md: cannot create the output folder (README.md is a file, not a folder)"),
+        (["build", "--model", "peixoto-ex1", "--out", "README.md/fmus"],
+         "lpvest: error: --out README.md/fmus: cannot create the output folder (README.md is a file, not a folder)"),
+        (["design", "peixoto-ex1", "--out", "models"], "lpvest: error: --out models: is a folder; expected a file"),
+        (["design", "peixoto-ex1", "--solver", "BOGUS", "--out", "OUT/d.json"],
+         "lpvest: error: solver 'BOGUS': expected AUTO or an installed cvxpy solver of semidefinite programs ("),
+        (["build", "--model", "peixoto-ex1", "--solver", "BOGUS", "--out", "OUT"],
+         "lpvest: error: solver 'BOGUS': expected AUTO or an installed cvxpy solver of semidefinite programs ("),
+        (["build", "--model", "peixoto-ex1", "--solver", "OSQP", "--out", "OUT"],  # installed, but no SDPs
+         "lpvest: error: solver 'OSQP': expected AUTO or an installed cvxpy solver of semidefinite programs ("),
+        (["design", "peixoto-ex1", "--epsilon", "nan", "--out", "OUT/d.json"],
+         "lpvest design: error: argument --epsilon: expected a number (inf and -inf allowed), found nan"),
+        # a negative number in scientific notation is a value, not an option: the solver is the error
+        (["design", "peixoto-ex1", "--epsilon", "-1e300", "--solver", "BOGUS", "--out", "OUT/d.json"],
+         "lpvest: error: solver 'BOGUS'"),
+        (["sweep", "examples/sweep_kalman.toml", "--workers", "-1"],
+         "lpvest sweep: error: argument --workers: expected 0 (run in this process) or a number of worker "
+         "processes, found '-1'"),
+        (["--bogus-flag"], "lpvest: error: unrecognized option '--bogus-flag' before the command"),
+        (["systems", "show", "models"], "lpvest: error: models: is a folder, not a model file"),
+        (["build", "--kinds", "Bogus", "--out", "OUT"],
+         "lpvest: error: --kinds: no role 'Bogus' (roles: Plant, Scheduler, Source, Kalman, TruncatedKalman, "),
     ],
 )
 def test_expected_failures_are_one_line_with_status_2(tmp_path, argv, message):
@@ -146,7 +170,7 @@ def test_debug_shows_the_traceback():
     assert proc.returncode == 2
     assert "Traceback (most recent call last)" in proc.stderr and "OutputError" in proc.stderr
     assert proc.stderr.endswith("lpvest: error: --out /dev/null: cannot create the output folder "
-                                "(it is a file, not a folder)\n")
+                                "(/dev/null is a file, not a folder)\n")
 
 
 def test_systems_name_is_systems_show_name(capsys):
@@ -173,3 +197,25 @@ def test_every_subcommand_has_a_description_and_examples():
         assert p.description and len(p.description) > 40, name
         assert "examples:\n  lpvest " + name in text, name
         assert "--debug" in text, name
+
+
+def test_a_wrong_model_is_refused_before_anything_is_printed():
+    proc = _run("systems", "show", "peixoto-ex1", "--model", "nomodel", cwd=Path(__file__).resolve().parent.parent)
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert proc.stderr.endswith("no model 'nomodel' (models: plant)\n")
+
+
+def test_help_shows_a_percent_sign_once():
+    proc = _run("simulate", "--help")
+    assert "spanning 90 % of the box" in proc.stdout and "%%" not in proc.stdout
+
+
+def test_a_design_file_for_another_plant_is_refused_before_any_fmu_is_built(tmp_path):
+    root = Path(__file__).resolve().parent.parent
+    out = tmp_path / "out"
+    proc = _run("build", "--model", "examples/own_plant.toml", "--design",
+                "models/designs/peixoto-ex1.HinfPD.json", "--out", str(out), cwd=root)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+    assert proc.stderr.startswith("lpvest: error: models/designs/peixoto-ex1.HinfPD.json: designed for a plant"), \
+        proc.stderr
+    assert not list(out.glob("*.fmu"))  # refused first: not after the plant, scheduler, source, filters

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -328,11 +329,40 @@ def test_lpvest_build_for_a_users_model_file(fmus, tmp_path, capsys):
     assert f"{len(names)} FMU(s)" in text and "all valid" in text
     assert "building AffineDemoHinfPD (6/7)" in captured.err  # progress per FMU
     assert "AffineDemoHinfPD: designing (lpvest.fmi.designs:hinf_pd, epsilon = 1.0)" in captured.err
+    # each design's gamma, epsilon and solver once; no progress bar into a redirected stream
+    designed = [line for line in captured.err.splitlines() if line.startswith("AffineDemoHinfPD: designed: ")]
+    assert len(designed) == 1 and re.fullmatch(r"AffineDemoHinfPD: designed: gamma = [0-9.e+-]+ at epsilon = 1 "
+                                               r"\((CLARABEL|SCS), [0-9.]+ s\)", designed[0]), captured.err
+    assert "\r" not in captured.err
     first = (out / "AffineDemoHinfPD.fmu").read_bytes()
     # a rebuild reuses the designs made at build time (out/.designs): no solve, the same FMU
     assert main(args + ["--kinds", "HinfPD"]) == 0
-    assert "AffineDemoHinfPD: design reused from" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "AffineDemoHinfPD: design reused from" in err and designed[0].split(": designed")[1] in err
     assert (out / "AffineDemoHinfPD.fmu").read_bytes() == first
+    # --quiet: the table and the verdict, no progress lines
+    assert main(args + ["--kinds", "HinfPD", "--quiet"]) == 0
+    quiet = capsys.readouterr()
+    assert quiet.err == "" and "1 FMU(s)" in quiet.out
+
+
+@pytest.mark.slow
+def test_two_builds_of_a_users_plant_with_an_epsilon_search_give_the_same_fmu_bytes(tmp_path):
+    """Each build searches epsilon anew (no shared design cache): the FMU carries the design
+    without the solver's timings (which differ from solve to solve), so the bytes agree."""
+    from lpvest.design import HinfDesign
+    from lpvest.fmi.build import build_fmus
+
+    model = Path(__file__).resolve().parent.parent / "examples" / "own_plant.toml"
+    fmus = [build_fmus([model], tmp_path / f"build{i}", roles=["HinfPD"])[0][0].validation.path for i in (1, 2)]
+    assert fmus[0].read_bytes() == fmus[1].read_bytes()
+    with zipfile.ZipFile(fmus[0]) as z:
+        text = z.read("resources/design.json").decode()
+    assert "solve_time" not in text and "compile_time" not in text
+    design = HinfDesign.from_json(text)  # still a design: the timings read as unknown
+    assert np.isnan(design.solve_time) and np.isnan(design.compile_time) and np.isfinite(design.gamma)
+    cached = next((tmp_path / "build1" / ".designs").glob("*.json")).read_text()
+    assert HinfDesign.from_json(cached).solve_time > 0  # the cache outside the FMU keeps them
 
 
 def test_a_design_that_fails_leaves_the_other_fmus_built(tmp_path, capsys):

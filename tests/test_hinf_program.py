@@ -248,3 +248,15 @@ def test_an_epsilon_search_with_no_certified_point_says_so_naming_the_program_an
     angles = np.sort(tried)
     assert len(tried) == 6 and angles[-1] == math.pi / 2
     np.testing.assert_allclose(np.diff(angles), math.pi / 6, rtol=0, atol=8 * EPS)
+
+
+@pytest.mark.parametrize("solver", ["BOGUS", "OSQP", 3])
+def test_a_solver_that_cannot_solve_lmis_is_refused_before_compiling(solver):
+    """An unknown name, or an installed solver without semidefinite cones (OSQP): one
+    ArgumentError naming the solvers that can, not cvxpy's SolverError after the compile."""
+    from lpvest.design.hinf import sdp_solvers
+
+    assert {"CLARABEL", "SCS"} <= set(sdp_solvers()) and "OSQP" not in sdp_solvers()
+    with pytest.raises(ArgumentError, match=r"solver .*: expected AUTO or an installed cvxpy solver of "
+                                            r"semidefinite programs \(CLARABEL, SCS"):
+        HinfProgram(2, 2, 1, 1, 2, solver=solver)

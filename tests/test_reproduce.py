@@ -128,7 +128,7 @@ def test_workers_must_be_a_count(tmp_path, capsys):
     with pytest.raises(SystemExit) as exit_info:  # argparse's usage error: status 2
         main(["reproduce", "all", "--out", str(tmp_path), "--workers", "two"])
     assert exit_info.value.code == 2
-    assert "argument --workers: expected a number of worker processes (0: none), found 'two'" in \
+    assert "argument --workers: expected 0 (run in this process) or a number of worker processes, found 'two'" in \
         capsys.readouterr().err
 
 

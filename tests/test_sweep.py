@@ -19,7 +19,6 @@ import signal
 import subprocess
 import sys
 import textwrap
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -42,6 +41,7 @@ from lpvest.sweep import (
 )
 from lpvest.sweep.metrics import Metric, compute
 from lpvest.sweep.tasks import Task
+from tests.interrupting import interrupt_at
 
 ROOT = Path(__file__).resolve().parent.parent
 ROOT_SEED = 2026
@@ -328,24 +328,12 @@ def test_ctrl_c_on_the_command_line_cancels_cleanly_and_a_rerun_resumes(spec_fil
     out = tmp_path / "cli"
     cmd = [sys.executable, "-m", "lpvest.cli", "sweep", str(spec_file), "--out", str(out), "--workers", "2",
            "--no-progress", "--no-plot"]
-    # its own process group, as a shell job: Ctrl-C reaches the client and its workers
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
-    stopped = threading.Event()
-
-    def interrupt_when_tasks_are_on_disk() -> None:
-        while not stopped.wait(0.05):
-            if any((out / "parts").glob("part-*.parquet")):
-                os.killpg(proc.pid, signal.SIGINT)
-                return
-
-    watcher = threading.Thread(target=interrupt_when_tasks_are_on_disk, daemon=True)
-    watcher.start()
-    try:
-        stdout, stderr = proc.communicate(timeout=TIMEOUT)
-    finally:
-        stopped.set()
-        if proc.poll() is None:  # pragma: no cover - only when the test fails
-            os.killpg(proc.pid, signal.SIGKILL)
+    # its own process group, as a shell job: Ctrl-C reaches the client and its workers. Sent once a
+    # finished task is on disk and others are pending (the hook holds the client there): watching for
+    # the first part file instead raced with the end of the sweep (the first part file can be the
+    # last one, written when every task has finished; the signal then landed after the work was done)
+    res = interrupt_at(cmd, "sweep-outcome", tmp_path, group=True)
+    proc, stderr = res, res.stderr
     assert proc.returncode == 130, stderr
     assert "lpvest: interrupted:" in stderr and "run the same sweep again to resume" in stderr
     assert "Traceback" not in stderr  # the workers ignore SIGINT; the client closes them

@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 import re
 import shutil
+import sys
 import tempfile
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
@@ -44,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from .._interrupt import interruptible, raise_if_pending
 from ..errors import LpvestError, abbreviate, shorten
 
 __all__ = [
@@ -806,6 +808,7 @@ class CoSimulation:
         try:
             return fn()
         except (FMICallException, OSError, Exception) as exc:
+            raise_if_pending()  # a signal's KeyboardInterrupt, swallowed by the FMU: not its failure
             if isinstance(exc, LpvestError):
                 raise
             at = "" if t is None else f" at t = {t:g}"
@@ -822,6 +825,7 @@ class CoSimulation:
                        lambda s=setters[_CALL[v.type]], r=v.vr, x=x: s([r], [x]),
                        where=f"components.{unit.spec.name}.parameters.{par}")
 
+    @interruptible
     def run(
         self,
         n_steps: int | None = None,
@@ -915,7 +919,8 @@ class CoSimulation:
         extra = [(i, buf, j) for i, (buf, j) in enumerate(rec_cols) if buf is not self._store_c]
         extra_data = np.empty((n_steps + 1, len(extra))) if extra else None
         steppers = [(u.funcs["fmi2DoStep"], u.fmu.component, u) for u in self._units]
-        show = progress if progress is not None else n_steps > 20_000
+        # by default a bar for long runs, and only on a terminal (never carriage returns into a log)
+        show = progress if progress is not None else n_steps > 20_000 and sys.stderr.isatty()
         bar = None
         if show:
             from tqdm import tqdm
@@ -983,6 +988,7 @@ class CoSimulation:
         return DiscardedStep(name, t, k, last, terminated, message)
 
     def _fail(self, unit: _Unit, what: str, status: int, t: float) -> None:
+        raise_if_pending()  # a signal's KeyboardInterrupt raised inside the FMU (pythonfmu: fatal)
         label = ["ok", "warning", "discard", "error", "fatal", "pending"][status] if 0 <= status < 6 else "?"
         log = _log_text(unit)
         raise CoSimulationError(f"component {unit.spec.name}: {what} at t = {t:g} returned {label} ({log})",

@@ -95,6 +95,8 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
+import signal
+import threading
 import time
 import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -131,6 +133,8 @@ __all__ = [
     "DEFAULT_MARGIN",
     "AUTO_CLARABEL_MAX_ROWS",
     "choose_solver",
+    "check_solver",
+    "sdp_solvers",
 ]
 
 #: Solver used unless told otherwise: ``"AUTO"`` picks by problem size (see
@@ -150,6 +154,33 @@ _DEFAULT_OPTIONS: dict[str, dict[str, Any]] = {"CLARABEL": {"max_threads": 1}}
 RETRY_MARGIN_FACTOR = 30.0
 
 _ACCEPTED = ("optimal", "optimal_inaccurate")
+
+
+def sdp_solvers() -> list[str]:
+    """The installed cvxpy solvers that handle semidefinite constraints (the
+    LMIs), e.g. ``["CLARABEL", "SCS"]``."""
+    from cvxpy.reductions.solvers import defines
+
+    return [name for name in defines.INSTALLED_CONIC_SOLVERS
+            if any(c.__name__ in ("PSD", "SvecPSD") for c in defines.SOLVER_MAP_CONIC[name].SUPPORTED_CONSTRAINTS)]
+
+
+def check_solver(solver: object) -> str:
+    """``solver`` upper-cased if it is ``"AUTO"`` or an installed solver of
+    semidefinite programs; else :class:`~lpvest.errors.ArgumentError` naming
+    them (before anything is compiled or solved).
+
+    Examples
+    --------
+    >>> check_solver("clarabel")
+    'CLARABEL'
+    """
+    name = str(solver).upper() if isinstance(solver, str) else ""
+    known = sdp_solvers()
+    if name != "AUTO" and name not in known:
+        raise ArgumentError(f"solver {abbreviate(solver, 30)}: expected AUTO or an installed cvxpy solver of "
+                            f"semidefinite programs ({', '.join(known) or 'none installed'})")
+    return name
 
 
 def choose_solver(n_vertices: int, nx: int, nz: int, nw: int, kind: str = KIND_PD) -> str:
@@ -542,11 +573,12 @@ class HinfProgram:
         t0 = time.perf_counter()
         self.n_vertices, self.nx, self.ny, self.nz, self.nw = (int(v) for v in dims.values())
         self.kind = kind
-        self.solver = str(solver).upper()
+        self.solver = check_solver(solver)
         self.auto = self.solver == "AUTO"  #: the solver was chosen by size (with a Clarabel fallback)
         if self.auto:
             self.solver = choose_solver(n_vertices, nx, nz, nw, kind)
         self._warm = False  # warm starts only inside a search (HinfProgram.warm_starts)
+        self._abandoned: threading.Thread | None = None  # an interrupted solve, still running
         self._returned_point = False  # the last solve returned a point (last_variables)
         self.margin = float(margin)
         self.solver_options = dict(solver_options or {})
@@ -694,12 +726,35 @@ class HinfProgram:
                 # data and the search alone)
                 options = {"warm_start": self._warm and solver == "SCS", **_DEFAULT_OPTIONS.get(solver, {}),
                            **(self.solver_options if solver == self.solver else {})}
-                self._problem.solve(solver=solver, **options)
+                self._solve_interruptibly(solver, options)
             status, message = str(self._problem.status), ""
         except cp.error.SolverError as exc:
             status, message = "solver_error", f" ({exc})"
         self._returned_point = status in _ACCEPTED
         return status, time.perf_counter() - t0, message
+
+    def _solve_interruptibly(self, solver: str, options: Mapping[str, Any]) -> None:
+        """``problem.solve`` on a worker thread (:func:`lpvest._interrupt.call_interruptibly`):
+        Ctrl-C or SIGTERM stops the wait at once; the abandoned solve may still
+        write into this program, which is then never used again (it leaves the
+        program cache, and a later solve here first waits for it to end). SCS
+        catches SIGINT itself and returns "interrupted": that is raised too."""
+        from .._interrupt import call_interruptibly, hold
+
+        if self._abandoned is not None:
+            self._abandoned.join()  # an interrupted solve still writes into the problem
+            self._abandoned = None
+        target = _interruptible_scs() if solver == "SCS" else solver
+
+        def run() -> None:
+            hold("solve")
+            self._problem.solve(solver=target, **options)
+
+        def abandon(thread: threading.Thread) -> None:
+            self._abandoned = thread
+            _cached_program.cache_clear()
+
+        call_interruptibly(run, on_abandon=abandon)
 
     @contextlib.contextmanager
     def warm_starts(self) -> Iterator[None]:
@@ -976,6 +1031,35 @@ def _infeasible_message(plant: PolytopicLPV, prog: HinfProgram, where: str, deta
     return f"{prog.kind} H-infinity LMIs for {name} at {where}, solver {prog.solver}: no certified solution ({reason})"
 
 
+#: SCS's status when its own SIGINT handler stopped it (``SCS_SIGINT`` in scs.h).
+_SCS_SIGINT = -5
+
+
+@functools.lru_cache(maxsize=1)
+def _interruptible_scs() -> Any:
+    """cvxpy's SCS interface, except that a solve SCS stopped on SIGINT (its
+    own handler catches the signal while it iterates, so Python's never runs)
+    raises :class:`lpvest._interrupt.Interrupted` instead of being one more
+    failed point of a search (cvxpy reports it as a solver error). The same
+    data, options and warm starts as ``solver="SCS"``."""
+    from cvxpy.reductions.solvers.conic_solvers.scs_conif import SCS
+
+    from .._interrupt import Interrupted
+
+    class InterruptibleSCS(SCS):
+        def name(self) -> str:
+            return "LPVEST_SCS"
+
+        def solve_via_data(self, data: Any, warm_start: bool, verbose: bool, solver_opts: Any,
+                           solver_cache: Any = None) -> Any:
+            results = super().solve_via_data(data, warm_start, verbose, solver_opts, solver_cache)
+            if results["info"]["status_val"] == _SCS_SIGINT:
+                raise Interrupted(signal.SIGINT)
+            return results
+
+    return InterruptibleSCS()
+
+
 @functools.lru_cache(maxsize=16)
 def _cached_program(
     dims: tuple[int, int, int, int, int], kind: str, solver: str, margin: float, options: tuple[tuple[str, Any], ...]
@@ -999,6 +1083,7 @@ def _program_for(
         return program
     if kind not in (KIND_PD, KIND_ROBUST):
         raise ArgumentError(f"kind must be {KIND_PD!r} or {KIND_ROBUST!r}; found {abbreviate(kind, 30)}")
+    check_solver(solver)
     _check_margin(margin)
     dims = (plant.n_vertices, plant.nx, plant.ny, plant.nz, plant.nw)
     opts = tuple(sorted((solver_options or {}).items()))
@@ -1295,7 +1380,7 @@ def search_epsilon(
         raise LMIInfeasibleError(_infeasible_message(plant, prog, "every epsilon", unstable), status="infeasible",
                                  detail=unstable)
     points: dict[float, DesignAttempt] = {}
-    bar = _progress_bar(progress, f"epsilon search ({prog.kind}, {prog.solver})")
+    bar = _progress_bar(progress, f"epsilon search ({prog.kind}, {prog.solver})", n_grid)
 
     def evaluate(phi: float) -> float:
         key = _canonical_phi(phi)
@@ -1303,6 +1388,9 @@ def search_epsilon(
             points[key] = prog.attempt(plant, phi=key)
             if bar is not None:
                 best = min(p.gamma for p in points.values())
+                if bar.n >= bar.total:  # the grid is done: each refinement step adds one
+                    bar.total = bar.n + 1
+                    bar.set_description_str(f"epsilon search ({prog.kind}, {prog.solver}), refining", refresh=False)
                 bar.set_postfix_str(f"best gamma {best:.6g}", refresh=False)
                 bar.update(1)
         return points[key].gamma
@@ -1313,12 +1401,17 @@ def search_epsilon(
         return _search(plant, prog, evaluate, points, n_grid, n_refine, xatol)
 
 
-def _progress_bar(progress: bool, desc: str) -> Any:
-    if not progress:
+def _progress_bar(progress: bool, desc: str, total: int) -> Any:
+    """A bar of the designs solved, out of ``total`` (the grid; a refinement
+    raises it by one a step), with its ETA; it stays when done. Only on a
+    terminal: never carriage returns into a redirected log."""
+    import sys
+
+    if not progress or not sys.stderr.isatty():
         return None
     from tqdm import tqdm
 
-    return tqdm(desc=desc, unit="design", leave=False)
+    return tqdm(desc=desc, total=total, unit="design", leave=True)
 
 
 def _search(

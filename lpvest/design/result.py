@@ -59,6 +59,7 @@ __all__ = [
     "DESIGN_FORMAT",
     "DESIGN_FORMAT_VERSION",
     "model_digest",
+    "without_timings",
 ]
 
 #: ``kind`` of a parameter-dependent (gain-scheduled) filter, Theorem 1.
@@ -151,7 +152,8 @@ class HinfDesign:
         Seconds: one-time compilation of the LMI program that produced this
         design (shared by every solve of that program), and the solves at
         this ``epsilon`` (a retry at the larger margin and a fallback solver
-        included).
+        included); ``nan`` when read from a file without them (the design an
+        FMU carries: :func:`without_timings`).
     lmi_margin : float
         ``-max`` eigenvalue over every LMI (6)-(7) at the returned point (> 0).
     lyapunov_margin : float
@@ -426,8 +428,8 @@ class HinfDesign:
                 lyapunov=np.array(field(data, "lyapunov"), dtype=float),
                 solver=str(field(solver, "name", "solver.")),
                 status=str(field(solver, "status", "solver.")),
-                compile_time=float(field(solver, "compile_time", "solver.")),
-                solve_time=float(field(solver, "solve_time", "solver.")),
+                compile_time=float(solver.get("compile_time", math.nan)),
+                solve_time=float(solver.get("solve_time", math.nan)),
                 lmi_margin=float(field(check, "lmi_margin", "check.")),
                 lyapunov_margin=float(field(check, "lyapunov_margin", "check.")),
                 n_lmis=int(field(check, "n_lmis", "check.")),
@@ -491,3 +493,18 @@ class HinfDesign:
         except json.JSONDecodeError as exc:
             raise ModelFileError(f"{name}: not valid JSON: {exc}") from exc
         return cls.from_dict(data, source=name)
+
+
+def without_timings(text: str) -> str:
+    """The JSON text of a design (:meth:`HinfDesign.to_json`) without the
+    solver's compile and solve times, the only fields that differ between two
+    solves of the same program: what an FMU carries, so that two builds give
+    the same bytes. Text in another format is returned as is."""
+    try:
+        data = json.loads(text)
+    except ValueError:
+        return text
+    if not isinstance(data, dict) or data.get("format") != DESIGN_FORMAT or not isinstance(data.get("solver"), dict):
+        return text
+    data["solver"] = {k: v for k, v in data["solver"].items() if k not in ("compile_time", "solve_time")}
+    return json.dumps(data, indent=1, allow_nan=False) + "\n"

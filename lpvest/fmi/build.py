@@ -80,6 +80,7 @@ from .registry import EstimatorKind, estimator_kinds, resolve
 from .spec import SPEC_FILE, SPEC_FORMAT
 
 __all__ = [
+    "known_roles",
     "FmuPlan",
     "BuildResult",
     "BuildError",
@@ -196,6 +197,14 @@ def _estimator_step(kind: EstimatorKind, default: float) -> float:
         if par.name == kind.sample_time:
             return float(par.start)
     raise BuildError(f"estimator {kind.role}: sample_time names {kind.sample_time!r}, which is not a parameter")
+
+
+def known_roles() -> list[str]:
+    """Every FMU role a build can make: the plant, its signal sources and each
+    estimator kind (:func:`lpvest.fmi.registry.estimator_kinds`)."""
+    from .registry import estimator_kinds
+
+    return ["Plant", "Scheduler", "Source", *(k.role for k in estimator_kinds())]
 
 
 def plan_system(
@@ -476,41 +485,67 @@ def design_text(plan: FmuPlan, progress: Callable[[str], None] | None) -> tuple[
     """The design the FMU carries (text or bytes) and where it came from: the
     plan's design file (checked against the model), a design kept from an
     earlier build, or one made now."""
+    from ..design.result import without_timings
     from ..modelfile import load_system
     from .state import encode_state
 
     assert plan.estimator is not None and plan.estimator.design is not None
     model = load_system(plan.system_path).model(plan.model_key)
     if plan.design is not None:
-        from ..design.result import HinfDesign
-
-        try:
-            text = plan.design.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise BuildError(f"{plan.design}: cannot be read: {exc.strerror}") from exc
-        from ..systems.polytopic import hinf_setting
-
-        HinfDesign.from_json(text).check_model(hinf_setting(model), source=str(plan.design),
-                                               plant_name=plan.system_name)
-        return text, f"file {plan.design.name}"
+        text = _check_design_file(plan, model)
+        return text, f"file {plan.design.name}"  # carried as given: the same file, the same bytes
     options = dict(plan.design_options)
     settings = "".join(f", {k} = {v}" for k, v in sorted(options.items()))
     origin = f"designed at build time by {plan.estimator.design}{settings}"
     cached = _design_cache_file(plan)
     if cached is not None and cached.is_file():
+        text = cached.read_text(encoding="utf-8")
         if progress is not None:
-            progress(f"{plan.identifier}: design reused from {cached}")
-        return cached.read_text(encoding="utf-8"), origin
+            progress(f"{plan.identifier}: design reused from {cached}{_design_summary(text)}")
+        return without_timings(text), origin
     if progress is not None:
         progress(f"{plan.identifier}: designing ({plan.estimator.design}{settings})")
     design = resolve(plan.estimator.design)(model, progress=progress is not None, **options)
     made: str | bytes = design if isinstance(design, str) else encode_state(design)
+    if progress is not None and isinstance(made, str):
+        progress(f"{plan.identifier}: designed{_design_summary(made)}")
     if cached is not None and isinstance(made, str):
         cached.parent.mkdir(parents=True, exist_ok=True)
         partial = cached.with_suffix(".part")
         partial.write_text(made, encoding="utf-8")
-        partial.replace(cached)
-    return made, origin
+        partial.replace(cached)  # with the solver's timings; the FMU carries the design without them
+    return without_timings(made) if isinstance(made, str) else made, origin
+
+
+def _design_summary(text: str) -> str:
+    """``": gamma = ..., epsilon = ..., solver ... (... s)"`` of an H-infinity design's
+    JSON text; empty for another format."""
+    try:
+        data = json.loads(text)
+        eps = "inf" if data["epsilon"] is None else f"{data['epsilon']:.6g}"
+        solver = data["solver"]
+        seconds = f", {solver['solve_time']:.1f} s" if "solve_time" in solver else ""
+        return f": gamma = {data['gamma']:.7g} at epsilon = {eps} ({solver['name']}{seconds})"
+    except (ValueError, KeyError, TypeError):
+        return ""
+
+
+def _check_design_file(plan: FmuPlan, model: Any = None) -> str:
+    """The text of ``plan.design``, checked against the plan's model (its
+    dimensions and digest); :class:`BuildError` or the design's own error."""
+    from ..design.result import HinfDesign
+    from ..modelfile import load_system
+    from ..systems.polytopic import hinf_setting
+
+    assert plan.design is not None
+    try:
+        text = plan.design.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise BuildError(f"{plan.design}: cannot be read: {exc.strerror}") from exc
+    if model is None:
+        model = load_system(plan.system_path).model(plan.model_key)
+    HinfDesign.from_json(text).check_model(hinf_setting(model), source=str(plan.design), plant_name=plan.system_name)
+    return text
 
 
 def _design_cache_file(plan: FmuPlan) -> Path | None:
@@ -822,11 +857,15 @@ def build_fmu(
                     _warn_without_bridge(platform)
                 entries[name] = (lib.read_bytes(), True)
         partial = out / f".{plan.identifier}.fmu.part"
-        with zipfile.ZipFile(partial, "w") as z:
-            for name in sorted(entries):
-                data, executable = entries[name]
-                write_zip_entry(z, name, data, executable)
-        partial.replace(target)
+        try:
+            with zipfile.ZipFile(partial, "w") as z:
+                for name in sorted(entries):
+                    data, executable = entries[name]
+                    write_zip_entry(z, name, data, executable)
+            partial.replace(target)
+        except BaseException:  # Ctrl-C, a full disk: no half-written FMU is left behind
+            partial.unlink(missing_ok=True)
+            raise
     return target
 
 
@@ -882,6 +921,9 @@ def build_fmus(
         notes += more
         if wanted is not None:
             plans = [p for p in plans if p.role in wanted]
+        for plan in plans:  # a design file for another plant is refused before anything is built
+            if plan.design is not None and plan.estimator is not None:
+                _check_design_file(plan)
         for n, plan in enumerate(plans, 1):
             solving = plan.estimator is not None and bool(plan.estimator.design) and plan.design is None
             if solving:

@@ -77,6 +77,21 @@ def _run(task: Task, fn: Callable[[Any, Task], TaskResult], shared: Any) -> Outc
     return execute(fn, shared, task)
 
 
+class _AbandonedGathers(logging.Filter):
+    """Drops tornado's log of an ``as_completed`` callback whose gather failed
+    because the cluster closed under it: after an interruption (or an error)
+    the engine cancels the pending tasks and closes the cluster while results
+    may still be on their way; that failure is expected and its traceback,
+    printed after "interrupted", was only noise (and made the Ctrl-C test of
+    ``lpvest sweep`` fail on a loaded machine: "Traceback" in stderr)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return "as_completed._track_future" not in record.getMessage()
+
+
+_ABANDONED_GATHERS = _AbandonedGathers()
+
+
 class Engine:
     """Where sweep tasks run: an embedded ``LocalCluster`` or an existing Dask cluster.
 
@@ -94,7 +109,11 @@ class Engine:
     start_timeout : float
         Seconds to wait for the cluster to start, or to connect to it.
     quiet : bool
-        Silence Dask's log messages below ERROR (a killed worker, a restart).
+        Silence Dask's log messages below ERROR in this process (a killed
+        worker, a restart), and below CRITICAL in the local cluster's worker
+        processes: a worker's errors are the tasks' (recorded as their
+        outcome) or the cluster closing under it (its heartbeat failing after
+        Ctrl-C, on a loaded machine), which is no news.
 
     Examples
     --------
@@ -155,6 +174,9 @@ class Engine:
         if self.quiet:
             for name in ("distributed", "distributed.nanny", "distributed.worker", "distributed.scheduler"):
                 logging.getLogger(name).setLevel(logging.ERROR)
+        tornado_log = logging.getLogger("tornado.application")
+        if _ABANDONED_GATHERS not in tornado_log.filters:
+            tornado_log.addFilter(_ABANDONED_GATHERS)
         try:
             if self.scheduler is None:
                 n = self.workers or os.cpu_count() or 1
@@ -162,7 +184,7 @@ class Engine:
                 with dask.config.set(LOCAL_WORKER_CONFIG):
                     self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                                  dashboard_address=":0", preload=["lpvest.sweep._worker"],
-                                                 silence_logs=logging.ERROR if self.quiet else logging.WARNING)
+                                                 silence_logs=logging.CRITICAL if self.quiet else logging.WARNING)
                 self._client = Client(self._cluster, timeout=self.start_timeout)
             else:
                 self._client = Client(self.scheduler, timeout=self.start_timeout)

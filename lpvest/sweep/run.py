@@ -10,6 +10,7 @@ Examples
 
 from __future__ import annotations
 
+import signal
 import sys
 import time
 from collections.abc import Callable
@@ -17,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .._interrupt import exit_status, hold, holds, interruptible
 from .engine import Engine
 from .spec import SweepSpec, load_sweep
 from .store import FORMAT, SweepStore
@@ -38,12 +40,22 @@ class SweepInterrupted(KeyboardInterrupt):
         Tasks finished and written (including earlier runs').
     total : int
         Tasks of the sweep.
+    signum : int
+        The signal (SIGINT: Ctrl-C; SIGTERM); the command line exits with ``128 + signum``.
+    finishing : bool
+        Every task was written; the summary or the figures were not (a rerun makes them).
     """
 
-    def __init__(self, out: Path, finished: int, total: int) -> None:
-        super().__init__(f"interrupted: {finished} of {total} tasks finished and written to {out}; "
-                         "run the same sweep again to resume")
-        self.out, self.finished, self.total = out, finished, total
+    def __init__(self, out: Path, finished: int, total: int, *, signum: int = signal.SIGINT,
+                 finishing: bool = False) -> None:
+        if finishing:
+            text = (f"interrupted while finishing: all {total} tasks are written to {out}; "
+                    "run the same sweep again to write the summary and draw the figures")
+        else:
+            text = (f"interrupted: {finished} of {total} tasks finished and written to {out}; "
+                    "run the same sweep again to resume")
+        super().__init__(text)
+        self.out, self.finished, self.total, self.signum = out, finished, total, int(signum)
 
 
 @dataclass(frozen=True)
@@ -77,6 +89,9 @@ class SweepResult:
         One line on what each task runs (from the study).
     figures : tuple of Path, default ()
         The metric figures written (``out/figures/<metric>.png``).
+    repaired : tuple of str, default ()
+        What the rerun found damaged in ``out`` (a part file, trajectories
+        whose SHA-256 differs from the one recorded) and ran again, one line each.
     """
 
     out: Path
@@ -91,6 +106,7 @@ class SweepResult:
     engine: str
     description: str
     figures: tuple[Path, ...] = ()
+    repaired: tuple[str, ...] = ()
 
     @property
     def failures(self) -> list[tuple[int, str]]:
@@ -132,6 +148,7 @@ class SweepResult:
         n_seeds = len(spec.seeds.keys) if spec.seeds else 1
         shape = f"{n_points} point(s) x {n_seeds} seed(s)" if spec.seeds else f"{n_points} point(s)"
         lines = [f"sweep {spec.origin}: {self.description}; {self.n_tasks} tasks ({shape})"]
+        lines += [f"repaired: {note}" for note in self.repaired]
         if self.ran:
             lines.append(f"ran {self.ran} task(s) in {self.seconds:.1f} s ({self.engine}); {self.resumed} "
                          f"finished earlier (resumed); {len(self.failures)} failed")
@@ -182,6 +199,7 @@ def _fmt(v: Any) -> str:
     return f"{v:g}" if isinstance(v, float) else str(v)
 
 
+@interruptible
 def run_sweep(
     spec: SweepSpec | str | Path,
     out: str | Path,
@@ -270,6 +288,8 @@ def run_sweep(
     store = SweepStore(out, spec, prepared, tasks, key, overwrite=overwrite, retry_failed=retry_failed,
                        flush_every=flush_every, flush_seconds=flush_seconds)
     pending = store.pending()
+    for note in store.notes:  # at once, in case the run is interrupted before its report
+        print(f"lpvest: repaired: {note}", file=sys.stderr, flush=True)
     show = sys.stderr.isatty() if progress is None else progress
     desc = f"sweep {Path(spec.origin).name}"
 
@@ -277,6 +297,9 @@ def run_sweep(
         store.add(outcome)
         if on_outcome is not None:
             on_outcome(outcome)
+        if holds("sweep-outcome"):  # the interruption tests' hook: a task is on disk, more are pending
+            store.flush()
+            hold("sweep-outcome")
 
     own = None
     label = "in this process, no Dask"
@@ -295,9 +318,9 @@ def run_sweep(
             label = engine.describe()
         else:
             label = "nothing to run"
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         store.finish(complete=False, seconds=time.perf_counter() - t0, engine=label)
-        raise SweepInterrupted(Path(out), len(store.rows), len(tasks)) from None
+        raise SweepInterrupted(Path(out), len(store.rows), len(tasks), signum=exit_status(exc) - 128) from None
     except BaseException:
         store.finish(complete=False, seconds=time.perf_counter() - t0, engine=label)
         raise
@@ -305,14 +328,24 @@ def run_sweep(
         if own is not None:
             own.close()
     seconds = time.perf_counter() - t0
-    summary = store.finish(complete=True, seconds=seconds, engine=label)
+    drawing = plot and bool(prepared.metrics)
     figures: tuple[Path, ...] = ()
-    if plot and prepared.metrics and summary.num_rows:
-        from .plot import plot_metrics
+    try:
+        # with figures to draw, sweep.json says complete only once they are drawn too
+        summary = store.finish(complete=not drawing, seconds=seconds, engine=label)
+        if drawing:
+            hold("sweep-finish")
+            if summary.num_rows:
+                from .plot import plot_metrics
 
-        figures = tuple(plot_metrics(summary, spec, prepared.metrics, Path(out) / "figures"))
+                figures = tuple(plot_metrics(summary, spec, prepared.metrics, Path(out) / "figures"))
+            store.mark_complete()
+    except KeyboardInterrupt as exc:
+        raise SweepInterrupted(Path(out), len(store.rows), len(tasks), signum=exit_status(exc) - 128,
+                               finishing=True) from None
     return SweepResult(Path(out), spec, summary, prepared.metrics, len(tasks), len(store.rows) - store.resumed,
-                       store.resumed, len(store.rows) == len(tasks), seconds, label, prepared.description, figures)
+                       store.resumed, len(store.rows) == len(tasks), seconds, label, prepared.description, figures,
+                       tuple(store.notes))
 
 
 def _peek(path: Path) -> dict[str, Any]:

@@ -116,6 +116,7 @@ class SweepStore:
         self._seq = 0
         self.rows: dict[int, dict[str, Any]] = {}  #: task -> its part row (finished tasks)
         self.resumed = 0  #: tasks finished by earlier runs
+        self.notes: list[str] = []  #: what was found damaged on opening, and what is done about it
         self._open(overwrite, retry_failed)
 
     # -- opening --------------------------------------------------------------
@@ -151,12 +152,24 @@ class SweepStore:
         if existing:
             try:
                 old = json.loads(header_path.read_text(encoding="utf-8"))
-            except (OSError, json.JSONDecodeError):
+            except (OSError, ValueError):
                 old = {}
+            if not isinstance(old, dict):
+                old = {}
+            if not old and not overwrite and self._parts_are_ours():
+                # sweep.json damaged (truncated, ...), but the parts record this sweep's digest:
+                # it is rewritten below and the finished tasks are kept
+                self.notes.append("sweep.json was damaged; rewritten from the part files (their digest is this "
+                                  "sweep's)")
+                old = {"format": FORMAT, "digest": self.digest}
             if old.get("format") != FORMAT or old.get("digest") != self.digest:
                 if not overwrite:
                     what = f"a different sweep ({old.get('spec', '?')}, digest {str(old.get('digest', '?'))[:12]}" \
                         if old else "unreadable sweep files ("
+                    if not old:
+                        raise SweepError(f"{self.out}: sweep.json is damaged and no part file says which sweep "
+                                         f"this folder holds (this one: {self.digest[:12]}): choose another output "
+                                         "folder, or overwrite them")
                     raise SweepError(f"{self.out} holds the results of {what}; this one: {self.digest[:12]}): "
                                      "choose another output folder, or overwrite them")
                 self._clear()
@@ -167,13 +180,87 @@ class SweepStore:
         known = {t.index for t in self.tasks}
         for part in sorted((self.out / "parts").glob("part-*.parquet")):
             self._seq = max(self._seq, int(part.stem.split("-")[1]))
+            problem = self._check_part(part)
+            if problem is not None:
+                # set aside (not read again, kept for a look); its tasks are run again
+                part.replace(part.with_name(f"damaged-{part.name}"))
+                _sidecar(part).unlink(missing_ok=True)
+                self.notes.append(f"{part.relative_to(self.out)} is damaged ({problem}); its tasks are run again")
+                continue
             for row in pq.read_table(part).to_pylist():
                 if row["task"] in known:  # a later part (a retried task) replaces an earlier one
                     self.rows[row["task"]] = row
         if retry_failed:
             self.rows = {i: r for i, r in self.rows.items() if r["status"] == "ok"}
-        self.resumed = len(self.rows)
         self._open_trajectories()
+        self._check_trajectories()
+        self.resumed = len(self.rows)
+
+    def _parts_are_ours(self) -> bool:
+        """Whether some intact part file records this sweep's digest."""
+        import pyarrow.parquet as pq
+
+        for part in sorted((self.out / "parts").glob("part-*.parquet")):
+            if self._check_part(part) is None:
+                meta = pq.read_schema(part).metadata or {}
+                return meta.get(b"lpvest_sweep_digest", b"").decode() == self.digest
+        return False
+
+    @staticmethod
+    def _check_part(part: Path) -> str | None:
+        """Why ``part`` cannot be trusted (its SHA-256 is not the one recorded
+        when it was written, or none was), or None."""
+        try:
+            recorded = _sidecar(part).read_text(encoding="ascii").strip()
+        except OSError:
+            return "no SHA-256 was recorded for it"
+        if _sha256(part) != recorded:
+            return "its SHA-256 differs from the one recorded when it was written"
+        return None
+
+    def _check_trajectories(self) -> None:
+        """Each finished task's kept signals against the SHA-256 its part
+        recorded; a task whose rows differ or cannot be read is run again (its
+        chunk rewritten: NaN until then)."""
+        if self.group is None:
+            return
+        import zarr
+
+        ok = sorted(i for i, r in self.rows.items() if r.get("trajectory_sha256"))
+        if not ok:
+            return
+        damaged: dict[int, str] = {}
+        for name in self.prepared.signals:
+            array = self.group[name]
+            assert isinstance(array, zarr.Array)
+            step = int(array.chunks[0])
+            for start in range(0, len(self.tasks), step):
+                members = [i for i in ok if start <= i < start + step]
+                if not members:
+                    continue
+                try:
+                    block = np.asarray(array[start:start + step])
+                except Exception as exc:  # noqa: BLE001 - a damaged chunk fails in the codec, however it fails
+                    for i in members:
+                        damaged.setdefault(i, f"{name}: cannot be read ({type(exc).__name__})")
+                    self._reset_chunk(array, start, step)
+                    continue
+                bad = [i for i in members if _rows_sha256(self.prepared.signals, {name: block[i - start]}, name)
+                       != self.rows[i]["trajectory_sha256"].get(name)]
+                for i in bad:
+                    damaged.setdefault(i, f"{name}: its values differ from those written")
+        if damaged:
+            first = min(damaged)
+            self.notes.append(f"trajectories.zarr: {len(damaged)} task(s) damaged (task {first}: {damaged[first]}); "
+                              "they are run again")
+            for i in damaged:
+                del self.rows[i]
+
+    def _reset_chunk(self, array: Any, start: int, step: int) -> None:
+        """Delete the stored chunk (it reads as NaN again); the tasks it held are run again."""
+        key = "/".join(["c", str(start // step), *(["0"] * (array.ndim - 1))])
+        path = self.out / "trajectories.zarr" / array.path / Path(key)
+        path.unlink(missing_ok=True)
 
     def _open_trajectories(self) -> None:
         import zarr
@@ -267,11 +354,22 @@ class SweepStore:
         for m in self.prepared.metrics:
             cols[m] = pa.array([None if o.result is None else float(o.result.metrics[m]) for o in batch],
                                pa.float64())
-        table = pa.table(cols)
+        # what each task's kept signals were when written, checked when a rerun resumes
+        if self.prepared.signals:
+            cols["trajectory_sha256"] = pa.array(
+                [None if o.result is None else
+                 {name: _rows_sha256(self.prepared.signals, o.result.signals, name) for name in self.prepared.signals}
+                 for o in batch], pa.struct([(name, pa.string()) for name in self.prepared.signals]))
+        table = pa.table(cols).replace_schema_metadata({"lpvest_sweep_digest": self.digest})
         self._seq += 1
         path = self.out / "parts" / f"part-{self._seq:06d}.parquet"
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
         pq.write_table(table, tmp)
+        # the part's SHA-256 next to it, written before the part is (a part without one is not trusted)
+        side = _sidecar(path)
+        side_tmp = side.with_name(side.name + f".{os.getpid()}.tmp")
+        side_tmp.write_text(_sha256(tmp) + "\n", encoding="ascii")
+        side_tmp.replace(side)
         tmp.replace(path)
         for row in table.to_pylist():
             self.rows[row["task"]] = row
@@ -296,7 +394,20 @@ class SweepStore:
             cols[m] = pa.array([self.rows[i][m] for i in done], pa.float64())
         cols["status"] = pa.array([self.rows[i]["status"] for i in done], pa.string())
         cols["error"] = pa.array([self.rows[i]["error"] for i in done], pa.string())
-        return pa.table(cols)
+        return pa.table(cols).replace_schema_metadata({"lpvest_metrics": json.dumps(self.metric_definitions())})
+
+    def metric_definitions(self) -> dict[str, dict[str, Any]]:
+        """Each metric column's definition, kept in the summary's schema
+        metadata (``lpvest_metrics``, JSON): a co-simulation metric's kind, the
+        recorded variables it reads (estimate, truth, ...) and its first row;
+        an experiment's metric names the experiment that defines it."""
+        spec = {m.name: m for m in self.spec.metrics}
+        out: dict[str, dict[str, Any]] = {}
+        for name in self.prepared.metrics:
+            m = spec.get(name)
+            out[name] = ({"kind": m.kind, **dict(m.variables), "start": m.start} if m is not None
+                         else {"experiment": str(self.spec.experiment)})
+        return out
 
     def finish(self, *, complete: bool, seconds: float, engine: str) -> Any:
         """Commit what is buffered; write ``summary.parquet``, ``timing.parquet``
@@ -315,8 +426,36 @@ class SweepStore:
             pq.write_table(t, tmp)
             tmp.replace(path)
         failed = sum(r["status"] != "ok" for r in self.rows.values())
-        self._write_json(self._header() | {
+        self._finished = self._header() | {
             "complete": complete and len(self.rows) == len(self.tasks),
             "finished": len(self.rows), "failed": failed, "resumed": self.resumed,
-            "last_run": {"seconds": round(seconds, 3), "engine": engine}})
+            "last_run": {"seconds": round(seconds, 3), "engine": engine}}
+        self._write_json(self._finished)
         return table
+
+    def mark_complete(self) -> None:
+        """``sweep.json`` says complete: every task is written and so is what
+        follows them (the figures). Only after :meth:`finish` with
+        ``complete=False`` and every task finished."""
+        self._write_json(self._finished | {"complete": len(self.rows) == len(self.tasks)})
+
+
+def _sidecar(part: Path) -> Path:
+    """``part-000001.parquet.sha256``: the part's SHA-256, recorded when it was written."""
+    return part.with_name(part.name + ".sha256")
+
+
+def _sha256(path: Path) -> str:
+    import hashlib
+
+    with open(path, "rb") as f:
+        return hashlib.file_digest(f, "sha256").hexdigest()
+
+
+def _rows_sha256(signals: Mapping[str, Any], values: Mapping[str, Any], name: str) -> str:
+    """SHA-256 of one task's values of the kept signal ``name`` (float64, little-endian, C order)."""
+    import hashlib
+
+    shape = tuple(signals[name][0])
+    data = np.ascontiguousarray(np.asarray(values[name], dtype="<f8").reshape(shape))
+    return hashlib.sha256(data.tobytes()).hexdigest()
