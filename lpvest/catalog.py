@@ -102,7 +102,7 @@ def find_system(source: str | Path) -> Path:
         raise ModelFileError(f"expected a model file or an example name, found {type(source).__name__}")
     path = Path(source)
     if path.suffix == ".toml" or _exists(path):
-        if path.is_dir():
+        if _exists(path) and path.is_dir():  # a name the system cannot look up is no folder
             raise ModelFileError(f"{shorten(str(path), 120)}: is a folder, not a model file")
         if not _exists(path):
             raise ModelFileError(f"{shorten(str(path), 120)}: no such model file")
