@@ -66,8 +66,8 @@ from scipy.linalg import qr  # noqa: E402
 
 from lpvest import load_system  # noqa: E402
 from lpvest.estimators import bspline as bs  # noqa: E402
-from lpvest.estimators.bspline import fit as bfit, regression as breg  # noqa: E402
-from lpvest.estimators.bspline.kernels import product_quadrature  # noqa: E402
+from lpvest.estimators.bspline import _fit as bfit, _regression as breg  # noqa: E402
+from lpvest.estimators.bspline._kernels import product_quadrature  # noqa: E402
 
 
 def _median_ms(fn, repeat: int) -> tuple[float, float]:

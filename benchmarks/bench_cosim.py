@@ -15,9 +15,9 @@ every sample:
    and the five filter matrices at ``alpha``, ``y, z``, ``zhat``, one solve
    with ``H(alpha)``, the next states;
 1. **in-process**: lpvest's streaming components
-   (:class:`lpvest.signals.SignalGenerator` for ``theta`` and ``w``,
-   :class:`lpvest.systems.streaming.DiscretePlant`,
-   :class:`lpvest.estimators.hinf.HinfFilter`) stepped in a plain Python loop;
+   (:class:`lpvest.core._signals.SignalGenerator` for ``theta`` and ``w``,
+   :class:`lpvest.systems._streaming.DiscretePlant`,
+   :class:`lpvest.estimators._hinf.HinfFilter`) stepped in a plain Python loop;
 2. **co-simulation**: the four FMUs (``PeixotoEx1Scheduler``, ``...Source``,
    ``...Plant``, ``...HinfPD``) under :class:`lpvest.cosim.CoSimulation` with
    unit step (the time of :meth:`~lpvest.cosim.CoSimulation.run` only);
@@ -113,10 +113,10 @@ def in_process(design_json: str, steps: int) -> tuple[np.ndarray, float]:
     """(recorded values (steps + 1, 9), run seconds): the library's streaming
     components in a Python loop, the same signals as the FMUs' defaults."""
     from lpvest import load_system
+    from lpvest.core._signals import SignalGenerator, SignalSpec
     from lpvest.design import HinfDesign
-    from lpvest.estimators.hinf import HinfFilter
-    from lpvest.signals import SignalGenerator, SignalSpec
-    from lpvest.systems.streaming import DiscretePlant
+    from lpvest.estimators._hinf import HinfFilter
+    from lpvest.systems._streaming import DiscretePlant
 
     plant_model = load_system("peixoto-ex1").model()
     theta = SignalGenerator(SignalSpec.build("sinusoid", 1, amplitude=1.0, omega=0.25, offset=0.0))

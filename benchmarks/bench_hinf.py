@@ -124,7 +124,7 @@ def main() -> int:
     if args.own:
         from pathlib import Path
 
-        from lpvest.systems.polytopic import hinf_setting
+        from lpvest.systems._polytopic import hinf_setting
 
         own = hinf_setting(lpvest.load_system(Path(__file__).parent.parent / "examples" / "own_plant.toml").model())
         print(f"own plant: N = {own.n_vertices}, nx = {own.nx}, nz = {own.nz}, nw = {own.nw}")

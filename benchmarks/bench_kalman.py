@@ -64,6 +64,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from lpvest import AffineLPV, Monomial, SchedulingSpace  # noqa: E402
+from lpvest.core._protocol import run_streaming  # noqa: E402
 from lpvest.estimators.kalman import (  # noqa: E402
     KalmanModel,
     KalmanState,
@@ -71,7 +72,6 @@ from lpvest.estimators.kalman import (  # noqa: E402
     kalman_filter,
     kalman_step,
 )
-from lpvest.protocol import run_streaming  # noqa: E402
 
 
 def random_model(nx: int, ny: int, nu: int, rng: np.random.Generator, *, cross: bool = False) -> AffineLPV:
@@ -308,7 +308,7 @@ def bench_methods(nx: int, ny: int, lengths: list[int], repeat: int, seed: int) 
 def bench_truncated(nx: int, ny: int, taus: list[int], steps: int, repeat: int, seed: int) -> dict[int, float]:
     """Per-step cost of TruncatedKalmanFilter.step against tau (O(tau) expected),
     timed after the window has filled."""
-    from lpvest.estimators.truncated import TruncatedKalmanFilter
+    from lpvest.estimators._truncated import TruncatedKalmanFilter
 
     rng = np.random.default_rng(seed)
     model = random_model(nx, ny, 1, rng)

@@ -1,7 +1,7 @@
 """Accuracy of the parallel-in-time Kalman scan against the sequential recursion.
 
 Not a test: it measures the figures that the module notes of
-:mod:`lpvest.estimators.kalman.scan` ("Accuracy"), ``SCAN_MAX_AMPLIFICATION``
+:mod:`lpvest.estimators.kalman._scan` ("Accuracy"), ``SCAN_MAX_AMPLIFICATION``
 and the scan tests' tolerances are derived from.
 
 Both algorithms compute the same exact filter (4a)-(4e); they round
@@ -11,7 +11,7 @@ differently. The scan works on the decorrelated model, whose
 rounding errors are amplified by about ``amp^2`` (the covariance goes through
 ``Abar P Abar^T``). For every case this prints
 
-- ``amp``: :func:`~lpvest.estimators.kalman.scan.scan_amplification`
+- ``amp``: :func:`~lpvest.estimators.kalman._scan.scan_amplification`
   (``max_t ||J_t||_F ||C_t||_F``, what ``method="auto"`` gates on);
 - ``err``: the largest difference between ``method="scan"`` and
   ``method="sequential"`` over every output field (means, covariances,
@@ -34,7 +34,7 @@ Run (``--seeds 1``: about 30 minutes on one core of a loaded machine;
     .venv/bin/python benchmarks/bench_scan_accuracy.py [--quick] [--seeds 1] [--lengths 64 1024 100000]
 
 and under another BLAS kernel, e.g. ``OPENBLAS_CORETYPE=Sandybridge``. The
-figures in the module notes of :mod:`lpvest.estimators.kalman.scan` come
+figures in the module notes of :mod:`lpvest.estimators.kalman._scan` come
 from ``--seeds 1`` (Haswell) and ``--quick`` (Sandybridge, Nehalem).
 """
 
@@ -57,8 +57,8 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 
 from lpvest import AffineLPV, Monomial, NumericalError, SchedulingSpace  # noqa: E402
 from lpvest.estimators.kalman import KalmanModel, kalman_filter  # noqa: E402
-from lpvest.estimators.kalman.scan import decorrelate_stack, scan_amplification  # noqa: E402
-from lpvest.systems.affine import NoiseCovariance  # noqa: E402
+from lpvest.estimators.kalman._scan import decorrelate_stack, scan_amplification  # noqa: E402
+from lpvest.systems._affine import NoiseCovariance  # noqa: E402
 from tests.kalman_helpers import random_schedule, random_system  # noqa: E402
 
 EPS = float(np.finfo(float).eps)

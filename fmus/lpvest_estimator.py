@@ -12,7 +12,7 @@ fmi2DoStep; fmi2DoStep calls ``step(inputs)``. An estimator whose kind has
 late inputs (the measurement ``y``) gets the parameter ``measurement_delay``:
 ``lpvest.fmi.registry.build_estimator`` pairs a measurement that arrives that
 many samples late with the other inputs of its own sample
-(``lpvest.protocol.MeasurementDelay``).
+(``lpvest.core._protocol.MeasurementDelay``).
 """
 
 from pathlib import Path

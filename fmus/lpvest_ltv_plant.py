@@ -1,7 +1,7 @@
 """Plant FMU: a continuous-time LTV plant (Sridhar et al., Section V) (slave script).
 
-A thin adapter over :class:`lpvest.systems.streaming.LTVPlant`: the state
-follows the model's :class:`lpvest.systems.ltv.LTVSolution`, one DOP853
+A thin adapter over :class:`lpvest.systems._streaming.LTVPlant`: the state
+follows the model's :class:`lpvest.systems._ltv.LTVSolution`, one DOP853
 integration (``rtol = 1e-12``, ``atol = 1e-14`` by default) kept from step to
 step, whose own steps do not depend on the communication points: any step
 size reads the same trajectory, and a 1 ms step mostly costs one
@@ -16,7 +16,7 @@ hold). Outputs ``y`` (``y[1]`` = ``C(t) x``), ``x[i]`` and ``u_applied[1]``
 
 from lpvest.fmi.slave import LpvestSlave
 from lpvest.fmi.spec import Parameter
-from lpvest.systems.streaming import LTVPlant
+from lpvest.systems._streaming import LTVPlant
 
 
 class LpvestLtvPlant(LpvestSlave):

@@ -1,6 +1,6 @@
 """Plant FMU: a discrete-time LPV plant from a model file (slave script).
 
-A thin adapter over :class:`lpvest.systems.streaming.DiscretePlant`: a
+A thin adapter over :class:`lpvest.systems._streaming.DiscretePlant`: a
 polytopic model (Peixoto et al. (1)), an affine model with general noise
 (Cox & Toth (1)-(3)), an innovation-form model with a gain of ``p_t`` or an
 input-output model (Cox & Toth (21a); its state ``x`` is the memory of past
@@ -22,9 +22,9 @@ the model file's own parameters (e.g. ``rho``).
 
 from lpvest.fmi.slave import LpvestSlave
 from lpvest.fmi.spec import Parameter
-from lpvest.systems.affine import AffineLPV
-from lpvest.systems.innovation import InnovationLPV, LPVInputOutput
-from lpvest.systems.streaming import DiscretePlant
+from lpvest.systems._affine import AffineLPV
+from lpvest.systems._innovation import InnovationLPV, LPVInputOutput
+from lpvest.systems._streaming import DiscretePlant
 
 
 class LpvestPlant(LpvestSlave):

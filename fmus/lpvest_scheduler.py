@@ -1,7 +1,7 @@
 """Scheduler FMU: the scheduling signal of an LPV model (slave script).
 
-A thin adapter over :class:`lpvest.signals.SchedulerComponent` and
-:mod:`lpvest.signals`. Outputs ``p[j]`` (declared range: the model's scheduling
+A thin adapter over :class:`lpvest.core._signals.SchedulerComponent` and
+:mod:`lpvest.core._signals`. Outputs ``p[j]`` (declared range: the model's scheduling
 box) and, for a polytopic model, ``alpha[i]`` on the unit simplex. The value
 at each communication point ``t`` is reported before fmi2DoStep.
 
@@ -15,9 +15,9 @@ scheduling box is an error at initialization naming the parameter. Default:
 ``p = centre + half-width * sin(0.25 t)`` (Peixoto et al.: ``theta_k = sin(0.25 k)``).
 """
 
+from lpvest.core._signals import SchedulerComponent, SignalSpec
 from lpvest.fmi.slave import LpvestSlave
 from lpvest.fmi.spec import Parameter
-from lpvest.signals import SchedulerComponent, SignalSpec
 
 
 class LpvestScheduler(LpvestSlave):

@@ -1,7 +1,7 @@
 """Source FMU: the external input u and the disturbance w of an LPV model (slave script).
 
-A thin adapter over :class:`lpvest.signals.SourceComponent` and
-:mod:`lpvest.signals`. Outputs ``u[i]`` (when the model has inputs) and
+A thin adapter over :class:`lpvest.core._signals.SourceComponent` and
+:mod:`lpvest.core._signals`. Outputs ``u[i]`` (when the model has inputs) and
 ``w[i]`` (the disturbance of a polytopic model; the external process noise of
 an affine one). The value at each communication point is reported before
 fmi2DoStep.
@@ -15,10 +15,10 @@ from ``k = 10``, the default for ``w`` of a polytopic model), ``gaussian``
 ``s.table``.
 """
 
+from lpvest.core._signals import SignalSpec, SourceComponent
 from lpvest.fmi.slave import LpvestSlave
 from lpvest.fmi.spec import Parameter
-from lpvest.signals import SignalSpec, SourceComponent
-from lpvest.systems.polytopic import PolytopicLPV
+from lpvest.systems._polytopic import PolytopicLPV
 
 KINDS = ("zero", "sinusoid", "decaying", "gaussian", "constant", "random", "table")
 

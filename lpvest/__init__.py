@@ -8,7 +8,7 @@ The public names, by concept: errors; model files, systems and
 scheduling; signals and streaming plants; the exact and truncated Kalman
 filters and their analyses; the H-infinity designs and filters; the B-spline
 estimator of LTV systems; co-simulation files and SSP. The streaming protocol
-is :mod:`lpvest.protocol`, FMUs are built by :mod:`lpvest.fmi`.
+is :mod:`lpvest.core`, FMUs are built by :mod:`lpvest.fmi`.
 
 >>> import lpvest
 >>> plant = lpvest.load_system("peixoto-ex1").model()
@@ -19,7 +19,7 @@ is :mod:`lpvest.protocol`, FMUs are built by :mod:`lpvest.fmi`.
 from ._version import __version__ as __version__
 
 # -- errors (every deliberate error derives from LpvestError) ------------------------
-from .errors import (
+from .core import (
     ArgumentError as ArgumentError,
     ArgumentTypeError as ArgumentTypeError,
     DimensionError as DimensionError,
@@ -39,18 +39,11 @@ from .errors import (
 
 # -- model files, systems, scheduling and formulas -----------------------------------
 # isort: split
-from .catalog import example_systems as example_systems
-from .expressions import Expression as Expression, FormulaMatrix as FormulaMatrix
-from .modelfile import (
-    SystemFile as SystemFile,
-    dump_system as dump_system,
-    load_system as load_system,
-    loads_system as loads_system,
-    save_system as save_system,
-)
-from .scheduling import (
+from .core import (
     CallableBasis as CallableBasis,
+    Expression as Expression,
     FormulaBasis as FormulaBasis,
+    FormulaMatrix as FormulaMatrix,
     Monomial as Monomial,
     SchedulingSpace as SchedulingSpace,
 )
@@ -65,19 +58,25 @@ from .systems import (
     MultilinearSimplexMap as MultilinearSimplexMap,
     NoiseCovariance as NoiseCovariance,
     PolytopicLPV as PolytopicLPV,
+    SystemFile as SystemFile,
     TimeFunction as TimeFunction,
     affine_to_polytopic as affine_to_polytopic,
+    dump_system as dump_system,
+    example_systems as example_systems,
     hinf_setting as hinf_setting,
+    load_system as load_system,
+    loads_system as loads_system,
+    save_system as save_system,
 )
 
 # -- signals and streaming plants ----------------------------------------------------
 # isort: split
-from .signals import SignalGenerator as SignalGenerator, SignalSpec as SignalSpec, sample_signal as sample_signal
-from .systems.streaming import DiscretePlant as DiscretePlant, LTVPlant as LTVPlant
+from .core import SignalGenerator as SignalGenerator, SignalSpec as SignalSpec, sample_signal as sample_signal
+from .systems import DiscretePlant as DiscretePlant, LTVPlant as LTVPlant
 
 # -- Kalman filtering (Cox & Toth): exact, truncated memory, analyses ----------------
 # isort: split
-from .analysis.fading_memory import (
+from .analysis import (
     FilterComparison as FilterComparison,
     PredictionError as PredictionError,
     TruncationErrors as TruncationErrors,
@@ -89,6 +88,14 @@ from .analysis.fading_memory import (
     tau_needed as tau_needed,
     truncation_errors as truncation_errors,
 )
+from .estimators import (
+    AssumptionBounds as AssumptionBounds,
+    SteadyState as SteadyState,
+    TruncatedKalmanFilter as TruncatedKalmanFilter,
+    assumption_bounds as assumption_bounds,
+    steady_state as steady_state,
+    theorem_start_covariance as theorem_start_covariance,
+)
 from .estimators.kalman import (
     InnovationFormData as InnovationFormData,
     KalmanModel as KalmanModel,
@@ -99,14 +106,6 @@ from .estimators.kalman import (
     kalman_filter as kalman_filter,
     kalman_step as kalman_step,
     simulate_innovation_form as simulate_innovation_form,
-)
-from .estimators.truncated import (
-    AssumptionBounds as AssumptionBounds,
-    SteadyState as SteadyState,
-    TruncatedKalmanFilter as TruncatedKalmanFilter,
-    assumption_bounds as assumption_bounds,
-    steady_state as steady_state,
-    theorem_start_covariance as theorem_start_covariance,
 )
 
 # -- H-infinity filtering (Peixoto et al.): LMI designs and the filters --------------
@@ -120,7 +119,7 @@ from .design import (
     epsilon_curve as epsilon_curve,
     search_epsilon as search_epsilon,
 )
-from .estimators.hinf import HinfFilter as HinfFilter, hinf_filter_batch as hinf_filter_batch
+from .estimators import HinfFilter as HinfFilter, hinf_filter_batch as hinf_filter_batch
 
 # -- LTV estimation with B-splines (Sridhar et al.) ----------------------------------
 # isort: split

@@ -40,8 +40,8 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from ._interrupt import abandoned_calls, exit_status, handling_signals
-from .errors import ArgumentError, LpvestError, OutputError, abbreviate, shorten
+from .core._errors import ArgumentError, LpvestError, OutputError, abbreviate, shorten
+from .core._interrupt import abandoned_calls, exit_status, handling_signals
 
 __all__ = ["main", "describe_model"]
 
@@ -153,7 +153,7 @@ def describe_model(key: str, model: object) -> str:
 
 
 def _model_summary(model: object) -> str:
-    from .modelfile import MODEL_TYPES
+    from .systems._modelfile import MODEL_TYPES
 
     for name, cls in MODEL_TYPES.items():
         if isinstance(model, cls):
@@ -162,8 +162,8 @@ def _model_summary(model: object) -> str:
 
 
 def cmd_systems(args: argparse.Namespace) -> int:
-    from .catalog import example_systems
-    from .modelfile import load_system
+    from .systems._catalog import example_systems
+    from .systems._modelfile import load_system
 
     if not args.words:
         entries = example_systems()
@@ -205,7 +205,7 @@ def cmd_systems(args: argparse.Namespace) -> int:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     from .experiments.simulate import simulate_system
-    from .modelfile import load_system
+    from .systems._modelfile import load_system
 
     system = load_system(args.target, parameters=_parse_params(args.param))
     sim = simulate_system(system, args.model, steps=args.steps, schedule=args.schedule, seed=args.seed)
@@ -285,7 +285,7 @@ def cmd_regress(args: argparse.Namespace) -> int:
 def _design_args(items: Sequence[str] | None) -> dict[str, Path]:
     """``--design [ROLE=]FILE`` -> {role: file}; the role defaults to the design's kind
     (parameter-dependent -> HinfPD, robust -> HinfRobust)."""
-    from .design.result import KIND_PD, HinfDesign
+    from .design._result import KIND_PD, HinfDesign
 
     out: dict[str, Path] = {}
     for item in items or ():
@@ -304,7 +304,7 @@ def _design_args(items: Sequence[str] | None) -> dict[str, Path]:
 def cmd_build(args: argparse.Namespace) -> int:
     import warnings
 
-    from .design.hinf import check_solver
+    from .design._hinf import check_solver
     from .fmi.build import BuildWarning, build_fmus, format_table, known_roles
 
     out = _out_dir(args.out)
@@ -343,11 +343,11 @@ def cmd_build(args: argparse.Namespace) -> int:
 
 
 def cmd_design(args: argparse.Namespace) -> int:
-    from .design.hinf import check_solver, design_hinf, search_epsilon
-    from .design.result import KIND_PD, KIND_ROBUST
-    from .modelfile import load_system
-    from .systems.affine import AffineLPV
-    from .systems.polytopic import PolytopicLPV
+    from .design._hinf import check_solver, design_hinf, search_epsilon
+    from .design._result import KIND_PD, KIND_ROBUST
+    from .systems._affine import AffineLPV
+    from .systems._modelfile import load_system
+    from .systems._polytopic import PolytopicLPV
 
     system = load_system(args.target, parameters=_parse_params(args.param))
     model = system.model(args.model)
@@ -677,7 +677,7 @@ def _version() -> str:
 def run(argv: Sequence[str] | None = None) -> int:
     """:func:`main` for the console script: after an interruption that left a
     native solve running, the process leaves at once with the status (see
-    :func:`lpvest._interrupt.abandoned_calls`)."""
+    :func:`lpvest.core.abandoned_calls`)."""
     status = main(argv)
     if abandoned_calls():
         sys.stdout.flush()

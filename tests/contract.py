@@ -3,8 +3,8 @@ that property-based tests run on each generated input, and the tally of what
 the generators produced (printed at the end of a pytest run, see conftest.py).
 
 The contract: an input is either accepted, or refused with an
-:class:`~lpvest.errors.LpvestError` of the expected subclass whose message is
-one line of at most :data:`~lpvest.errors.MESSAGE_LIMIT` characters, starts
+:class:`~lpvest.core._errors.LpvestError` of the expected subclass whose message is
+one line of at most :data:`~lpvest.core._errors.MESSAGE_LIMIT` characters, starts
 with the name of the file (or formula) and leaks no internal name; nothing
 takes more than :data:`CPU_LIMIT` seconds of CPU time. Anything else (another
 exception, a bad message, a timeout) fails the test and is counted.
@@ -19,7 +19,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from lpvest.errors import MESSAGE_LIMIT, LpvestError
+from lpvest.core._errors import MESSAGE_LIMIT, LpvestError
 
 #: CPU seconds one example may take (process CPU time, so another job on the
 #: machine does not count): a malformed input must be refused at once.

@@ -3,7 +3,7 @@
 A moving average over the last ``window`` samples of ``y`` (window filled from
 the first sample on), its windowed second moment ``S = mean(y y^T)``, and the
 scheduling it was given. It follows the step protocol of
-``lpvest.protocol`` and is copied into the test FMU's resources, so it
+``lpvest.core._protocol`` and is copied into the test FMU's resources, so it
 is importable there as the top-level module ``fmu_movavg``.
 """
 
@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from lpvest.errors import DimensionError, LpvestError
-from lpvest.protocol import Port
-from lpvest.validation import as_vector
+from lpvest.core._errors import DimensionError, LpvestError
+from lpvest.core._protocol import Port
+from lpvest.core._validation import as_vector
 
 
 class MovingAverage:

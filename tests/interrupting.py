@@ -1,5 +1,5 @@
 """Running a command until it reaches a moment, then signalling it: the
-interruption tests' one way of synchronising (lpvest._interrupt's test hook,
+interruption tests' one way of synchronising (lpvest.core._interrupt's test hook,
 ``LPVEST_TEST_HOLD`` / ``LPVEST_TEST_READY``), never a delay."""
 
 from __future__ import annotations

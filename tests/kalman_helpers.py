@@ -8,9 +8,9 @@ from typing import NamedTuple
 import numpy as np
 
 from lpvest import AffineLPV, Monomial, SchedulingSpace
+from lpvest.core._scheduling import parse_basis
 from lpvest.estimators.kalman import KalmanModel
-from lpvest.estimators.kalman.scan import MIN_BLOCK, decorrelate_stack, scan_amplification, scan_error_bound
-from lpvest.scheduling import parse_basis
+from lpvest.estimators.kalman._scan import MIN_BLOCK, decorrelate_stack, scan_amplification, scan_error_bound
 from tests.tolerances import EPS
 
 
@@ -34,7 +34,7 @@ def scan_rtol(amp: float, block: int | None = None, kappa: float = 1.0) -> float
 
     Default blocks (``>= MIN_BLOCK`` samples, or the whole run): the library's
     documented bound ``100 eps (kappa + (1 + amp)^2)``, ``kappa`` =
-    :func:`kappa_omega` (lpvest.estimators.kalman.scan, "Accuracy"; measured worst constant 15
+    :func:`kappa_omega` (lpvest.estimators.kalman._scan, "Accuracy"; measured worst constant 15
     over T = 64 .. 1e5, amp up to 1e4, OpenBLAS Haswell, Sandybridge and
     Nehalem, by benchmarks/bench_scan_accuracy.py). Shorter blocks (1 = the
     plain scan): the general combinations work on single-sample elements and

@@ -114,7 +114,7 @@ def _norm(m: np.ndarray) -> float:
 
 def weights_error(simplex_map: Any, p: np.ndarray) -> np.ndarray:
     """A bound on the difference of two evaluations of a simplex map's weights at ``p``."""
-    from lpvest.systems.polytopic import FormulaSimplexMap, MultilinearSimplexMap
+    from lpvest.systems._polytopic import FormulaSimplexMap, MultilinearSimplexMap
 
     if simplex_map is None:
         return np.zeros(0)
@@ -141,7 +141,7 @@ def weights_error(simplex_map: Any, p: np.ndarray) -> np.ndarray:
 
 def basis_error(basis: Any, p: np.ndarray) -> float:
     """A bound on the difference of two evaluations of a basis function at ``p``."""
-    from lpvest.scheduling import FormulaBasis, Monomial
+    from lpvest.core._scheduling import FormulaBasis, Monomial
 
     if isinstance(basis, Monomial):  # products of powers: FUNC_ULPS per power, one rounding per product
         v = abs(basis(p))
@@ -158,7 +158,7 @@ def weighted_error(stacks: dict[str, np.ndarray], e_weights: np.ndarray) -> dict
 
 
 def covariance_step_bound(P: np.ndarray, F: np.ndarray, n: int, nu: int, m: int, e_P: float, e_F: float) -> dict:
-    """The library's covariance step at (P, F) (lpvest.estimators.kalman.recursion)
+    """The library's covariance step at (P, F) (lpvest.estimators.kalman._recursion)
     and first-order bounds on how far two evaluations may be apart when P and F
     already differ by e_P, e_F (infinity norms):
 
@@ -167,8 +167,8 @@ def covariance_step_bound(P: np.ndarray, F: np.ndarray, n: int, nu: int, m: int,
       differences, and a backward-stable solve adds 2 gamma_m cond(Omega) |gains|;
     - PP = M V M^T, M = [I, -gains] (Joseph form): V's differences and the gains'.
     """
-    from lpvest.estimators.kalman.model import StepMatrices
-    from lpvest.estimators.kalman.recursion import covariance_step
+    from lpvest.estimators.kalman._model import StepMatrices
+    from lpvest.estimators.kalman._recursion import covariance_step
 
     cs = covariance_step(P, StepMatrices(F, n, nu, m))
     n2 = 2 * n
@@ -189,7 +189,7 @@ def covariance_step_bound(P: np.ndarray, F: np.ndarray, n: int, nu: int, m: int,
 
 def kalman_step_bound(step: Any, F: np.ndarray, P: np.ndarray, x: np.ndarray, u: np.ndarray, n: int, nu: int,
                       m: int, e_x: float, e_P: float, e_F: float) -> dict:
-    """Bounds on the outputs of one Kalman step (lpvest.estimators.kalman.recursion.kalman_step)
+    """Bounds on the outputs of one Kalman step (lpvest.estimators.kalman._recursion.kalman_step)
     and on the next state's difference, from the differences e_x, e_P, e_F it starts with."""
     c = covariance_step_bound(P, F, n, nu, m, e_P, e_F)
     xu = np.concatenate((x, u))
@@ -227,12 +227,12 @@ def packed_error(km: Any, p: np.ndarray) -> float:
 def restart_bound(F: np.ndarray, n: int, nu: int, m: int, P_start: np.ndarray, e_start: float) -> tuple[np.ndarray,
                                                                                                        float]:
     """(6a) with ERRATA, Abar P^_0 Abar^T + G Qbar G^T at the oldest kept sample
-    (lpvest.estimators.truncated.restart_covariance), and a bound on two
+    (lpvest.estimators._truncated.restart_covariance), and a bound on two
     evaluations' difference: J = G S H^T (H R H^T)^-1 by a Cholesky solve
     (2 gamma_m cond(HRH) |J|), Abar = A - J C, the products, and P^_0's own
     difference e_start carried by |Abar|^2."""
-    from lpvest.estimators.kalman.model import StepMatrices
-    from lpvest.estimators.truncated import decorrelate, restart_covariance
+    from lpvest.estimators._truncated import decorrelate, restart_covariance
+    from lpvest.estimators.kalman._model import StepMatrices
 
     km = StepMatrices(F, n, nu, m).readable()
     P = restart_covariance(km, P_start)
@@ -257,7 +257,7 @@ def dare_bound(km: Any, p: np.ndarray) -> float:
     closed loop) applied to the residual: |delta X| <= ||(I - Phi (x) Phi)^-1||
     times a residual of n eps times the sizes of the terms (Higham 16, the
     Lyapunov operator's condition), for each solver."""
-    from lpvest.estimators.truncated import steady_state
+    from lpvest.estimators._truncated import steady_state
 
     ss = steady_state(km, p)
     m = km.matrices(p)

@@ -17,8 +17,8 @@ from lpvest import (
     affine_to_polytopic,
     load_system,
 )
-from lpvest.scheduling import parse_basis
-from lpvest.validation import check_simplex
+from lpvest.core._scheduling import parse_basis
+from lpvest.core._validation import check_simplex
 from tests.tolerances import roundoff
 
 pytestmark = pytest.mark.blas_sensitive  # numerical agreement: ./dev test runs it under a second BLAS kernel

@@ -13,14 +13,14 @@ ROOT = Path(__file__).resolve().parent.parent / "lpvest"
 
 #: Layers from the bottom; a module may import only from its own layer or below.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("lpvest._version", "lpvest.errors", "lpvest._interrupt"),
-    ("lpvest.protocol", "lpvest._linalg", "lpvest.validation", "lpvest.tomlfiles", "lpvest.rng"),
-    ("lpvest.expressions", "lpvest.scheduling", "lpvest.signals"),
+    ("lpvest._version", "lpvest.core._errors", "lpvest.core._interrupt"),
+    ("lpvest.core._protocol", "lpvest.core._linalg", "lpvest.core._validation", "lpvest.core._toml", "lpvest.core._rng"),
+    ("lpvest.core._expressions", "lpvest.core._scheduling", "lpvest.core._signals"),
     ("lpvest.systems",),
-    ("lpvest.catalog", "lpvest.modelfile"),
-    ("lpvest.estimators", "lpvest.analysis", "lpvest.design.result"),
+    ("lpvest.systems._catalog", "lpvest.systems._modelfile"),
+    ("lpvest.estimators", "lpvest.analysis", "lpvest.design._result"),
     ("lpvest.design",),
-    ("lpvest.plotting",),
+    ("lpvest.core._plotting",),
     ("lpvest.fmi",),
     ("lpvest.cosim",),
     ("lpvest.experiments", "lpvest.sweep"),

@@ -26,9 +26,17 @@ from lpvest import (
     load_system,
     reconstruct_state,
 )
+from lpvest.core._protocol import Sampled as StreamingEstimator, run_streaming
 from lpvest.estimators import bspline as bs
-from lpvest.estimators.bspline import basis, fit, kernels, model, observer, regression, state
-from lpvest.protocol import Sampled as StreamingEstimator, run_streaming
+from lpvest.estimators.bspline import (
+    _basis as basis,
+    _fit as fit,
+    _kernels as kernels,
+    _model as model,
+    _observer as observer,
+    _regression as regression,
+    _state as state,
+)
 from tests.tolerances import EPS, lstsq_rtol, roundoff
 
 pytestmark = pytest.mark.blas_sensitive  # numerical agreement: ./dev test runs it under a second BLAS kernel

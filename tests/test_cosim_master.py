@@ -10,9 +10,9 @@ import re
 import numpy as np
 import pytest
 
+from lpvest.core._errors import shorten
 from lpvest.cosim import AlgebraicLoopError, Component, CoSimulation, CoSimulationError, simulate
 from lpvest.cosim.master import DiscardedStep, DiscardedStepWarning, step_count, whole_steps
-from lpvest.errors import shorten
 
 from . import fake_fmu
 from .fake_fmu import CALLS, FakeSlave, Model, write_fmu

@@ -13,8 +13,8 @@ import pytest
 
 from lpvest import load_system
 from lpvest.cli import main
+from lpvest.core._errors import ModelFileError
 from lpvest.cosim.files import _path_text, load_cosim
-from lpvest.errors import ModelFileError
 from tests.kalman_helpers import kalman_fmu_tolerance
 from tests.test_fmu import paper_w, theta
 from tests.tolerances import roundoff
@@ -50,7 +50,7 @@ def test_peixoto_example_file_runs_from_the_command_line_and_matches_the_library
     k = np.arange(101)
     alpha = plant.alpha_batch(theta(k)[:, None])
     ref = plant.simulate(alpha, paper_w(k)[:, None])
-    from lpvest.estimators.hinf import hinf_filter_batch
+    from lpvest.estimators._hinf import hinf_filter_batch
 
     zhat = hinf_filter_batch(_design(fmus["PeixotoEx1HinfPD"]), ref.y, alpha).zhat
     np.testing.assert_array_equal(data[:, 0], k)
@@ -79,8 +79,8 @@ def test_kalman_example_file_matches_the_library_filters_on_the_recorded_data(fm
     # sin of an argument of size <= 30 rounded once, sin once
     np.testing.assert_allclose(d["src.u[1]"], np.sin(0.1 * d["time"]), rtol=0, atol=roundoff(1.0 + 30.0, 1))
     assert np.all(np.abs(np.diff(d["sched.p[1]"])) <= 0.2 + roundoff(1.0, 2))  # the random walk's rate bound
+    from lpvest.estimators._truncated import TruncatedKalmanFilter
     from lpvest.estimators.kalman import kalman_filter
-    from lpvest.estimators.truncated import TruncatedKalmanFilter
 
     kf = kalman_filter(model, p, u, y)
     tol = kalman_fmu_tolerance(model, p, u, y, kf)

@@ -1,4 +1,4 @@
-"""The exception family (lpvest/errors.py): every deliberate error of a public
+"""The exception family (lpvest/core/_errors.py): every deliberate error of a public
 function is an LpvestError subclass that is also the built-in a caller
 expects, with a short message (issue 12: the places that raised plain
 ValueError/TypeError/RuntimeError)."""
@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 from lpvest import load_system
-from lpvest.design import HinfProgram, design_hinf, lmi_matrices, search_epsilon
-from lpvest.errors import (
+from lpvest.core._errors import (
     ArgumentError,
     ArgumentTypeError,
     InternalError,
@@ -18,9 +17,10 @@ from lpvest.errors import (
     OutputError,
     abbreviate,
 )
-from lpvest.estimators.hinf import HinfFilter
+from lpvest.core._validation import as_rng
+from lpvest.design import HinfProgram, design_hinf, lmi_matrices, search_epsilon
+from lpvest.estimators._hinf import HinfFilter
 from lpvest.estimators.kalman import LPVKalmanFilter, kalman_filter
-from lpvest.validation import as_rng
 
 
 @pytest.fixture(scope="module")
@@ -89,7 +89,7 @@ def test_abbreviate(value, limit, shown):
 
 
 def test_shorten():
-    from lpvest.errors import shorten
+    from lpvest.core._errors import shorten
 
     assert shorten("a,\n  b") == "a, b"
     assert shorten("x" * 100, 20) == "xxxxxxx...xx (100 characters)"
@@ -105,7 +105,7 @@ def test_shorten():
 )
 def test_load_system_of_a_name_the_system_cannot_look_up(source, match):
     # a NUL character raised ValueError and a 5000-character name OSError from Path.exists()
-    from lpvest.errors import ModelFileError
+    from lpvest.core._errors import ModelFileError
 
     with pytest.raises(ModelFileError, match=match):
         load_system(source)

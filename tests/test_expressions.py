@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from lpvest import Expression, ExpressionError, FormulaMatrix
-from lpvest.expressions import shift_name
+from lpvest.core._expressions import shift_name
 from tests.tolerances import roundoff
 
 

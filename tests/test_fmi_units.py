@@ -49,9 +49,9 @@ def test_parameter_types_follow_the_start_value():
 def test_registry_resolves_factories_and_selects_models():
     from lpvest import load_system
 
-    kind = EstimatorKind("Kalman", "lpvest.signals:sample_signal", models=("affine",))
+    kind = EstimatorKind("Kalman", "lpvest.core._signals:sample_signal", models=("affine",))
     assert resolve(kind.factory).__name__ == "sample_signal"
     assert not kind.applies_to(load_system("peixoto-ex1").model())
     assert all(isinstance(k, EstimatorKind) for k in estimator_kinds())
     with pytest.raises(ValueError, match="not of the form 'module:function'"):
-        resolve("lpvest.signals")
+        resolve("lpvest.core._signals")

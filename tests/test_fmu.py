@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from lpvest import load_system
+from lpvest.core._rng import Stream
 from lpvest.fmi.build import validate_fmus
-from lpvest.rng import Stream
 from tests.fmu_driver import Driver
 from tests.tolerances import roundoff
 
@@ -310,7 +310,7 @@ def test_scheduler_default_is_the_papers_sinusoid(fmus):
 
 
 def test_scheduler_random_kind_has_bounded_rate_and_is_seeded(fmus):
-    from lpvest.signals import SignalSpec, sample_signal
+    from lpvest.core._signals import SignalSpec, sample_signal
 
     d = Driver(fmus["AffineDemoScheduler"])
     assert d.initialize(kind="random", seed=4, **{"rate[1]": 0.3, "rate[2]": 0.1}) == 0

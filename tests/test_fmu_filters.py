@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from lpvest import load_system
-from lpvest.protocol import Sampled as StreamingEstimator
+from lpvest.core._protocol import Sampled as StreamingEstimator
 from tests.fmu_driver import Driver
 
 
@@ -34,7 +34,7 @@ def _kalman() -> StreamingEstimator:
 
 
 def _truncated(tau: int = 4) -> StreamingEstimator:
-    from lpvest.estimators.truncated import TruncatedKalmanFilter
+    from lpvest.estimators._truncated import TruncatedKalmanFilter
 
     return TruncatedKalmanFilter(load_system("cox-toth-truncation").model(), tau, start="theorem")
 
@@ -68,7 +68,7 @@ def _hinf_from_fmu(name: str) -> StreamingEstimator:
     import zipfile
 
     from lpvest.design import HinfDesign
-    from lpvest.estimators.hinf import HinfFilter
+    from lpvest.estimators._hinf import HinfFilter
 
     with zipfile.ZipFile(FMU_PATHS[name]) as z:
         design = HinfDesign.from_json(z.read("resources/design.json").decode())
@@ -82,8 +82,8 @@ def _hinf_known_input(name: str, system: str) -> StreamingEstimator:
     import zipfile
 
     from lpvest.design import HinfDesign
-    from lpvest.estimators.hinf import HinfFilter
-    from lpvest.systems.polytopic import hinf_setting
+    from lpvest.estimators._hinf import HinfFilter
+    from lpvest.systems._polytopic import hinf_setting
 
     with zipfile.ZipFile(FMU_PATHS[name]) as z:
         design = HinfDesign.from_json(z.read("resources/design.json").decode())
@@ -437,7 +437,7 @@ def test_simulate_fmu_with_a_step_of_two_samples_holds_the_inputs(fmus, name, de
     those two samples, bit for bit, with the measurement one sample late too."""
     from fmpy import simulate_fmu
 
-    from lpvest.protocol import MeasurementDelay
+    from lpvest.core._protocol import MeasurementDelay
 
     make, params, data, T, h = FILTERS[name]
     est = make() if not delay else MeasurementDelay(make(), delay=delay)
@@ -518,7 +518,7 @@ def test_kalman_fmu_takes_x0_and_P0_and_reports_gain_and_log_likelihood(fmus):
 
 
 def test_truncated_kalman_fmu_steady_state_start(fmus):
-    from lpvest.estimators.truncated import TruncatedKalmanFilter
+    from lpvest.estimators._truncated import TruncatedKalmanFilter
 
     model = load_system("cox-toth-truncation").model()
     T = 30

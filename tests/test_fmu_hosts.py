@@ -299,7 +299,7 @@ def test_fmus_run_in_a_fresh_virtual_environment_with_exactly_their_requirements
                                atol=kalman_fmu_tolerance(kf_model, theta(k)[:, None], kf_u, kf_y, kf))
     # the H-infinity filter ran without cvxpy (not installed there): its design came from the FMU
     from lpvest.design import HinfDesign
-    from lpvest.estimators.hinf import HinfFilter
+    from lpvest.estimators._hinf import HinfFilter
 
     with zipfile.ZipFile(fmus["PeixotoEx1HinfPD"]) as z:
         design = HinfDesign.from_json(z.read("resources/design.json").decode())

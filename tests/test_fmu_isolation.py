@@ -45,15 +45,15 @@ def _run(code: str, *, cwd: Path | None = None, timeout: int = 900) -> dict:
 
 
 @pytest.mark.parametrize(("name", "present", "absent", "requirements"), [
-    ("PeixotoEx1Plant", ["lpvest.systems.streaming", "lpvest.fmi.slave", "pythonfmu.fmi2slave"],
-     ["lpvest.cli", "lpvest.cosim", "lpvest.experiments.fmus", "lpvest.design.hinf", "lpvest.estimators.kalman",
+    ("PeixotoEx1Plant", ["lpvest.systems._streaming", "lpvest.fmi.slave", "pythonfmu.fmi2slave"],
+     ["lpvest.cli", "lpvest.cosim", "lpvest.experiments.fmus", "lpvest.design._hinf", "lpvest.estimators.kalman",
       "lpvest.fmi.build", "lpvest.cosim.ssp"], ["numpy>=1.26"]),
     ("CoxTothTruncationKalman", ["lpvest.estimators.kalman", "lpvest.fmi.factories.kalman"],
-     ["lpvest.estimators.bspline", "lpvest.estimators.truncated", "lpvest.design.hinf", "lpvest.cli"],
+     ["lpvest.estimators.bspline", "lpvest.estimators._truncated", "lpvest.design._hinf", "lpvest.cli"],
      ["numpy>=1.26"]),
-    ("PeixotoEx1HinfPD", ["lpvest.estimators.hinf", "lpvest.design.result"],
-     ["lpvest.design.hinf", "lpvest.fmi.designs", "lpvest.estimators.kalman"], ["numpy>=1.26"]),
-    ("SridharLtvBSplineObserver", ["lpvest.estimators.bspline", "lpvest.estimators.bspline.kernels"],
+    ("PeixotoEx1HinfPD", ["lpvest.estimators._hinf", "lpvest.design._result"],
+     ["lpvest.design._hinf", "lpvest.fmi.designs", "lpvest.estimators.kalman"], ["numpy>=1.26"]),
+    ("SridharLtvBSplineObserver", ["lpvest.estimators.bspline", "lpvest.estimators.bspline._kernels"],
      ["lpvest.estimators.kalman", "lpvest.cli"], ["numpy>=1.26", "scipy>=1.11"]),
 ])
 def test_an_fmu_carries_what_its_component_imports_and_says_what_it_needs(fmus, name, present, absent,
@@ -305,7 +305,7 @@ def test_design_then_build_from_the_design_without_solving(tmp_path, capsys, mon
     assert doc["kind"] == "parameter-dependent" and len(doc["model_digest"]) == 64
 
     # building from the file never solves: the solver is not even importable
-    import lpvest.design.hinf as hinf
+    import lpvest.design._hinf as hinf
 
     def no_solver(*args, **kwargs):
         raise AssertionError("the build solved an LMI")
@@ -336,9 +336,9 @@ def test_a_design_for_another_plant_is_refused_in_one_line(tmp_path, capsys):
 def test_stored_designs_fit_their_plants():
     """Each design stored with the examples fits the plant it is named for (the
     builder uses it instead of solving), and its certificate checks."""
-    from lpvest.catalog import stored_design
-    from lpvest.design.result import HinfDesign
-    from lpvest.systems.polytopic import hinf_setting
+    from lpvest.design._result import HinfDesign
+    from lpvest.systems._catalog import stored_design
+    from lpvest.systems._polytopic import hinf_setting
 
     found = sorted((ROOT / "models" / "designs").glob("*.json"))
     assert len(found) == 10

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from lpvest import LMIInfeasibleError, PolytopicLPV, load_system
+from lpvest.core._errors import DimensionError, NonFiniteError
 from lpvest.design import (
     KIND_PD,
     KIND_ROBUST,
@@ -28,8 +29,7 @@ from lpvest.design import (
     multiplier,
     search_epsilon,
 )
-from lpvest.design.hinf import _canonical_phi, _search
-from lpvest.errors import DimensionError, NonFiniteError
+from lpvest.design._hinf import _canonical_phi, _search
 from tests import hinf_oracle as oracle
 from tests.tolerances import LMI_RESOLVE_GAMMA_RTOL, roundoff
 
@@ -235,7 +235,7 @@ def test_rescaling_is_exact():
     alpha = scenario_alpha(plant, k)
     y = np.random.default_rng(0).standard_normal((60, 1))
     paper_design = dataclasses.replace(design, **{n: np.stack(paper[n]) for n in ("H", "Af", "Bf", "Cf", "Df")})
-    from lpvest.estimators.hinf import hinf_filter_batch
+    from lpvest.estimators._hinf import hinf_filter_batch
 
     # two realizations of one stable filter, states scaled by powers of s: the
     # rescaled matrices carry rounding amplified by s^2, through 60 steps
@@ -430,7 +430,7 @@ def test_json_round_trip(name, tmp_path):
 
 
 def test_json_infinite_epsilon_and_errors(tmp_path):
-    from lpvest.errors import ModelFileError
+    from lpvest.core._errors import ModelFileError
 
     _, d = get_design("random3-robust")
     assert math.isinf(d.epsilon) and d.multiplier == (1.0, 0.0)

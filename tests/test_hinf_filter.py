@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from lpvest import load_system
+from lpvest.core._errors import DimensionError, NonFiniteError, SchedulingRangeError
+from lpvest.core._protocol import Sampled as StreamingEstimator, run_streaming
 from lpvest.design import KIND_PD, KIND_ROBUST, design_hinf
-from lpvest.errors import DimensionError, NonFiniteError, SchedulingRangeError
-from lpvest.estimators.hinf import HinfFilter, hinf_filter_batch
-from lpvest.protocol import Sampled as StreamingEstimator, run_streaming
+from lpvest.estimators._hinf import HinfFilter, hinf_filter_batch
 from tests import hinf_oracle as oracle
 from tests.tolerances import roundoff
 
@@ -187,9 +187,9 @@ import sys
 for name in ("cvxpy", "scipy", "matplotlib", "clarabel"):
     sys.modules[name] = None  # any import of these now fails
 import numpy as np
-from lpvest.design.result import HinfDesign
-from lpvest.estimators.hinf import HinfFilter
-from lpvest.protocol import run_streaming
+from lpvest.design._result import HinfDesign
+from lpvest.estimators._hinf import HinfFilter
+from lpvest.core._protocol import run_streaming
 d = HinfDesign.from_json(r"{path}")
 out = run_streaming(HinfFilter(d), {{"alpha": np.load(r"{tmp_path / 'alpha.npy'}"),
                                       "y": np.load(r"{tmp_path / 'y.npy'}")}})

@@ -1,6 +1,6 @@
 """H-infinity filters for a model with general noise and a known input:
-the conversion to Peixoto et al.'s setting (lpvest.systems.polytopic.hinf_setting)
-and the exact compensation of u (module docs of lpvest.estimators.hinf)."""
+the conversion to Peixoto et al.'s setting (lpvest.systems._polytopic.hinf_setting)
+and the exact compensation of u (module docs of lpvest.estimators._hinf)."""
 
 from __future__ import annotations
 
@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from lpvest import load_system
+from lpvest.core._errors import ArgumentTypeError, DimensionError, ModelFileError
+from lpvest.core._protocol import run_streaming
 from lpvest.design import KIND_PD, KIND_ROBUST, design_hinf
-from lpvest.errors import ArgumentTypeError, DimensionError, ModelFileError
-from lpvest.estimators.hinf import HinfFilter, hinf_filter_batch
-from lpvest.modelfile import save_system
-from lpvest.protocol import run_streaming
-from lpvest.systems.polytopic import PolytopicLPV, hinf_setting
+from lpvest.estimators._hinf import HinfFilter, hinf_filter_batch
+from lpvest.systems._modelfile import save_system
+from lpvest.systems._polytopic import PolytopicLPV, hinf_setting
 from tests import hinf_oracle as oracle
 from tests.tolerances import roundoff
 
@@ -194,7 +194,7 @@ def test_a_robust_filter_of_a_plant_whose_input_path_is_constant_takes_no_schedu
 
 
 def test_a_polytopic_model_with_a_known_input_streams_and_evaluates_like_its_simulation(rng):
-    from lpvest.systems.streaming import DiscretePlant
+    from lpvest.systems._streaming import DiscretePlant
 
     plant = hinf_setting(model())
     # at / at_batch: the six matrices of (1), equal to the same entries of matrices()
@@ -296,8 +296,8 @@ def test_a_saved_state_carries_the_copy_of_the_response_to_u():
 
 
 def test_a_singular_or_exploding_filter_step_is_a_numerical_error():
-    from lpvest.errors import NumericalError
-    from lpvest.estimators.hinf import hinf_step
+    from lpvest.core._errors import NumericalError
+    from lpvest.estimators._hinf import hinf_step
 
     _, d = setup(KIND_ROBUST)
     bad = dataclasses.replace(d, H=np.zeros_like(np.asarray(d.H)))
@@ -338,8 +338,8 @@ def test_inputs_of_the_wrong_shape_are_named_and_the_ports_describe_themselves()
 
 
 def test_a_singular_scheduled_filter_names_the_scheduling_point():
-    from lpvest.errors import NumericalError
-    from lpvest.estimators.hinf import hinf_step
+    from lpvest.core._errors import NumericalError
+    from lpvest.estimators._hinf import hinf_step
 
     _, d = setup(KIND_PD)
     bad = dataclasses.replace(d, H=np.zeros_like(np.asarray(d.H)))

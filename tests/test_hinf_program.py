@@ -1,4 +1,4 @@
-"""The H-infinity program's own algebra (lpvest/design/hinf.py): the dual bound on made-up
+"""The H-infinity program's own algebra (lpvest/design/_hinf.py): the dual bound on made-up
 duals, the eigenvalue check that certifies a returned point, the solver fallback, and the
 small rules around them. The designs themselves are checked against oracles in
 tests/test_hinf_design.py."""
@@ -11,11 +11,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-import lpvest.design.hinf as hinf
+import lpvest.design._hinf as hinf
 from lpvest import load_system
+from lpvest.core._errors import ArgumentError, ArgumentTypeError, DimensionError, LMIInfeasibleError, NonFiniteError
 from lpvest.design import KIND_PD, KIND_ROBUST, HinfProgram
-from lpvest.design.hinf import LMIBlock, choose_solver, multiplier
-from lpvest.errors import ArgumentError, ArgumentTypeError, DimensionError, LMIInfeasibleError, NonFiniteError
+from lpvest.design._hinf import LMIBlock, choose_solver, multiplier
 
 EPS = np.finfo(float).eps
 
@@ -254,7 +254,7 @@ def test_an_epsilon_search_with_no_certified_point_says_so_naming_the_program_an
 def test_a_solver_that_cannot_solve_lmis_is_refused_before_compiling(solver):
     """An unknown name, or an installed solver without semidefinite cones (OSQP): one
     ArgumentError naming the solvers that can, not cvxpy's SolverError after the compile."""
-    from lpvest.design.hinf import sdp_solvers
+    from lpvest.design._hinf import sdp_solvers
 
     assert {"CLARABEL", "SCS"} <= set(sdp_solvers()) and "OSQP" not in sdp_solvers()
     with pytest.raises(ArgumentError, match=r"solver .*: expected AUTO or an installed cvxpy solver of "

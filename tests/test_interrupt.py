@@ -3,7 +3,7 @@ exits 130 / 143, says in one line what it kept and how to go on, and keeps
 nothing half-made.
 
 Every test synchronises on an event, never on a delay: the command runs with
-the test hook of :mod:`lpvest._interrupt` (``LPVEST_TEST_HOLD=MOMENT``), which
+the test hook of :mod:`lpvest.core._interrupt` (``LPVEST_TEST_HOLD=MOMENT``), which
 writes the moment to a file when the command reaches it and then waits; the
 test sends the signal once the line is there. A held LMI solve waits on its
 worker thread, exactly where a native solver (Clarabel) would be computing
@@ -69,8 +69,8 @@ def test_scs_stopped_by_its_own_sigint_handler_is_an_interruption_not_a_failed_p
     script = textwrap.dedent("""
         import os, sys, threading
         import cvxpy as cp, numpy as np
-        from lpvest._interrupt import Interrupted, abandoned_calls, call_interruptibly, handling_signals
-        from lpvest.design.hinf import _interruptible_scs
+        from lpvest.core._interrupt import Interrupted, abandoned_calls, call_interruptibly, handling_signals
+        from lpvest.design._hinf import _interruptible_scs
 
         n = 60
         rng = np.random.default_rng(0)

@@ -18,6 +18,7 @@ from lpvest import (
     SchedulingSpace,
     load_system,
 )
+from lpvest.core._protocol import Sampled as StreamingEstimator, run_streaming
 from lpvest.estimators import kalman as kalman_package
 from lpvest.estimators.kalman import (
     SCAN_MAX_AMPLIFICATION,
@@ -26,12 +27,11 @@ from lpvest.estimators.kalman import (
     KalmanState,
     LPVKalmanFilter,
     ScanAccuracyWarning,
+    _streaming as streaming_module,
     kalman_filter,
     kalman_step,
     simulate_innovation_form,
-    streaming as streaming_module,
 )
-from lpvest.protocol import Sampled as StreamingEstimator, run_streaming
 from tests.kalman_helpers import (
     EPS,
     amplification,
@@ -557,7 +557,7 @@ def test_kalman_step_is_pure(truncation_model):
     np.testing.assert_array_equal(s0.P, truncation_model.P0)
 
 
-@pytest.mark.parametrize("module", ["model", "recursion", "batch", "streaming"])
+@pytest.mark.parametrize("module", ["_model", "_recursion", "_batch", "_streaming"])
 def test_docstring_examples_run(module):
     failures, tried = doctest.testmod(getattr(kalman_package, module), optionflags=doctest.ELLIPSIS)
     assert tried > 0 and failures == 0

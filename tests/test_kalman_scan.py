@@ -17,11 +17,11 @@ from lpvest.estimators.kalman import (
     SCAN_MIN_SAMPLES,
     KalmanModel,
     ScanAccuracyWarning,
-    batch as batch_module,
+    _batch as batch_module,
+    _scan as scan_module,
     kalman_filter,
-    scan as scan_module,
 )
-from lpvest.estimators.kalman.scan import (
+from lpvest.estimators.kalman._scan import (
     MIN_BLOCK,
     block_length,
     decorrelate_stack,

@@ -171,7 +171,7 @@ def test_plant_reads_one_trajectory_whatever_the_step(system):
     """The integration's steps do not depend on the communication points: the
     plant stepped at 1 ms, at 50 ms and at irregular points gives, at each common
     time, the model's solution at that time, bit for bit."""
-    from lpvest.systems.streaming import LTVPlant
+    from lpvest.systems._streaming import LTVPlant
 
     model = system.model("io")
     ss = model.to_state_space()
@@ -197,7 +197,7 @@ def test_plant_state_restores_exactly(system):
     after the integration has restarted several times (anchor replayed), for the
     model's input and for a held input that changes; a state without its anchor
     (t and x only) continues within the integrator's tolerance."""
-    from lpvest.systems.streaming import LTVPlant
+    from lpvest.systems._streaming import LTVPlant
 
     model = system.model("io")
     h = 0.01
@@ -230,8 +230,8 @@ def test_plant_state_restores_exactly(system):
 
 def test_held_input_against_exact_discretisation():
     """x' = -x + u with u held over each step: x_{k+1} = e^{-h} x_k + (1 - e^{-h}) u_k exactly."""
-    from lpvest.systems.ltv import LTVStateSpace
-    from lpvest.systems.streaming import LTVPlant
+    from lpvest.systems._ltv import LTVStateSpace
+    from lpvest.systems._streaming import LTVPlant
 
     plant = LTVPlant(LTVStateSpace([[-1.0]], [[1.0]], [[1.0]]))
     h, x = 0.1, 0.0
@@ -244,7 +244,7 @@ def test_held_input_against_exact_discretisation():
 
 def test_solution_errors():
     from lpvest import ArgumentError
-    from lpvest.systems.ltv import LTVStateSpace
+    from lpvest.systems._ltv import LTVStateSpace
 
     sol = LTVStateSpace([["sqrt(1 - t)"]], [[0]], [[1]]).solution(0.0, [1.0], u=0.0)  # nan after t = 1
     # x = exp(2/3 (1 - (1 - t)^1.5)); DOP853 at rtol 1e-12 over a few steps

@@ -1,4 +1,4 @@
-"""A measurement that arrives late (lpvest.protocol.MeasurementDelay), against
+"""A measurement that arrives late (lpvest.core._protocol.MeasurementDelay), against
 the library on the properly aligned data.
 
 The oracle is the undelayed component fed the samples as they belong together
@@ -15,17 +15,17 @@ import numpy as np
 import pytest
 
 from lpvest import load_system
-from lpvest.catalog import stored_design
+from lpvest.core._errors import ArgumentError, ArgumentTypeError, DimensionError, NonFiniteError, SchedulingRangeError
+from lpvest.core._protocol import MeasurementDelay, run_streaming
+from lpvest.core._signals import SchedulerComponent, SignalSpec
 from lpvest.design import HinfDesign
-from lpvest.errors import ArgumentError, ArgumentTypeError, DimensionError, NonFiniteError, SchedulingRangeError
-from lpvest.estimators.hinf import HinfFilter
+from lpvest.estimators._hinf import HinfFilter
+from lpvest.estimators._truncated import TruncatedKalmanFilter
 from lpvest.estimators.kalman import LPVKalmanFilter
-from lpvest.estimators.truncated import TruncatedKalmanFilter
 from lpvest.fmi.registry import MEASUREMENT_DELAY, EstimatorKind, build_estimator, estimator_kinds
 from lpvest.fmi.state import decode_state, encode_state
-from lpvest.protocol import MeasurementDelay, run_streaming
-from lpvest.signals import SchedulerComponent, SignalSpec
-from lpvest.systems.polytopic import hinf_setting
+from lpvest.systems._catalog import stored_design
+from lpvest.systems._polytopic import hinf_setting
 from tests.fmu_movavg import MovingAverage
 
 T = 40

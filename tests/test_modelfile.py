@@ -20,7 +20,7 @@ from lpvest import (
     load_system,
     loads_system,
 )
-from lpvest.errors import shorten
+from lpvest.core._errors import shorten
 
 EXAMPLES = [e.name for e in example_systems()]
 
@@ -95,7 +95,7 @@ def test_parameter_override():
     beyond = load_system("peixoto-ex2", parameters={"rho": 30.0}, allow_outside_range=True)
     assert beyond.model().vertices.A[0, 1, 1] == pytest.approx(-1.5)
     # the same from text
-    from lpvest.catalog import find_system
+    from lpvest.systems._catalog import find_system
 
     text = find_system("peixoto-ex2").read_text(encoding="utf-8")
     with pytest.raises(ModelFileError, match=r"parameters\.rho: override 30 is outside"):
@@ -396,7 +396,7 @@ def test_models_are_named_system_slash_key():
 
 def test_a_model_unstable_along_the_schedule_is_an_error_not_inf(tmp_path):
     # entries of 1e100 are accepted, but the simulation leaves the floating-point range: a clear error
-    from lpvest.errors import NumericalError
+    from lpvest.core._errors import NumericalError
     from lpvest.experiments.simulate import simulate_system
 
     path = tmp_path / "m.toml"

@@ -11,11 +11,11 @@ import math
 import numpy as np
 import pytest
 
-from lpvest.errors import ExpressionError
-from lpvest.estimators.kalman.recursion import small_chol_inverse
-from lpvest.expressions import Expression
+from lpvest.core._errors import ExpressionError
+from lpvest.core._expressions import Expression
+from lpvest.core._rng import Stream, log, lower_times, normal_quantile, psd_cholesky
+from lpvest.estimators.kalman._recursion import small_chol_inverse
 from lpvest.fmi.native.formulas import VM_STACK, compile_formula
-from lpvest.rng import Stream, log, lower_times, normal_quantile, psd_cholesky
 from tests.native_helpers import Formula, core_library, doubles, seeded
 from tests.tolerances import roundoff
 
@@ -229,7 +229,7 @@ def test_formulas_with_functions_agree_within_their_derived_bound(text, rng):
 
 
 def test_the_deepest_formula_the_language_allows_runs_within_the_stack():
-    # nested to the parser's limit (lpvest.expressions.MAX_FORMULA_DEPTH), right-leaning: every
+    # nested to the parser's limit (lpvest.core._expressions.MAX_FORMULA_DEPTH), right-leaning: every
     # operand waits on the stack; the compiler counts the depth and the machine has room for it
     deep = Expression.parse("x*(" * 49 + "x" + ")" * 49)
     c = compile_formula(deep, ["x"])

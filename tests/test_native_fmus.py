@@ -227,9 +227,9 @@ def test_plant_gives_the_librarys_numbers(native_fmus, open_fmu, name, tmp_path)
     local = 2 gamma_n (|A| |x| + |B| |u| + |G| |w|) plus what a difference of
     the weights alpha(p) or psi(p) does (formulas with functions); the same for
     the outputs. The drawn noise (and x_0) are the same bits in both."""
-    from lpvest.systems.affine import AffineLPV
-    from lpvest.systems.innovation import LPVInputOutput
-    from lpvest.systems.polytopic import PolytopicLPV
+    from lpvest.systems._affine import AffineLPV
+    from lpvest.systems._innovation import LPVInputOutput
+    from lpvest.systems._polytopic import PolytopicLPV
     from tests.test_native_core import formula_bound
 
     params = PLANTS[name]
@@ -345,7 +345,7 @@ SCHEDULES = [
 
 @pytest.mark.parametrize("name, params, exact", SCHEDULES)
 def test_scheduler_and_source_give_the_librarys_signals(native_fmus, open_fmu, name, params, exact, tmp_path):
-    """Random kinds (gaussian: lpvest.rng's normals, random: its uniforms),
+    """Random kinds (gaussian: lpvest.core._rng's normals, random: its uniforms),
     tables and constants are the library's bits; sinusoids agree within what
     two sin/exp evaluations may differ by, alpha = map(p) within the map's
     formula bound for that difference of p."""
@@ -416,7 +416,7 @@ def test_kalman_filter_gives_the_librarys_numbers(native_fmus, open_fmu, name, t
     sensitivity, the closed loop Phi = A - K C: delta P+ = Phi delta P Phi^T,
     delta x+ = Phi delta x + delta K xi (first order; Joseph form); the
     log-likelihood adds its steps' bounds."""
-    from lpvest.estimators.kalman.recursion import KalmanState, kalman_step
+    from lpvest.estimators.kalman._recursion import KalmanState, kalman_step
     from tests.native_reference import kalman_step_bound, packed_error
 
     params = KALMANS[name]
@@ -471,9 +471,9 @@ def test_truncated_kalman_filter_gives_the_librarys_numbers(native_fmus, open_fm
     scipy's and the runtime's Riccati solutions apart by dare_bound); then the
     step's outputs as for the exact filter, the estimate carried on by the
     truncated closed loop."""
-    from lpvest.estimators.kalman.model import StepMatrices
-    from lpvest.estimators.kalman.recursion import KalmanState, kalman_step
-    from lpvest.estimators.truncated import truncated_prior
+    from lpvest.estimators._truncated import truncated_prior
+    from lpvest.estimators.kalman._model import StepMatrices
+    from lpvest.estimators.kalman._recursion import KalmanState, kalman_step
     from tests.native_reference import covariance_step_bound, dare_bound, kalman_step_bound, packed_error, restart_bound
 
     name, params = TRUNCATED[case]
@@ -856,7 +856,7 @@ def test_lpvest_build_backend_native(native_fmus, tmp_path, capsys):
 
 
 def test_reproduce_with_the_native_backend(native_fmus, tmp_path):
-    from lpvest.errors import ArgumentError
+    from lpvest.core._errors import ArgumentError
     from lpvest.experiments.fmus import ExperimentFmus, as_experiment_fmus
     from lpvest.experiments.reproduce import reproduce
 

@@ -32,12 +32,12 @@ import tomli_w
 from hypothesis import given, settings, strategies as st
 
 from lpvest.cli import describe_model, main
+from lpvest.core._errors import MESSAGE_LIMIT, ExpressionError, ModelFileError
+from lpvest.core._expressions import FUNCTIONS, Expression, shift_name
 from lpvest.cosim import CoSimulationError
 from lpvest.cosim.files import load_cosim
 from lpvest.cosim.ssp import read_ssp
-from lpvest.errors import MESSAGE_LIMIT, ExpressionError, ModelFileError
-from lpvest.expressions import FUNCTIONS, Expression, shift_name
-from lpvest.modelfile import load_system
+from lpvest.systems._modelfile import load_system
 
 from .contract import check_message, within_contract
 
@@ -626,7 +626,7 @@ def warm_api() -> None:
     use, scipy's among them, are not an input's time."""
     from hypothesis import find
 
-    from lpvest.errors import LpvestError
+    from lpvest.core._errors import LpvestError
 
     for call, arguments in API_CASES.values():
         with np.errstate(all="ignore"), contextlib.suppress(LpvestError):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from lpvest.cli import main
-from lpvest.errors import LpvestError
+from lpvest.core._errors import LpvestError
 from lpvest.experiments import Experiment, ExperimentResult
 from lpvest.experiments.fmus import (
     CATALOG,
@@ -120,7 +120,7 @@ def test_a_resolved_cache_serves_its_fmus_only_and_pickles(tmp_path):
 
 
 def test_workers_must_be_a_count(tmp_path, capsys):
-    from lpvest.errors import ArgumentError
+    from lpvest.core._errors import ArgumentError
     from lpvest.experiments.reproduce import reproduce
 
     with pytest.raises(ArgumentError, match=r"workers must be an integer >= 0 \(0: in this process\); found -1"):

@@ -1,4 +1,4 @@
-"""lpvest's random generator (lpvest.rng): numpy's PCG64 raw words, uniforms,
+"""lpvest's random generator (lpvest.core._rng): numpy's PCG64 raw words, uniforms,
 normals by AS 241 with the module's own logarithm, multivariate draws. The same
 bits in the C runtime are checked in tests/test_native_core.py."""
 
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from scipy.special import ndtri
 
-from lpvest.errors import ArgumentError, ArgumentTypeError
-from lpvest.rng import Stream, as_stream, log, lower_times, normal_quantile, psd_cholesky
+from lpvest.core._errors import ArgumentError, ArgumentTypeError
+from lpvest.core._rng import Stream, as_stream, log, lower_times, normal_quantile, psd_cholesky
 from tests.tolerances import EPS, roundoff
 
 

@@ -1,4 +1,4 @@
-"""Test signals (lpvest.signals) and the Scheduler/Source components."""
+"""Test signals (lpvest.core._signals) and the Scheduler/Source components."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from lpvest import load_system
-from lpvest.rng import Stream
-from lpvest.signals import (
+from lpvest.core._rng import Stream
+from lpvest.core._signals import (
     SchedulerComponent,
     SignalError,
     SignalGenerator,

@@ -14,7 +14,7 @@ import pytest
 from pythonfmu.enums import Fmi2Status
 
 from lpvest.fmi.slave import MAX_MESSAGE
-from lpvest.modelfile import load_system
+from lpvest.systems._modelfile import load_system
 
 from .slave_harness import ERROR, OK, WARNING, Slave, edit_state, write_resources
 
@@ -236,8 +236,8 @@ def test_a_filter_reads_its_estimate_before_the_step_and_holds_it_after(resource
         assert f.step(float(k), 1.0)
         assert f.get("zhat[1]", "zhat[2]") == before
         seen.append(before)
-    from lpvest.design.result import HinfDesign
-    from lpvest.estimators.hinf import HinfFilter
+    from lpvest.design._result import HinfDesign
+    from lpvest.estimators._hinf import HinfFilter
 
     design = HinfDesign.from_json((resources["peixoto-ex1HinfPD"] / "design.json").read_text())
     lib = HinfFilter(design, simplex_map=load_system("peixoto-ex1").model().simplex_map)
@@ -438,7 +438,7 @@ def test_a_spec_without_a_sample_time_samples_every_second(tmp_path):
 def test_a_timed_scheduler_far_from_t0_is_the_library_signal_at_the_hosts_points(resources, read_before_step):
     """A function of time (no sample time) ends each step exactly at the host's point t + h, not at
     its own sum of steps: far from 0 the two differ in the last bits of p = sin(0.25 t)."""
-    from lpvest.signals import SchedulerComponent, SignalSpec
+    from lpvest.core._signals import SchedulerComponent, SignalSpec
 
     t0, h, n = 1e6, 0.1, 40
     s = Slave(resources["peixoto-ex1Scheduler"])
@@ -637,12 +637,12 @@ Dy = [[1.0]]
 
 
 class _Duck:
-    """A component that is not an :class:`lpvest.protocol.Component`: ports, ``outputs``,
+    """A component that is not an :class:`lpvest.core._protocol.Component`: ports, ``outputs``,
     ``step``, ``reset`` and its state only (no ``prepare``/``advance``, no ``timed``). ``fail``:
     ``("raise" | "nan", n)`` makes its n-th step raise or return NaN outputs."""
 
     def __init__(self, inner, extra: bool, fail):
-        from lpvest.protocol import Port
+        from lpvest.core._protocol import Port
 
         self.inner, self.fail, self.steps = inner, fail, 0
         self.input_ports = tuple(inner.input_ports)

@@ -11,12 +11,12 @@ import pytest
 
 from lpvest import load_system
 from lpvest.cli import main
+from lpvest.core._signals import SchedulerComponent, SignalSpec, SourceComponent
 from lpvest.cosim import Component, CoSimulation, CoSimulationError
 from lpvest.cosim.ssp import DELAY, read_ssp, simulate_ssp, write_ssp
 from lpvest.design import HinfDesign
-from lpvest.estimators.hinf import HinfFilter
-from lpvest.signals import SchedulerComponent, SignalSpec, SourceComponent
-from lpvest.systems.streaming import DiscretePlant
+from lpvest.estimators._hinf import HinfFilter
+from lpvest.systems._streaming import DiscretePlant
 from tests.tolerances import roundoff
 
 H = 0.5  # communication step: not the FMUs' default experiment step (1), so it must come from the file
@@ -85,7 +85,7 @@ def _jacobi(library, first: dict[str, float], *, delay: int = 0, m: int = 1, n: 
     filter pairs its measurement ``delay`` samples late (MeasurementDelay); a
     step of ``m`` samples runs the plant and the filter ``m`` samples with their
     inputs held."""
-    from lpvest.protocol import MeasurementDelay
+    from lpvest.core._protocol import MeasurementDelay
 
     sched, src, plant, filt = library()
     if delay:

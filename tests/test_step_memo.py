@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from lpvest import load_system
-from lpvest.errors import DimensionError, NonFiniteError, SchedulingRangeError
-from lpvest.estimators.hinf import HinfFilter
-from lpvest.protocol import input_key
-from lpvest.signals import SchedulerComponent, SignalSpec
-from lpvest.systems.streaming import DiscretePlant
+from lpvest.core._errors import DimensionError, NonFiniteError, SchedulingRangeError
+from lpvest.core._protocol import input_key
+from lpvest.core._signals import SchedulerComponent, SignalSpec
+from lpvest.estimators._hinf import HinfFilter
+from lpvest.systems._streaming import DiscretePlant
 from tests.fmu_driver import Driver
 
 

@@ -1,4 +1,4 @@
-"""Streaming plants (lpvest.systems.streaming) against the batch simulations."""
+"""Streaming plants (lpvest.systems._streaming) against the batch simulations."""
 
 from __future__ import annotations
 
@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from lpvest import load_system
-from lpvest.errors import DimensionError, ExpressionError, NonFiniteError, SchedulingRangeError
-from lpvest.protocol import run_streaming
-from lpvest.systems.streaming import DiscretePlant, LTVPlant, plant_supports
+from lpvest.core._errors import DimensionError, ExpressionError, NonFiniteError, SchedulingRangeError
+from lpvest.core._protocol import run_streaming
+from lpvest.systems._streaming import DiscretePlant, LTVPlant, plant_supports
 from tests.conftest_fmu import AFFINE_TOML
 from tests.tolerances import roundoff
 
@@ -125,7 +125,7 @@ def test_library_simulation_and_streaming_plant_draw_the_same_realization():
     import numpy as np
 
     from lpvest import load_system
-    from lpvest.systems.streaming import DiscretePlant
+    from lpvest.systems._streaming import DiscretePlant
 
     model = load_system("cox-toth-truncation").model()
     assert np.any(model.P0)
@@ -141,7 +141,7 @@ def test_library_simulation_and_streaming_plant_draw_the_same_realization():
 
 
 def test_run_streaming_names_what_is_wrong_with_its_sequences():
-    from lpvest.signals import SignalSpec, SourceComponent
+    from lpvest.core._signals import SignalSpec, SourceComponent
 
     plant = DiscretePlant(load_system("peixoto-ex1").model())
     with pytest.raises(DimensionError, match="different lengths"):

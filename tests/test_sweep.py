@@ -27,8 +27,8 @@ import pyarrow.parquet as pq
 import pytest
 
 from lpvest.cli import main
+from lpvest.core._errors import ModelFileError
 from lpvest.cosim import Component, CoSimulation, CoSimulationError, simulate
-from lpvest.errors import ModelFileError
 from lpvest.sweep import (
     Engine,
     SweepError,
@@ -473,7 +473,7 @@ def test_seed_keys_and_common_random_numbers(fmus, tmp_path):
 # the experiments' Monte Carlo through the sweep: the numbers of the serial code
 # ---------------------------------------------------------------------------
 def test_cox_toth_prediction_error_through_the_engine_is_the_serial_loop(engine2, tmp_path):
-    from lpvest.analysis.fading_memory import empirical_prediction_error
+    from lpvest.analysis._fading_memory import empirical_prediction_error
     from lpvest.experiments.cox_toth import prediction_error_setup, prediction_error_task
 
     spec = tmp_path / "ct.toml"
@@ -519,7 +519,7 @@ def test_sridhar_noisy_through_the_engine_is_the_serial_experiment(engine2, expe
 @pytest.mark.slow
 def test_peixoto_example2_through_the_engine_is_the_serial_sweep(engine2, tmp_path):
     from lpvest.design import KIND_PD, HinfProgram, design_hinf, search_epsilon
-    from lpvest.modelfile import load_system
+    from lpvest.systems._modelfile import load_system
 
     spec = tmp_path / "px.toml"
     spec.write_text('experiment = "peixoto-example2"\n[[zip]]\nrho = [3.0]\nepsilon = [-10.0]\n')

@@ -17,8 +17,8 @@ from lpvest import (
     SchedulingSpace,
     load_system,
 )
-from lpvest.analysis import fading_memory
-from lpvest.analysis.fading_memory import (
+from lpvest.analysis import _fading_memory as fading_memory
+from lpvest.analysis._fading_memory import (
     decay_rate,
     empirical_prediction_error,
     frozen_gains,
@@ -27,9 +27,9 @@ from lpvest.analysis.fading_memory import (
     tau_needed,
     truncation_errors,
 )
-from lpvest.estimators import truncated as truncated_module
-from lpvest.estimators.kalman import KalmanModel, kalman_filter
-from lpvest.estimators.truncated import (
+from lpvest.core._protocol import Sampled as StreamingEstimator, run_streaming
+from lpvest.estimators import _truncated as truncated_module
+from lpvest.estimators._truncated import (
     TruncatedKalmanFilter,
     assumption_bounds,
     decorrelate,
@@ -37,7 +37,7 @@ from lpvest.estimators.truncated import (
     steady_state,
     theorem_start_covariance,
 )
-from lpvest.protocol import Sampled as StreamingEstimator, run_streaming
+from lpvest.estimators.kalman import KalmanModel, kalman_filter
 from tests.kalman_helpers import memory_steps, random_schedule, random_system
 from tests.tolerances import roundoff
 
@@ -144,7 +144,7 @@ def test_errata_9_prior_from_posterior(dims):
 def test_exact_posterior_start_reproduces_the_exact_gain(model, data):
     # (6a) with P^_0 = the true P_{s-1|s-1} gives back P_{t|t-1} exactly: this pins
     # down the corrected (6a) (index s-1, G(p_{s-1}) Qbar G^T)
-    from lpvest.estimators.truncated import truncated_prior
+    from lpvest.estimators._truncated import truncated_prior
 
     p, u, y = data
     res = kalman_filter(model, p, u, y)

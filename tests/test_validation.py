@@ -7,7 +7,7 @@ from lpvest import (
     NotPositiveDefiniteError,
     SchedulingRangeError,
 )
-from lpvest.validation import (
+from lpvest.core._validation import (
     as_matrix,
     as_rng,
     as_signal,
@@ -81,7 +81,7 @@ def test_as_rng():
 def test_a_value_just_outside_the_box_is_printed_with_the_digits_that_show_it():
     # issue 12: 1 + 1e-7 was printed as "p = 1 is outside its declared range [-1, 1]"
     from lpvest import SchedulingRangeError
-    from lpvest.validation import check_box
+    from lpvest.core._validation import check_box
 
     with pytest.raises(SchedulingRangeError, match=r"^scheduling value p = 1\.0000001 is outside its declared "
                                                    r"range \[-1, 1\]$"):
@@ -93,7 +93,7 @@ def test_a_value_just_outside_the_box_is_printed_with_the_digits_that_show_it():
 def test_definiteness_of_matrices_near_the_float_range(entry, match):
     # issue 12: an entry of -1e308 raised LinAlgError (Q + Q^T overflowed to inf before eigvalsh)
     from lpvest import NotPositiveDefiniteError
-    from lpvest.validation import check_positive_definite
+    from lpvest.core._validation import check_positive_definite
 
     q = np.array([[entry, 0.0], [0.0, 1.0 if match else 0.5e308]])
     if match is None:

@@ -11,7 +11,7 @@ array([[[ 0.1098, -0.0124],
         [-0.0124,  0.0648]]])
 """
 
-from .fading_memory import (
+from ._fading_memory import (
     FilterComparison as FilterComparison,
     Monotonicity as Monotonicity,
     PredictionError as PredictionError,

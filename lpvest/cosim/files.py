@@ -48,9 +48,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ModelFileError, abbreviate, shorten
-from ..plotting import save_figure
-from ..tomlfiles import describe_value, read_toml
+from ..core._errors import ModelFileError, abbreviate, shorten
+from ..core._plotting import save_figure
+from ..core._toml import describe_value, read_toml
 from .master import Component, Connection, CoSimulation, CoSimulationError, DiscardedStep, step_count
 
 __all__ = ["CoSimFile", "CoSimResult", "load_cosim", "DEFAULT_FMU_DIR"]

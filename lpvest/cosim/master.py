@@ -45,8 +45,8 @@ from typing import Any
 
 import numpy as np
 
-from .._interrupt import interruptible, raise_if_pending
-from ..errors import LpvestError, abbreviate, shorten
+from ..core._errors import LpvestError, abbreviate, shorten
+from ..core._interrupt import interruptible, raise_if_pending
 
 __all__ = [
     "Component",

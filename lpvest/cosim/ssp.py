@@ -71,7 +71,7 @@ So :func:`write_ssp` (``jacobi=True``, the default) binds
 ``measurement_delay = 1`` for every filter whose measurement comes from such
 an output: the filter then pairs ``y_k``, arriving in step ``k + 1``, with
 ``theta_k`` and the known input of sample ``k``
-(:class:`~lpvest.protocol.MeasurementDelay`), and its estimate of sample
+(:class:`~lpvest.core.MeasurementDelay`), and its estimate of sample
 ``k``, read after step ``k + 1``, is the estimate our master reads at
 ``t_k``: to the bit, with the certified bound intact.
 
@@ -104,7 +104,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import abbreviate, shorten
+from ..core._errors import abbreviate, shorten
 from ..fmi.build import write_zip_entry
 from ..fmi.spec import SPEC_FILE
 from .master import Component, Connection, CoSimulation, CoSimulationError, whole_steps

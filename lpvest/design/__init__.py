@@ -12,7 +12,7 @@ Theorem 1 for Peixoto et al.'s Example 1 at the paper's ``epsilon = 150``
 ('parameter-dependent', 1.214)
 """
 
-from .hinf import (
+from ._hinf import (
     DEFAULT_MARGIN as DEFAULT_MARGIN,
     DEFAULT_SOLVER as DEFAULT_SOLVER,
     DesignAttempt as DesignAttempt,
@@ -27,7 +27,7 @@ from .hinf import (
     multiplier as multiplier,
     search_epsilon as search_epsilon,
 )
-from .result import (
+from ._result import (
     DESIGN_FORMAT as DESIGN_FORMAT,
     DESIGN_FORMAT_VERSION as DESIGN_FORMAT_VERSION,
     KIND_PD as KIND_PD,

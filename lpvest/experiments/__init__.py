@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..errors import InternalError
+from ..core._errors import InternalError
 
 if TYPE_CHECKING:
     from ..sweep.tasks import Task, TaskResult

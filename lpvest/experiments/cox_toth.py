@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..analysis.fading_memory import (
+from ..analysis._fading_memory import (
     compare_filters,
     decay_rate,
     empirical_prediction_error,
@@ -41,13 +41,13 @@ from ..analysis.fading_memory import (
     tau_needed,
     truncation_errors,
 )
+from ..core._plotting import save_figure
+from ..core._rng import Stream
+from ..estimators._truncated import assumption_bounds
 from ..estimators.kalman import KalmanModel, kalman_filter
-from ..estimators.truncated import assumption_bounds
-from ..modelfile import load_system
-from ..plotting import save_figure
-from ..rng import Stream
 from ..sweep.tasks import Task, TaskResult, map_tasks
 from ..systems import AffineLPV, InnovationLPV, LPVInputOutput
+from ..systems._modelfile import load_system
 from . import Experiment, ExperimentResult, show_progress
 from .fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
 
@@ -101,7 +101,7 @@ def run_example1(
 
     ``p_t = 0.6 + 0.3 sin(0.25 t)`` (in [0.3, 0.9]: (21b) divides by
     ``p_{t+1}``), ``u_t`` standard normal from ``Stream(seed)``, ``e_t``
-    standard normal from ``Stream(seed + 1)`` (:class:`lpvest.rng.Stream`: the
+    standard normal from ``Stream(seed + 1)`` (:class:`lpvest.core.Stream`: the
     numbers the Source and Plant FMUs draw). Through FMUs: the
     Scheduler, Source and Plant FMUs co-simulate (21c) (the only one of the
     three with a streaming plant: (21a) has no state and (21b)'s gain needs
@@ -225,7 +225,7 @@ def _plot_example1(
 TRUNCATION_TAUS = tuple(range(0, 61))
 PREDICTION_TAUS = (0, 1, 2, 5, 10, 20)
 #: The filters whose prediction-error variance is compared (the names of
-#: :func:`~lpvest.analysis.fading_memory.compare_filters` with these taus and ``constant_p = 0``).
+#: :func:`~lpvest.analysis.compare_filters` with these taus and ``constant_p = 0``).
 PREDICTION_FILTERS = ("exact", *(f"truncated tau={t}" for t in PREDICTION_TAUS), "frozen K_inf(p_t)",
                       "constant K_inf(0)")
 
@@ -258,7 +258,7 @@ def prediction_error_setup(
     """The set-up of :func:`prediction_error_task` on ``cox-toth-truncation``
     with ``p_t = sin(0.25 t)``, ``u_t = sin(0.1 t)``: the exact, truncated
     (theorem start, :data:`PREDICTION_TAUS`), frozen and constant gains
-    (``comparison``: a :func:`~lpvest.analysis.fading_memory.compare_filters`
+    (``comparison``: a :func:`~lpvest.analysis.compare_filters`
     result already computed on that set-up)."""
     model = load_system("cox-toth-truncation").model(None, AffineLPV)
     p, u = _truncation_signals(steps)
@@ -452,9 +452,9 @@ def _truncation_fmu(
     fmus: ExperimentFmus, model: Any, p: np.ndarray, u: np.ndarray, data: Any, theorem: Any, seed: int, steps: int
 ) -> tuple[FmuRun, dict[int, float]]:
     """Co-simulate :func:`truncation_cosim`; compare with the library."""
+    from ..core._protocol import run_streaming
+    from ..estimators._truncated import TruncatedKalmanFilter
     from ..estimators.kalman import LPVKalmanFilter
-    from ..estimators.truncated import TruncatedKalmanFilter
-    from ..protocol import run_streaming
 
     timer = Timer()
     spec = truncation_cosim(steps, seed=seed)

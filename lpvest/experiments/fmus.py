@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ArgumentError, LpvestError, abbreviate
+from ..core._errors import ArgumentError, LpvestError, abbreviate
 from ..fmi.cache import FmuCache, FmuCacheError, default_cache_dir
 from ..fmi.registry import EstimatorKind, estimator_kinds
 
@@ -172,7 +172,7 @@ class ExperimentFmus(FmuCache):
         """The model file of ``entry``: the example's, or a generated variant."""
         if not entry.parameters:
             return entry.system
-        from ..catalog import find_system
+        from ..systems._catalog import find_system
 
         text = find_system(entry.system).read_text(encoding="utf-8")
         text, n = re.subn(r'(?m)^name = "[^"]*"$', f'name = "{entry.system_name}"', text, count=1)
@@ -190,7 +190,7 @@ class ExperimentFmus(FmuCache):
         path.parent.mkdir(parents=True, exist_ok=True)
         if not path.is_file() or path.read_text(encoding="utf-8") != header + text:
             path.write_text(header + text, encoding="utf-8")
-        from ..modelfile import load_system
+        from ..systems._modelfile import load_system
 
         loaded = load_system(path)
         for key, value in entry.parameters:

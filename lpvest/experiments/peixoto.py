@@ -12,7 +12,7 @@
   limit ``rho = 21.4``, worked out three ways (see :func:`stability_limits`).
 
 In ``results.json`` an ``epsilon`` of ``null`` means ``epsilon = infinity``
-(the limit of the rescaled LMIs; see :mod:`lpvest.design.hinf`).
+(the limit of the rescaled LMIs; see :mod:`lpvest.design`).
 
 Examples
 --------
@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..plotting import save_figure
+from ..core._plotting import save_figure
 from ..sweep.tasks import Task, TaskResult, map_tasks
 from ..systems import PolytopicLPV
 from . import Experiment, ExperimentResult, Split, show_progress
@@ -166,12 +166,12 @@ def _hinf_fmus(
 ) -> HinfFmuResult:
     """Compare the co-simulation ``res`` of ``spec`` with the library, which
     runs the same scenario (``plant.simulate``,
-    :class:`~lpvest.estimators.hinf.HinfFilter`) with the design each filter
+    :class:`~lpvest.estimators.HinfFilter`) with the design each filter
     FMU carries; ``designs`` (filter component -> the library's own design) are
     compared with the carried ones. ``signals=False`` leaves out the checks of
     the Scheduler and Source outputs (already made for another plant)."""
-    from ..estimators.hinf import HinfFilter
-    from ..protocol import run_streaming
+    from ..core._protocol import run_streaming
+    from ..estimators._hinf import HinfFilter
 
     steps = spec.n_steps + 1
     sig = fig1_signals(steps, plant=plant)
@@ -242,7 +242,7 @@ def run_table1(
     del progress
     fmus = as_experiment_fmus(fmus)
     from ..design import KIND_PD, KIND_ROBUST, design_hinf, search_epsilon
-    from ..modelfile import load_system
+    from ..systems._modelfile import load_system
 
     plant = load_system("peixoto-ex1").model(None, PolytopicLPV)
     pd150 = design_hinf(plant, epsilon=PAPER_EPSILON, kind=KIND_PD)
@@ -372,7 +372,7 @@ class Fig1Signals:
 
 def fig1_signals(steps: int = 100, *, plant: Any | None = None) -> Fig1Signals:
     """``theta_k = sin(0.25 k)``, ``w_k = sin(0.5 k) exp(-0.1 k)`` for ``k >= 10``."""
-    from ..modelfile import load_system
+    from ..systems._modelfile import load_system
     from .simulate import peixoto_disturbance
 
     plant = plant if plant is not None else load_system("peixoto-ex1").model(None, PolytopicLPV)
@@ -395,11 +395,11 @@ def run_fig1(
     ``epsilon = 150`` designs (:data:`~lpvest.experiments.fmus.PAPER_KINDS`;
     the shipped HinfPD/HinfRobust carry the best-epsilon designs instead). The
     figures show the FMU results. The library designs at ``epsilon = 150``
-    here and runs the streaming :class:`~lpvest.estimators.hinf.HinfFilter`
+    here and runs the streaming :class:`~lpvest.estimators.HinfFilter`
     on ``plant.simulate`` as the cross-check.
     """
     from ..design import KIND_PD, KIND_ROBUST, design_hinf
-    from ..modelfile import load_system
+    from ..systems._modelfile import load_system
 
     del progress
     fmus = as_experiment_fmus(fmus)
@@ -513,7 +513,7 @@ class StabilityLimits:
 
 
 def _ex2_vertices(rho: float) -> np.ndarray:
-    from ..modelfile import load_system
+    from ..systems._modelfile import load_system
 
     # the stability study leaves the paper's range [1, 21] on purpose
     system = load_system("peixoto-ex2", parameters={"rho": rho}, allow_outside_range=True)
@@ -526,7 +526,7 @@ def stability_limits(*, tol: float = 1e-6) -> StabilityLimits:
     from scipy.optimize import brentq
 
     from ..design import KIND_PD, HinfProgram
-    from ..modelfile import load_system
+    from ..systems._modelfile import load_system
 
     grid = np.linspace(0.0, 1.0, 101)
 
@@ -597,7 +597,7 @@ def _example2_program() -> Any:
     """The LMI program of Theorem 1 for Example 2's dimensions, compiled once
     per process (every rho has the same dimensions: one program serves all)."""
     from ..design import KIND_PD, HinfProgram
-    from ..modelfile import load_system
+    from ..systems._modelfile import load_system
 
     return HinfProgram.for_plant(load_system("peixoto-ex2").model(None, PolytopicLPV), kind=KIND_PD)
 
@@ -609,7 +609,7 @@ def example2_task(_shared: Any, task: Task) -> TaskResult:
     ``design_epsilon`` (``inf`` for the limit) and ``n_evaluations``; the value is
     the :class:`~lpvest.design.HinfDesign`."""
     from ..design import KIND_PD, design_hinf, search_epsilon
-    from ..modelfile import load_system
+    from ..systems._modelfile import load_system
 
     plant = load_system("peixoto-ex2", parameters={"rho": float(task.point["rho"])}).model(None, PolytopicLPV)
     if "epsilon" in task.point:
@@ -711,7 +711,7 @@ def _finish_example2(out_dir: Path | None, rhos: tuple[float, ...], fmus: Experi
     """Example 2 from its tasks' results (the stability limits, the FMU
     co-simulation, then one design per rho): the table, the FMU results against
     the library, the figure."""
-    from ..modelfile import load_system
+    from ..systems._modelfile import load_system
 
     lim: StabilityLimits = outcomes[0].value
     res, steps, seconds = outcomes[1].value

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import LpvestError, abbreviate
+from ..core._errors import LpvestError, abbreviate
 from .fmus import CoSimSpec, ExperimentFmus, as_experiment_fmus
 
 __all__ = [

@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..errors import ArgumentError, LpvestError, abbreviate
+from ..core._errors import ArgumentError, LpvestError, abbreviate
 from ..sweep.tasks import Outcome, SweepError, Task, TaskResult, one_blas_thread
 from . import Experiment, ExperimentResult, Split, write_results
 from .fmus import ExperimentFmus, as_experiment_fmus

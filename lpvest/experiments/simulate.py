@@ -24,11 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ArgumentError, ArgumentTypeError, NonFiniteError, NumericalError, abbreviate, shorten
-from ..expressions import Expression
-from ..modelfile import SystemFile
-from ..plotting import save_figure
-from ..scheduling import SchedulingSpace
+from ..core._errors import ArgumentError, ArgumentTypeError, NonFiniteError, NumericalError, abbreviate, shorten
+from ..core._expressions import Expression
+from ..core._plotting import save_figure
+from ..core._scheduling import SchedulingSpace
 from ..systems import (
     AffineLPV,
     InnovationLPV,
@@ -37,6 +36,7 @@ from ..systems import (
     LTVStateSpace,
     PolytopicLPV,
 )
+from ..systems._modelfile import SystemFile
 
 __all__ = ["Simulation", "simulate_system", "default_schedule", "peixoto_disturbance"]
 
@@ -130,7 +130,7 @@ def simulate_system(
 ) -> Simulation:
     """Simulate one model of ``system`` with default signals (see module doc).
 
-    Raises :class:`~lpvest.errors.NumericalError` naming the signal and the
+    Raises :class:`~lpvest.core.NumericalError` naming the signal and the
     first sample when the simulation leaves the floating-point range (an
     unstable model, or one with huge coefficients), rather than writing inf.
     """

@@ -34,7 +34,7 @@ that serves the three experiments (run once per process,
 FMU's samples ([0, 9] s for V-B, plus measurement noise added to ``y`` per
 seed: the plant runs once, not 20 times); the sliding experiment reads the
 observer FMU. The library cross-check runs the streaming
-:class:`~lpvest.systems.streaming.LTVPlant` (the same operations as the plant
+:class:`~lpvest.systems.LTVPlant` (the same operations as the plant
 FMU: bit for bit) and :class:`~lpvest.estimators.bspline.BSplineObserver` on
 its samples. One batch integration over the whole window
 (:meth:`~lpvest.systems.LTVInputOutput.simulate`) differs from both at the
@@ -52,12 +52,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..core._plotting import save_figure
+from ..core._protocol import run_streaming
 from ..estimators.bspline import BSplineObserver, KernelModel, UnknownConstant, UnknownSpline, fit_kernel_model
-from ..modelfile import load_system
-from ..plotting import save_figure
-from ..protocol import run_streaming
 from ..sweep.tasks import Task, TaskResult, map_tasks
 from ..systems import LTVInputOutput
+from ..systems._modelfile import load_system
 from . import Experiment, ExperimentResult, show_progress
 from .fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
 
@@ -223,7 +223,7 @@ _SHARED: dict[tuple, SridharData] = {}
 def sridhar_data(fmus: ExperimentFmus, *, progress: bool = False) -> SridharData:
     """Run :func:`sridhar_cosim` and its library counterparts, once per process
     and set of FMU files (the three Sridhar experiments share them)."""
-    from ..systems.streaming import LTVPlant
+    from ..systems._streaming import LTVPlant
 
     spec = sridhar_cosim()
     paths = [fmus.path(ident) for ident in spec.fmu_names]

@@ -73,7 +73,7 @@ from xml.dom.minidom import parseString
 from xml.etree.ElementTree import Element, SubElement, tostring
 
 from .._version import __version__
-from ..errors import ArgumentError, LpvestError
+from ..core._errors import ArgumentError, LpvestError
 from .bundle import Bundle, SourceRoot, make_bundle
 from .naming import fmu_name
 from .registry import EstimatorKind, estimator_kinds, resolve
@@ -218,12 +218,12 @@ def plan_system(
 
     ``designs`` maps a role (``HinfPD``) to a design file the FMU carries
     instead of solving at build time; without one, an example system's stored
-    design (:func:`lpvest.catalog.stored_design`) is used when there is one.
+    design (:func:`lpvest.systems.stored_design`) is used when there is one.
     """
-    from ..catalog import stored_design
-    from ..modelfile import load_system
     from ..systems import AffineLPV, InnovationLPV, LPVInputOutput, LTVInputOutput, LTVStateSpace, PolytopicLPV
-    from ..systems.streaming import plant_supports
+    from ..systems._catalog import stored_design
+    from ..systems._modelfile import load_system
+    from ..systems._streaming import plant_supports
 
     system = load_system(source)
     if system.path is None:
@@ -298,9 +298,9 @@ def plan_system(
 
 
 def _design_fits(path: Path, model: Any) -> bool:
-    from ..design.result import HinfDesign
-    from ..errors import ModelFileError
-    from ..systems.polytopic import hinf_setting
+    from ..core._errors import ModelFileError
+    from ..design._result import HinfDesign
+    from ..systems._polytopic import hinf_setting
 
     try:
         HinfDesign.from_json(path).check_model(hinf_setting(model), source=str(path))
@@ -485,8 +485,8 @@ def design_text(plan: FmuPlan, progress: Callable[[str], None] | None) -> tuple[
     """The design the FMU carries (text or bytes) and where it came from: the
     plan's design file (checked against the model), a design kept from an
     earlier build, or one made now."""
-    from ..design.result import without_timings
-    from ..modelfile import load_system
+    from ..design._result import without_timings
+    from ..systems._modelfile import load_system
     from .state import encode_state
 
     assert plan.estimator is not None and plan.estimator.design is not None
@@ -533,9 +533,9 @@ def _design_summary(text: str) -> str:
 def _check_design_file(plan: FmuPlan, model: Any = None) -> str:
     """The text of ``plan.design``, checked against the plan's model (its
     dimensions and digest); :class:`BuildError` or the design's own error."""
-    from ..design.result import HinfDesign
-    from ..modelfile import load_system
-    from ..systems.polytopic import hinf_setting
+    from ..design._result import HinfDesign
+    from ..systems._modelfile import load_system
+    from ..systems._polytopic import hinf_setting
 
     assert plan.design is not None
     try:
@@ -876,7 +876,7 @@ DESIGN_CACHE = ".designs"
 def _systems(sources: Iterable[str | Path] | None) -> list[str | Path]:
     if sources is not None:
         return list(sources)
-    from ..catalog import example_systems
+    from ..systems._catalog import example_systems
 
     return [e.path for e in example_systems()]
 
@@ -908,7 +908,7 @@ def build_fmus(
     with the same model file, options and lpvest version. An FMU that cannot
     be built (no certified design, ...) is a result with the reason as its
     problem; the others are built and validated."""
-    from ..errors import LpvestError
+    from ..core._errors import LpvestError
 
     check_backend(backend)
     results: list[BuildResult] = []

@@ -51,7 +51,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import LpvestError
+from ..core._errors import LpvestError
 
 __all__ = ["Bundle", "BundleError", "SourceRoot", "make_bundle", "KNOWN_REQUIREMENTS", "BUNDLE_FORMAT"]
 

@@ -34,7 +34,7 @@ from functools import cache
 from pathlib import Path
 from typing import Any, Self
 
-from ..errors import LpvestError
+from ..core._errors import LpvestError
 
 __all__ = ["FmuCache", "FmuCacheError", "fingerprint", "default_cache_dir", "CACHE_FORMAT"]
 

@@ -16,9 +16,9 @@ __all__ = ["hinf_pd", "hinf_robust"]
 def _best(model: Any, kind: str, *, epsilon: float | None = None, solver: str = "AUTO",
           progress: bool = False) -> str:
     """The design at ``epsilon``, or the best over every epsilon
-    (:func:`lpvest.design.hinf.search_epsilon`), as JSON. A model with general
+    (:func:`lpvest.design.search_epsilon`), as JSON. A model with general
     noise is taken in its H-infinity setting."""
-    from ..design.hinf import design_hinf, search_epsilon
+    from ..design._hinf import design_hinf, search_epsilon
 
     if epsilon is not None:
         return design_hinf(model, epsilon=float(epsilon), kind=kind, solver=solver).to_json()
@@ -27,13 +27,13 @@ def _best(model: Any, kind: str, *, epsilon: float | None = None, solver: str = 
 
 def hinf_pd(model: Any, **options: Any) -> str:
     """The parameter-dependent filter (Theorem 1), best epsilon (options: see ``_best``)."""
-    from ..design.result import KIND_PD
+    from ..design._result import KIND_PD
 
     return _best(model, KIND_PD, **options)
 
 
 def hinf_robust(model: Any, **options: Any) -> str:
     """The robust filter (Corollary 1), best epsilon (options: see ``_best``)."""
-    from ..design.result import KIND_ROBUST
+    from ..design._result import KIND_ROBUST
 
     return _best(model, KIND_ROBUST, **options)

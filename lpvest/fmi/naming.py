@@ -3,7 +3,7 @@
 A port ``y`` of shape ``(2,)`` becomes the FMI variables ``y[1]``, ``y[2]``; a
 port ``P`` of shape ``(2, 2)`` becomes ``P[1,1]``, ``P[1,2]``, ``P[2,1]``,
 ``P[2,2]`` (row-major); a scalar port (shape ``()``) is the variable ``name``
-itself. This module imports only the standard library (and lpvest.errors).
+itself. This module imports only the standard library (and lpvest.core).
 
 >>> element_names("y", (2,))
 ['y[1]', 'y[2]']
@@ -18,7 +18,7 @@ from __future__ import annotations
 import itertools
 import re
 
-from ..errors import ArgumentError
+from ..core._errors import ArgumentError
 
 __all__ = ["element_names", "fmu_name", "parse_element"]
 

@@ -1,7 +1,7 @@
 """Estimator kinds that get an FMU: one registration line per filter.
 
 An :class:`EstimatorKind` names the FMU role (``Kalman`` -> ``PeixotoEx1Kalman.fmu``),
-the factory that builds the streaming component (:mod:`lpvest.protocol`)
+the factory that builds the streaming component (:mod:`lpvest.core`)
 from a model, its FMU parameters, the model types it applies to, and
 optionally a design function run when the FMU is built (e.g. an LMI
 synthesis: the FMU then carries the design as JSON in ``resources/`` and needs
@@ -11,7 +11,7 @@ outputs (see ``fmus/lpvest_estimator.py``).
 Factories and design functions are named as ``"module:function"`` strings so
 that this module imports nothing heavy and the FMU imports only what it runs:
 
-- ``factory(model, *, design=None, **parameters) -> Sampled | Timed`` (:mod:`lpvest.protocol`)
+- ``factory(model, *, design=None, **parameters) -> Sampled | Timed`` (:mod:`lpvest.core`)
   (``design`` is the carried design, or ``None``), in its own module so
   that an FMU carries only the estimator it runs (:mod:`lpvest.fmi.bundle`);
 - ``design(model) -> dict | str`` (numpy arrays allowed; a ``str`` is a JSON
@@ -38,8 +38,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..errors import ArgumentError, ArgumentTypeError
-from ..protocol import MeasurementDelay
+from ..core._errors import ArgumentError, ArgumentTypeError
+from ..core._protocol import MeasurementDelay
 from .spec import MODEL_P0, MODEL_X0, SCHEDULING_CENTRE, Parameter
 
 __all__ = ["EstimatorKind", "ESTIMATOR_KINDS", "MEASUREMENT_DELAY", "estimator_kinds", "resolve", "build_estimator"]
@@ -67,7 +67,7 @@ class EstimatorKind:
     factory : str
         ``"module:function"`` building the estimator (see the module docs).
     models : tuple of str
-        Model types (``lpvest.modelfile.MODEL_TYPES`` keys) it applies to.
+        Model types (``lpvest.systems.MODEL_TYPES`` keys) it applies to.
     parameters : tuple of Parameter
         FMU parameters, passed to the factory as keywords.
     design : str, optional
@@ -96,7 +96,7 @@ class EstimatorKind:
         The measurement inputs a master may deliver late (``("y",)``): the
         FMU then has the parameter ``measurement_delay`` (:data:`MEASUREMENT_DELAY`),
         and a value ``d > 0`` wraps the estimator in
-        :class:`~lpvest.protocol.MeasurementDelay` (:func:`build_estimator`).
+        :class:`~lpvest.core.MeasurementDelay` (:func:`build_estimator`).
         Empty (the default): no such parameter. Only for a sampled estimator.
     """
 
@@ -129,9 +129,9 @@ class EstimatorKind:
         -------
         bool
             ``True`` if this kind applies to ``model``'s type; model types
-            unknown to ``lpvest.modelfile.MODEL_TYPES`` are ignored.
+            unknown to ``lpvest.systems.MODEL_TYPES`` are ignored.
         """
-        from ..modelfile import MODEL_TYPES
+        from ..systems._modelfile import MODEL_TYPES
 
         return any(isinstance(model, MODEL_TYPES[t]) for t in self.models if t in MODEL_TYPES)
 
@@ -203,7 +203,7 @@ def resolve(target: str) -> Callable[..., Any]:
 
 def build_estimator(kind: dict[str, Any], model: Any, design: Any, params: dict[str, Any]) -> Any:
     """The streaming component of an estimator FMU: the kind's factory called
-    with the kind's parameters, wrapped in :class:`~lpvest.protocol.MeasurementDelay`
+    with the kind's parameters, wrapped in :class:`~lpvest.core.MeasurementDelay`
     when the kind has late inputs and ``params["measurement_delay"]`` is > 0.
 
     Parameters
@@ -221,7 +221,7 @@ def build_estimator(kind: dict[str, Any], model: Any, design: Any, params: dict[
     Returns
     -------
     Sampled or Timed
-        The component (:mod:`lpvest.protocol`).
+        The component (:mod:`lpvest.core`).
     """
     options = {p["name"]: params[p["name"]] for p in kind["parameters"]}
     component = resolve(kind["factory"])(model, design=design, **options)

@@ -5,7 +5,7 @@ things: its parameters (:meth:`LpvestSlave.declare`), how to build its
 streaming component from them (:meth:`LpvestSlave.make_component`), and
 optionally the declared range of an input and which inputs an output depends
 on. The component follows the step protocol of
-:mod:`lpvest.protocol` (ports, ``outputs(inputs)`` without state
+:mod:`lpvest.core` (ports, ``outputs(inputs)`` without state
 change, ``step(inputs)``, ``reset``, ``get_state``/``set_state``); components
 with ``timed = True`` take ``reset(t0)`` and ``step(inputs, dt=h, t_end=t + h)``.
 
@@ -64,10 +64,10 @@ from pythonfmu.enums import Fmi2Causality, Fmi2Status, Fmi2Variability
 from pythonfmu.fmi2slave import Fmi2Slave
 from pythonfmu.variables import Boolean, Integer, Real, String
 
-from .._interrupt import hold
 from .._version import __version__
-from ..errors import ArgumentError
-from ..protocol import Component, whole_samples
+from ..core._errors import ArgumentError
+from ..core._interrupt import hold
+from ..core._protocol import Component, whole_samples
 from .naming import element_names
 from .spec import Parameter, read_spec
 from .state import copy_state, decode_state, encode_state
@@ -125,7 +125,7 @@ class _Element:
                  minimum: float | None = None, maximum: float | None = None) -> None:
         self.name, self.kind, self.owner, self.index, self.fmi_type = name, kind, owner, index, fmi_type
         self.minimum, self.maximum, self.label = minimum, maximum, label
-        # inputs: the relative tolerance of lpvest.validation.check_box; parameters: exact
+        # inputs: the relative tolerance of lpvest.core.check_box; parameters: exact
         self.tol = 1e-12 * max(1.0, abs(minimum or 0.0), abs(maximum or 0.0)) if kind == "input" else 0.0
         self.position = -1  # outputs: index in the flat list of output values
 
@@ -166,7 +166,7 @@ class LpvestSlave(Fmi2Slave):
     def system(self, params: Mapping[str, Any] | None = None) -> Any:
         """The system file carried in ``resources/``, loaded with the model
         parameters among ``params`` (e.g. ``rho``)."""
-        from ..modelfile import load_system
+        from ..systems._modelfile import load_system
 
         path = Path(self.resources) / self.spec["model_file"]
         names = self.spec.get("model_parameters", [])
@@ -647,7 +647,7 @@ class LpvestSlave(Fmi2Slave):
 
     def _samples_in(self, h: float) -> int | None:
         """How many samples the step ``h`` runs (``h = m`` times the sample time,
-        :func:`lpvest.protocol.whole_samples`); ``None``: not a whole number.
+        :func:`lpvest.core.whole_samples`); ``None``: not a whole number.
         A component that is a function of time (no sample time) runs one step."""
         if self._sample_time is None:
             return 1
@@ -672,7 +672,7 @@ class LpvestSlave(Fmi2Slave):
             return False
 
     def _do_step(self, t: float, h: float) -> bool:
-        hold("fmu-step")  # the interruption tests' hook (lpvest._interrupt); nothing otherwise
+        hold("fmu-step")  # the interruption tests' hook (lpvest.core); nothing otherwise
         problem = self._step_problem(t, h)
         if problem is None:
             if self._held is not None:

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ArgumentTypeError, ModelFileError
+from ..core._errors import ArgumentTypeError, ModelFileError
 
 __all__ = [
     "SPEC_FILE",

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ArgumentError, ArgumentTypeError
+from ..core._errors import ArgumentError, ArgumentTypeError
 
 __all__ = ["encode_state", "decode_state", "copy_state", "FORMAT"]
 

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from ..plotting import save_figure
+from ..core._plotting import save_figure
 from .spec import Axis, SweepSpec
 
 __all__ = ["plot_metrics", "metric_statistics"]

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .._interrupt import exit_status, hold, holds, interruptible
+from ..core._interrupt import exit_status, hold, holds, interruptible
 from .engine import Engine
 from .spec import SweepSpec, load_sweep
 from .store import FORMAT, SweepStore
@@ -349,6 +349,6 @@ def run_sweep(
 
 
 def _peek(path: Path) -> dict[str, Any]:
-    from ..tomlfiles import read_toml
+    from ..core._toml import read_toml
 
     return read_toml(path)

@@ -52,8 +52,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..errors import ModelFileError
-from ..tomlfiles import describe_value
+from ..core._errors import ModelFileError
+from ..core._toml import describe_value
 from .metrics import Metric, parse as parse_metric
 from .tasks import Task, task_seeds
 
@@ -388,7 +388,7 @@ def load_sweep(path: str | Path, *, fmu_dir: str | Path | None = None) -> SweepS
     ModelFileError
         One line naming the file and the field.
     """
-    from ..tomlfiles import read_toml
+    from ..core._toml import read_toml
 
     path = Path(path)
     return sweep_spec(read_toml(path), origin=str(path), base=path.parent, fmu_dir=fmu_dir)

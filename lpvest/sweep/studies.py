@@ -46,7 +46,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..errors import ModelFileError
+from ..core._errors import ModelFileError
 from .metrics import Metric, check as check_metric, compute as compute_metric, expand, select
 from .tasks import Task, TaskResult, digest
 

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..errors import LpvestError
+from ..core._errors import LpvestError
 
 if TYPE_CHECKING:
     from .engine import Engine

@@ -12,7 +12,7 @@ Examples
 ((20, 2), (20, 1))
 """
 
-from .affine import (
+from ._affine import (
     CONSTANT_TERM as CONSTANT_TERM,
     AffineDependence as AffineDependence,
     AffineLPV as AffineLPV,
@@ -20,19 +20,36 @@ from .affine import (
     NoiseCovariance as NoiseCovariance,
     StateSpaceMatrices as StateSpaceMatrices,
 )
-from .innovation import (
+from ._catalog import (
+    ExampleEntry as ExampleEntry,
+    example_systems as example_systems,
+    find_system as find_system,
+    models_dir as models_dir,
+    stored_design as stored_design,
+)
+from ._innovation import (
     InnovationLPV as InnovationLPV,
     InnovationTrajectory as InnovationTrajectory,
     LPVInputOutput as LPVInputOutput,
 )
-from .ltv import (
+from ._ltv import (
     LTVInputOutput as LTVInputOutput,
     LTVSolution as LTVSolution,
     LTVStateSpace as LTVStateSpace,
     LTVTrajectory as LTVTrajectory,
     TimeFunction as TimeFunction,
 )
-from .polytopic import (
+from ._modelfile import (
+    MODEL_TYPES as MODEL_TYPES,
+    Model as Model,
+    ParameterRange as ParameterRange,
+    SystemFile as SystemFile,
+    dump_system as dump_system,
+    load_system as load_system,
+    loads_system as loads_system,
+    save_system as save_system,
+)
+from ._polytopic import (
     FormulaSimplexMap as FormulaSimplexMap,
     MultilinearSimplexMap as MultilinearSimplexMap,
     PolytopicLPV as PolytopicLPV,
@@ -41,6 +58,11 @@ from .polytopic import (
     SimplexMap as SimplexMap,
     affine_to_polytopic as affine_to_polytopic,
     hinf_setting as hinf_setting,
+)
+from ._streaming import (
+    DiscretePlant as DiscretePlant,
+    LTVPlant as LTVPlant,
+    plant_supports as plant_supports,
 )
 
 __all__ = [
@@ -66,4 +88,20 @@ __all__ = [
     "SimplexMap",
     "affine_to_polytopic",
     "hinf_setting",
+    "DiscretePlant",
+    "LTVPlant",
+    "plant_supports",
+    "SystemFile",
+    "ParameterRange",
+    "Model",
+    "load_system",
+    "loads_system",
+    "dump_system",
+    "save_system",
+    "MODEL_TYPES",
+    "models_dir",
+    "example_systems",
+    "find_system",
+    "stored_design",
+    "ExampleEntry",
 ]

@@ -35,7 +35,7 @@ semidefinite by construction, then symmetrised.
 
 - Gains come from the Cholesky factor of ``Omega_t`` (for ``n_y = 1`` a
   division by the positive scalar); a factor that fails raises
-  :class:`~lpvest.errors.NumericalError` naming ``t``. No inverse, no jitter.
+  :class:`~lpvest.core.NumericalError` naming ``t``. No inverse, no jitter.
 - ``[E, [B; 0; D], W]`` is one matrix of degree two in the basis functions
   (``G Q G^T`` is quadratic); :class:`KalmanModel` packs its coefficients
   once, so a sample's matrices are one product ``z(p) @ coefficients``.
@@ -44,17 +44,17 @@ semidefinite by construction, then symmetrised.
   analysis.
 - The batch filter :func:`kalman_filter` has a second algorithm, the
   parallel-in-time scan of Särkkä & García-Fernández (2021) on the
-  decorrelated model (:mod:`lpvest.estimators.kalman.scan`): the same numbers
+  decorrelated model (:mod:`lpvest.estimators.kalman`): the same numbers
   from a few hundred batched numpy calls instead of ~14 small calls per
   sample; ``method="auto"`` chooses.
 
 Runtime code: imports only numpy.
 
-Modules: :mod:`~lpvest.estimators.kalman.model` (the p-dependent matrices),
-:mod:`~lpvest.estimators.kalman.recursion` (the kernel and one step),
-:mod:`~lpvest.estimators.kalman.batch` (a whole trajectory, the
-innovation-form simulator), :mod:`~lpvest.estimators.kalman.scan` (the
-parallel-in-time form), :mod:`~lpvest.estimators.kalman.streaming` (the
+Modules: :mod:`~lpvest.estimators.kalman` (the p-dependent matrices),
+:mod:`~lpvest.estimators.kalman` (the kernel and one step),
+:mod:`~lpvest.estimators.kalman` (a whole trajectory, the
+innovation-form simulator), :mod:`~lpvest.estimators.kalman` (the
+parallel-in-time form), :mod:`~lpvest.estimators.kalman` (the
 streaming component).
 
 Examples
@@ -72,7 +72,7 @@ Examples
 
 from __future__ import annotations
 
-from .batch import (
+from ._batch import (
     SCAN_MAX_AMPLIFICATION,
     SCAN_MIN_SAMPLES,
     InnovationFormData,
@@ -80,10 +80,10 @@ from .batch import (
     kalman_filter,
     simulate_innovation_form,
 )
-from .model import KalmanMatrices, KalmanModel, StepMatrices
-from .recursion import CovarianceStep, KalmanState, KalmanStep, covariance_step, kalman_step
-from .scan import ScanAccuracyWarning
-from .streaming import LPVKalmanFilter
+from ._model import KalmanMatrices, KalmanModel, StepMatrices
+from ._recursion import CovarianceStep, KalmanState, KalmanStep, covariance_step, kalman_step
+from ._scan import ScanAccuracyWarning
+from ._streaming import LPVKalmanFilter
 
 __all__ = [
     "KalmanModel",

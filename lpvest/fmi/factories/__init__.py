@@ -2,7 +2,7 @@
 module per estimator kind so that an FMU carries only the estimator it runs.
 
 Each module has ``build(model, *, design=None, **parameters)`` returning a
-streaming component (:mod:`lpvest.protocol`):
+streaming component (:mod:`lpvest.core`):
 
 - :mod:`~lpvest.fmi.factories.kalman`: the exact LPV Kalman filter (Cox & Toth (4a)-(4e));
 - :mod:`~lpvest.fmi.factories.truncated`: the truncated-memory filter (Theorem 1, ERRATA (6a));

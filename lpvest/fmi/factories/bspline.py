@@ -9,10 +9,10 @@ from typing import Any
 
 import numpy as np
 
-from ...errors import LpvestError, SamplingError
-from ...estimators.bspline.model import KernelModel, UnknownConstant, UnknownSpline
-from ...estimators.bspline.observer import BSplineObserver
-from ...protocol import TimedComponent
+from ...core._errors import LpvestError, SamplingError
+from ...core._protocol import TimedComponent
+from ...estimators.bspline._model import KernelModel, UnknownConstant, UnknownSpline
+from ...estimators.bspline._observer import BSplineObserver
 
 __all__ = ["build", "SampledObserver", "coefficient"]
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from ...design.result import HinfDesign
-from ...errors import LpvestError
-from ...estimators.hinf import HinfFilter, needs_scheduling
-from ...systems.polytopic import hinf_setting
+from ...core._errors import LpvestError
+from ...design._result import HinfDesign
+from ...estimators._hinf import HinfFilter, needs_scheduling
+from ...systems._polytopic import hinf_setting
 
 __all__ = ["build"]
 
@@ -17,7 +17,7 @@ def build(model: Any, *, design: Any) -> HinfFilter:
     """The H-infinity filter (2) of a design carried by the FMU (JSON text).
 
     A model with general noise (affine) is taken in its H-infinity setting
-    (:func:`~lpvest.systems.polytopic.hinf_setting`), and its known input
+    (:func:`~lpvest.systems.hinf_setting`), and its known input
     ``u`` becomes an input of the filter, compensated exactly. A
     parameter-dependent filter is scheduled by the plant's physical
     scheduling ``p`` when the model has a map to ``alpha`` (range-checked),

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from ...estimators.kalman.streaming import LPVKalmanFilter
+from ...estimators.kalman._streaming import LPVKalmanFilter
 
 __all__ = ["build"]
 

@@ -7,8 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from ...errors import LpvestError
-from ...estimators.truncated import TruncatedKalmanFilter
+from ...core._errors import LpvestError
+from ...estimators._truncated import TruncatedKalmanFilter
 
 __all__ = ["build", "STARTS"]
 

@@ -7,7 +7,7 @@
 - :mod:`lpvest.fmi.native.build`: the FMU: sources, binaries for linux64, win64
   and darwin64 cross-compiled with zig, resources, model description;
 - ``runtime/``: the C runtime (package data), written once: dense kernels, the
-  random generator of :mod:`lpvest.rng`, the formula machine, the roles and
+  random generator of :mod:`lpvest.core`, the formula machine, the roles and
   the FMI 2.0 co-simulation layer.
 """
 

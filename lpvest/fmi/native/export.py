@@ -31,9 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from ...errors import LpvestError
-from ...expressions import Expression
-from ...scheduling import FormulaBasis, Monomial
+from ...core._errors import LpvestError
+from ...core._expressions import Expression
+from ...core._scheduling import FormulaBasis, Monomial
 from .formulas import OPS, CompiledFormula, compile_formula
 
 __all__ = ["NativeExportError", "RoleData", "role_data", "model_data_c", "native_unsupported", "ROLE_CODES"]
@@ -137,7 +137,7 @@ def _basis_code(b: Any, names: Sequence[str]) -> CompiledFormula:
 
 def _map(simplex_map: Any, names: Sequence[str]) -> _Struct:
     """An lpv_map of a simplex map (None: LPV_MAP_NONE)."""
-    from ...systems.polytopic import FormulaSimplexMap, MultilinearSimplexMap
+    from ...systems._polytopic import FormulaSimplexMap, MultilinearSimplexMap
 
     if simplex_map is None:
         return _Struct("lpv_map", (("kind", 0), ("n_out", 0), ("n_formulas", 0), ("formulas", _Formulas(())),
@@ -178,9 +178,9 @@ def _port_offsets(ports: Sequence[Any]) -> dict[str, int]:
 
 
 def _plant(component: Any, ins: dict[str, int], outs: dict[str, int]) -> RoleData:
-    from ...systems.affine import AffineLPV
-    from ...systems.innovation import InnovationLPV, LPVInputOutput
-    from ...systems.polytopic import PolytopicLPV
+    from ...systems._affine import AffineLPV
+    from ...systems._innovation import InnovationLPV, LPVInputOutput
+    from ...systems._polytopic import PolytopicLPV
 
     model = component.model
     f: dict[str, Any] = {}
@@ -246,8 +246,8 @@ def _source(component: Any, outs: dict[str, int]) -> RoleData:
 
 
 def _kalman(component: Any, ins: dict[str, int], outs: dict[str, int], truncated: bool) -> RoleData:
+    from ...estimators._truncated import theorem_start_covariance
     from ...estimators.kalman import KalmanModel
-    from ...estimators.truncated import theorem_start_covariance
 
     model = component.kalman_model.model
     km = KalmanModel(model)

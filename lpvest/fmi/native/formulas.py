@@ -1,17 +1,17 @@
 """Formulas of lpvest's safe language compiled to the native runtime's stack code.
 
 The compiler walks the validated syntax tree of an
-:class:`~lpvest.expressions.Expression` (never its text): numbers become
+:class:`~lpvest.core.Expression` (never its text): numbers become
 entries of a constant pool, names are resolved against the variables the
 formula may use (the scheduling components, the model parameters) and any
 other name is refused here, at export time, with the formula named; ``+ - * /
 **`` and unary signs become stack operations, the functions of
-:data:`lpvest.expressions.FUNCTIONS` calls by index. The deepest stack the
+:data:`lpvest.core.FUNCTIONS` calls by index. The deepest stack the
 code needs is computed and checked against the runtime's
 ``LPV_VM_STACK`` (``runtime/lpv_core.h``). ``lpv_vm.c`` evaluates the code
 with IEEE arithmetic, as numpy evaluates the tree.
 
->>> from lpvest.expressions import Expression
+>>> from lpvest.core import Expression
 >>> c = compile_formula(Expression.parse("(1 - theta)/2"), ["theta"])
 >>> c.code, c.constants, c.depth
 ((1, 0, 2, 0, 4, 1, 1, 6, 0), (1.0, 2.0), 2)
@@ -23,8 +23,8 @@ import ast
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from ...errors import ExpressionError, abbreviate
-from ...expressions import FUNCTIONS, Expression
+from ...core._errors import ExpressionError, abbreviate
+from ...core._expressions import FUNCTIONS, Expression
 
 __all__ = ["CompiledFormula", "compile_formula", "VM_STACK", "OPS", "FUNCTION_INDEX"]
 
@@ -35,7 +35,7 @@ VM_STACK = 128
 OPS = {"END": 0, "CONST": 1, "VAR": 2, "ADD": 3, "SUB": 4, "MUL": 5, "DIV": 6, "POW": 7, "NEG": 8, "CALL": 9}
 _BIN = {ast.Add: OPS["ADD"], ast.Sub: OPS["SUB"], ast.Mult: OPS["MUL"], ast.Div: OPS["DIV"], ast.Pow: OPS["POW"]}
 
-#: Function index (``LPV_FN_*``): the order of :data:`lpvest.expressions.FUNCTIONS`.
+#: Function index (``LPV_FN_*``): the order of :data:`lpvest.core.FUNCTIONS`.
 FUNCTION_INDEX = {name: i for i, name in enumerate(FUNCTIONS)}
 
 

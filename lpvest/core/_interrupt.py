@@ -1,0 +1,190 @@
+"""Interruption of long calls: ``Ctrl-C`` (SIGINT) and SIGTERM.
+
+Three things keep a signal from being lost on its way to the code that acts
+on it:
+
+- :func:`handling_signals` makes both signals raise :class:`Interrupted` (a
+  ``KeyboardInterrupt`` carrying the signal number, hence the exit status
+  130 or 143) in the main thread, and records the signal as *pending*: code
+  that sees a failure a signal caused (an FMU's ``doStep`` returning fatal
+  because pythonfmu caught the ``KeyboardInterrupt`` raised inside it) asks
+  :func:`raise_if_pending` before blaming anyone.
+- :func:`call_interruptibly` runs a native call that does not look at Python's
+  signals (an LMI solver: Clarabel finishes its solve before Python's handler
+  runs) on a worker thread while the main thread waits, where the handler
+  runs at once. An interrupted call is abandoned: its thread runs on, its
+  result is dropped, and the caller must not reuse what the thread still
+  writes to (the H-infinity program is dropped from its cache).
+- SCS installs its own SIGINT handler while it solves and returns "interrupted"
+  instead: :mod:`lpvest.design` turns that status into
+  :class:`Interrupted`.
+
+Test hook (documented for the interruption tests, harmless otherwise): with
+``LPVEST_TEST_HOLD=MOMENT`` and ``LPVEST_TEST_READY=FILE`` in the
+environment, :func:`hold` at that moment appends ``MOMENT`` and a newline to
+``FILE`` and then waits for a signal (forever, on a thread other than the main
+one). A test starts the command, waits for the line (an event, not a delay),
+sends the signal and checks what the command did. Moments: ``solve`` (an LMI
+solve has started, on its worker thread), ``fmu-step`` (inside an lpvest FMU's
+``fmi2DoStep``), ``sweep-outcome`` (a sweep has written its first finished
+task), ``sweep-finish`` (every task is written; figures are next).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import os
+import signal
+import threading
+from collections.abc import Callable, Iterator
+from typing import Any, TypeVar
+
+__all__ = ["Interrupted", "handling_signals", "raise_if_pending", "call_interruptibly", "hold", "holds",
+           "interruptible", "exit_status", "abandoned_calls"]
+
+T = TypeVar("T")
+
+_NAMES: dict[int, str] = {int(signal.SIGINT): "SIGINT", int(signal.SIGTERM): "SIGTERM"}
+
+
+class Interrupted(KeyboardInterrupt):
+    """A signal (SIGINT or SIGTERM) stopped a long call.
+
+    Parameters
+    ----------
+    signum : int
+        The signal; the command line exits with ``128 + signum`` (130, 143).
+    """
+
+    def __init__(self, signum: int = signal.SIGINT) -> None:
+        super().__init__(_NAMES.get(signum, f"signal {signum}"))
+        self.signum = int(signum)
+
+    @property
+    def name(self) -> str:
+        return _NAMES.get(self.signum, f"signal {self.signum}")
+
+
+def exit_status(exc: BaseException) -> int:
+    """130 for SIGINT (and a plain ``KeyboardInterrupt``), 143 for SIGTERM."""
+    return 128 + getattr(exc, "signum", signal.SIGINT)
+
+
+_pending: int | None = None
+_depth = 0
+
+
+def _handler(signum: int, frame: Any) -> None:
+    global _pending
+    _pending = signum
+    raise Interrupted(signum)
+
+
+def raise_if_pending() -> None:
+    """Raise :class:`Interrupted` if a signal arrived within
+    :func:`handling_signals` (and something swallowed its exception)."""
+    if _pending is not None:
+        raise Interrupted(_pending)
+
+
+@contextlib.contextmanager
+def handling_signals() -> Iterator[None]:
+    """SIGINT and SIGTERM raise :class:`Interrupted` within this context (in the
+    main thread; elsewhere, and where the program installed its own handlers,
+    nothing changes). Nested uses share the outermost one's state."""
+    global _depth, _pending
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous: dict[int, Any] = {}
+    for signum, default in ((signal.SIGINT, signal.default_int_handler), (signal.SIGTERM, signal.SIG_DFL)):
+        current = signal.getsignal(signum)
+        if current is default or current is _handler:
+            previous[signum] = current
+            signal.signal(signum, _handler)
+    if _depth == 0:
+        _pending = None
+    _depth += 1
+    try:
+        yield
+    finally:
+        _depth -= 1
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def interruptible(fn: F) -> F:
+    """Decorator: ``fn`` runs within :func:`handling_signals`."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        with handling_signals():
+            return fn(*args, **kwargs)
+
+    return wrapper  # type: ignore[return-value]
+
+
+def call_interruptibly(fn: Callable[[], T], *, on_abandon: Callable[[threading.Thread], None] | None = None) -> T:
+    """``fn()`` on a worker thread while this (main) thread waits, so that a
+    signal's handler runs at once; on another thread, ``fn()`` directly.
+
+    Raises
+    ------
+    KeyboardInterrupt
+        The signal's exception; the worker thread is abandoned (it runs to
+        its end, its result dropped) and handed to ``on_abandon``.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return fn()
+    box: dict[str, Any] = {}
+
+    def target() -> None:
+        try:
+            box["value"] = fn()
+        except BaseException as exc:  # noqa: BLE001 - handed to the waiting thread
+            box["error"] = exc
+
+    worker = threading.Thread(target=target, name="lpvest-solve", daemon=True)
+    worker.start()
+    try:
+        worker.join()  # interruptible: the handler raises here
+    except BaseException:
+        _abandoned.append(worker)
+        if on_abandon is not None:
+            on_abandon(worker)
+        raise
+    if "error" in box:
+        raise box["error"]
+    return box["value"]
+
+
+def holds(moment: str) -> bool:
+    """Whether the test hook holds at ``moment``."""
+    return os.environ.get("LPVEST_TEST_HOLD") == moment
+
+
+_abandoned: list[threading.Thread] = []
+
+
+def abandoned_calls() -> bool:
+    """Whether a call :func:`call_interruptibly` abandoned is still running.
+    A process that exits then should leave with ``os._exit`` (after flushing
+    its output): a native solver still running while the interpreter and the
+    C++ runtime shut down can abort the process ("terminate called without
+    an active exception", SIGABRT) instead of the exit status it chose."""
+    return any(t.is_alive() for t in _abandoned)
+
+
+def hold(moment: str) -> None:
+    """The test hook (see the module's docstring): at ``moment``, when
+    ``LPVEST_TEST_HOLD`` names it, say so in ``LPVEST_TEST_READY`` and wait
+    for a signal."""
+    if not holds(moment):
+        return
+    with open(os.environ["LPVEST_TEST_READY"], "a", encoding="utf-8") as f:
+        f.write(moment + "\n")
+    threading.Event().wait()  # in the main thread a signal's handler raises here
