@@ -82,7 +82,7 @@ RECORD = ["sched.p", "src.w", "plant.y", "plant.z", "filter.zhat", "filter.xf"]
 def fmu_paths(folder: Path, backend: str = "pythonfmu") -> dict[str, Path]:
     paths = {role: folder / f"PeixotoEx1{role}.fmu" for role in ROLES}
     if not all(p.is_file() for p in paths.values()):
-        from lpvest.fmi.build import build_fmus
+        from lpvest.fmi._build import build_fmus
 
         print(f"building the Peixoto Example 1 FMUs ({backend}) into {folder} ...")
         build_fmus(["peixoto-ex1"], folder, backend=backend)

@@ -107,7 +107,7 @@ def ltv_step(fmus) -> dict[str, float]:
 
 def example2(fmus, repeat: int) -> dict[str, float]:
     """Example 2 on 1 and on 2 workers, alternating; best of ``repeat`` each."""
-    from lpvest.experiments.reproduce import reproduce
+    from lpvest.experiments._reproduce import reproduce
 
     times: dict[int, list[float]] = {1: [], 2: []}
     gammas: dict[int, list[float]] = {}
@@ -127,7 +127,7 @@ def example2(fmus, repeat: int) -> dict[str, float]:
 
 
 def reproduce_all_time(fmus, workers: int | None) -> float:
-    from lpvest.experiments.reproduce import reproduce_all
+    from lpvest.experiments._reproduce import reproduce_all
 
     with tempfile.TemporaryDirectory() as out:
         t = time.perf_counter()
@@ -205,7 +205,7 @@ def main() -> None:
     args = parser.parse_args()
 
     from lpvest.experiments import registry
-    from lpvest.experiments.fmus import CATALOG, as_experiment_fmus
+    from lpvest.experiments._fmus import CATALOG, as_experiment_fmus
 
     print(f"load average {_load()} on {os.cpu_count()} cores; free cores now: {free_cores():.2f}", flush=True)
     fmus = as_experiment_fmus(args.fmus)

@@ -10,7 +10,7 @@ and the scheduler, metrics and the state trajectories kept; the number of steps
 is calibrated so that one task takes about ``--seconds`` in this process.
 ``--tasks`` such tasks (one sweep file, seeds only) run three ways:
 
-1. **serial loop**: the task function (:func:`lpvest.sweep.studies.run_cosim_task`:
+1. **serial loop**: the task function (:func:`lpvest.sweep._studies.run_cosim_task`:
    the FMUs loaded at the first task, reset for each next one) called in a
    plain loop in this process: no engine, nothing written;
 2. **engine, 1 worker**: :func:`lpvest.sweep.run_sweep` on a Dask
@@ -82,7 +82,7 @@ trace_P = {{ kind = "final_trace", of = "kalman.P" }}
 
 def fmu_folder(folder: Path) -> Path:
     if not all((folder / f"CoxTothTruncation{r}.fmu").is_file() for r in ROLES):
-        from lpvest.fmi.build import build_fmus
+        from lpvest.fmi._build import build_fmus
 
         print(f"building the cox-toth-truncation FMUs into {folder} ...")
         build_fmus(["cox-toth-truncation"], folder, roles=list(ROLES))
@@ -100,7 +100,7 @@ def serial_loop(spec_path: Path, *, loaded: bool = False) -> tuple[float, list[d
     """(seconds, metrics) of the tasks in a plain loop; the FMUs are loaded at
     the first task, as a worker does, or before the clock starts (``loaded``)."""
     from lpvest.sweep import load_sweep
-    from lpvest.sweep.studies import prepare, release_simulation
+    from lpvest.sweep._studies import prepare, release_simulation
 
     spec = load_sweep(spec_path)
     prepared = prepare(spec, ship_fmus=False)

@@ -25,7 +25,7 @@ HERE = Path(__file__).resolve().parent
 def build_native(sources: Sequence[str | Path], folder: Path, roles: Sequence[str] | None = None) -> dict[str, Path]:
     """The native FMUs of ``sources`` (example names or model files) in
     ``folder``, by identifier: built with the native backend when missing."""
-    from lpvest.fmi.build import build_fmus, plan_system
+    from lpvest.fmi._build import build_fmus, plan_system
 
     wanted = None if roles is None else set(roles)
     plans = [p for s in sources for p in plan_system(s)[0] if wanted is None or p.role in wanted]

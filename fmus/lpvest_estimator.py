@@ -2,7 +2,7 @@
 
 A generic adapter over the step protocol of
 :mod:`lpvest.estimators.base`: the estimator is built by the factory its
-registration names (``lpvest.fmi.registry``), from the model file and the
+registration names (``lpvest.fmi._registry``), from the model file and the
 optional design carried in ``resources/``, with the FMU parameters as keywords.
 Its input ports become FMI inputs (``p[j]`` with the scheduling box as declared
 range, ``alpha[i]`` in [0, 1], ``u[i]``, ``y[i]``), its output ports FMI outputs
@@ -10,17 +10,17 @@ range, ``alpha[i]`` in [0, 1], ``u[i]``, ``y[i]``), its output ports FMI outputs
 outputs read ``outputs(inputs)`` (the estimates at k, no state change) before
 fmi2DoStep; fmi2DoStep calls ``step(inputs)``. An estimator whose kind has
 late inputs (the measurement ``y``) gets the parameter ``measurement_delay``:
-``lpvest.fmi.registry.build_estimator`` pairs a measurement that arrives that
+``lpvest.fmi._registry.build_estimator`` pairs a measurement that arrives that
 many samples late with the other inputs of its own sample
 (``lpvest.core._protocol.MeasurementDelay``).
 """
 
 from pathlib import Path
 
-from lpvest.fmi.registry import MEASUREMENT_DELAY, build_estimator
-from lpvest.fmi.slave import LpvestSlave
-from lpvest.fmi.spec import Parameter
-from lpvest.fmi.state import decode_state
+from lpvest.fmi._parameters import Parameter
+from lpvest.fmi._registry import MEASUREMENT_DELAY, build_estimator
+from lpvest.fmi._slave import LpvestSlave
+from lpvest.fmi._state import decode_state
 
 
 class LpvestEstimator(LpvestSlave):

@@ -14,8 +14,8 @@ hold). Outputs ``y`` (``y[1]`` = ``C(t) x``), ``x[i]`` and ``u_applied[1]``
 (the input at the communication point). Needs numpy and scipy.
 """
 
-from lpvest.fmi.slave import LpvestSlave
-from lpvest.fmi.spec import Parameter
+from lpvest.fmi._parameters import Parameter
+from lpvest.fmi._slave import LpvestSlave
 from lpvest.systems._streaming import LTVPlant
 
 

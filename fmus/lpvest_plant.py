@@ -20,8 +20,8 @@ from ``N(x0, P0)`` with the parameter ``P0[i,j]`` when the noise is on, as
 the model file's own parameters (e.g. ``rho``).
 """
 
-from lpvest.fmi.slave import LpvestSlave
-from lpvest.fmi.spec import Parameter
+from lpvest.fmi._parameters import Parameter
+from lpvest.fmi._slave import LpvestSlave
 from lpvest.systems._affine import AffineLPV
 from lpvest.systems._innovation import InnovationLPV, LPVInputOutput
 from lpvest.systems._streaming import DiscretePlant

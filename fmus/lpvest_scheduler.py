@@ -16,8 +16,8 @@ scheduling box is an error at initialization naming the parameter. Default:
 """
 
 from lpvest.core._signals import SchedulerComponent, SignalSpec
-from lpvest.fmi.slave import LpvestSlave
-from lpvest.fmi.spec import Parameter
+from lpvest.fmi._parameters import Parameter
+from lpvest.fmi._slave import LpvestSlave
 
 
 class LpvestScheduler(LpvestSlave):

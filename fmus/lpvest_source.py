@@ -16,8 +16,8 @@ from ``k = 10``, the default for ``w`` of a polytopic model), ``gaussian``
 """
 
 from lpvest.core._signals import SignalSpec, SourceComponent
-from lpvest.fmi.slave import LpvestSlave
-from lpvest.fmi.spec import Parameter
+from lpvest.fmi._parameters import Parameter
+from lpvest.fmi._slave import LpvestSlave
 from lpvest.systems._polytopic import PolytopicLPV
 
 KINDS = ("zero", "sinusoid", "decaying", "gaussian", "constant", "random", "table")

@@ -140,8 +140,8 @@ from .estimators.bspline import (
 
 # -- co-simulation files and SSP -----------------------------------------------------
 # isort: split
-from .cosim.files import CoSimFile as CoSimFile, CoSimResult as CoSimResult, load_cosim as load_cosim
-from .cosim.ssp import read_ssp as read_ssp, simulate_ssp as simulate_ssp, write_ssp as write_ssp
+from .cosim._cosimfile import CoSimFile as CoSimFile, CoSimResult as CoSimResult, load_cosim as load_cosim
+from .cosim._ssp import read_ssp as read_ssp, simulate_ssp as simulate_ssp, write_ssp as write_ssp
 
 __all__ = [
     "__version__",

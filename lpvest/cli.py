@@ -204,7 +204,7 @@ def cmd_systems(args: argparse.Namespace) -> int:
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
-    from .experiments.simulate import simulate_system
+    from .experiments._simulate import simulate_system
     from .systems._modelfile import load_system
 
     system = load_system(args.target, parameters=_parse_params(args.param))
@@ -230,8 +230,8 @@ def _backend_argument(p: argparse.ArgumentParser, what: str) -> None:
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
     from .experiments import registry
-    from .experiments.fmus import ExperimentFmus
-    from .experiments.reproduce import reproduce, reproduce_all
+    from .experiments._fmus import ExperimentFmus
+    from .experiments._reproduce import reproduce, reproduce_all
 
     experiments = registry()
     if args.name in (None, "list"):
@@ -274,8 +274,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
 
 def cmd_regress(args: argparse.Namespace) -> int:
-    from .experiments.fmus import as_experiment_fmus
-    from .experiments.regression import regress
+    from .experiments._fmus import as_experiment_fmus
+    from .experiments._references import regress
 
     fmus = as_experiment_fmus(args.fmus)
     fmus.progress = lambda msg: print(msg, file=sys.stderr, flush=True)
@@ -305,7 +305,7 @@ def cmd_build(args: argparse.Namespace) -> int:
     import warnings
 
     from .design._hinf import check_solver
-    from .fmi.build import BuildWarning, build_fmus, format_table, known_roles
+    from .fmi._build import BuildWarning, build_fmus, format_table, known_roles
 
     out = _out_dir(args.out)
     sources = args.model or None
@@ -377,7 +377,7 @@ def cmd_design(args: argparse.Namespace) -> int:
 
 
 def cmd_cosim(args: argparse.Namespace) -> int:
-    from .cosim.files import load_cosim
+    from .cosim._cosimfile import load_cosim
 
     spec = load_cosim(args.file, fmu_dir=args.fmus)
     if args.ssp:
@@ -385,7 +385,7 @@ def cmd_cosim(args: argparse.Namespace) -> int:
         print(f"wrote {path}: {len(spec.components)} components, {len(spec.connections)} connections, "
               f"step {spec.step_size:g}, t = {spec.start_time:g} .. {spec.stop_time:g}")
         print("note: fmpy's simulate_ssp and libcosim step all components in parallel (Jacobi): each connection "
-              "adds a one-step delay where an output feeds through from an input (see lpvest.cosim.ssp)")
+              "adds a one-step delay where an output feeds through from an input (see lpvest.cosim)")
         return 0
     out = _out_dir(args.out)
     with warnings.catch_warnings(record=True) as caught:
@@ -442,7 +442,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from .fmi.build import format_table, validate_fmus
+    from .fmi._build import format_table, validate_fmus
 
     for name in args.fmus:
         _check_fmu_file(Path(name))
@@ -516,7 +516,7 @@ HELP: dict[str, tuple[str, str]] = {
         "lpvest design peixoto-ex1 --out pd.json\n"
         "  lpvest design peixoto-ex2 --param rho=11 --kind robust --epsilon 150 --out robust.json"),
     "cosim": (
-        "Co-simulate FMUs described in a TOML file (format: lpvest/cosim/files.py, examples/*.toml): CSV, plot "
+        "Co-simulate FMUs described in a TOML file (format: lpvest/cosim/_cosimfile.py, examples/*.toml): CSV, plot "
         "and summary; or write the system as an SSP file.",
         "lpvest cosim examples/peixoto_ex1_hinf.toml --out out/cosim\n"
         "  lpvest cosim examples/cox_toth_kalman.toml --fmus my-fmus/\n"
@@ -526,7 +526,7 @@ HELP: dict[str, tuple[str, str]] = {
         "on Dask (a local cluster, one worker per core, or --scheduler ADDRESS): one co-simulation per task, "
         "seeds from numpy's SeedSequence by task index, a Parquet summary and Zarr trajectories written as "
         "tasks finish, a figure per metric; a rerun resumes; a failing task is recorded with its message. "
-        "Format: lpvest/sweep/spec.py; needs the extra lpvest[sweep].",
+        "Format: lpvest/sweep/_sweepfile.py; needs the extra lpvest[sweep].",
         "lpvest sweep examples/sweep_kalman.toml --out out/sweep-kalman\n"
         "  lpvest sweep examples/sweep_kalman.toml --scheduler tcp://10.0.0.5:8786\n"
         "  lpvest sweep --list"),
@@ -589,7 +589,7 @@ def build_parser() -> argparse.ArgumentParser:
     _backend_argument(p, "the FMUs' backend; native FMUs go to OUT/fmu-cache-native by default")
     p.set_defaults(func=cmd_reproduce)
 
-    from .experiments.regression import add_arguments as regress_arguments
+    from .experiments._references import add_arguments as regress_arguments
 
     p = sub.add_parser("regress", help="compare the FMU co-simulations with the stored regression references "
                                        "(--update rewrites them)")

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from lpvest.fmi.registry import EstimatorKind
-from lpvest.fmi.spec import Parameter
+from lpvest.fmi._parameters import Parameter
+from lpvest.fmi._registry import EstimatorKind
 
 HERE = Path(__file__).resolve().parent
 #: The walkthrough's own plant (docs/own-plant.md).
@@ -84,7 +84,7 @@ def fmus(tmp_path_factory: pytest.TempPathFactory) -> FmuSet:
     """Every example system's FMUs, the affine demo's, the input-output demo's
     plant, and the moving-average estimator FMU for peixoto-ex1, built once
     into a temporary folder."""
-    from lpvest.fmi.build import build_fmu, build_fmus, plan_system
+    from lpvest.fmi._build import build_fmu, build_fmus, plan_system
 
     out = tmp_path_factory.mktemp("fmus")
     model = out / "affine_demo.toml"
@@ -107,7 +107,7 @@ def experiment_fmus(fmus: FmuSet, tmp_path_factory: pytest.TempPathFactory):
     """The experiments' FMU cache for the session: the session's FMU set
     adopted (built from the current code), the rest (the epsilon = 150 and
     rho-variant H-infinity FMUs) built on first use."""
-    from lpvest.experiments.fmus import ExperimentFmus
+    from lpvest.experiments._fmus import ExperimentFmus
 
     cache = ExperimentFmus(tmp_path_factory.mktemp("experiment-fmus"))
     cache.adopt(fmus.paths)
@@ -135,7 +135,7 @@ def native_fmus(fmus: FmuSet, tmp_path_factory: pytest.TempPathFactory) -> FmuSe
     reused (the same design cache)."""
     import shutil
 
-    from lpvest.fmi.build import DESIGN_CACHE, build_fmus
+    from lpvest.fmi._build import DESIGN_CACHE, build_fmus
 
     out = tmp_path_factory.mktemp("native-fmus")
     if (fmus.out / DESIGN_CACHE).is_dir():

@@ -79,7 +79,7 @@ class Driver:
         return getter([self.vr[name]])[0]
 
     def vector(self, base: str) -> np.ndarray:
-        from lpvest.fmi.naming import parse_element
+        from lpvest.fmi._naming import parse_element
 
         names = sorted((n for n in self.vr if n.startswith(base + "[")), key=lambda n: parse_element(n)[1])
         if not names and base in self.vr:  # a scalar port: the variable is its name

@@ -21,7 +21,7 @@ class MovingAverage:
 
     def __init__(self, ny: int, n_p: int, window: int) -> None:
         if window < 1 or window > 1000:
-            # a user's estimator may explain at length: the FMU caps what it logs (lpvest.fmi.slave)
+            # a user's estimator may explain at length: the FMU caps what it logs (lpvest.fmi._slave)
             raise LpvestError(f"window = {window} must lie in [1, 1000]. " + " ".join(
                 f"(window {w}: {w} samples of y are averaged)" for w in range(1, 101)))
         self.ny, self.n_p, self.window = ny, n_p, int(window)

@@ -19,7 +19,7 @@ RUNTIME_DIR = Path(lpvest.fmi.native.__file__).resolve().parent / "runtime"
 
 #: The numerical core of the runtime (no FMI layer, no model data).
 CORE = ("lpv_linalg.c", "lpv_rng.c", "lpv_vm.c")
-#: The flags the FMUs are built with (lpvest.fmi.native.build.CFLAGS), for a test library.
+#: The flags the FMUs are built with (lpvest.fmi.native._build.CFLAGS), for a test library.
 TEST_FLAGS = ("-std=c99", "-O2", "-ffp-contract=off", "-Wall", "-Wextra", "-Werror", "-fPIC", "-shared",
               "-fvisibility=hidden", "-DLPV_TEST_EXPORTS")
 

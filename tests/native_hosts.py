@@ -135,7 +135,7 @@ class HostDriver:
         return max(self.set(f"{base}[{i + 1}]", float(v)) for i, v in enumerate(values))
 
     def vector(self, base: str) -> np.ndarray:
-        from lpvest.fmi.naming import parse_element
+        from lpvest.fmi._naming import parse_element
 
         names = sorted((n for n in self.vr if n.startswith(base + "[")), key=lambda n: parse_element(n)[1])
         if not names and base in self.vr:

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from lpvest.fmi.build import scripts_dir, slave_class_name
+from lpvest.fmi._build import scripts_dir, slave_class_name
 from tests.tolerances import EPS
 
 #: the role scripts (fmus/) of the native roles

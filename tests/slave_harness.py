@@ -1,6 +1,6 @@
 """An lpvest FMU slave run in this process, from a resources folder written without bundling.
 
-A built FMU runs the private copy of lpvest it carries, so a change to ``lpvest/fmi/slave.py``
+A built FMU runs the private copy of lpvest it carries, so a change to ``lpvest/fmi/_slave.py``
 (a fix, or a mutant of ``./dev mutate``) reaches a built FMU only after a rebuild. Here the role
 script's class is imported from this lpvest (``lpvest._fmus``) and instantiated as pythonfmu
 would, against a folder holding what the builder writes into ``resources/`` (the spec, the model
@@ -18,9 +18,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from lpvest.fmi.build import design_text, manifest_inputs_version, plan_system, scripts_dir
-from lpvest.fmi.spec import SPEC_FILE, SPEC_FORMAT
-from lpvest.fmi.state import decode_state, encode_state
+from lpvest.fmi._build import design_text, manifest_inputs_version, plan_system, scripts_dir
+from lpvest.fmi._parameters import SPEC_FILE, SPEC_FORMAT
+from lpvest.fmi._state import decode_state, encode_state
 
 #: pythonfmu's status values (Fmi2Status): ok, warning, discard, error, fatal
 OK, WARNING, ERROR = 0, 1, 3

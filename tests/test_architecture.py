@@ -1,31 +1,34 @@
-"""The package's shape, checked on its sources: imports run downwards through
-the layers, there is no import cycle, and no private name crosses a module
-boundary. (Static: every ``import`` statement counts, inside functions too.)"""
+"""The package's shape, checked on its sources: the floors of
+docs/architecture.md (read from its table, so the picture and the check
+cannot drift apart), imports that run downwards, no import cycle between
+modules or packages, private implementation modules, and no private name
+crossing a module boundary. (Static: every ``import`` statement counts,
+inside functions too; imports under ``TYPE_CHECKING`` never run.)"""
 
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent / "lpvest"
+ARCHITECTURE = ROOT.parent / "docs" / "architecture.md"
 
-#: Layers from the bottom; a module may import only from its own layer or below.
-LAYERS: tuple[tuple[str, ...], ...] = (
-    ("lpvest._version", "lpvest.core._errors", "lpvest.core._interrupt"),
-    ("lpvest.core._protocol", "lpvest.core._linalg", "lpvest.core._validation", "lpvest.core._toml", "lpvest.core._rng"),
-    ("lpvest.core._expressions", "lpvest.core._scheduling", "lpvest.core._signals"),
-    ("lpvest.systems",),
-    ("lpvest.systems._catalog", "lpvest.systems._modelfile"),
-    ("lpvest.estimators", "lpvest.analysis", "lpvest.design._result"),
-    ("lpvest.design",),
-    ("lpvest.core._plotting",),
-    ("lpvest.fmi",),
-    ("lpvest.cosim",),
-    ("lpvest.experiments", "lpvest.sweep"),
-    ("lpvest.cli", "lpvest"),
-)
+
+def _floors() -> dict[str, int]:
+    """folder (or top-level module) name -> floor, from the table of docs/architecture.md."""
+    text = ARCHITECTURE.read_text(encoding="utf-8")
+    table = text.split("<!-- layers")[1].split("<!-- /layers -->")[0]
+    floors = {}
+    for floor, name in re.findall(r"^\|\s*(\d+)\s*\|\s*`([a-z_]+)(?:/|\.py)`", table, flags=re.M):
+        floors[name] = int(floor)
+    return floors
+
+
+FLOORS = _floors()
+TOP = max(FLOORS.values()) + 1  # the package root, lpvest/__init__.py
 
 
 def _module_name(path: Path) -> str:
@@ -36,12 +39,19 @@ def _module_name(path: Path) -> str:
 
 
 def _layer(name: str) -> int:
-    best, level = -1, -1
-    for i, prefixes in enumerate(LAYERS):
-        for prefix in prefixes:
-            if (name == prefix or name.startswith(prefix + ".")) and len(prefix) > best:
-                best, level = len(prefix), i
-    return level
+    """The floor of module ``name`` (-1: in no floor)."""
+    parts = name.split(".")
+    if parts == ["lpvest"]:
+        return TOP
+    if parts == ["lpvest", "_version"]:
+        return 0
+    return FLOORS.get(parts[1], -1)
+
+
+def _package(name: str) -> str:
+    """The floor's folder of module ``name`` (``lpvest.cosim._master`` -> ``cosim``)."""
+    parts = name.split(".")
+    return parts[1] if len(parts) > 1 else ""
 
 
 def _imports() -> dict[str, list[tuple[str, int, list[str]]]]:
@@ -79,15 +89,41 @@ def _imports() -> dict[str, list[tuple[str, int, list[str]]]]:
 IMPORTS = _imports()
 
 
+def test_the_floors_are_the_folders():
+    # every folder (and top-level module) of lpvest/ has a floor in docs/architecture.md, and the
+    # table names nothing that is not there
+    present = {p.name for p in ROOT.iterdir() if p.is_dir() and (p / "__init__.py").is_file()}
+    present |= {p.stem for p in ROOT.glob("*.py") if p.stem not in ("__init__", "_version")}
+    assert present == set(FLOORS)
+    assert len(set(FLOORS.values())) == len(FLOORS)  # one folder per floor: no two can lean on each other
+
+
 def test_every_module_has_a_layer():
     assert [m for m in IMPORTS if _layer(m) < 0] == []
 
 
 def test_imports_run_downwards():
-    upward = [f"{m} (layer {_layer(m)}) imports {t} (layer {_layer(t)}) at line {line}"
+    upward = [f"{m} (floor {_layer(m)}) imports {t} (floor {_layer(t)}) at line {line}"
               for m, found in IMPORTS.items() if m != "lpvest" for t, line, _ in found
               if _layer(t) > _layer(m)]
     assert upward == []
+
+
+def test_no_cycle_between_packages():
+    graph: dict[str, set[str]] = {}
+    for m, found in IMPORTS.items():
+        for t, _, _ in found:
+            if _package(m) and _package(t) and _package(m) != _package(t):
+                graph.setdefault(_package(m), set()).add(_package(t))
+    both_ways = sorted(f"{a} <-> {b}" for a in graph for b in graph[a] if a < b and a in graph.get(b, ()))
+    assert both_ways == []
+
+
+def test_implementation_modules_are_private():
+    # inside a package, every module but __init__ is private: the __init__ is the contract
+    public = sorted(str(p.relative_to(ROOT)) for p in ROOT.rglob("*.py")
+                    if p.parent != ROOT and p.name != "__init__.py" and not p.name.startswith("_"))
+    assert public == []
 
 
 def test_no_import_cycle():

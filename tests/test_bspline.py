@@ -923,7 +923,7 @@ def test_a_known_coefficient_that_is_not_finite_at_a_sample_is_named(coefficient
 def test_the_build_plan_of_a_third_order_model_has_no_observer(tmp_path):
     # `lpvest build --model` wrote the plant and then failed on the observer (order 3)
     from lpvest.estimators.bspline import observer_supports
-    from lpvest.fmi.build import plan_system
+    from lpvest.fmi._build import plan_system
 
     path = tmp_path / "third.toml"
     path.write_text('[system]\nname = "third"\ntitle = "a third-order LTV model"\n'

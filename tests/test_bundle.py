@@ -1,4 +1,4 @@
-"""What an FMU carries (lpvest/fmi/bundle.py), in this process: the import scan, the rewrite,
+"""What an FMU carries (lpvest/fmi/_bundle.py), in this process: the import scan, the rewrite,
 the private package's files, and the entry module's finder. The hygiene of many instances in
 one host (sys.path, sys.modules, sys.meta_path) is tested through built FMUs elsewhere."""
 
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from lpvest.fmi.bundle import BUNDLE_FORMAT, Bundle, BundleError, SourceRoot, make_bundle
+from lpvest.fmi._bundle import BUNDLE_FORMAT, Bundle, BundleError, SourceRoot, make_bundle
 
 
 def _tree(base: Path, files: dict[str, str]) -> Path:
@@ -90,9 +90,9 @@ def test_the_scan_follows_module_level_and_relative_imports_and_sorts_third_part
             f"{p}/core/b.py", f"{p}/util.py", f"{p}/_fmus/role.py", f"{b.entry}.py"} == set(b.files)
     assert b.files[f"{p}/__init__.py"] == (b'"""lpvest 9, as carried by an lpvest FMU: only the modules its '
                                            b'component imports;\npackage __init__ files are empty (see '
-                                           b'lpvest.fmi.bundle)."""\n')
+                                           b'lpvest.fmi._bundle)."""\n')
     assert b.files[f"{p}/core/__init__.py"] == (
-        b'"""pkg.core, as carried by an lpvest FMU (empty: see lpvest.fmi.bundle)."""\n')
+        b'"""pkg.core, as carried by an lpvest FMU (empty: see lpvest.fmi._bundle)."""\n')
     # a folder root (no __init__.py of its own): a package made for the way
     made = f'"""{p}._fmus: part of an lpvest FMU\'s private package."""\n'
     assert b.files[f"{p}/_fmus/__init__.py"] == made.encode()

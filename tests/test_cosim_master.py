@@ -1,4 +1,4 @@
-"""The co-simulation master (lpvest/cosim/master.py) in this process, over stand-in FMUs that
+"""The co-simulation master (lpvest/cosim/_master.py) in this process, over stand-in FMUs that
 record every FMI call (tests/fake_fmu.py): the order of sets, gets and steps inside a step, the
 values each component sees, failures, start values, reset and close. tests/test_cosim.py runs
 the master over real FMUs."""
@@ -12,7 +12,7 @@ import pytest
 
 from lpvest.core._errors import shorten
 from lpvest.cosim import AlgebraicLoopError, Component, CoSimulation, CoSimulationError, simulate
-from lpvest.cosim.master import DiscardedStep, DiscardedStepWarning, step_count, whole_steps
+from lpvest.cosim._master import DiscardedStep, DiscardedStepWarning, step_count, whole_steps
 
 from . import fake_fmu
 from .fake_fmu import CALLS, FakeSlave, Model, write_fmu
@@ -368,7 +368,7 @@ def test_set_up_errors_name_the_connection_or_component(fmus, tmp_path):
 
 
 def test_the_log_names_the_last_problem_and_is_cut(fmus):
-    from lpvest.cosim.master import _log_text
+    from lpvest.cosim._master import _log_text
 
     unit = fake_fmu.Model()
     unit.log = ["[OK] fine", "[WARNING] first", "[OK] later"]

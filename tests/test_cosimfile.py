@@ -14,7 +14,7 @@ import pytest
 from lpvest import load_system
 from lpvest.cli import main
 from lpvest.core._errors import ModelFileError
-from lpvest.cosim.files import _path_text, load_cosim
+from lpvest.cosim._cosimfile import _path_text, load_cosim
 from tests.kalman_helpers import kalman_fmu_tolerance
 from tests.test_fmu import paper_w, theta
 from tests.tolerances import roundoff

@@ -7,7 +7,7 @@ import pytest
 
 from lpvest.cli import main
 from lpvest.experiments import registry
-from lpvest.experiments.cox_toth import run_example1, run_truncation
+from lpvest.experiments._cox_toth import run_example1, run_truncation
 from tests.tolerances import roundoff
 
 pytestmark = pytest.mark.blas_sensitive  # numerical agreement: ./dev test runs it under a second BLAS kernel
@@ -152,8 +152,8 @@ def test_the_plant_fmu_draws_what_simulate_draws(experiment_fmus):
     """The Plant FMU (noise on, seed 3) draws x_0 ~ N(x0, P0) and then the noise,
     as AffineLPV.simulate(rng=3) does: the same seed, the same realization."""
     from lpvest import load_system
-    from lpvest.experiments.cox_toth import truncation_cosim
-    from lpvest.experiments.fmus import column
+    from lpvest.experiments._cox_toth import truncation_cosim
+    from lpvest.experiments._fmus import column
 
     model = load_system("cox-toth-truncation").model()
     assert np.any(model.P0)  # else x_0 would not be drawn

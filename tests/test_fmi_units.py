@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lpvest.fmi.naming import element_names, fmu_name, parse_element
-from lpvest.fmi.registry import EstimatorKind, estimator_kinds, resolve
-from lpvest.fmi.spec import Parameter
-from lpvest.fmi.state import decode_state, encode_state
+from lpvest.fmi._naming import element_names, fmu_name, parse_element
+from lpvest.fmi._parameters import Parameter
+from lpvest.fmi._registry import EstimatorKind, estimator_kinds, resolve
+from lpvest.fmi._state import decode_state, encode_state
 
 
 def test_structured_names_are_one_based_and_row_major():

@@ -18,7 +18,7 @@ import pytest
 
 from lpvest import load_system
 from lpvest.core._rng import Stream
-from lpvest.fmi.build import validate_fmus
+from lpvest.fmi._build import validate_fmus
 from tests.fmu_driver import Driver
 from tests.tolerances import roundoff
 
@@ -93,7 +93,7 @@ def test_model_description_declares_ranges_dependencies_and_capabilities(fmus):
     assert sorted(deps[str(var["y[1]"][0])].split()) == inputs
     initial = {u.get("index") for u in root.find("ModelStructure/InitialUnknowns")}
     assert initial == set(deps)
-    # the FMU's own copy of lpvest, under a build-unique name (lpvest.fmi.bundle), never the plain name
+    # the FMU's own copy of lpvest, under a build-unique name (lpvest.fmi._bundle), never the plain name
     # a model parameter with a declared range (models/peixoto_ex2.toml) declares it
     ex2 = ET.fromstring(z_read(fmus["PeixotoEx2Plant"], "modelDescription.xml"))
     (rho,) = [sv for sv in ex2.iter("ScalarVariable") if sv.get("name") == "rho"]
@@ -157,7 +157,7 @@ def test_an_input_starts_inside_its_range_and_the_checks_made_at_set_are_not_rep
     # outside the range (an unset input included)
     from fmpy import read_model_description
 
-    from lpvest.fmi.build import build_fmus
+    from lpvest.fmi._build import build_fmus
 
     (tmp_path / "shifted.toml").write_text(SHIFTED_BOX)
     (result,), _ = build_fmus([tmp_path / "shifted.toml"], tmp_path / "out", roles=["Plant"])

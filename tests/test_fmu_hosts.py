@@ -118,7 +118,7 @@ def test_libcosim_connects_scheduler_source_and_plant_like_the_library(fmus):
     np.testing.assert_allclose([values["plant"]["x[1]"], values["plant"]["x[2]"]], ref.x[steps], rtol=0, atol=tol)
     # libcosim observes the outputs after the last step, before it passes the
     # new inputs on: y feeds through, so it holds the value of the sample just
-    # consumed, y_(steps-1) (lpvest.fmi.slave, step semantics)
+    # consumed, y_(steps-1) (lpvest.fmi._slave, step semantics)
     assert values["plant"]["y[1]"] == pytest.approx(ref.y[steps - 1, 0], abs=tol)
 
 
@@ -328,7 +328,7 @@ def test_lpvest_build_for_a_users_model_file(fmus, tmp_path, capsys):
         assert any(line.startswith(name) and line.rstrip().endswith("ok") for line in text.splitlines())
     assert f"{len(names)} FMU(s)" in text and "all valid" in text
     assert "building AffineDemoHinfPD (6/7)" in captured.err  # progress per FMU
-    assert "AffineDemoHinfPD: designing (lpvest.fmi.designs:hinf_pd, epsilon = 1.0)" in captured.err
+    assert "AffineDemoHinfPD: designing (lpvest.fmi._designs:hinf_pd, epsilon = 1.0)" in captured.err
     # each design's gamma, epsilon and solver once; no progress bar into a redirected stream
     designed = [line for line in captured.err.splitlines() if line.startswith("AffineDemoHinfPD: designed: ")]
     assert len(designed) == 1 and re.fullmatch(r"AffineDemoHinfPD: designed: gamma = [0-9.e+-]+ at epsilon = 1 "
@@ -351,7 +351,7 @@ def test_two_builds_of_a_users_plant_with_an_epsilon_search_give_the_same_fmu_by
     """Each build searches epsilon anew (no shared design cache): the FMU carries the design
     without the solver's timings (which differ from solve to solve), so the bytes agree."""
     from lpvest.design import HinfDesign
-    from lpvest.fmi.build import build_fmus
+    from lpvest.fmi._build import build_fmus
 
     model = Path(__file__).resolve().parent.parent / "examples" / "own_plant.toml"
     fmus = [build_fmus([model], tmp_path / f"build{i}", roles=["HinfPD"])[0][0].validation.path for i in (1, 2)]

@@ -1,5 +1,5 @@
 """Every FMU runs its own bundled code, whatever else the process has loaded
-(lpvest.fmi.bundle): plain fmpy loops over every FMU, with and without lpvest in
+(lpvest.fmi._bundle): plain fmpy loops over every FMU, with and without lpvest in
 the host; builds of two lpvest versions side by side; what an FMU carries and
 declares; byte-identical rebuilds; designs as data (lpvest design / build --design)."""
 
@@ -21,7 +21,7 @@ import pytest
 
 from lpvest import load_system
 from lpvest.cli import main
-from lpvest.fmi.bundle import BundleError, SourceRoot, make_bundle
+from lpvest.fmi._bundle import BundleError, SourceRoot, make_bundle
 from tests.fmu_driver import Driver
 from tests.test_fmu import paper_w, theta
 
@@ -45,14 +45,14 @@ def _run(code: str, *, cwd: Path | None = None, timeout: int = 900) -> dict:
 
 
 @pytest.mark.parametrize(("name", "present", "absent", "requirements"), [
-    ("PeixotoEx1Plant", ["lpvest.systems._streaming", "lpvest.fmi.slave", "pythonfmu.fmi2slave"],
-     ["lpvest.cli", "lpvest.cosim", "lpvest.experiments.fmus", "lpvest.design._hinf", "lpvest.estimators.kalman",
-      "lpvest.fmi.build", "lpvest.cosim.ssp"], ["numpy>=1.26"]),
-    ("CoxTothTruncationKalman", ["lpvest.estimators.kalman", "lpvest.fmi.factories.kalman"],
+    ("PeixotoEx1Plant", ["lpvest.systems._streaming", "lpvest.fmi._slave", "pythonfmu.fmi2slave"],
+     ["lpvest.cli", "lpvest.cosim", "lpvest.experiments._fmus", "lpvest.design._hinf", "lpvest.estimators.kalman",
+      "lpvest.fmi._build", "lpvest.cosim._ssp"], ["numpy>=1.26"]),
+    ("CoxTothTruncationKalman", ["lpvest.estimators.kalman", "lpvest.fmi.factories._kalman"],
      ["lpvest.estimators.bspline", "lpvest.estimators._truncated", "lpvest.design._hinf", "lpvest.cli"],
      ["numpy>=1.26"]),
     ("PeixotoEx1HinfPD", ["lpvest.estimators._hinf", "lpvest.design._result"],
-     ["lpvest.design._hinf", "lpvest.fmi.designs", "lpvest.estimators.kalman"], ["numpy>=1.26"]),
+     ["lpvest.design._hinf", "lpvest.fmi._designs", "lpvest.estimators.kalman"], ["numpy>=1.26"]),
     ("SridharLtvBSplineObserver", ["lpvest.estimators.bspline", "lpvest.estimators.bspline._kernels"],
      ["lpvest.estimators.kalman", "lpvest.cli"], ["numpy>=1.26", "scipy>=1.11"]),
 ])
@@ -163,8 +163,8 @@ for order in ("forward", "reverse"):
         out[order + ":" + name] = [[float(v) for v in row] for row in res[[n for n in res.dtype.names]][-1:]][0]
 if blocked:
     sys.meta_path.remove(blocker)
-import lpvest.fmi.factories.kalman, lpvest.fmi.build
-out["host"] = [lpvest.__file__, lpvest.fmi.factories.kalman.__file__]
+import lpvest.fmi.factories._kalman, lpvest.fmi._build
+out["host"] = [lpvest.__file__, lpvest.fmi.factories._kalman.__file__]
 out["packages"] = sorted(m for m in sys.modules if m.startswith("lpvest_") and "." not in m)
 print("RESULT" + json.dumps(out))
 """
@@ -210,7 +210,7 @@ def test_builds_of_two_lpvest_versions_run_side_by_side(fmus, tmp_path):
         import json, sys
         sys.path.insert(0, {str(tree)!r})
         import lpvest
-        from lpvest.fmi.build import build_fmu, plan_system
+        from lpvest.fmi._build import build_fmu, plan_system
         plan = next(p for p in plan_system("peixoto-ex1")[0] if p.role == "Plant")
         print("RESULT" + json.dumps([lpvest.__version__, str(build_fmu(plan, {str(out)!r}))]))
     """))
@@ -248,13 +248,13 @@ def test_builds_of_two_lpvest_versions_run_side_by_side(fmus, tmp_path):
 def test_the_same_inputs_give_a_byte_identical_fmu(tmp_path):
     """Built here and in a fresh process (its own compile of the status bridge,
     other temporary folders): the same bytes, and no path or host name inside."""
-    from lpvest.fmi.build import build_fmu, plan_system
+    from lpvest.fmi._build import build_fmu, plan_system
 
     plans = {p.role: p for p in plan_system("peixoto-ex1")[0]}
     first = {role: build_fmu(plans[role], tmp_path / "a") for role in ("Plant", "HinfPD")}
     second = _run(textwrap.dedent(f"""
         import json
-        from lpvest.fmi.build import build_fmu, plan_system
+        from lpvest.fmi._build import build_fmu, plan_system
         plans = {{p.role: p for p in plan_system("peixoto-ex1")[0]}}
         out = {str(tmp_path / 'b')!r}
         print("RESULT" + json.dumps({{r: str(build_fmu(plans[r], out)) for r in ("Plant", "HinfPD")}}))
@@ -284,7 +284,7 @@ def test_every_example_fmu_rebuilt_elsewhere_is_byte_identical(fmus, tmp_path):
     folder: the same bytes (issue 11: the same inputs give the same .fmu)."""
     second = _run(textwrap.dedent(f"""
         import json
-        from lpvest.fmi.build import build_fmus
+        from lpvest.fmi._build import build_fmus
         results, _ = build_fmus(None, {str(tmp_path / 'again')!r})
         print("RESULT" + json.dumps({{r.plan.identifier: str(r.validation.path) for r in results}}))
     """), cwd=tmp_path)
@@ -357,7 +357,7 @@ def test_stored_designs_fit_their_plants():
 def test_an_fmu_built_where_lpvest_is_not_a_source_checkout_carries_the_same_code(tmp_path):
     """The bundle does not depend on where lpvest lives: the digest covers the
     sources, not their paths."""
-    from lpvest.fmi.build import _bundle, plan_system
+    from lpvest.fmi._build import _bundle, plan_system
 
     plan = next(p for p in plan_system("peixoto-ex1")[0] if p.role == "Plant")
     here = _bundle(plan)
@@ -367,7 +367,7 @@ def test_an_fmu_built_where_lpvest_is_not_a_source_checkout_carries_the_same_cod
     there = _run(textwrap.dedent(f"""
         import json, sys
         sys.path.insert(0, {str(tree)!r})
-        from lpvest.fmi.build import _bundle, plan_system
+        from lpvest.fmi._build import _bundle, plan_system
         plan = next(p for p in plan_system("peixoto-ex1")[0] if p.role == "Plant")
         print("RESULT" + json.dumps(_bundle(plan).package))
     """), cwd=tmp_path)

@@ -118,7 +118,7 @@ def test_scs_stopped_by_its_own_sigint_handler_is_an_interruption_not_a_failed_p
 # ---------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def cox_fmus(tmp_path_factory):
-    from lpvest.fmi.build import build_fmus
+    from lpvest.fmi._build import build_fmus
 
     out = tmp_path_factory.mktemp("cox-fmus")
     results, _ = build_fmus(["cox-toth-truncation"], out, roles=["Plant", "Scheduler", "Kalman"])

@@ -22,8 +22,8 @@ from lpvest.design import HinfDesign
 from lpvest.estimators._hinf import HinfFilter
 from lpvest.estimators._truncated import TruncatedKalmanFilter
 from lpvest.estimators.kalman import LPVKalmanFilter
-from lpvest.fmi.registry import MEASUREMENT_DELAY, EstimatorKind, build_estimator, estimator_kinds
-from lpvest.fmi.state import decode_state, encode_state
+from lpvest.fmi._registry import MEASUREMENT_DELAY, EstimatorKind, build_estimator, estimator_kinds
+from lpvest.fmi._state import decode_state, encode_state
 from lpvest.systems._catalog import stored_design
 from lpvest.systems._polytopic import hinf_setting
 from tests.fmu_movavg import MovingAverage

@@ -397,7 +397,7 @@ def test_models_are_named_system_slash_key():
 def test_a_model_unstable_along_the_schedule_is_an_error_not_inf(tmp_path):
     # entries of 1e100 are accepted, but the simulation leaves the floating-point range: a clear error
     from lpvest.core._errors import NumericalError
-    from lpvest.experiments.simulate import simulate_system
+    from lpvest.experiments._simulate import simulate_system
 
     path = tmp_path / "m.toml"
     path.write_text(EX2.replace('"-0.05*rho"', "1e100"))

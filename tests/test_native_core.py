@@ -15,7 +15,7 @@ from lpvest.core._errors import ExpressionError
 from lpvest.core._expressions import Expression
 from lpvest.core._rng import Stream, log, lower_times, normal_quantile, psd_cholesky
 from lpvest.estimators.kalman._recursion import small_chol_inverse
-from lpvest.fmi.native.formulas import VM_STACK, compile_formula
+from lpvest.fmi.native._formulas import VM_STACK, compile_formula
 from tests.native_helpers import Formula, core_library, doubles, seeded
 from tests.tolerances import roundoff
 

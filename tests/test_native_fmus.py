@@ -41,7 +41,7 @@ def test_every_discrete_time_role_is_built_natively(fmus, native_fmus):
 
 
 def test_a_native_fmu_is_a_source_fmu_with_three_binaries(native_fmus):
-    from lpvest.fmi.native.build import RUNTIME_DIR
+    from lpvest.fmi.native._build import RUNTIME_DIR
 
     with zipfile.ZipFile(native_fmus["PeixotoEx1HinfPD"]) as z:
         names = set(z.namelist())
@@ -857,8 +857,8 @@ def test_lpvest_build_backend_native(native_fmus, tmp_path, capsys):
 
 def test_reproduce_with_the_native_backend(native_fmus, tmp_path):
     from lpvest.core._errors import ArgumentError
-    from lpvest.experiments.fmus import ExperimentFmus, as_experiment_fmus
-    from lpvest.experiments.reproduce import reproduce
+    from lpvest.experiments._fmus import ExperimentFmus, as_experiment_fmus
+    from lpvest.experiments._reproduce import reproduce
 
     cache = ExperimentFmus(tmp_path / "cache", backend="native")
     cache.adopt(native_fmus.paths)

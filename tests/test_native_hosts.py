@@ -287,7 +287,7 @@ def test_the_same_inputs_give_a_byte_identical_native_fmu(tmp_path):
     """Two builds of the same plans in two processes and two folders: the same bytes."""
     code = textwrap.dedent("""
         import sys
-        from lpvest.fmi.build import build_fmu, plan_system
+        from lpvest.fmi._build import build_fmu, plan_system
         plans, _ = plan_system("peixoto-ex1")
         for p in plans:
             if p.role in ("Plant", "HinfPD"):

@@ -9,7 +9,7 @@ import pytest
 
 from lpvest.cli import main
 from lpvest.experiments import registry
-from lpvest.experiments.peixoto import run_example2, stability_limits
+from lpvest.experiments._peixoto import run_example2, stability_limits
 from tests.tolerances import LMI_RESOLVE_GAMMA_RTOL
 
 

@@ -35,8 +35,8 @@ from lpvest.cli import describe_model, main
 from lpvest.core._errors import MESSAGE_LIMIT, ExpressionError, ModelFileError
 from lpvest.core._expressions import FUNCTIONS, Expression, shift_name
 from lpvest.cosim import CoSimulationError
-from lpvest.cosim.files import load_cosim
-from lpvest.cosim.ssp import read_ssp
+from lpvest.cosim._cosimfile import load_cosim
+from lpvest.cosim._ssp import read_ssp
 from lpvest.systems._modelfile import load_system
 
 from .contract import check_message, within_contract
@@ -354,7 +354,7 @@ def test_model_files_are_accepted_or_refused_by_one_line_naming_the_file(scratch
 
     within_contract("model files", load, prefix=f"{path}: ", error=ModelFileError, given=raw, paths=(str(scratch),))
     if loaded:  # an accepted file: its discrete-time models simulate, or say why not
-        from lpvest.experiments.simulate import simulate_system
+        from lpvest.experiments._simulate import simulate_system
         from lpvest.systems import LTVInputOutput, LTVStateSpace
 
         system = loaded[0]

@@ -2,7 +2,7 @@
 references stored in tests/data/reference (regenerate: `lpvest regress --update`).
 
 The tolerance of each reference and its reason are in
-lpvest.experiments.regression.REFERENCES (and in each file's header).
+lpvest.experiments._references.REFERENCES (and in each file's header).
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lpvest.experiments.regression import (
+from lpvest.experiments._references import (
     REFERENCES,
     check_reference,
     read_reference,

@@ -12,14 +12,14 @@ import pytest
 from lpvest.cli import main
 from lpvest.core._errors import LpvestError
 from lpvest.experiments import Experiment, ExperimentResult
-from lpvest.experiments.fmus import (
+from lpvest.experiments._fmus import (
     CATALOG,
     Agreement,
     ExperimentFmus,
     FmuRun,
 )
-from lpvest.experiments.reproduce import reproduce_all
-from lpvest.fmi.cache import fingerprint
+from lpvest.experiments._reproduce import reproduce_all
+from lpvest.fmi._cache import fingerprint
 from tests.tolerances import roundoff
 
 # -- agreement records ------------------------------------------------------------------------------
@@ -83,7 +83,7 @@ def test_fingerprint_follows_what_the_fmu_is_made_of(tmp_path):
 
     cache = ExperimentFmus(tmp_path)
     plan = cache.plan("PeixotoEx1HinfPDEps150")
-    assert plan.estimator.design == "lpvest.experiments.fmus:hinf_pd_eps150"
+    assert plan.estimator.design == "lpvest.experiments._fmus:hinf_pd_eps150"
     base = fingerprint(plan)
     assert fingerprint(cache.plan("PeixotoEx1HinfPDEps150")) == base
     assert fingerprint(cache.plan("PeixotoEx1HinfPD")) != base  # another design function
@@ -107,7 +107,7 @@ def test_variant_model_file_for_example2(tmp_path):
 def test_a_resolved_cache_serves_its_fmus_only_and_pickles(tmp_path):
     import pickle
 
-    from lpvest.fmi.cache import FmuCacheError
+    from lpvest.fmi._cache import FmuCacheError
 
     cache = ExperimentFmus(tmp_path)
     view = pickle.loads(pickle.dumps(cache.resolved(["CoxTothEx1Scheduler"])))  # what a worker gets
@@ -121,7 +121,7 @@ def test_a_resolved_cache_serves_its_fmus_only_and_pickles(tmp_path):
 
 def test_workers_must_be_a_count(tmp_path, capsys):
     from lpvest.core._errors import ArgumentError
-    from lpvest.experiments.reproduce import reproduce
+    from lpvest.experiments._reproduce import reproduce
 
     with pytest.raises(ArgumentError, match=r"workers must be an integer >= 0 \(0: in this process\); found -1"):
         reproduce(["peixoto-fig1"], tmp_path, workers=-1)

@@ -1,4 +1,4 @@
-"""The FMU slave base (lpvest/fmi/slave.py) in this process: step rule, inputs, state, errors.
+"""The FMU slave base (lpvest/fmi/_slave.py) in this process: step rule, inputs, state, errors.
 
 The slave runs from a resources folder written without bundling (tests/slave_harness.py), so a
 change to slave.py is seen without a rebuild; tests/test_fmu.py checks the same conventions
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from pythonfmu.enums import Fmi2Status
 
-from lpvest.fmi.slave import MAX_MESSAGE
+from lpvest.fmi._slave import MAX_MESSAGE
 from lpvest.systems._modelfile import load_system
 
 from .slave_harness import ERROR, OK, WARNING, Slave, edit_state, write_resources
@@ -673,7 +673,7 @@ class _Duck:
 def foreign(resources, fail=None, name: str = "foreign") -> Slave:
     """peixoto-ex1's plant slave whose component is a :class:`_Duck`, with two parameters more:
     ``limit`` (an Integer with only a maximum) and ``extra`` (one output more: other ports)."""
-    from lpvest.fmi.spec import Parameter
+    from lpvest.fmi._parameters import Parameter
 
     from .slave_harness import _script
 

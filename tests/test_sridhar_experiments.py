@@ -9,7 +9,7 @@ import pytest
 
 from lpvest.cli import main
 from lpvest.experiments import registry
-from lpvest.experiments.sridhar import (
+from lpvest.experiments._sridhar import (
     PAPER_A1_NOISELESS,
     PAPER_A1_NOISY,
     noisy_output,

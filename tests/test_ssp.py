@@ -1,6 +1,6 @@
 """The SSP export: the file fmpy and libcosim load and run, what each honours,
 and how their Jacobi stepping changes the results compared with our master,
-checked against the exact relation (lpvest/cosim/ssp.py, module documentation)."""
+checked against the exact relation (lpvest/cosim/_ssp.py, module documentation)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from lpvest import load_system
 from lpvest.cli import main
 from lpvest.core._signals import SchedulerComponent, SignalSpec, SourceComponent
 from lpvest.cosim import Component, CoSimulation, CoSimulationError
-from lpvest.cosim.ssp import DELAY, read_ssp, simulate_ssp, write_ssp
+from lpvest.cosim._ssp import DELAY, read_ssp, simulate_ssp, write_ssp
 from lpvest.design import HinfDesign
 from lpvest.estimators._hinf import HinfFilter
 from lpvest.systems._streaming import DiscretePlant
@@ -81,7 +81,7 @@ def _jacobi(library, first: dict[str, float], *, delay: int = 0, m: int = 1, n: 
     with the inputs read after the previous step (``first`` at k = 0), and its
     outputs are read after the step: those with direct feedthrough (the plant's
     y, the filter's zhat) hold their value at the sample just consumed, the
-    others (p, w, the states x and xf) are at t_(k+1) (lpvest.fmi.slave). The
+    others (p, w, the states x and xf) are at t_(k+1) (lpvest.fmi._slave). The
     filter pairs its measurement ``delay`` samples late (MeasurementDelay); a
     step of ``m`` samples runs the plant and the filter ``m`` samples with their
     inputs held."""
@@ -278,7 +278,7 @@ def test_the_readme_numbers_for_the_example_file(fmus, tmp_path):
     to the bit, with the file as written (measurement_delay = 1)."""
     from pathlib import Path
 
-    from lpvest.cosim.files import load_cosim
+    from lpvest.cosim._cosimfile import load_cosim
 
     spec = load_cosim(Path(__file__).resolve().parent.parent / "examples" / "peixoto_ex1_hinf.toml",
                       fmu_dir=fmus.out)
@@ -565,7 +565,7 @@ def _rewrite_ssd(path, change):
     """Apply ``change`` to the root of the SSP's SystemStructure.ssd, in place."""
     import xml.etree.ElementTree as ET
 
-    from lpvest.cosim.ssp import NS
+    from lpvest.cosim._ssp import NS
 
     with zipfile.ZipFile(path) as z:
         members = {n: z.read(n) for n in z.namelist()}

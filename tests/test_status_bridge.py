@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from lpvest.fmi import build
+from lpvest.fmi import _build as build
 
 ROOT = Path(__file__).resolve().parent.parent
 SOURCE = ROOT / "lpvest" / "fmi" / "status_bridge.c"

@@ -39,8 +39,8 @@ from lpvest.sweep import (
     sweep_spec,
     task_seeds,
 )
-from lpvest.sweep.metrics import Metric, compute
-from lpvest.sweep.tasks import Task
+from lpvest.sweep._metrics import Metric, compute
+from lpvest.sweep._tasks import Task
 from tests.interrupting import interrupt_at
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -474,7 +474,7 @@ def test_seed_keys_and_common_random_numbers(fmus, tmp_path):
 # ---------------------------------------------------------------------------
 def test_cox_toth_prediction_error_through_the_engine_is_the_serial_loop(engine2, tmp_path):
     from lpvest.analysis._fading_memory import empirical_prediction_error
-    from lpvest.experiments.cox_toth import prediction_error_setup, prediction_error_task
+    from lpvest.experiments._cox_toth import prediction_error_setup, prediction_error_task
 
     spec = tmp_path / "ct.toml"
     spec.write_text(textwrap.dedent("""
@@ -486,7 +486,7 @@ def test_cox_toth_prediction_error_through_the_engine_is_the_serial_loop(engine2
     res = run_sweep(spec, tmp_path / "out", engine=engine2, progress=False)
     setup = prediction_error_setup(steps=80, runs=300, burn_in=20, seed=3)
     for row in res.summary.to_pylist():
-        # the serial experiment's loop body (lpvest.experiments.cox_toth.run_truncation before the hook)
+        # the serial experiment's loop body (lpvest.experiments._cox_toth.run_truncation before the hook)
         emp = empirical_prediction_error(setup.model, setup.p, setup.u, setup.gains[row["filter"]], runs=300, rng=4)
         assert row["monte_carlo_mean_trace"] == float(np.mean(np.trace(emp[20:], axis1=1, axis2=2)))
         assert row["mean_trace"] == setup.mean_trace[row["filter"]]
@@ -501,11 +501,11 @@ def test_cox_toth_prediction_error_through_the_engine_is_the_serial_loop(engine2
 
 @pytest.mark.slow
 def test_sridhar_noisy_through_the_engine_is_the_serial_experiment(engine2, experiment_fmus, tmp_path):
-    from lpvest.experiments.sridhar import run_noisy
+    from lpvest.experiments._sridhar import run_noisy
 
     serial = run_noisy(None, seeds=2, fmus=experiment_fmus)
     on_dask = run_noisy(None, seeds=2, fmus=experiment_fmus, engine=engine2)
-    # a task runs with BLAS on one thread in this process as on a worker (lpvest.sweep.tasks.execute):
+    # a task runs with BLAS on one thread in this process as on a worker (lpvest.sweep._tasks.execute):
     # without that, the least-squares sums of a multithreaded BLAS round in another order and the
     # GCV fits moved by up to 3e-8 relative; with it, the same numbers bit for bit
     assert on_dask.results == serial.results
@@ -539,7 +539,7 @@ def test_peixoto_example2_through_the_engine_is_the_serial_sweep(engine2, tmp_pa
 
 
 def test_map_tasks_names_the_failed_task():
-    from lpvest.experiments.cox_toth import prediction_error_setup, prediction_error_task
+    from lpvest.experiments._cox_toth import prediction_error_setup, prediction_error_task
 
     setup = prediction_error_setup(steps=10, runs=5, burn_in=2)
     with pytest.raises(SweepError, match=r"task 1 \(filter = 'kalman'\) failed: KeyError: .*no filter 'kalman'"):

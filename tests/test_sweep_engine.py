@@ -1,4 +1,4 @@
-"""The sweep engine's handling of results (lpvest/sweep/engine.py) against a stubbed Dask client.
+"""The sweep engine's handling of results (lpvest/sweep/_engine.py) against a stubbed Dask client.
 
 The futures, their completion order and their statuses are scripted, so each case the engine
 must handle (a result that arrives while its future is already lost, a task that could not run,
@@ -11,9 +11,9 @@ from __future__ import annotations
 import distributed
 import pytest
 
-import lpvest.sweep.engine as engine_module
-from lpvest.sweep.engine import LOCAL_WORKER_CONFIG, Engine, require_sweep_extra
-from lpvest.sweep.tasks import Outcome, SweepError, Task, TaskResult
+import lpvest.sweep._engine as engine_module
+from lpvest.sweep._engine import LOCAL_WORKER_CONFIG, Engine, require_sweep_extra
+from lpvest.sweep._tasks import Outcome, SweepError, Task, TaskResult
 
 
 class Future:

@@ -1,11 +1,11 @@
 """Co-simulation: FMUs (and lpvest's own components) stepped together.
 
-- :mod:`lpvest.cosim.master`: the fixed-step master over fmpy's ``FMU2Slave``
+- :mod:`lpvest.cosim`: the fixed-step master over fmpy's ``FMU2Slave``
   (:class:`CoSimulation`, :func:`simulate`), zero-delay where outputs feed
   through;
-- :mod:`lpvest.cosim.files`: co-simulation files (``lpvest cosim FILE.toml``:
+- :mod:`lpvest.cosim`: co-simulation files (``lpvest cosim FILE.toml``:
   :func:`load_cosim`);
-- :mod:`lpvest.cosim.ssp`: the SSP export and runs of an SSP by fmpy or
+- :mod:`lpvest.cosim`: the SSP export and runs of an SSP by fmpy or
   libcosim (:func:`write_ssp`, :func:`read_ssp`, :func:`simulate_ssp`).
 
 Examples
@@ -16,8 +16,8 @@ Examples
 
 from __future__ import annotations
 
-from .files import CoSimFile, CoSimResult, load_cosim
-from .master import (
+from ._cosimfile import CoSimFile, CoSimResult, load_cosim
+from ._master import (
     AlgebraicLoopError,
     Component,
     Connection,
@@ -27,7 +27,7 @@ from .master import (
     DiscardedStepWarning,
     simulate,
 )
-from .ssp import read_ssp, simulate_ssp, write_ssp
+from ._ssp import read_ssp, simulate_ssp, write_ssp
 
 __all__ = [
     "Component",

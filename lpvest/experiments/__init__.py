@@ -1,17 +1,18 @@
 """Experiments: importable, headless reproductions of the papers' examples.
 
-Each module in this package may define ``EXPERIMENTS``, a sequence of
-:class:`Experiment`; :func:`registry` collects them, and ``lpvest reproduce
+The paper modules (``_cox_toth.py``, ``_peixoto.py``, ``_sridhar.py``) each
+define ``EXPERIMENTS``, a sequence of :class:`Experiment`; :func:`registry`
+collects them, and ``lpvest reproduce
 NAME|all`` runs them. An experiment's ``run(out_dir, *, fmus=None,
 progress=None, ...)`` returns an :class:`ExperimentResult` (a printable
 table, JSON-able numbers, the figures it wrote, the paper-versus-ours rows of
 the report, and the record of what ran through FMUs) and writes nothing when
 ``out_dir`` is ``None``. ``fmus`` is an
-:class:`~lpvest.experiments.fmus.ExperimentFmus` (the FMU cache), a cache
+:class:`~lpvest.experiments.ExperimentFmus` (the FMU cache), a cache
 folder, or ``None`` for the default cache; ``progress`` shows progress bars
 (default: :func:`show_progress`).
 
-What :mod:`~lpvest.experiments.reproduce` needs to run experiments side by
+What :mod:`~lpvest.experiments` needs to run experiments side by
 side on Dask workers is declared with each: the FMUs it runs
 (:attr:`Experiment.fmus`, built before any worker starts), the experiments
 that share a computation and so run as one task (:attr:`Experiment.group`),
@@ -22,9 +23,7 @@ last step on their results.
 
 from __future__ import annotations
 
-import importlib
 import json
-import pkgutil
 import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -34,10 +33,22 @@ from typing import TYPE_CHECKING, Any
 from ..core._errors import InternalError
 
 if TYPE_CHECKING:
-    from ..sweep.tasks import Task, TaskResult
-    from .fmus import FmuRun
+    from ..sweep._tasks import Task, TaskResult
+    from ._fmus import FmuRun
 
-__all__ = ["Experiment", "ExperimentResult", "Split", "registry", "show_progress", "write_results"]
+__all__ = [
+    "Experiment",
+    "ExperimentResult",
+    "Split",
+    "registry",
+    "show_progress",
+    "write_results",
+    "CoSimSpec",
+    "ExperimentFmus",
+    "ExperimentRun",
+    "reproduce",
+    "reproduce_all",
+]
 
 
 def show_progress(progress: bool | None, out_dir: Path | None) -> bool:
@@ -95,7 +106,7 @@ class ExperimentResult:
 class Split:
     """An experiment as independent tasks and a last step on their results:
     ``finish([fn(shared, task) for task in tasks])`` is the experiment's
-    result, whichever process ran each task (:func:`~lpvest.sweep.tasks.map_tasks`
+    result, whichever process ran each task (:func:`~lpvest.sweep.map_tasks`
     gives the same numbers serially and on Dask workers).
 
     Parameters
@@ -108,7 +119,7 @@ class Split:
         The tasks, in the order ``finish`` takes their results.
     finish : callable
         ``finish(results) -> ExperimentResult``, ``results`` the
-        :class:`~lpvest.sweep.tasks.TaskResult` of each task in order; it
+        :class:`~lpvest.sweep.TaskResult` of each task in order; it
         writes the experiment's files.
     desc : str
         What the tasks are, for a progress bar (``"Example 2: rho sweep"``).
@@ -143,7 +154,7 @@ class Experiment:
     reduced : mapping, default {}
         Keyword options of the quicker configuration, passed to ``run``.
     fmus : tuple of str, default ()
-        Identifiers of the FMUs it runs (:data:`~lpvest.experiments.fmus.CATALOG`):
+        Identifiers of the FMUs it runs (:data:`~lpvest.experiments._fmus.CATALOG`):
         ``lpvest reproduce`` builds them before handing the experiment to a
         worker process, which may use no other.
     group : str, default ""
@@ -169,8 +180,8 @@ class Experiment:
 def registry() -> dict[str, Experiment]:
     """Every experiment of every module in :mod:`lpvest.experiments`, by name.
 
-    Modules whose name starts with ``_`` are skipped; the others are imported
-    and their ``EXPERIMENTS`` collected, in module-name order.
+    The paper modules are imported (on the first call: they import scipy and
+    the FMU machinery) and their ``EXPERIMENTS`` collected, in module-name order.
 
     Returns
     -------
@@ -183,11 +194,10 @@ def registry() -> dict[str, Experiment]:
         If two experiments have the same name.
     """
     out: dict[str, Experiment] = {}
-    for info in sorted(pkgutil.iter_modules(__path__), key=lambda i: i.name):
-        if info.name.startswith("_"):
-            continue
-        module = importlib.import_module(f"{__name__}.{info.name}")
-        for exp in getattr(module, "EXPERIMENTS", ()):
+    from . import _cox_toth, _peixoto, _sridhar  # the modules that define experiments
+
+    for module in (_cox_toth, _peixoto, _sridhar):
+        for exp in module.EXPERIMENTS:
             if exp.name in out:
                 raise InternalError(f"experiment name {exp.name!r} is defined twice")
             out[exp.name] = exp
@@ -234,3 +244,15 @@ def write_results(result: ExperimentResult, out_dir: Path) -> Path:
         data["fmu_cosimulation"] = result.fmu.to_json()
     path.write_text(json.dumps(_jsonable(data), indent=2) + "\n", encoding="utf-8")
     return path
+
+# the FMU cache and the runner, defined on top of the classes above
+# isort: split
+from ._fmus import (  # noqa: E402 - defined on top of the classes above
+    CoSimSpec as CoSimSpec,
+    ExperimentFmus as ExperimentFmus,
+)
+from ._reproduce import (  # noqa: E402 - defined on top of the classes above
+    ExperimentRun as ExperimentRun,
+    reproduce as reproduce,
+    reproduce_all as reproduce_all,
+)

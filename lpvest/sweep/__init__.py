@@ -1,17 +1,17 @@
 """Sweeps and Monte Carlo over co-simulations, on Dask.
 
-The same co-simulation (a file of :mod:`lpvest.cosim.files`) or the Monte Carlo
+The same co-simulation (a file of :mod:`lpvest.cosim`) or the Monte Carlo
 part of a paper experiment, run over seeds and parameter values: one task per
 combination, on an embedded Dask ``LocalCluster`` (one worker process per
 core) or on an existing cluster, with the results written as tasks finish
 (summary as Parquet, trajectories as Zarr) and a rerun resuming where the
 last one stopped.
 
-- :mod:`~lpvest.sweep.spec`: the sweep file (axes, seeds, metrics, kept signals);
-- :mod:`~lpvest.sweep.metrics`: the summary metrics of a co-simulation;
-- :mod:`~lpvest.sweep.studies`: a co-simulation file or an experiment as tasks;
-- :mod:`~lpvest.sweep.engine`: Dask; :mod:`~lpvest.sweep.tasks`: tasks, seeds, the in-process runner;
-- :mod:`~lpvest.sweep.store`: the output folder; :mod:`~lpvest.sweep.plot`: a figure per metric.
+- :mod:`~lpvest.sweep`: the sweep file (axes, seeds, metrics, kept signals);
+- :mod:`~lpvest.sweep`: the summary metrics of a co-simulation;
+- :mod:`~lpvest.sweep`: a co-simulation file or an experiment as tasks;
+- :mod:`~lpvest.sweep`: Dask; :mod:`~lpvest.sweep`: tasks, seeds, the in-process runner;
+- :mod:`~lpvest.sweep`: the output folder; :mod:`~lpvest.sweep`: a figure per metric.
 
 Dask, pyarrow and zarr come with the extra ``pip install 'lpvest[sweep]'``;
 they are imported when a sweep runs, not with this package.
@@ -25,23 +25,28 @@ Examples
 
 from __future__ import annotations
 
-from .engine import Engine as Engine
-from .metrics import METRIC_KINDS as METRIC_KINDS, Metric as Metric
-from .run import SweepInterrupted as SweepInterrupted, SweepResult as SweepResult, run_sweep as run_sweep
-from .spec import (
+from ._engine import (
+    LOCAL_WORKER_CONFIG as LOCAL_WORKER_CONFIG,
+    Engine as Engine,
+)
+from ._metrics import METRIC_KINDS as METRIC_KINDS, Metric as Metric
+from ._run import SweepInterrupted as SweepInterrupted, SweepResult as SweepResult, run_sweep as run_sweep
+from ._studies import experiment_studies as experiment_studies
+from ._sweepfile import (
     Axis as Axis,
     Seeds as Seeds,
     SweepSpec as SweepSpec,
     load_sweep as load_sweep,
     sweep_spec as sweep_spec,
 )
-from .studies import experiment_studies as experiment_studies
-from .tasks import (
+from ._tasks import (
     Outcome as Outcome,
     SweepError as SweepError,
     Task as Task,
     TaskResult as TaskResult,
+    execute as execute,
     map_tasks as map_tasks,
+    one_blas_thread as one_blas_thread,
     task_seeds as task_seeds,
 )
 
@@ -64,4 +69,7 @@ __all__ = [
     "run_sweep",
     "sweep_spec",
     "task_seeds",
+    "LOCAL_WORKER_CONFIG",
+    "execute",
+    "one_blas_thread",
 ]

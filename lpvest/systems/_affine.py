@@ -772,7 +772,7 @@ class AffineLPV:
         -------
         dict of str to object
             ``type = "affine"``, the basis and matrices
-            (:func:`~lpvest.systems.dependence_table`), ``Q``, ``R``,
+            (:func:`~lpvest.systems._affine.dependence_table`), ``Q``, ``R``,
             ``S``, ``x0``, ``P0`` and, when set, ``Cz``.
         """
         out: dict[str, Any] = {"type": "affine", **dependence_table(self.dependence)}

@@ -356,7 +356,7 @@ class InnovationLPV:
         -------
         dict of str to object
             ``type = "innovation"``, the basis and matrices
-            (:func:`~lpvest.systems.dependence_table`), ``K`` (numbers
+            (:func:`~lpvest.systems._affine.dependence_table`), ``K`` (numbers
             and formula text), ``innovation_covariance`` and ``x0``.
         """
         out: dict[str, Any] = {"type": "innovation", **dependence_table(self.dependence)}

@@ -7,7 +7,7 @@ included), ``step(inputs)`` that returns the same values and advances,
 ``reset()``, and ``get_state``/``set_state`` of the whole state
 (random-generator state included). The Plant FMUs are thin adapters over them.
 Each sample is the model's own pure step (:meth:`PolytopicLPV.step`,
-:meth:`AffineLPV.step`, :func:`~lpvest.systems.innovation_step`),
+:meth:`AffineLPV.step`, :func:`~lpvest.systems._innovation.innovation_step`),
 the one the batch ``simulate`` methods loop over: a Python loop over a plant
 reproduces ``simulate`` to the bit (with the noise drawn one sample at a time).
 

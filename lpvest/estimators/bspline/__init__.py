@@ -26,7 +26,7 @@ cross-validation (GCV). ``P`` (``m x s``, dense) is never formed: between
 consecutive starts of the B-splines' supports its rows lie in a space of
 dimension about 10, so each such segment is first reduced by a small QR and
 only the stacked triangular factors enter the final QR (a TSQR; see
-:func:`~lpvest.estimators.bspline.compressed_system`). :func:`kernel_regression` returns the dense ``P``.
+:func:`~lpvest.estimators.bspline._fit.compressed_system`). :func:`kernel_regression` returns the dense ``P``.
 The rank of ``P`` must equal the number of unknowns (practical
 identifiability, Definition 1; the paper's "rank P = 2n"), otherwise
 :class:`~lpvest.core.IdentifiabilityError` names the coefficients the data

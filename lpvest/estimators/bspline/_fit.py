@@ -338,7 +338,7 @@ def fit_window(
     Parameters
     ----------
     plan : RegressionPlan
-        From :func:`~lpvest.estimators.bspline.build_plan` for ``m`` samples.
+        From :func:`~lpvest.estimators.bspline._fit.build_plan` for ``m`` samples.
     a : float
         Time of the window's first sample.
     u, y : ndarray, shape (m,)

@@ -80,7 +80,7 @@ SCAN_MIN_SAMPLES = 80
 #: rounding errors by about ``amp^2`` (a nearly singular ``H R H^T`` next to
 #: a strong cross-covariance), see :mod:`lpvest.estimators.kalman`,
 #: "Accuracy". Up to this gate the scan's own part of its documented accuracy
-#: (:func:`~lpvest.estimators.kalman.scan_error_bound`,
+#: (:func:`~lpvest.estimators.kalman._batch.scan_error_bound`,
 #: ``100 eps (kappa + (1 + amp)^2)`` with ``kappa = max_t cond(Omega_t)``
 #: the part any algorithm shares) is at most ``100 eps 31^2 = 2.1e-11``
 #: relative to each output's size; beyond it, ``method="scan"`` runs but
@@ -105,7 +105,7 @@ def kalman_filter(
 
     The matrices for every sample are evaluated at once. Two algorithms give
     the same numbers to rounding: the scan's outputs are within
-    :func:`~lpvest.estimators.kalman.scan_error_bound` of the
+    :func:`~lpvest.estimators.kalman._batch.scan_error_bound` of the
     sequential recursion's (``100 eps (kappa + (1 + amp)^2)`` relative to
     each output's largest entry, ``kappa = max_t cond(Omega_t)``; the scan's
     own part is at most 2.1e-11 where ``"auto"`` takes it), and the tests

@@ -489,7 +489,7 @@ def riccati_sweep(
 #: ``kalman_filter(method="auto")`` runs the sequential recursion for fewer
 #: samples than this: the scan's fixed cost of a few hundred numpy calls is
 #: then not recovered (measured with ``benchmarks/bench_kalman.py``: with
-#: blocks of at least :data:`~lpvest.estimators.kalman.MIN_BLOCK`
+#: blocks of at least :data:`~lpvest.estimators.kalman._scan.MIN_BLOCK`
 #: samples, for accuracy, the two break even between 64 and 96 samples for
 #: n_x = 2 and 10: 1.5 / 1.7 ms at 64, 2.0 / 1.7 ms at 96).
 #: There is no rule on n_x: per sample the scan does fewer flops than the

@@ -47,7 +47,7 @@ What the base does for every FMU (docs/fmus.md states the conventions):
   random generator), time.
 
 The FMU runs the copy of lpvest it carries under a build-unique name
-(:mod:`lpvest.fmi.bundle`); this module imports pythonfmu's Python files from
+(:mod:`lpvest.fmi`); this module imports pythonfmu's Python files from
 their submodules so that the FMU can carry them too.
 """
 
@@ -68,9 +68,9 @@ from .._version import __version__
 from ..core._errors import ArgumentError
 from ..core._interrupt import hold
 from ..core._protocol import Component, whole_samples
-from .naming import element_names
-from .spec import Parameter, read_spec
-from .state import copy_state, decode_state, encode_state
+from ._naming import element_names
+from ._parameters import Parameter, read_spec
+from ._state import copy_state, decode_state, encode_state
 
 __all__ = ["LpvestSlave", "MAX_MESSAGE", "INT32"]
 
@@ -213,7 +213,7 @@ class LpvestSlave(Fmi2Slave):
         self.modelName = self.spec["identifier"]
         self.description = self.spec.get("description", "")
         self.version = __version__
-        # which code runs this FMU: its own copy of lpvest (lpvest.fmi.bundle), named here
+        # which code runs this FMU: its own copy of lpvest (lpvest.fmi), named here
         self._log(Fmi2Status.ok, f"lpvest {__version__} ({__name__.rpartition('.fmi.')[0]})")
         self._elements: dict[int, _Element] = {}
         self._invalid: dict[str, str] = {}

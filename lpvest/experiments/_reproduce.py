@@ -1,7 +1,7 @@
 """Run experiments (``lpvest reproduce NAME|all``): each writes its figures and
 ``results.json`` into ``OUT/<name>/``, and ``all`` writes ``OUT/report.md``.
 
-The FMUs come from an :class:`~lpvest.experiments.fmus.ExperimentFmus` cache
+The FMUs come from an :class:`~lpvest.experiments.ExperimentFmus` cache
 (``OUT/fmu-cache`` from the command line), built on first use and reused while
 up to date.
 
@@ -18,7 +18,7 @@ checked first and the missing or stale ones built side by side on the
 workers, each recorded in the cache's manifest by this process only; the
 experiments' tasks then only read them.
 Every task runs with BLAS on one thread, in this process too
-(:func:`~lpvest.sweep.tasks.one_blas_thread`), so the numbers are the same,
+(:func:`~lpvest.sweep.one_blas_thread`), so the numbers are the same,
 bit for bit, whatever the number of workers, and so is the report (but for
 the times it states). ``workers=0`` runs everything in this process, one
 experiment after another; so does a run with a single task.
@@ -30,7 +30,7 @@ only when stderr is a terminal.
 
 Examples
 --------
->>> from lpvest.experiments.reproduce import reproduce_all
+>>> from lpvest.experiments import reproduce_all
 >>> runs = reproduce_all("out", reduced=True)                  # doctest: +SKIP
 >>> [r.name for r in runs if not r.ok]                         # doctest: +SKIP
 []
@@ -47,9 +47,9 @@ from pathlib import Path
 from typing import Any
 
 from ..core._errors import ArgumentError, LpvestError, abbreviate
-from ..sweep.tasks import Outcome, SweepError, Task, TaskResult, one_blas_thread
+from ..sweep._tasks import Outcome, SweepError, Task, TaskResult, one_blas_thread
 from . import Experiment, ExperimentResult, Split, write_results
-from .fmus import ExperimentFmus, as_experiment_fmus
+from ._fmus import ExperimentFmus, as_experiment_fmus
 
 __all__ = ["ExperimentRun", "reproduce", "reproduce_all", "default_workers"]
 
@@ -189,7 +189,7 @@ def _in_process(groups: list[list[Experiment]], cache: ExperimentFmus, rep: _Rep
 
 def build_task(cache: ExperimentFmus, task: Task) -> TaskResult:
     """Build one FMU of ``cache`` (``task.point["fmu"]``) on a worker; this
-    process records it (:meth:`~lpvest.fmi.cache.FmuCache.record`)."""
+    process records it (:meth:`~lpvest.fmi.FmuCache.record`)."""
     return TaskResult(value=cache.build_file(task.point["fmu"]))
 
 
@@ -212,7 +212,7 @@ def _build_on_workers(engine: Any, cache: ExperimentFmus, needed: list[str], say
 
 
 def _on_workers(groups: list[list[Experiment]], cache: ExperimentFmus, rep: _Reporter, workers: int) -> None:
-    from ..sweep.engine import Engine
+    from ..sweep._engine import Engine
 
     with Engine(workers=workers) as engine:
         _run_on(engine, groups, cache, rep)
@@ -292,7 +292,7 @@ def reproduce(
         and (side by side) one line per finished task.
     backend : str or None, default None
         The FMUs' backend (``"pythonfmu"`` or ``"native"``,
-        :data:`lpvest.fmi.build.BACKENDS`; default: the given cache's, else
+        :data:`lpvest.fmi._build.BACKENDS`; default: the given cache's, else
         ``"pythonfmu"``).
     workers : int or None, default None
         Dask worker processes (default: one per core, :func:`default_workers`);
@@ -342,11 +342,11 @@ def reproduce_all(
     workers: int | None = None,
 ) -> list[ExperimentRun]:
     """Every registered experiment (:func:`reproduce`), then ``out/report.md``
-    (:func:`lpvest.experiments.report.write_report`). ``fmus`` defaults to the
+    (:func:`lpvest.experiments._report.write_report`). ``fmus`` defaults to the
     cache ``out/fmu-cache`` (``out/fmu-cache-native`` for ``backend="native"``);
     ``workers`` as in :func:`reproduce`."""
     from . import registry
-    from .report import write_report
+    from ._report import write_report
 
     out = Path(out)
     default = out / ("fmu-cache" if backend in (None, "pythonfmu") else f"fmu-cache-{backend}")

@@ -4,7 +4,7 @@ FMU with binaries for Linux, Windows and macOS cross-compiled with zig.
 What a native FMU holds:
 
 - ``modelDescription.xml``: the variables of the Python FMU of the same role
-  (the same slave writes both, :func:`lpvest.fmi.build.model_description_xml`),
+  (the same slave writes both, :func:`lpvest.fmi._build.model_description_xml`),
   no execution tool needed, the source files listed (``SourceFiles``);
 - ``sources/``: the runtime (``lpv_*.c``, ``lpv*.h``), the FMI 2.0 headers and
   the generated ``model_data.c``, with ``buildDescription.xml``:
@@ -44,7 +44,7 @@ from typing import Any
 from xml.etree.ElementTree import Element, SubElement
 
 from ..._version import __version__
-from ..build import (
+from .._build import (
     BuildError,
     FmuPlan,
     design_text,
@@ -55,8 +55,8 @@ from ..build import (
     write_fmu_zip,
     zig_version,
 )
-from ..spec import SPEC_FILE, SPEC_FORMAT
-from .export import NativeExportError, model_data_c, native_unsupported, parameter_entries, role_data
+from .._parameters import SPEC_FILE, SPEC_FORMAT
+from ._export import NativeExportError, model_data_c, native_unsupported, parameter_entries, role_data
 
 __all__ = ["build_native_fmu", "RUNTIME_DIR", "runtime_files", "NATIVE_PLATFORMS", "CFLAGS", "LDFLAGS",
            "native_manifest_inputs", "compile_binary"]
@@ -234,7 +234,7 @@ def build_native_fmu(plan: FmuPlan, out_dir: str | Path, *, progress: Callable[[
     Parameters
     ----------
     plan : FmuPlan
-        A plan of :func:`lpvest.fmi.build.plan_system`.
+        A plan of :func:`lpvest.fmi.plan_system`.
     out_dir : str or Path
         The output folder (created).
     progress : callable, optional

@@ -19,11 +19,11 @@ from pathlib import Path
 from typing import Any
 
 from ..core._interrupt import exit_status, hold, holds, interruptible
-from .engine import Engine
-from .spec import SweepSpec, load_sweep
-from .store import FORMAT, SweepStore
-from .studies import prepare
-from .tasks import Outcome, SweepError, digest, execute
+from ._engine import Engine
+from ._store import FORMAT, SweepStore
+from ._studies import prepare
+from ._sweepfile import SweepSpec, load_sweep
+from ._tasks import Outcome, SweepError, digest, execute
 
 __all__ = ["run_sweep", "SweepResult", "SweepInterrupted"]
 
@@ -141,7 +141,7 @@ class SweepResult:
         str
             The report, one string of several lines.
         """
-        from .plot import metric_statistics
+        from ._plot import metric_statistics
 
         spec = self.spec
         n_points = len(spec.points())
@@ -223,9 +223,9 @@ def run_sweep(
     Parameters
     ----------
     spec : SweepSpec, str or Path
-        The sweep (a :class:`~lpvest.sweep.spec.SweepSpec` or a sweep file).
+        The sweep (a :class:`~lpvest.sweep.SweepSpec` or a sweep file).
     out : str or Path
-        Output folder (:mod:`lpvest.sweep.store`). A rerun of the same spec
+        Output folder (:mod:`lpvest.sweep`). A rerun of the same spec
         into it runs only the tasks not finished yet.
     scheduler : str, optional
         Address of a running Dask scheduler; default: a ``LocalCluster``.
@@ -233,7 +233,7 @@ def run_sweep(
         Worker processes of the ``LocalCluster`` (default: one per core);
         ``0`` runs the tasks in this process, one after another (no Dask).
     engine : Engine, optional
-        A started :class:`~lpvest.sweep.engine.Engine` to use (and leave open)
+        A started :class:`~lpvest.sweep.Engine` to use (and leave open)
         instead of ``scheduler``/``workers``.
     fmus : str, Path or ExperimentFmus, optional
         The folder of a co-simulation's FMUs (when ``spec`` is a file;
@@ -251,7 +251,7 @@ def run_sweep(
         Write ``out/figures/<metric>.png``.
     on_outcome : callable, optional
         Called in this process with each task's
-        :class:`~lpvest.sweep.tasks.Outcome` as it finishes (after it is recorded).
+        :class:`~lpvest.sweep.Outcome` as it finishes (after it is recorded).
     idle_timeout : float, optional
         Give up when no task finishes for this many seconds.
     flush_every, flush_seconds : int, float
@@ -336,7 +336,7 @@ def run_sweep(
         if drawing:
             hold("sweep-finish")
             if summary.num_rows:
-                from .plot import plot_metrics
+                from ._plot import plot_metrics
 
                 figures = tuple(plot_metrics(summary, spec, prepared.metrics, Path(out) / "figures"))
             store.mark_complete()

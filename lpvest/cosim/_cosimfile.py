@@ -51,7 +51,7 @@ import numpy as np
 from ..core._errors import ModelFileError, abbreviate, shorten
 from ..core._plotting import save_figure
 from ..core._toml import describe_value, read_toml
-from .master import Component, Connection, CoSimulation, CoSimulationError, DiscardedStep, step_count
+from ._master import Component, Connection, CoSimulation, CoSimulationError, DiscardedStep, step_count
 
 __all__ = ["CoSimFile", "CoSimResult", "load_cosim", "DEFAULT_FMU_DIR"]
 
@@ -251,7 +251,7 @@ class CoSimFile:
         return CoSimResult(self, data, elapsed, order, sim.discarded, tuple(sim.not_recorded))
 
     def to_ssp(self, path: str | Path) -> Path:
-        """Write this system as an SSP file (:func:`lpvest.cosim.ssp.write_ssp`).
+        """Write this system as an SSP file (:func:`lpvest.cosim.write_ssp`).
 
         The SSP's name is the file's stem, its description the title, its
         default experiment from ``start_time`` to :attr:`stop_time`.
@@ -266,7 +266,7 @@ class CoSimFile:
         Path
             ``path``.
         """
-        from .ssp import write_ssp
+        from ._ssp import write_ssp
 
         try:
             return write_ssp(path, self.components, self.connections, step_size=self.step_size,

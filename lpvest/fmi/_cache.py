@@ -9,11 +9,11 @@ pythonfmu and the compiler), plus the solver versions when a design is solved
 at build time. Any change rebuilds; nothing is guessed from time stamps.
 
 :class:`FmuCache` holds the mechanism; a subclass says which FMUs exist
-(:class:`~lpvest.experiments.fmus.ExperimentFmus`: the paper experiments').
+(:class:`~lpvest.experiments.ExperimentFmus`: the paper experiments').
 
 Examples
 --------
->>> from lpvest.fmi.build import plan_system
+>>> from lpvest.fmi import plan_system
 >>> plans, _ = plan_system("sridhar-ltv")
 >>> digest = fingerprint(plans[0])          # what the FMU is made from
 >>> len(digest), digest == fingerprint(plan_system("sridhar-ltv")[0][0])
@@ -63,16 +63,16 @@ def _solver_versions() -> str:
 
 
 def fingerprint(plan: Any, backend: str = "pythonfmu") -> str:
-    """SHA-256 of everything an FMU of ``plan`` (a :class:`~lpvest.fmi.build.FmuPlan`)
-    is made from: the inputs its manifest records (:func:`lpvest.fmi.build.manifest_inputs`:
+    """SHA-256 of everything an FMU of ``plan`` (a :class:`~lpvest.fmi.FmuPlan`)
+    is made from: the inputs its manifest records (:func:`lpvest.fmi._build.manifest_inputs`:
     plan, model file, carried code, design file, pythonfmu, compiler; for the
-    native backend :func:`lpvest.fmi.native.build.native_manifest_inputs`: plan,
+    native backend :func:`lpvest.fmi.native._build.native_manifest_inputs`: plan,
     model file, the C runtime, zig and its flags), and for a design solved at
     build time the versions of the solver stack."""
-    from .build import backend_of, manifest_inputs
+    from ._build import backend_of, manifest_inputs
 
     if backend_of(plan, backend) == "native":
-        from .native.build import native_manifest_inputs
+        from .native._build import native_manifest_inputs
 
         inputs = native_manifest_inputs(plan)
         if plan.design is not None:
@@ -104,9 +104,9 @@ class FmuCache:
     """FMUs in a cache folder, built when missing or stale.
 
     A subclass says which FMUs exist: :meth:`plan` gives the
-    :class:`~lpvest.fmi.build.FmuPlan` of an identifier, :meth:`known` whether
+    :class:`~lpvest.fmi.FmuPlan` of an identifier, :meth:`known` whether
     an identifier is one of them
-    (:class:`~lpvest.experiments.fmus.ExperimentFmus`: the paper experiments').
+    (:class:`~lpvest.experiments.ExperimentFmus`: the paper experiments').
 
     Parameters
     ----------
@@ -116,7 +116,7 @@ class FmuCache:
     progress : callable, optional
         Called with a message before each build (the CLI prints it).
     backend : str, default "pythonfmu"
-        The FMU backend (:data:`lpvest.fmi.build.BACKENDS`); ``"native"``
+        The FMU backend (:data:`lpvest.fmi._build.BACKENDS`); ``"native"``
         builds every discrete-time role as C (the others stay pythonfmu FMUs).
 
     ``fmus["PeixotoEx1Plant"]`` (or :meth:`path`) returns the FMU's path,
@@ -128,7 +128,7 @@ class FmuCache:
 
     def __init__(self, directory: str | Path, *, progress: Callable[[str], None] | None = None,
                  backend: str = "pythonfmu") -> None:
-        from .build import check_backend
+        from ._build import check_backend
 
         self.directory = Path(directory)
         self.progress = progress
@@ -177,7 +177,7 @@ class FmuCache:
 
     # -- what exists ----------------------------------------------------------
     def plan(self, identifier: str) -> Any:
-        """The :class:`~lpvest.fmi.build.FmuPlan` of ``identifier``."""
+        """The :class:`~lpvest.fmi.FmuPlan` of ``identifier``."""
         raise NotImplementedError
 
     def known(self, identifier: str) -> bool:
@@ -256,7 +256,7 @@ class FmuCache:
         FmuCacheError
             The built FMU fails validation.
         """
-        from .build import build_fmu, validate_fmus
+        from ._build import build_fmu, validate_fmus
 
         plan = self.plan(identifier)
         want = fingerprint(plan, self.backend)
@@ -318,7 +318,7 @@ class FmuCache:
         return view
 
     def _build(self, plan: Any, want: str, target: Path) -> None:
-        from .build import backend_of
+        from ._build import backend_of
 
         if self.progress is not None:
             backend = backend_of(plan, self.backend)

@@ -14,8 +14,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from .fmus import ExperimentFmus
-    from .reproduce import ExperimentRun
+    from ._fmus import ExperimentFmus
+    from ._reproduce import ExperimentRun
 
 __all__ = ["write_report", "render_report"]
 

@@ -6,7 +6,7 @@ variables of the Python FMU of the same role (read from its slave, so the two
 declare the same names, kinds, ranges and start values), the ports, the
 parameters, and the role's numbers and formulas. Numbers are C99 hex-float
 literals (``0x1.8p+1``: exact, no decimal rounding); formulas are stack code
-compiled from their parsed trees (:mod:`lpvest.fmi.native.formulas`). The
+compiled from their parsed trees (:mod:`lpvest.fmi.native`). The
 numbers are the library's own: the vertex or coefficient stacks of the model,
 the Cholesky factor of its noise covariance, a Kalman filter's packed
 coefficients (:attr:`lpvest.estimators.kalman.KalmanModel.packing`), the
@@ -34,7 +34,7 @@ import numpy as np
 from ...core._errors import LpvestError
 from ...core._expressions import Expression
 from ...core._scheduling import FormulaBasis, Monomial
-from .formulas import OPS, CompiledFormula, compile_formula
+from ._formulas import OPS, CompiledFormula, compile_formula
 
 __all__ = ["NativeExportError", "RoleData", "role_data", "model_data_c", "native_unsupported", "ROLE_CODES"]
 
@@ -609,7 +609,7 @@ def model_data_c(
     role : str
         The FMU role.
     table : mapping
-        The slave's :meth:`~lpvest.fmi.slave.LpvestSlave.variable_table`.
+        The slave's :meth:`~lpvest.fmi._slave.LpvestSlave.variable_table`.
     data : RoleData
         :func:`role_data` of its component.
     late_inputs : sequence of str

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from ..core._plotting import save_figure
-from .spec import Axis, SweepSpec
+from ._sweepfile import Axis, SweepSpec
 
 __all__ = ["plot_metrics", "metric_statistics"]
 

@@ -13,7 +13,7 @@ that this module imports nothing heavy and the FMU imports only what it runs:
 
 - ``factory(model, *, design=None, **parameters) -> Sampled | Timed`` (:mod:`lpvest.core`)
   (``design`` is the carried design, or ``None``), in its own module so
-  that an FMU carries only the estimator it runs (:mod:`lpvest.fmi.bundle`);
+  that an FMU carries only the estimator it runs (:mod:`lpvest.fmi`);
 - ``design(model) -> dict | str`` (numpy arrays allowed; a ``str`` is a JSON
   document stored as readable ``resources/design.json``), at build time. The
   model of such an FMU is fixed at the file's parameter values (they are not
@@ -21,7 +21,7 @@ that this module imports nothing heavy and the FMU imports only what it runs:
 
 Adding a filter FMU is one line in :data:`ESTIMATOR_KINDS` below, e.g.::
 
-    EstimatorKind("Kalman", "lpvest.fmi.factories.kalman:build", models=("affine",),
+    EstimatorKind("Kalman", "lpvest.fmi.factories._kalman:build", models=("affine",),
                   parameters=(Parameter("x0", MODEL_X0, "mean of the initial state x_0"),)),
 
 Examples
@@ -40,7 +40,7 @@ from typing import Any
 
 from ..core._errors import ArgumentError, ArgumentTypeError
 from ..core._protocol import MeasurementDelay
-from .spec import MODEL_P0, MODEL_X0, SCHEDULING_CENTRE, Parameter
+from ._parameters import MODEL_P0, MODEL_X0, SCHEDULING_CENTRE, Parameter
 
 __all__ = ["EstimatorKind", "ESTIMATOR_KINDS", "MEASUREMENT_DELAY", "estimator_kinds", "resolve", "build_estimator"]
 
@@ -78,7 +78,7 @@ class EstimatorKind:
     files : tuple of Path
         Extra Python modules (files or packages) the factory lives in, for
         estimators outside lpvest (e.g. a user's own module): carried in the
-        FMU's private package (:mod:`lpvest.fmi.bundle`), their ``lpvest``
+        FMU's private package (:mod:`lpvest.fmi`), their ``lpvest``
         imports bound to the FMU's own copy.
     requirements : tuple of str
         Third-party packages the estimator imports inside functions (its
@@ -232,12 +232,12 @@ def build_estimator(kind: dict[str, Any], model: Any, design: Any, params: dict[
 
 #: The estimator FMUs built for every applicable model: one line per filter.
 ESTIMATOR_KINDS: list[EstimatorKind] = [
-    EstimatorKind("Kalman", "lpvest.fmi.factories.kalman:build", models=("affine",),
+    EstimatorKind("Kalman", "lpvest.fmi.factories._kalman:build", models=("affine",),
                   parameters=(Parameter("x0", MODEL_X0, "mean of the initial state x_0"),
                               Parameter("P0", MODEL_P0, "covariance of the initial state x_0")),
                   description="exact LPV Kalman filter in innovation form (Cox & Toth (4a)-(4e))",
                   late_inputs=("y",)),
-    EstimatorKind("TruncatedKalman", "lpvest.fmi.factories.truncated:build", models=("affine",),
+    EstimatorKind("TruncatedKalman", "lpvest.fmi.factories._truncated:build", models=("affine",),
                   parameters=(Parameter("tau", 10, "memory: the gain uses p_(t-tau)..p_t", minimum=0,
                                         maximum=100_000),
                               Parameter("start", "theorem", "start covariance of the restarted recursion: "
@@ -248,7 +248,7 @@ ESTIMATOR_KINDS: list[EstimatorKind] = [
                   description="truncated-memory LPV Kalman filter (Cox & Toth Theorem 1)", late_inputs=("y",)),
     # no late inputs: the observer's plant (continuous time, y(t) = C(t) x(t)) has no feedthrough, so a
     # Jacobi master delivers y(t_k) and u(t_k) together, in time (docs/fmus.md, "Measurement delay")
-    EstimatorKind("BSplineObserver", "lpvest.fmi.factories.bspline:build", models=("ltv-io",),
+    EstimatorKind("BSplineObserver", "lpvest.fmi.factories._bspline:build", models=("ltv-io",),
                   parameters=(Parameter("dt", 0.001, "sample time = communication step (s)", minimum=1e-12),
                               Parameter("window", 4.0, "window length (s)", minimum=0.0),
                               Parameter("hop", 0.5, "time between refits (s)", minimum=0.0),
@@ -260,12 +260,12 @@ ESTIMATOR_KINDS: list[EstimatorKind] = [
                   requirements=("scipy",), sample_time="dt",
                   description="sliding-window B-spline joint parameter and state observer (Sridhar et al.)",
                   supports="lpvest.estimators.bspline:observer_supports"),
-    EstimatorKind("HinfPD", "lpvest.fmi.factories.hinf:build", models=("polytopic", "affine"),
-                  design="lpvest.fmi.designs:hinf_pd",
+    EstimatorKind("HinfPD", "lpvest.fmi.factories._hinf:build", models=("polytopic", "affine"),
+                  design="lpvest.fmi._designs:hinf_pd",
                   description="gain-scheduled H-infinity filter (Peixoto et al. Theorem 1), best epsilon",
                   late_inputs=("y",)),
-    EstimatorKind("HinfRobust", "lpvest.fmi.factories.hinf:build", models=("polytopic", "affine"),
-                  design="lpvest.fmi.designs:hinf_robust",
+    EstimatorKind("HinfRobust", "lpvest.fmi.factories._hinf:build", models=("polytopic", "affine"),
+                  design="lpvest.fmi._designs:hinf_robust",
                   description="robust H-infinity filter (Peixoto et al. Corollary 1), best epsilon",
                   late_inputs=("y",)),
 ]

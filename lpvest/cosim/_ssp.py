@@ -105,9 +105,9 @@ from typing import Any
 import numpy as np
 
 from ..core._errors import abbreviate, shorten
-from ..fmi.build import write_zip_entry
-from ..fmi.spec import SPEC_FILE
-from .master import Component, Connection, CoSimulation, CoSimulationError, whole_steps
+from ..fmi._build import write_zip_entry
+from ..fmi._parameters import SPEC_FILE
+from ._master import Component, Connection, CoSimulation, CoSimulationError, whole_steps
 
 __all__ = ["write_ssp", "read_ssp", "SspSystem", "simulate_ssp", "IMPORTERS"]
 
@@ -314,7 +314,7 @@ def write_ssp(
 
 
 #: The filter parameter :func:`write_ssp` binds for a Jacobi importer
-#: (:data:`lpvest.fmi.registry.MEASUREMENT_DELAY`).
+#: (:data:`lpvest.fmi._registry.MEASUREMENT_DELAY`).
 DELAY = "measurement_delay"
 
 

@@ -35,7 +35,7 @@ def coefficient(name: str, spec: str) -> UnknownConstant | UnknownSpline | None:
 class SampledObserver(TimedComponent):
     """The B-spline observer inside an FMU: one :meth:`step` is one sample, of
     the observer's sample time ``dt`` (the FMU runs a communication step of
-    ``m`` whole samples as ``m`` steps with the inputs held, :mod:`lpvest.fmi.slave`).
+    ``m`` whole samples as ``m`` steps with the inputs held, :mod:`lpvest.fmi`).
 
     Time comes from the communication points: the first sample is at the
     experiment's start time ``t0`` (:meth:`reset`), and every step states the

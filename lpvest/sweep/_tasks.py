@@ -9,7 +9,7 @@ way on a Dask worker and in this process: an exception becomes a failed
 
 This module needs only numpy: the experiments import it whether or not the
 ``sweep`` extra (Dask, pyarrow, zarr) is installed, and run their tasks through
-:func:`map_tasks` serially or on an :class:`~lpvest.sweep.engine.Engine`.
+:func:`map_tasks` serially or on an :class:`~lpvest.sweep.Engine`.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ import numpy as np
 from ..core._errors import LpvestError
 
 if TYPE_CHECKING:
-    from .engine import Engine
+    from ._engine import Engine
 
 __all__ = ["Task", "TaskResult", "Outcome", "SweepError", "execute", "map_tasks", "one_blas_thread", "task_seeds",
            "digest"]
@@ -240,7 +240,7 @@ def map_tasks(
     desc: str = "tasks",
 ) -> list[TaskResult]:
     """Run ``fn`` over ``points`` and return the results in order, serially in
-    this process (``engine=None``) or on a Dask :class:`~lpvest.sweep.engine.Engine`.
+    this process (``engine=None``) or on a Dask :class:`~lpvest.sweep.Engine`.
 
     The experiments run their Monte Carlo members through this function: the
     same task function gives the same numbers either way.

@@ -55,14 +55,14 @@ import numpy as np
 from ..core._plotting import save_figure
 from ..core._protocol import run_streaming
 from ..estimators.bspline import BSplineObserver, KernelModel, UnknownConstant, UnknownSpline, fit_kernel_model
-from ..sweep.tasks import Task, TaskResult, map_tasks
+from ..sweep._tasks import Task, TaskResult, map_tasks
 from ..systems import LTVInputOutput
 from ..systems._modelfile import load_system
 from . import Experiment, ExperimentResult, show_progress
-from .fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
+from ._fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
 
 if TYPE_CHECKING:
-    from ..sweep.engine import Engine
+    from ..sweep._engine import Engine
 
 __all__ = [
     "EXPERIMENTS",

@@ -45,14 +45,14 @@ from ..core._plotting import save_figure
 from ..core._rng import Stream
 from ..estimators._truncated import assumption_bounds
 from ..estimators.kalman import KalmanModel, kalman_filter
-from ..sweep.tasks import Task, TaskResult, map_tasks
+from ..sweep._tasks import Task, TaskResult, map_tasks
 from ..systems import AffineLPV, InnovationLPV, LPVInputOutput
 from ..systems._modelfile import load_system
 from . import Experiment, ExperimentResult, show_progress
-from .fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
+from ._fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
 
 if TYPE_CHECKING:
-    from ..sweep.engine import Engine
+    from ..sweep._engine import Engine
 
 __all__ = [
     "EXPERIMENTS",

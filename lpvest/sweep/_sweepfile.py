@@ -26,7 +26,7 @@ line (``sweep.toml: seeds.parameters[1]: ...``). The format, by example
     "plant.x0" = [[0.0, 0.0], [1.0, -1.0]]
     "kalman.x0" = [[0.0, 0.0], [1.0, -1.0]]
 
-    [metrics]                        # summary numbers per task (lpvest.sweep.metrics)
+    [metrics]                        # summary numbers per task (lpvest.sweep)
     rms_x = { kind = "rms_error", estimate = "kalman.xhat", truth = "plant.x", start = 20 }
     trace_P = { kind = "final_trace", of = "kalman.P" }
 
@@ -34,12 +34,12 @@ line (``sweep.toml: seeds.parameters[1]: ...``). The format, by example
 Tasks are numbered with the parameter points outer (grid axes in the order
 written, the last fastest, then the zip groups) and the seeds inner. Task
 ``i`` with seed key ``s`` gives its seed parameters
-:func:`~lpvest.sweep.tasks.task_seeds` ``(root, s)`` (``common = true``) or
+:func:`~lpvest.sweep.task_seeds` ``(root, s)`` (``common = true``) or
 ``(root, i)`` (``common = false``): ``seeds = 200`` and ``seeds = [17]`` give
 seed key 17 the same noise.
 
 For an experiment, the axes, ``options`` and the metrics are the
-experiment's (:mod:`lpvest.sweep.studies`); ``metrics`` and ``keep`` are then
+experiment's (:mod:`lpvest.sweep`); ``metrics`` and ``keep`` are then
 lists of the names it offers.
 """
 
@@ -54,11 +54,11 @@ from typing import TYPE_CHECKING, Any
 
 from ..core._errors import ModelFileError
 from ..core._toml import describe_value
-from .metrics import Metric, parse as parse_metric
-from .tasks import Task, task_seeds
+from ._metrics import Metric, parse as parse_metric
+from ._tasks import Task, task_seeds
 
 if TYPE_CHECKING:
-    from ..cosim.files import CoSimFile
+    from ..cosim._cosimfile import CoSimFile
 
 __all__ = ["Axis", "Seeds", "SweepSpec", "with_defaults", "load_sweep", "sweep_spec"]
 
@@ -206,7 +206,7 @@ class SweepSpec:
         -------
         list of Task
             ``Task(index, point, seed key, seed values)``; the seed values are
-            :func:`~lpvest.sweep.tasks.task_seeds` ``(root, key)`` (``common``)
+            :func:`~lpvest.sweep.task_seeds` ``(root, key)`` (``common``)
             or ``(root, index)``, empty without seed parameters.
         """
         points = self.points()
@@ -437,7 +437,7 @@ def sweep_spec(
     >>> spec.n_tasks                                                 # doctest: +SKIP
     4
     """
-    from ..cosim.files import load_cosim
+    from ..cosim._cosimfile import load_cosim
 
     r = _Reader(origin)
     base = Path(base)
@@ -472,7 +472,7 @@ def sweep_spec(
                 raise r.error("steps", f"expected a positive integer, found {describe_value(steps)}")
             cosim = replace(cosim, n_steps=steps)
     else:
-        from .studies import study
+        from ._studies import study
 
         name = data["experiment"]
         if not isinstance(name, str):
@@ -535,7 +535,7 @@ def sweep_spec(
         if not metrics and not keep:
             raise r.error("metrics", "missing: name at least one metric or a kept signal (keep)")
     else:
-        from .studies import study
+        from ._studies import study
 
         st = study(experiment)  # type: ignore[arg-type]
         if "metrics" in data:
@@ -591,7 +591,7 @@ def with_defaults(spec: SweepSpec) -> SweepSpec:
     """
     if spec.experiment is None:
         return spec
-    from .studies import study
+    from ._studies import study
 
     st = study(spec.experiment)
     given = {a.name for a in spec.axes}

@@ -104,7 +104,7 @@ class Bundle:
     roots: tuple[SourceRoot, ...] = ()
 
     def rename(self, dotted: str) -> str:
-        """The private name of an original dotted module name (``lpvest.fmi.slave``
+        """The private name of an original dotted module name (``lpvest.fmi``
         -> ``lpvest_<digest>.fmi.slave``)."""
         renamed = _rename(dotted, self.roots, self.package)
         if renamed is None:
@@ -341,7 +341,7 @@ _ENTRY = '''"""Entry module of the lpvest FMU {identifier} (written by lpvest's 
 
 pythonfmu imports this module by the name in slavemodule.txt. It loads the
 FMU's private copy of lpvest, the package {package} next to this file, into
-memory under that build-unique name (see lpvest.fmi.bundle), and exposes the
+memory under that build-unique name (see lpvest.fmi), and exposes the
 slave class. Nothing else in the process is changed: no other module is
 replaced, and resources/ is taken back off sys.path.
 """
@@ -436,8 +436,8 @@ def _digest(modules: Mapping[str, _Module], roots: Sequence[SourceRoot]) -> str:
 def _init_text(module: _Module, root: SourceRoot, version: str) -> str:
     if module.name == root.name and root.target == "":
         return (f'"""lpvest {version}, as carried by an lpvest FMU: only the modules its component imports;\n'
-                f'package __init__ files are empty (see lpvest.fmi.bundle)."""\n')
-    return f'"""{module.name}, as carried by an lpvest FMU (empty: see lpvest.fmi.bundle)."""\n'
+                f'package __init__ files are empty (see lpvest.fmi)."""\n')
+    return f'"""{module.name}, as carried by an lpvest FMU (empty: see lpvest.fmi)."""\n'
 
 
 def make_bundle(

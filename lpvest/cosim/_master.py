@@ -76,7 +76,7 @@ class CoSimulationError(LpvestError, RuntimeError):
     ----------
     where : str
         What in the set-up the error is about, in the terms of a co-simulation
-        file (:mod:`lpvest.cosim.files`): ``"connections[2]"`` (1-based),
+        file (:mod:`lpvest.cosim`): ``"connections[2]"`` (1-based),
         ``"components.plant"``, ``"components.plant.parameters.x0"``,
         ``"record[1]"``, ``"step_size"``; ``""`` when it is about no one field.
     """

@@ -1,7 +1,7 @@
 """Regression references: small stored trajectories of each example's co-simulation.
 
 Each :class:`Reference` is a short version of an experiment's co-simulation
-(the same :class:`~lpvest.experiments.fmus.CoSimSpec` builder, fewer steps or
+(the same :class:`~lpvest.experiments.CoSimSpec` builder, fewer steps or
 filters) and a few of its recorded outputs, stored as CSV in
 ``tests/data/reference/<name>.csv`` (a few hundred rows). The regression test
 (``tests/test_regression.py``) builds the FMUs, co-simulates and compares every
@@ -14,7 +14,7 @@ also stores the SHA-256 of the design its filter FMU carries.
 
 Regenerate the references (after a deliberate change) with::
 
-    lpvest regress --update                     # or: python -m lpvest.experiments.regression --update
+    lpvest regress --update                     # or: python -m lpvest.experiments --update
 
 and compare without writing with ``lpvest regress``.
 
@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core._errors import LpvestError, abbreviate
-from .fmus import CoSimSpec, ExperimentFmus, as_experiment_fmus
+from ._fmus import CoSimSpec, ExperimentFmus, as_experiment_fmus
 
 __all__ = [
     "Reference",
@@ -94,37 +94,37 @@ class Reference:
 
 
 def _example1() -> CoSimSpec:
-    from .cox_toth import example1_cosim
+    from ._cox_toth import example1_cosim
 
     return example1_cosim(200)
 
 
 def _truncation() -> CoSimSpec:
-    from .cox_toth import truncation_cosim
+    from ._cox_toth import truncation_cosim
 
     return truncation_cosim(200, taus=(2,))
 
 
 def _table1() -> CoSimSpec:
-    from .peixoto import hinf_cosim
+    from ._peixoto import hinf_cosim
 
     return hinf_cosim([("pd", "PeixotoEx1HinfPD"), ("robust", "PeixotoEx1HinfRobust")])
 
 
 def _fig1() -> CoSimSpec:
-    from .peixoto import hinf_cosim
+    from ._peixoto import hinf_cosim
 
     return hinf_cosim([("theorem1", "PeixotoEx1HinfPDEps150"), ("corollary1", "PeixotoEx1HinfRobustEps150")])
 
 
 def _example2() -> CoSimSpec:
-    from .peixoto import example2_cosim
+    from ._peixoto import example2_cosim
 
     return example2_cosim((1.0, 21.0))
 
 
 def _sridhar() -> CoSimSpec:
-    from .sridhar import sridhar_cosim
+    from ._sridhar import sridhar_cosim
 
     # 6 basis functions per 0.4 s window: a well-conditioned fit (a 1e-13
     # relative change of y moves a0 by ~1e-7 relative, so rounding moves it by
@@ -321,8 +321,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m lpvest.experiments.regression [--update] [--dir DIR] [--fmus DIR] [NAME...]``."""
-    parser = argparse.ArgumentParser(prog="python -m lpvest.experiments.regression",
+    """``python -m lpvest.experiments [--update] [--dir DIR] [--fmus DIR] [NAME...]``."""
+    parser = argparse.ArgumentParser(prog="python -m lpvest.experiments",
                                      description="Compare (or --update) the stored regression references.")
     add_arguments(parser)
     args = parser.parse_args(argv)

@@ -33,10 +33,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..core._plotting import save_figure
-from ..sweep.tasks import Task, TaskResult, map_tasks
+from ..sweep._tasks import Task, TaskResult, map_tasks
 from ..systems import PolytopicLPV
 from . import Experiment, ExperimentResult, Split, show_progress
-from .fmus import (
+from ._fmus import (
     Agreement,
     CoSimSpec,
     ExperimentFmus,
@@ -49,7 +49,7 @@ from .fmus import (
 )
 
 if TYPE_CHECKING:
-    from ..sweep.engine import Engine
+    from ..sweep._engine import Engine
 
 __all__ = [
     "EXPERIMENTS",
@@ -373,7 +373,7 @@ class Fig1Signals:
 def fig1_signals(steps: int = 100, *, plant: Any | None = None) -> Fig1Signals:
     """``theta_k = sin(0.25 k)``, ``w_k = sin(0.5 k) exp(-0.1 k)`` for ``k >= 10``."""
     from ..systems._modelfile import load_system
-    from .simulate import peixoto_disturbance
+    from ._simulate import peixoto_disturbance
 
     plant = plant if plant is not None else load_system("peixoto-ex1").model(None, PolytopicLPV)
     k = np.arange(steps, dtype=float)
@@ -392,7 +392,7 @@ def run_fig1(
 
     The Scheduler, Source and Plant FMUs drive ``PeixotoEx1HinfPDEps150`` and
     ``PeixotoEx1HinfRobustEps150``, filter FMUs built with the paper's
-    ``epsilon = 150`` designs (:data:`~lpvest.experiments.fmus.PAPER_KINDS`;
+    ``epsilon = 150`` designs (:data:`~lpvest.experiments._fmus.PAPER_KINDS`;
     the shipped HinfPD/HinfRobust carry the best-epsilon designs instead). The
     figures show the FMU results. The library designs at ``epsilon = 150``
     here and runs the streaming :class:`~lpvest.estimators.HinfFilter`

@@ -12,11 +12,11 @@ For a system file the builder plans:
   polytopic model, ``alpha``);
 - ``Source``: for LPV models with an input ``u`` or a disturbance ``w``;
 - one FMU per registered estimator kind that applies to the plant's model
-  (:mod:`lpvest.fmi.registry`).
+  (:mod:`lpvest.fmi`).
 
 How an FMU is made (pythonfmu 0.7 conventions, done here so that the model
 description can be completed): a staging folder becomes ``resources/``: the
-FMU's private package (:mod:`lpvest.fmi.bundle`: the modules of lpvest its
+FMU's private package (:mod:`lpvest.fmi`: the modules of lpvest its
 role script and factory import, under a build-unique name, with pythonfmu's
 Python files, and the entry module named in ``slavemodule.txt``), the model
 file, the spec ``lpvest_fmu.json``, an optional design (a given design file
@@ -74,10 +74,10 @@ from xml.etree.ElementTree import Element, SubElement, tostring
 
 from .._version import __version__
 from ..core._errors import ArgumentError, LpvestError
-from .bundle import Bundle, SourceRoot, make_bundle
-from .naming import fmu_name
-from .registry import EstimatorKind, estimator_kinds, resolve
-from .spec import SPEC_FILE, SPEC_FORMAT
+from ._bundle import Bundle, SourceRoot, make_bundle
+from ._naming import fmu_name
+from ._parameters import SPEC_FILE, SPEC_FORMAT
+from ._registry import EstimatorKind, estimator_kinds, resolve
 
 __all__ = [
     "known_roles",
@@ -201,8 +201,8 @@ def _estimator_step(kind: EstimatorKind, default: float) -> float:
 
 def known_roles() -> list[str]:
     """Every FMU role a build can make: the plant, its signal sources and each
-    estimator kind (:func:`lpvest.fmi.registry.estimator_kinds`)."""
-    from .registry import estimator_kinds
+    estimator kind (:func:`lpvest.fmi._build.estimator_kinds`)."""
+    from ._registry import estimator_kinds
 
     return ["Plant", "Scheduler", "Source", *(k.role for k in estimator_kinds())]
 
@@ -487,7 +487,7 @@ def design_text(plan: FmuPlan, progress: Callable[[str], None] | None) -> tuple[
     earlier build, or one made now."""
     from ..design._result import without_timings
     from ..systems._modelfile import load_system
-    from .state import encode_state
+    from ._state import encode_state
 
     assert plan.estimator is not None and plan.estimator.design is not None
     model = load_system(plan.system_path).model(plan.model_key)
@@ -768,7 +768,7 @@ def write_zip_entry(z: zipfile.ZipFile, name: str, data: bytes, executable: bool
     depends on nothing but the members and their order: a fixed time stamp
     (1980-01-01), Unix permissions 0644 (0755 when ``executable``), deflate at
     level 9. The FMU builder and the SSP writer
-    (:func:`lpvest.cosim.ssp.write_ssp`) write every member so.
+    (:func:`lpvest.cosim.write_ssp`) write every member so.
 
     Parameters
     ----------
@@ -792,11 +792,11 @@ def write_zip_entry(z: zipfile.ZipFile, name: str, data: bytes, executable: bool
 #: estimator registry names factories, so that this module imports neither backend's
 #: machinery): ``pythonfmu`` (the default) and ``native`` (C, :mod:`lpvest.fmi.native`).
 BACKENDS: dict[str, str] = {
-    "pythonfmu": "lpvest.fmi.build:build_fmu",
-    "native": "lpvest.fmi.native.build:build_native_fmu",
+    "pythonfmu": "lpvest.fmi._build:build_fmu",
+    "native": "lpvest.fmi.native._build:build_native_fmu",
 }
 #: ``role, script -> reason or None``: which roles the native backend builds
-_NATIVE_SUPPORT = "lpvest.fmi.native.export:native_unsupported"
+_NATIVE_SUPPORT = "lpvest.fmi.native._export:native_unsupported"
 
 
 def check_backend(backend: str) -> str:

@@ -13,7 +13,7 @@ How a sweep runs on it (:meth:`Engine.map`):
   model) is submitted once, as the argument of one task; Dask copies its result
   to each worker once, and recomputes it if every copy is lost.
 - One future per task. A task's exception is caught on the worker
-  (:func:`~lpvest.sweep.tasks.execute`) and comes back as a failed outcome; a
+  (:func:`~lpvest.sweep.execute`) and comes back as a failed outcome; a
   worker that dies takes no result with it: the scheduler runs its tasks
   again elsewhere (up to ``distributed.scheduler.allowed-failures`` deaths
   per task, then the task fails with ``KilledWorker``). Each task's outcome is
@@ -43,7 +43,7 @@ import uuid
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from .tasks import Outcome, SweepError, Task, TaskResult, execute
+from ._tasks import Outcome, SweepError, Task, TaskResult, execute
 
 __all__ = ["Engine", "LOCAL_WORKER_CONFIG", "require_sweep_extra"]
 
@@ -105,7 +105,7 @@ class Engine:
         ``os.cpu_count()``); not used with ``scheduler``.
     idle_timeout : float, optional
         Seconds to wait for the next task to finish before giving up
-        (:class:`~lpvest.sweep.tasks.SweepError`); default: no limit.
+        (:class:`~lpvest.sweep.SweepError`); default: no limit.
     start_timeout : float
         Seconds to wait for the cluster to start, or to connect to it.
     quiet : bool

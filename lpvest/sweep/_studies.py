@@ -1,6 +1,6 @@
 """What a sweep runs: a co-simulation file, or a registered experiment.
 
-:func:`prepare` turns a :class:`~lpvest.sweep.spec.SweepSpec` into a
+:func:`prepare` turns a :class:`~lpvest.sweep.SweepSpec` into a
 :class:`Prepared` sweep: the task function, the data every task reads, the
 metric names, the shapes of the kept signals, and the identity of what the
 results depend on (its SHA-256 names the sweep in its output folder).
@@ -19,7 +19,7 @@ after a failure it starts from fresh instances.
 
 **Experiments** (:func:`experiment_studies`): the Monte Carlo parts of the
 paper reproductions, the same task functions the experiments run
-(:func:`~lpvest.sweep.tasks.map_tasks`).
+(:func:`~lpvest.sweep.map_tasks`).
 
 =========================  ==========================================  ======================================
 experiment                 axes (defaults)                             per task
@@ -47,11 +47,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..core._errors import ModelFileError
-from .metrics import Metric, check as check_metric, compute as compute_metric, expand, select
-from .tasks import Task, TaskResult, digest
+from ._metrics import Metric, check as check_metric, compute as compute_metric, expand, select
+from ._tasks import Task, TaskResult, digest
 
 if TYPE_CHECKING:
-    from .spec import SweepSpec
+    from ._sweepfile import SweepSpec
 
 __all__ = ["Prepared", "ExperimentStudy", "experiment_studies", "study", "prepare",
            "CosimPayload", "run_cosim_task", "release_simulation"]
@@ -299,7 +299,7 @@ def _select_metrics(spec: SweepSpec, all_metrics: tuple[str, ...]) -> tuple[str,
 
 def _cox_toth_prepare(spec: SweepSpec, fmus: Any) -> Prepared:
     from .._version import __version__
-    from ..experiments.cox_toth import prediction_error_setup, prediction_error_task
+    from ..experiments._cox_toth import prediction_error_setup, prediction_error_task
 
     opts = {**STUDIES_OPTIONS["cox-toth-truncation"], **spec.options}
     for key, low in (("steps", 2), ("runs", 1), ("burn_in", 0), ("seed", 0)):
@@ -324,8 +324,8 @@ def _cox_toth_prepare(spec: SweepSpec, fmus: Any) -> Prepared:
 
 def _sridhar_prepare(spec: SweepSpec, fmus: Any) -> Prepared:
     from .._version import __version__
-    from ..experiments.fmus import as_experiment_fmus
-    from ..experiments.sridhar import NOISY_METRICS, noisy_seed_task, noisy_setup, sridhar_data
+    from ..experiments._fmus import as_experiment_fmus
+    from ..experiments._sridhar import NOISY_METRICS, noisy_seed_task, noisy_setup, sridhar_data
 
     setup = noisy_setup(sridhar_data(as_experiment_fmus(fmus), progress=False))
     data_sha = hashlib.sha256(b"".join(np.ascontiguousarray(a).tobytes() for a in
@@ -339,7 +339,7 @@ def _sridhar_prepare(spec: SweepSpec, fmus: Any) -> Prepared:
 
 def _peixoto_prepare(spec: SweepSpec, fmus: Any) -> Prepared:
     from .._version import __version__
-    from ..experiments.peixoto import example2_task
+    from ..experiments._peixoto import example2_task
 
     return Prepared(_experiment_task(example2_task, spec), None, _select_metrics(spec, _PEIXOTO_METRICS), {},
                     {"experiment": "peixoto-example2", "lpvest": __version__}, None,
@@ -372,13 +372,13 @@ STUDIES_OPTIONS: dict[str, dict[str, Any]] = {
 
 
 def _prediction_filters() -> tuple[str, ...]:
-    from ..experiments.cox_toth import PREDICTION_FILTERS
+    from ..experiments._cox_toth import PREDICTION_FILTERS
 
     return PREDICTION_FILTERS
 
 
 def _noisy_metrics() -> tuple[str, ...]:
-    from ..experiments.sridhar import NOISY_METRICS
+    from ..experiments._sridhar import NOISY_METRICS
 
     return NOISY_METRICS
 
@@ -411,7 +411,7 @@ def prepare(spec: SweepSpec, *, fmus: Any = None, ship_fmus: bool = True) -> Pre
     """The :class:`Prepared` sweep of ``spec`` (FMUs read, set-up checked).
 
     ``fmus``: the experiments' FMU cache (an
-    :class:`~lpvest.experiments.fmus.ExperimentFmus` or its folder) for
+    :class:`~lpvest.experiments.ExperimentFmus` or its folder) for
     experiments that run FMUs.
     """
     if spec.cosim is not None:

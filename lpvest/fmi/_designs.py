@@ -1,4 +1,4 @@
-"""Build-time designs of the H-infinity filter FMUs (named in :mod:`lpvest.fmi.registry`).
+"""Build-time designs of the H-infinity filter FMUs (named in :mod:`lpvest.fmi`).
 
 Each takes the model and returns the design as JSON text, which the FMU carries
 as ``resources/design.json``. They run only when no design file is given
