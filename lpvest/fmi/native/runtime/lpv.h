@@ -3,7 +3,7 @@
  * and the interface between the FMI layer (lpv_fmi2.c) and the roles.
  *
  * One runtime serves every FMU. What differs between FMUs is data: the
- * exporter (lpvest/fmi/native/export.py) writes one model_data.c per FMU that
+ * exporter (lpvest/fmi/native/_export.py) writes one model_data.c per FMU that
  * defines `const lpv_model lpv_model_data`: the FMI variables (the same as the
  * Python FMU of the role: names, kinds, ranges, start values), the ports, the
  * parameters, and the role's numbers (hex-float constants) and formulas

@@ -8,7 +8,7 @@
  *
  * Build without floating-point contraction (-ffp-contract=off) and without
  * -ffast-math: the random normals (lpv_rng.c) must be the same bits as the
- * library's (lpvest/rng.py), and several kernels sum in the library's order.
+ * library's (lpvest/core/_rng.py), and several kernels sum in the library's order.
  */
 #ifndef LPV_CORE_H
 #define LPV_CORE_H
@@ -82,7 +82,7 @@ LPV_API double lpv_log(double x);
 
 /* ------------------------------------------------ formula virtual machine */
 
-/* A formula of lpvest's safe language (lpvest/expressions.py), compiled by the
+/* A formula of lpvest's safe language (lpvest/core/_expressions.py), compiled by the
  * exporter from the parsed syntax tree (never from text) into code words:
  *   LPV_OP_CONST k   push constants[k]
  *   LPV_OP_VAR k     push variables[k] (a scheduling component or a parameter)

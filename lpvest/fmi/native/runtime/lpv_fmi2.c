@@ -1,7 +1,7 @@
 /*
  * lpvest native runtime: the FMI 2.0 co-simulation layer.
  *
- * What lpvest/fmi/slave.py (the Python FMU's base, behind lpvest's status bridge)
+ * What lpvest/fmi/_slave.py (the Python FMU's base, behind lpvest's status bridge)
  * does, for the roles of this runtime: the same variables (lpv_model_data), the
  * same step semantics, the same refusals with the same messages and statuses,
  * FMU states. In brief (docs/fmus.md states it for both backends):

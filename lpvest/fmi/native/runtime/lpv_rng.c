@@ -1,5 +1,5 @@
 /*
- * lpvest native runtime: the random generator of lpvest/rng.py, bit for bit.
+ * lpvest native runtime: the random generator of lpvest/core/_rng.py, bit for bit.
  *
  * Raw words: PCG64 (O'Neill's XSL-RR output of a 128-bit LCG, the bit generator
  * numpy.random.PCG64 implements), seeded as numpy seeds it: SeedSequence's hash of

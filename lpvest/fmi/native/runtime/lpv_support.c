@@ -3,7 +3,7 @@
  * the parameter lookups the roles use.
  *
  * The messages of a native FMU are those of the Python FMU of the same role
- * (lpvest/fmi/slave.py and the components it runs), numbers included: Python's
+ * (lpvest/fmi/_slave.py and the components it runs), numbers included: Python's
  * repr of a float (the shortest text that reads back exactly), format(v, "g").
  * The C library's printf gives the digits; the layout is built here, so a host's
  * locale (a decimal comma) or its C library's exponent width changes nothing.

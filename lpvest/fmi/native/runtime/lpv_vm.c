@@ -1,7 +1,7 @@
 /*
  * lpvest native runtime: the stack machine that evaluates model formulas.
  *
- * The exporter (lpvest/fmi/native/export.py) compiles a formula's validated
+ * The exporter (lpvest/fmi/native/_export.py) compiles a formula's validated
  * syntax tree into code words (lpv_core.h) with every name resolved to a variable
  * index and checked, and computes the deepest stack it needs (at most
  * LPV_VM_STACK). No text is ever read here. The power is the C library's pow, as
