@@ -13,6 +13,7 @@ import numpy as np
 from ...core._errors import ArgumentError, ArgumentTypeError, NumericalError, abbreviate
 from ...core._validation import as_rng, as_signal
 from ...systems._affine import AffineLPV, NoiseCovariance
+from ...systems._innovation import innovation_step
 from ._model import KalmanMatrices, KalmanModel, StepMatrices
 from ._recursion import initial_moments, riccati_sweep
 from ._scan import ScanAccuracyWarning, decorrelate_stack, scan_amplification, scan_error_bound, scan_filter
@@ -402,8 +403,8 @@ def simulate_innovation_form(
     Y = np.empty((T, m))
     for t in range(T):
         X[t] = x
-        Y[t] = mats.C[t] @ x + mats.D[t] @ u[t] + xi[t]
-        x = mats.A[t] @ x + mats.B[t] @ u[t] + K[t] @ xi[t]
+        Y[t], x = innovation_step({"A": mats.A[t], "B": mats.B[t], "C": mats.C[t], "D": mats.D[t]},
+                                  K[t], x, u[t], xi[t])
     return InnovationFormData(X, Y, xi, K, Om)
 
 
