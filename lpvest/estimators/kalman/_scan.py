@@ -280,11 +280,14 @@ def decorrelate_stack(
     """The decorrelated model (module notes) along a trajectory, or the first
     ``t`` at which ``H R H^T`` is not (numerically) positive definite.
 
+    ``Abar``, ``G Qbar G^T`` and ``J`` are the truncated filter's (5c), (5e)
+    (:func:`~lpvest.estimators.kalman._decorrelation.decorrelate_matrices`,
+    factored entry by entry over the stack); this adds the known input ``c``.
     All arguments are stacked over time (leading axis ``T``), in the layout of
     :class:`~lpvest.estimators.kalman.KalmanMatrices`; ``u`` (T, n_u), ``y``
     (T, n_y); ``AT``, optional, is ``A^T`` stored contiguously. With
     ``S = 0`` (``G S H^T = 0`` at every sample) ``J = 0`` and nothing is
-    computed: ``Abar = A``, ``G Qbar G^T = G Q G^T``.
+    computed: ``Abar = A``, ``G Qbar G^T = G Q G^T`` (symmetrised).
 
     Parameters
     ----------
@@ -301,7 +304,8 @@ def decorrelate_stack(
     y : ndarray, shape (T, n_y)
         Measurements.
     AT : ndarray, shape (T, n_x, n_x), optional
-        ``A^T`` stored contiguously (default: computed from ``A``).
+        ``A^T`` stored contiguously, returned as ``Abar^T`` when ``S = 0``
+        (default: computed from ``A``).
 
     Returns
     -------

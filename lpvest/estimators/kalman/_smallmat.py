@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from ...core._errors import NumericalError
+from ...core._errors import DimensionError, NumericalError
 
 __all__ = ["FactorError", "SMALL_NY", "SMALL_STACK", "chol_inverse", "cholesky", "is_small", "lsolve", "usolve"]
 
@@ -261,6 +261,8 @@ def chol_inverse(M: np.ndarray) -> tuple[np.ndarray, float | np.ndarray]:
     ------
     FactorError
         A matrix is not positive definite or not finite.
+    DimensionError
+        ``M`` is not small (use :func:`cholesky` and the solves).
 
     Examples
     --------
@@ -270,7 +272,8 @@ def chol_inverse(M: np.ndarray) -> tuple[np.ndarray, float | np.ndarray]:
            [-0.25,  0.5 ]]), 2.772589)
     """
     if not is_small(M):
-        raise ValueError(f"chol_inverse takes small matrices only; found size {M.shape[-1]}")
+        raise DimensionError(f"chol_inverse takes matrices of size <= {SMALL_NY if M.ndim == 2 else SMALL_STACK} "
+                             f"(one / a stack); found shape {M.shape}")
     m = M.shape[-1]
     L, pivots = _small_factor(M)
     cols = [_forward(L, [1.0 if i == c else 0.0 for i in range(m)], m) for c in range(m)]
