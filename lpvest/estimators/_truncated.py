@@ -68,6 +68,7 @@ from ..systems._affine import AffineLPV, NoiseCovariance
 from .kalman._decorrelation import decorrelate
 from .kalman._model import KalmanMatrices, KalmanModel, StepMatrices
 from .kalman._recursion import KalmanState, KalmanStep, covariance_step, initial_moments, kalman_step
+from .kalman._smallmat import cholesky, lsolve
 from .kalman._streaming import InputReader, input_ports
 
 __all__ = [
@@ -175,8 +176,8 @@ def assumption_bounds(
     m = km.matrices_batch(pts)
     d = decorrelate(m)
     a = np.linalg.eigvalsh(d.GQbarG)
-    L = np.linalg.cholesky(m.HRH)
-    LiC = np.linalg.solve(L, m.C)  # C^T (HRH)^-1 C = (L^-1 C)^T (L^-1 C)
+    L = cholesky(m.HRH, lapack=True)  # positive definite: decorrelate has factored it
+    LiC = lsolve(L, m.C, lapack=True)  # C^T (HRH)^-1 C = (L^-1 C)^T (L^-1 C)
     b = np.linalg.eigvalsh(mT(LiC) @ LiC)
     dl = np.linalg.eigvalsh(mT(d.Abar) @ d.Abar)
     return AssumptionBounds(
