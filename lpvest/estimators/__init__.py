@@ -30,17 +30,16 @@ from ._hinf import (
 )
 from ._truncated import (
     AssumptionBounds as AssumptionBounds,
-    Decorrelated as Decorrelated,
     SteadyState as SteadyState,
     TruncatedKalmanFilter as TruncatedKalmanFilter,
     assumption_bounds as assumption_bounds,
-    decorrelate as decorrelate,
     restart_covariance as restart_covariance,
     start_covariance as start_covariance,
     steady_state as steady_state,
     theorem_start_covariance as theorem_start_covariance,
     truncated_prior as truncated_prior,
 )
+from .kalman._decorrelation import Decorrelated as Decorrelated, decorrelate as decorrelate
 
 __all__ = [
     "HinfFilter",

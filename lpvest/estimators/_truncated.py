@@ -15,11 +15,11 @@ Decorrelation, general form
 ---------------------------
 (5a)-(5e) write ``G w_t`` as its minimum-variance estimate from the
 measurement noise plus an uncorrelated remainder. The paper's ``H^-1``
-presumes a square invertible ``H``. In general the noise in ``y_t`` is
-``e_t = H v_t`` with covariance ``H R H^T``, and
+presumes a square invertible ``H``; :func:`decorrelate` (written once, in
+``kalman/_decorrelation.py``, and shared with the parallel scan) uses the
+general form
 
-    E[G w_t | H v_t] = J_t H v_t,   J_t = G S H^T (H R H^T)^-1,
-    Abar_t = A - J_t C,             (5c)
+    J_t = G S H^T (H R H^T)^-1,   Abar_t = A - J_t C,   (5c)
     G Qbar G^T := G (Q - S H^T (H R H^T)^-1 H S^T) G^T = G Q G^T - J_t H S^T G^T,   (5e)
 
 needing only ``H R H^T`` invertible (``H`` of full row rank; (5g) needs it
@@ -65,21 +65,13 @@ from ..core._linalg import mT
 from ..core._protocol import Component, Port
 from ..core._validation import as_matrix, as_signal, as_vector, check_positive_definite
 from ..systems._affine import AffineLPV, NoiseCovariance
+from .kalman._decorrelation import decorrelate
 from .kalman._model import KalmanMatrices, KalmanModel, StepMatrices
-from .kalman._recursion import (
-    SMALL_NY,
-    KalmanState,
-    KalmanStep,
-    covariance_step,
-    initial_moments,
-    kalman_step,
-    small_chol_inverse,
-)
+from .kalman._recursion import KalmanState, KalmanStep, covariance_step, initial_moments, kalman_step
+from .kalman._smallmat import cholesky, lsolve
 from .kalman._streaming import InputReader, input_ports
 
 __all__ = [
-    "Decorrelated",
-    "decorrelate",
     "AssumptionBounds",
     "assumption_bounds",
     "theorem_start_covariance",
@@ -90,77 +82,6 @@ __all__ = [
     "truncated_prior",
     "TruncatedKalmanFilter",
 ]
-
-
-class Decorrelated(NamedTuple):
-    """The decorrelated form (5c), (5e) at one sample or stacked (general ``H``).
-
-    Stacked matrices give every field a leading axis ``T``.
-
-    Parameters
-    ----------
-    Abar : ndarray, shape (n_x, n_x)
-        ``A - J C``, (5c).
-    GQbarG : ndarray, shape (n_x, n_x)
-        ``G Qbar G^T``, (5e), symmetrised.
-    J : ndarray, shape (n_x, n_y)
-        ``G S H^T (H R H^T)^-1``.
-    """
-
-    Abar: np.ndarray
-    GQbarG: np.ndarray
-    J: np.ndarray
-
-
-def decorrelate(m: KalmanMatrices, *, where: str = "") -> Decorrelated:
-    """``Abar``, ``G Qbar G^T`` and ``J`` of (5c), (5e) in the general form
-    (module notes); works on one sample or a stack.
-
-    Parameters
-    ----------
-    m : KalmanMatrices
-        The matrices at one ``p`` or stacked along time.
-    where : str, default ""
-        Appended to the error message (e.g. ``" at t=5"``).
-
-    Returns
-    -------
-    Decorrelated
-        ``Abar``, ``G Qbar G^T`` and ``J``, stacked like ``m``.
-
-    Raises
-    ------
-    NotPositiveDefiniteError
-        ``H R H^T`` is singular (``H`` not of full row rank).
-
-    Examples
-    --------
-    >>> from lpvest import load_system
-    >>> km = KalmanModel(load_system("cox-toth-truncation").model())
-    >>> d = decorrelate(km.matrices([0.0]))
-    >>> bool(np.all(np.linalg.eigvalsh(d.GQbarG) > 0))
-    True
-    """
-    msg = (
-        f"H(p) R H(p)^T is singular{where}: the decorrelated form (5c)/(5e) needs it "
-        "invertible (H of full row rank)"
-    )
-    if m.HRH.ndim == 2 and m.HRH.shape[0] <= SMALL_NY:
-        try:
-            Ci, _ = small_chol_inverse(m.HRH, None)
-        except NumericalError as exc:
-            raise NotPositiveDefiniteError(msg) from exc
-        J = (Ci @ m.GSH.T).T @ Ci  # G S H^T chol^-T chol^-1
-    else:
-        try:
-            L = np.linalg.cholesky(m.HRH)
-        except np.linalg.LinAlgError as exc:
-            raise NotPositiveDefiniteError(msg) from exc
-        # J^T = (H R H^T)^-1 (G S H^T)^T by two triangular solves with the factor
-        J = mT(np.linalg.solve(mT(L), np.linalg.solve(L, mT(m.GSH))))
-    Abar = m.A - J @ m.C
-    GQG = m.GQG - J @ mT(m.GSH)
-    return Decorrelated(Abar, 0.5 * (GQG + mT(GQG)), J)
 
 
 class AssumptionBounds(NamedTuple):
@@ -255,8 +176,8 @@ def assumption_bounds(
     m = km.matrices_batch(pts)
     d = decorrelate(m)
     a = np.linalg.eigvalsh(d.GQbarG)
-    L = np.linalg.cholesky(m.HRH)
-    LiC = np.linalg.solve(L, m.C)  # C^T (HRH)^-1 C = (L^-1 C)^T (L^-1 C)
+    L = cholesky(m.HRH, lapack=True)  # positive definite: decorrelate has factored it
+    LiC = lsolve(L, m.C, lapack=True)  # C^T (HRH)^-1 C = (L^-1 C)^T (L^-1 C)
     b = np.linalg.eigvalsh(mT(LiC) @ LiC)
     dl = np.linalg.eigvalsh(mT(d.Abar) @ d.Abar)
     return AssumptionBounds(

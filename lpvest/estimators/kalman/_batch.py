@@ -13,9 +13,11 @@ import numpy as np
 from ...core._errors import ArgumentError, ArgumentTypeError, NumericalError, abbreviate
 from ...core._validation import as_rng, as_signal
 from ...systems._affine import AffineLPV, NoiseCovariance
+from ...systems._innovation import innovation_step
 from ._model import KalmanMatrices, KalmanModel, StepMatrices
 from ._recursion import initial_moments, riccati_sweep
 from ._scan import ScanAccuracyWarning, decorrelate_stack, scan_amplification, scan_error_bound, scan_filter
+from ._smallmat import cholesky, lsolve
 
 __all__ = [
     "KalmanResult",
@@ -312,8 +314,8 @@ def _loglik_terms(xi: np.ndarray, Omega: np.ndarray) -> np.ndarray:
     if m == 1:
         w = Omega[:, 0, 0]
         return -0.5 * (_LOG_2PI + np.log(w) + xi[:, 0] ** 2 / w)
-    chol = np.linalg.cholesky(Omega)
-    z = np.linalg.solve(chol, xi[..., None])[..., 0]
+    chol = cholesky(Omega, lapack=True)  # each Omega_t was factored in the recursion
+    z = lsolve(chol, xi[..., None], lapack=True)[..., 0]
     logdet = 2.0 * np.sum(np.log(np.diagonal(chol, axis1=1, axis2=2)), axis=1)
     return -0.5 * (m * _LOG_2PI + logdet + np.sum(z * z, axis=1))
 
@@ -396,14 +398,14 @@ def simulate_innovation_form(
     sms = km.step_matrices_batch(p)
     _, _, Om, Gm = riccati_sweep(km, sms, P)
     K = Gm[:, :n]
-    xi = np.einsum("tij,tj->ti", np.linalg.cholesky(Om), as_rng(rng).standard_normal((T, m)))
+    xi = np.einsum("tij,tj->ti", cholesky(Om, lapack=True), as_rng(rng).standard_normal((T, m)))
     mats = sms.readable()
     X = np.empty((T, n))
     Y = np.empty((T, m))
     for t in range(T):
         X[t] = x
-        Y[t] = mats.C[t] @ x + mats.D[t] @ u[t] + xi[t]
-        x = mats.A[t] @ x + mats.B[t] @ u[t] + K[t] @ xi[t]
+        Y[t], x = innovation_step({"A": mats.A[t], "B": mats.B[t], "C": mats.C[t], "D": mats.D[t]},
+                                  K[t], x, u[t], xi[t])
     return InnovationFormData(X, Y, xi, K, Om)
 
 

@@ -13,6 +13,7 @@ from ...core._errors import NumericalError
 from ...core._linalg import mT
 from ...core._validation import as_matrix, as_vector, check_positive_definite
 from ._model import KalmanModel, StepMatrices
+from ._smallmat import SMALL_NY, FactorError, chol_inverse, cholesky, lsolve, usolve
 
 __all__ = [
     "CovarianceStep",
@@ -23,7 +24,6 @@ __all__ = [
     "initial_moments",
     "riccati_sweep",
     "small_chol_inverse",
-    "SMALL_NY",
 ]
 
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -75,15 +75,10 @@ def _eye(k: int) -> np.ndarray:
     return e
 
 
-SMALL_NY = 3  #: largest n_y handled by :func:`small_chol_inverse`
-
-
 def small_chol_inverse(Omega: np.ndarray, t: int | None) -> tuple[np.ndarray, float]:
-    """``chol^-1`` and ``log det`` of a small symmetric positive definite
-    matrix: the Cholesky factor by the textbook recurrence, its inverse by
-    forward substitution on the identity, in Python floats.
-
-    Meant for ``n_y <= SMALL_NY``, where this beats two LAPACK calls.
+    """``chol^-1`` and ``log det`` of a small ``Omega_t`` (``n_y <= SMALL_NY``):
+    :func:`~lpvest.estimators.kalman._smallmat.chol_inverse` in Python floats,
+    its failure named as ``Omega_t``'s.
 
     Parameters
     ----------
@@ -105,33 +100,11 @@ def small_chol_inverse(Omega: np.ndarray, t: int | None) -> tuple[np.ndarray, fl
         A Cholesky pivot is not positive and finite (``Omega`` not positive
         definite, or non-finite).
     """
-    a = Omega.tolist()
-    m = len(a)
-    L = [[0.0] * m for _ in range(m)]
-    logdet = 0.0
-    for i in range(m):
-        Li = L[i]
-        for j in range(i + 1):
-            Lj = L[j]
-            s = a[i][j]
-            for k in range(j):
-                s -= Li[k] * Lj[k]
-            if i == j:
-                if not 0.0 < s < math.inf:
-                    raise _singular(t, f"Cholesky pivot {i + 1} is {s:.3g}")
-                Li[i] = math.sqrt(s)
-                logdet += math.log(s)
-            else:
-                Li[j] = s / Lj[j]
-    Ci = [[0.0] * m for _ in range(m)]
-    for c in range(m):
-        for i in range(c, m):
-            Li = L[i]
-            s = 1.0 if i == c else 0.0
-            for k in range(c, i):
-                s -= Li[k] * Ci[k][c]
-            Ci[i][c] = s / Li[i]
-    return np.array(Ci), logdet
+    try:
+        Ci, logdet = chol_inverse(Omega)
+    except FactorError as exc:
+        raise _singular(t, f"Cholesky pivot {exc.pivot} is {exc.value:.3g}") from None
+    return Ci, float(logdet)
 
 
 def covariance_step(
@@ -215,11 +188,11 @@ def covariance_step(
     else:
         Omega = V[n2:, n2:]
         try:
-            chol = np.linalg.cholesky(Omega)
-        except np.linalg.LinAlgError as exc:
+            chol = cholesky(Omega)
+        except FactorError as exc:
+            if exc.nonfinite:
+                raise _singular(t, "it holds non-finite values") from exc
             raise _singular(t, f"smallest eigenvalue {np.linalg.eigvalsh(Omega)[0]:.3g}") from exc
-        if not np.all(np.isfinite(chol)):
-            raise _singular(t, "it holds non-finite values")
         logdet = 2.0 * float(np.sum(np.log(np.diagonal(chol))))
         if gains is None:
             # one forward substitution: chol^-1 [V_21, I, rhs]; then
@@ -227,12 +200,12 @@ def covariance_step(
             parts = [V[n2:, :n2], _eye(m)]
             if rhs is not None:
                 parts.append(rhs[:, None])
-            Z = np.linalg.solve(chol, np.concatenate(parts, axis=1))
+            Z = lsolve(chol, np.concatenate(parts, axis=1))
             gains = Z[:, :n2].T @ Z[:, n2 : n2 + m]
             if rhs is not None:
                 whitened = Z[:, -1]
         elif rhs is not None:
-            whitened = np.linalg.solve(chol, rhs)
+            whitened = lsolve(chol, rhs[:, None])[:, 0]
     M = np.concatenate((_eye(n2), -gains), axis=1)
     PP = M @ V @ M.T
     PP = PP + PP.T
@@ -250,14 +223,11 @@ def _covariance_step_stack(
     V = E @ P @ mT(E) + F[..., n + sm.nu :]
     Omega = V[..., n2:, n2:]
     try:
-        chol = np.linalg.cholesky(Omega)
-    except np.linalg.LinAlgError as exc:
-        bad = np.linalg.eigvalsh(Omega)[..., 0] <= 0
-        raise _singular(t, f"in stack element {int(np.argmax(bad.reshape(-1)))}") from exc
-    if not np.all(np.isfinite(chol)):
-        raise _singular(t, "it holds non-finite values")
+        chol = cholesky(Omega, lapack=True)  # LAPACK, as this path always has: the same numbers
+    except FactorError as exc:
+        raise _singular(t, "it holds non-finite values" if exc.nonfinite else f"in stack element {exc.index}") from exc
     if gains is None:
-        gains = mT(np.linalg.solve(mT(chol), np.linalg.solve(chol, V[..., n2:, :n2])))
+        gains = mT(usolve(chol, lsolve(chol, V[..., n2:, :n2], lapack=True), lapack=True))
     M = np.concatenate((np.broadcast_to(_eye(n2), (*gains.shape[:-2], n2, n2)), -gains), axis=-1)
     PP = M @ V @ mT(M)
     logdet = 2.0 * np.sum(np.log(np.diagonal(chol, axis1=-2, axis2=-1)), axis=-1)

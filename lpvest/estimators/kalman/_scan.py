@@ -99,7 +99,10 @@ decorrelated form. The default (:func:`block_length`, ``~ sqrt(T)``)
 balances numpy's per-call overhead of steps 1 and 3 (``~ ell`` rounds of
 calls) against the general combinations of step 2 (``~ T / ell``). No
 inverse is formed, no jitter added; the small Cholesky factorisations and
-triangular solves (``n_y <= 4``) run entry by entry over the whole stack.
+triangular solves (``n_y <= 4``) run entry by entry over the whole stack
+(:mod:`~lpvest.estimators.kalman._smallmat`, the kernel the sequential filter
+uses too), and the decorrelation is the truncated filter's (5c), (5e)
+(:func:`~lpvest.estimators.decorrelate`).
 
 Accuracy
 --------
@@ -161,6 +164,8 @@ import numpy as np
 
 from ...core._errors import NumericalError
 from ...core._linalg import mT, sym
+from ._decorrelation import decorrelate_matrices
+from ._smallmat import FactorError, cholesky, lsolve, usolve
 
 __all__ = [
     "Decorrelation",
@@ -259,87 +264,6 @@ class Decorrelation(NamedTuple):
     y: np.ndarray
 
 
-def _first_not_pd(M: np.ndarray) -> int:
-    """Index of the first matrix of a stack whose Cholesky factorisation fails
-    (or that is not finite); -1 if none does. Error paths only."""
-    for k in range(M.shape[0]):
-        Mk = M[k]
-        if not np.all(np.isfinite(Mk)):
-            return k
-        try:
-            np.linalg.cholesky(Mk)
-        except np.linalg.LinAlgError:
-            return k
-    return -1
-
-
-_SMALL_M = 4  #: up to this n_y, Cholesky factors and triangular solves run row by row over the stack
-
-
-def _chol(M: np.ndarray) -> np.ndarray | None:
-    """Lower Cholesky factors of a stack (N, m, m), or None if one fails.
-
-    For ``m <= _SMALL_M`` the textbook recurrence runs entry by entry,
-    vectorised over the stack (numpy's batched LAPACK call costs about
-    0.3 us per matrix, ten times a small matrix product)."""
-    m = M.shape[-1]
-    if m == 1:
-        d = M[..., 0, 0]
-        if not (np.all(d > 0.0) and np.all(np.isfinite(d))):
-            return None
-        return np.sqrt(M)
-    if m > _SMALL_M:
-        try:
-            L = np.linalg.cholesky(M)
-        except np.linalg.LinAlgError:
-            return None
-        return L if np.all(np.isfinite(L)) else None
-    L = np.zeros(M.shape)
-    for j in range(m):
-        Lj = L[..., j, :j]
-        d = M[..., j, j] - np.sum(Lj * Lj, axis=-1)
-        if not (np.all(d > 0.0) and np.all(np.isfinite(d))):
-            return None
-        ljj = np.sqrt(d)
-        L[..., j, j] = ljj
-        for i in range(j + 1, m):
-            L[..., i, j] = (M[..., i, j] - np.sum(L[..., i, :j] * Lj, axis=-1)) / ljj
-    return L
-
-
-def _lsolve(L: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """``L^-1 B`` for lower-triangular factors ``L`` (N, m, m), ``B`` (N, m, k):
-    forward substitution."""
-    m = L.shape[-1]
-    if m == 1:
-        return B / L
-    if m > _SMALL_M:
-        return np.linalg.solve(L, B)
-    X = np.empty(B.shape)
-    for i in range(m):
-        v = B[..., i, :]
-        if i:
-            v = v - (L[..., i : i + 1, :i] @ X[..., :i, :])[..., 0, :]
-        X[..., i, :] = v / L[..., i, i, None]
-    return X
-
-
-def _usolve(L: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """``L^-T B`` for lower-triangular factors ``L``: back substitution."""
-    m = L.shape[-1]
-    if m == 1:
-        return B / L
-    if m > _SMALL_M:
-        return np.linalg.solve(mT(L), B)
-    X = np.empty(B.shape)
-    for i in range(m - 1, -1, -1):
-        v = B[..., i, :]
-        if i < m - 1:
-            v = v - (mT(L[..., i + 1 :, i : i + 1]) @ X[..., i + 1 :, :])[..., 0, :]
-        X[..., i, :] = v / L[..., i, i, None]
-    return X
-
-
 def decorrelate_stack(
     A: np.ndarray,
     B: np.ndarray,
@@ -356,11 +280,14 @@ def decorrelate_stack(
     """The decorrelated model (module notes) along a trajectory, or the first
     ``t`` at which ``H R H^T`` is not (numerically) positive definite.
 
+    ``Abar``, ``G Qbar G^T`` and ``J`` are the truncated filter's (5c), (5e)
+    (:func:`~lpvest.estimators.kalman._decorrelation.decorrelate_matrices`,
+    factored entry by entry over the stack); this adds the known input ``c``.
     All arguments are stacked over time (leading axis ``T``), in the layout of
     :class:`~lpvest.estimators.kalman.KalmanMatrices`; ``u`` (T, n_u), ``y``
     (T, n_y); ``AT``, optional, is ``A^T`` stored contiguously. With
     ``S = 0`` (``G S H^T = 0`` at every sample) ``J = 0`` and nothing is
-    computed: ``Abar = A``, ``G Qbar G^T = G Q G^T``.
+    computed: ``Abar = A``, ``G Qbar G^T = G Q G^T`` (symmetrised).
 
     Parameters
     ----------
@@ -377,7 +304,8 @@ def decorrelate_stack(
     y : ndarray, shape (T, n_y)
         Measurements.
     AT : ndarray, shape (T, n_x, n_x), optional
-        ``A^T`` stored contiguously (default: computed from ``A``).
+        ``A^T`` stored contiguously, returned as ``Abar^T`` when ``S = 0``
+        (default: computed from ``A``).
 
     Returns
     -------
@@ -397,28 +325,19 @@ def decorrelate_stack(
     >>> dec.AbarT.shape, round(scan_amplification(dec, mats.C), 3)
     ((100, 2, 2), 0.057)
     """
-    Lh = _chol(HRH)
-    if Lh is None:
-        return _first_not_pd(HRH)
-    if AT is None:
-        AT = np.ascontiguousarray(mT(A))
+    try:
+        d = decorrelate_matrices(A, C, GQG, GSH, HRH, recurrence=True)  # (5c), (5e)
+    except FactorError as exc:
+        return exc.index
     yd = y - _mv(D, u) if u.shape[1] else y
-    if not np.any(GSH):
+    if not np.any(GSH):  # J = 0: Abar = A, and the known input is B u
+        AbarT = np.ascontiguousarray(mT(A)) if AT is None else AT
         c = _mv(B, u) if u.shape[1] else np.zeros((A.shape[0], A.shape[1]))
-        return Decorrelation(AT, GQG, np.zeros(GSH.shape), c, yd)
-    Y = _lsolve(Lh, mT(GSH))  # chol^-1 (G S H^T)^T
-    JT = _usolve(Lh, Y)  # J^T = (H R H^T)^-1 (G S H^T)^T
-    J = mT(JT)
-    # in place where possible: every (T, n, n) pass counts
-    AbarT = mT(C) @ JT
-    np.subtract(AT, AbarT, out=AbarT)
-    GQbarG = mT(Y) @ Y  # G S H^T (H R H^T)^-1 H S^T G^T
-    np.subtract(GQG, GQbarG, out=GQbarG)
-    GQbarG = sym(GQbarG)
-    c = _mv(J, yd)
+        return Decorrelation(AbarT, d.GQbarG, d.J, c, yd)
+    c = _mv(d.J, yd)
     if u.shape[1]:
         c += _mv(B, u)
-    return Decorrelation(AbarT, GQbarG, J, c, yd)
+    return Decorrelation(np.ascontiguousarray(mT(d.Abar)), d.GQbarG, d.J, c, yd)
 
 
 def scan_amplification(dec: Decorrelation, C: np.ndarray) -> float:
@@ -560,14 +479,14 @@ def _fold(
         J, eta = acc.J, acc.eta
     HC = H @ Cp
     S = sym(HC @ mT(H) + R)
-    Ls = _chol(S)
-    if Ls is None:
-        k = _first_not_pd(S)
+    try:
+        Ls = cholesky(S)
+    except FactorError as exc:
         raise NumericalError(
             "the scan's conditional innovation covariance H C~ H^T + H R H^T is not positive "
-            f"definite at t={int(last[k])} (non-finite values?)"
-        )
-    X = _lsolve(Ls, np.concatenate((H @ Ap, (yd - _mv(H, bp))[..., None], HC), axis=-1))
+            f"definite at t={int(last[exc.index])} (non-finite values?)"
+        ) from None
+    X = lsolve(Ls, np.concatenate((H @ Ap, (yd - _mv(H, bp))[..., None], HC), axis=-1))
     V = X[..., :n]  # chol^-1 H A~
     v = X[..., n]  # chol^-1 (y' - H b~)
     GT = X[..., n + 1 :]  # chol^-1 H C~
@@ -775,23 +694,22 @@ def scan_filter(
         if m > 1:
             Om = sym(Om)
         Om_[sl] = Om
-        if m == 1:  # a positive finite scalar; no factor needed
-            ok = bool(np.all(Om > 0.0) and np.all(np.isfinite(Om)))
-        else:
-            Lo = _chol(Om)
-            ok = Lo is not None
-        if not ok:
-            bad = _first_not_pd(Om)
+        try:
+            if m == 1:  # a positive finite scalar; no factor needed
+                if not (np.all(Om > 0.0) and np.all(np.isfinite(Om))):
+                    cholesky(Om)  # raises, naming the first
+            else:
+                Lo = cholesky(Om)
+        except FactorError as exc:
             raise NumericalError(
-                f"the innovation covariance Omega_t is not positive definite at t={bad * ell + j}"
-            )
+                f"the innovation covariance Omega_t is not positive definite at t={exc.index * ell + j}"
+            ) from None
         xi = yd[sl] - _mv(Cj, x)
         xi_[sl] = xi
         if m == 1:
             LT = CP / Om
         else:
-            assert Lo is not None  # the Cholesky factors, computed for n_y > 1
-            LT = _usolve(Lo, _lsolve(Lo, CP))  # Omega^-1 C P = L^T
+            LT = usolve(Lo, lsolve(Lo, CP))  # Omega^-1 C P = L^T
         LT_[sl] = LT
         KT_[sl] = LT @ AjT  # K^T = (Abar L + J)^T; J added below
         x_f = x + _mv(mT(LT), xi)
@@ -818,10 +736,11 @@ def scan_filter(
     if not np.all(np.isfinite(Pp[T])):  # every other P_{t|t-1} went through a factorisation
         raise NumericalError(f"the predicted covariance P_{{t|t-1}} is not finite at t={T}")
     # log N(xi_t; 0, Omega_t) for all t at once (each Omega_t was factored above)
-    Lo = _chol(Om_)
-    if Lo is None:  # pragma: no cover - the same factorisations succeeded in the loop
-        raise NumericalError(f"the innovation covariance Omega_t is not positive definite at t={_first_not_pd(Om_)}")
-    z = _lsolve(Lo, xi_[..., None])[..., 0]
+    try:
+        Lo = cholesky(Om_)
+    except FactorError as exc:  # pragma: no cover - the same factorisations succeeded in the loop
+        raise NumericalError(f"the innovation covariance Omega_t is not positive definite at t={exc.index}") from None
+    z = lsolve(Lo, xi_[..., None])[..., 0]
     logdet = 2.0 * np.sum(np.log(np.diagonal(Lo, axis1=-2, axis2=-1)), axis=-1)
     ll = -0.5 * (m * math.log(2.0 * math.pi) + logdet + np.sum(z * z, axis=-1))
     out = ScanMoments(
