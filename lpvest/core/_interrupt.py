@@ -67,7 +67,19 @@ class Interrupted(KeyboardInterrupt):
 
 
 def exit_status(exc: BaseException) -> int:
-    """130 for SIGINT (and a plain ``KeyboardInterrupt``), 143 for SIGTERM."""
+    """130 for SIGINT (and a plain ``KeyboardInterrupt``), 143 for SIGTERM.
+
+    Parameters
+    ----------
+    exc : BaseException
+        The exception that stopped the command; its ``signum`` attribute (as
+        on :class:`Interrupted`) names the signal, SIGINT when it has none.
+
+    Returns
+    -------
+    int
+        ``128 + signum``, the exit status of a process the signal ended.
+    """
     return 128 + getattr(exc, "signum", signal.SIGINT)
 
 
@@ -118,7 +130,19 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 
 def interruptible(fn: F) -> F:
-    """Decorator: ``fn`` runs within :func:`handling_signals`."""
+    """Decorator: ``fn`` runs within :func:`handling_signals`.
+
+    Parameters
+    ----------
+    fn : callable
+        The function to wrap.
+
+    Returns
+    -------
+    callable
+        A wrapper with ``fn``'s signature and metadata (:func:`functools.wraps`)
+        that calls ``fn`` within :func:`handling_signals` and returns its result.
+    """
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
@@ -132,11 +156,26 @@ def call_interruptibly(fn: Callable[[], T], *, on_abandon: Callable[[threading.T
     """``fn()`` on a worker thread while this (main) thread waits, so that a
     signal's handler runs at once; on another thread, ``fn()`` directly.
 
+    Parameters
+    ----------
+    fn : callable
+        The call, without arguments.
+    on_abandon : callable or None, optional
+        Called with the worker thread when a signal abandons it (e.g. to drop
+        what the thread still writes to from a cache); None: nothing is called.
+
+    Returns
+    -------
+    object
+        What ``fn()`` returned.
+
     Raises
     ------
     KeyboardInterrupt
         The signal's exception; the worker thread is abandoned (it runs to
         its end, its result dropped) and handed to ``on_abandon``.
+    BaseException
+        Whatever ``fn()`` raised, re-raised in the calling thread.
     """
     if threading.current_thread() is not threading.main_thread():
         return fn()
@@ -163,7 +202,18 @@ def call_interruptibly(fn: Callable[[], T], *, on_abandon: Callable[[threading.T
 
 
 def holds(moment: str) -> bool:
-    """Whether the test hook holds at ``moment``."""
+    """Whether the test hook holds at ``moment``.
+
+    Parameters
+    ----------
+    moment : str
+        A moment of the test hook (see the module's docstring), e.g. ``"solve"``.
+
+    Returns
+    -------
+    bool
+        True when the environment variable ``LPVEST_TEST_HOLD`` equals ``moment``.
+    """
     return os.environ.get("LPVEST_TEST_HOLD") == moment
 
 
@@ -175,14 +225,27 @@ def abandoned_calls() -> bool:
     A process that exits then should leave with ``os._exit`` (after flushing
     its output): a native solver still running while the interpreter and the
     C++ runtime shut down can abort the process ("terminate called without
-    an active exception", SIGABRT) instead of the exit status it chose."""
+    an active exception", SIGABRT) instead of the exit status it chose.
+
+    Returns
+    -------
+    bool
+        True when the thread of at least one abandoned call is alive.
+    """
     return any(t.is_alive() for t in _abandoned)
 
 
 def hold(moment: str) -> None:
     """The test hook (see the module's docstring): at ``moment``, when
     ``LPVEST_TEST_HOLD`` names it, say so in ``LPVEST_TEST_READY`` and wait
-    for a signal."""
+    for a signal.
+
+    Parameters
+    ----------
+    moment : str
+        The moment reached (see the module's docstring); nothing happens
+        unless ``LPVEST_TEST_HOLD`` names it.
+    """
     if not holds(moment):
         return
     with open(os.environ["LPVEST_TEST_READY"], "a", encoding="utf-8") as f:

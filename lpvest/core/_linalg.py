@@ -31,7 +31,21 @@ __all__ = ["MatrixStack", "mT", "sym"]
 
 class MatrixStack:
     """Named arrays ``M_i`` (each of shape ``(n_terms, *shape)``) and their
-    weighted sums ``sum_i c_i M_i`` for all names at once (see the module docs)."""
+    weighted sums ``sum_i c_i M_i`` for all names at once (see the module docs).
+
+    Parameters
+    ----------
+    named : mapping of str to ndarray, shape (n_terms, *shape)
+        The terms ``M_i`` of each name along the first axis; every array has
+        the same ``n_terms``, the trailing ``shape`` may differ between names.
+        The arrays are copied (as float) into one read-only array.
+
+    Raises
+    ------
+    DimensionError
+        The arrays do not all have the same number of terms, or ``named`` is
+        empty.
+    """
 
     def __init__(self, named: Mapping[str, np.ndarray]) -> None:
         arrays = {k: np.asarray(v, dtype=float) for k, v in named.items()}
@@ -52,7 +66,18 @@ class MatrixStack:
         self._rows = [self.flat[i] for i in range(self.n_terms)]
 
     def at(self, c: np.ndarray) -> dict[str, np.ndarray]:
-        """``sum_i c[i] M_i`` for every name (fresh arrays)."""
+        """``sum_i c[i] M_i`` for every name (fresh arrays).
+
+        Parameters
+        ----------
+        c : ndarray, shape (n_terms,)
+            The weights (vertex weights ``alpha`` or ``[1, psi_1(p), ...]``).
+
+        Returns
+        -------
+        dict of str to ndarray, shape (*shape)
+            The weighted sum of each name, in the shape of its terms.
+        """
         rows = self._rows
         acc = c[0] * rows[0]
         for i in range(1, self.n_terms):
@@ -61,7 +86,18 @@ class MatrixStack:
 
     def at_batch(self, c: np.ndarray) -> dict[str, np.ndarray]:
         """``sum_i c[t, i] M_i`` for every row ``t`` of ``c`` (shape ``(T, n_terms)``),
-        each of shape ``(T, *shape)``; the same numbers as :meth:`at` row by row."""
+        each of shape ``(T, *shape)``; the same numbers as :meth:`at` row by row.
+
+        Parameters
+        ----------
+        c : array_like, shape (T, n_terms)
+            The weights of each sample, one row per sample.
+
+        Returns
+        -------
+        dict of str to ndarray, shape (T, *shape)
+            The weighted sums of each name, one per row of ``c``.
+        """
         c = np.asarray(c, dtype=float)
         rows = self._rows
         acc = c[:, 0:1] * rows[0]
@@ -72,10 +108,32 @@ class MatrixStack:
 
 
 def mT(a: np.ndarray) -> np.ndarray:
-    """The transpose of the last two axes (a stack of matrices)."""
+    """The transpose of the last two axes (a stack of matrices).
+
+    Parameters
+    ----------
+    a : ndarray, shape (..., m, n)
+        A matrix or a stack of matrices.
+
+    Returns
+    -------
+    ndarray, shape (..., n, m)
+        ``a`` with its last two axes swapped (a view, not a copy).
+    """
     return np.swapaxes(a, -1, -2)
 
 
 def sym(a: np.ndarray) -> np.ndarray:
-    """``(A + A^T) / 2`` over the last two axes."""
+    """``(A + A^T) / 2`` over the last two axes.
+
+    Parameters
+    ----------
+    a : ndarray, shape (..., n, n)
+        A square matrix or a stack of them.
+
+    Returns
+    -------
+    ndarray, shape (..., n, n)
+        The symmetric part of each matrix (a new array).
+    """
     return 0.5 * (a + mT(a))

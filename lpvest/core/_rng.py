@@ -160,12 +160,34 @@ def normal_quantile(p: Any) -> np.ndarray:
 
 
 def uniforms_from_raw(raw: np.ndarray) -> np.ndarray:
-    """Uniform doubles in ``[0, 1)`` from raw 64-bit words: ``(w >> 11) * 2**-53``."""
+    """Uniform doubles in ``[0, 1)`` from raw 64-bit words: ``(w >> 11) * 2**-53``.
+
+    Parameters
+    ----------
+    raw : array_like of uint64, any shape
+        Raw words (e.g. from :meth:`Stream.raw`).
+
+    Returns
+    -------
+    ndarray of float64, shape of ``raw``
+        One uniform per word.
+    """
     return (np.asarray(raw, dtype=np.uint64) >> np.uint64(11)).astype(np.float64) * _TWO_M53
 
 
 def normals_from_raw(raw: np.ndarray) -> np.ndarray:
-    """Standard normals from raw 64-bit words, one word each (module notes, 3.)."""
+    """Standard normals from raw 64-bit words, one word each (module notes, 3.).
+
+    Parameters
+    ----------
+    raw : array_like of uint64, any shape
+        Raw words (e.g. from :meth:`Stream.raw`).
+
+    Returns
+    -------
+    ndarray of float64, shape of ``raw``
+        One normal per word.
+    """
     u = ((np.asarray(raw, dtype=np.uint64) >> np.uint64(12)).astype(np.float64) + 0.5) * _TWO_M52
     return normal_quantile(u)
 
@@ -218,29 +240,89 @@ class Stream:
         self._bits.state = value
 
     def raw(self, size: int) -> np.ndarray:
-        """The next ``size`` raw 64-bit words (uint64)."""
+        """The next ``size`` raw 64-bit words (uint64).
+
+        Parameters
+        ----------
+        size : int
+            Number of words; the bit generator advances by as many.
+
+        Returns
+        -------
+        ndarray of uint64, shape (size,)
+            The words.
+        """
         return np.asarray(self._bits.random_raw(int(size)), dtype=np.uint64).reshape(-1)
 
     def uniform(self, size: int | tuple[int, ...]) -> np.ndarray:
-        """Uniforms in ``[0, 1)``, one raw word each, in C (row-major) order."""
+        """Uniforms in ``[0, 1)``, one raw word each, in C (row-major) order.
+
+        Parameters
+        ----------
+        size : int or tuple of int
+            Shape of the draw.
+
+        Returns
+        -------
+        ndarray of float64, shape (size,) or size
+            The uniforms.
+        """
         shape = (size,) if isinstance(size, int | np.integer) else tuple(size)
         return uniforms_from_raw(self.raw(int(np.prod(shape, dtype=np.int64)))).reshape(shape)
 
     def normal(self, size: int | tuple[int, ...]) -> np.ndarray:
-        """Standard normals, one raw word each, in C (row-major) order."""
+        """Standard normals, one raw word each, in C (row-major) order.
+
+        Parameters
+        ----------
+        size : int or tuple of int
+            Shape of the draw.
+
+        Returns
+        -------
+        ndarray of float64, shape (size,) or size
+            The normals.
+        """
         shape = (size,) if isinstance(size, int | np.integer) else tuple(size)
         return normals_from_raw(self.raw(int(np.prod(shape, dtype=np.int64)))).reshape(shape)
 
     def gaussian_vector(self, mean: np.ndarray, cov: np.ndarray) -> np.ndarray:
         """One draw of ``N(mean, cov)`` (``cov`` positive semidefinite, checked
         by the caller): ``mean + L z`` with ``L = psd_cholesky(cov)``, ``z``
-        standard normal (``n`` words, also where a column of ``L`` is zero)."""
+        standard normal (``n`` words, also where a column of ``L`` is zero).
+
+        Parameters
+        ----------
+        mean : array_like, shape (n,)
+            The mean (flattened).
+        cov : array_like, shape (n, n)
+            The covariance, symmetric positive semidefinite; only its lower
+            triangle is read.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            The draw.
+        """
         m = np.asarray(mean, dtype=np.float64).reshape(-1)
         return m + self.correlated(psd_cholesky(cov), 1)[0]
 
     def correlated(self, factor: np.ndarray, size: int) -> np.ndarray:
         """``size`` draws of ``L z`` (``z`` standard normal, ``L = factor``
-        lower triangular (n, n)), shape ``(size, n)`` (:func:`lower_times`)."""
+        lower triangular (n, n)), shape ``(size, n)`` (:func:`lower_times`).
+
+        Parameters
+        ----------
+        factor : array_like, shape (n, n)
+            ``L``; the entries above the diagonal are not read.
+        size : int
+            Number of draws; ``size * n`` words are used, in row-major order.
+
+        Returns
+        -------
+        ndarray, shape (size, n)
+            Row ``k`` is ``L z_k``.
+        """
         L = np.asarray(factor, dtype=np.float64)
         return lower_times(L, self.normal((int(size), L.shape[0])))
 

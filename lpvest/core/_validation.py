@@ -86,7 +86,26 @@ def _all_finite(arr: np.ndarray) -> bool:
 
 def check_finite(arr: np.ndarray, name: str) -> np.ndarray:
     """Raise :class:`NonFiniteError` naming ``name`` (and the first bad index) if
-    ``arr`` holds NaN or inf."""
+    ``arr`` holds NaN or inf.
+
+    Parameters
+    ----------
+    arr : array_like
+        The values; only float and complex arrays are checked (an integer or
+        object array passes as it is).
+    name : str
+        The user's name for it, used in the error message.
+
+    Returns
+    -------
+    ndarray
+        ``np.asarray(arr)``: ``arr`` itself when it is an ndarray, not a copy.
+
+    Raises
+    ------
+    NonFiniteError
+        ``arr`` holds NaN or inf.
+    """
     arr = np.asarray(arr)
     if arr.dtype.kind in "fc" and not _all_finite(arr):
         bad = np.argwhere(~np.isfinite(arr))[0]
@@ -98,7 +117,27 @@ def check_finite(arr: np.ndarray, name: str) -> np.ndarray:
 
 def as_float_array(value: object, name: str) -> np.ndarray:
     """``value`` as a float array (a copy), or a :class:`DimensionError` naming ``name``
-    when it is not numeric."""
+    when it is not numeric.
+
+    Parameters
+    ----------
+    value : array_like
+        Any value ``numpy.array(value, dtype=float)`` accepts; any shape, no
+        finiteness check.
+    name : str
+        The user's name for it, used in the error message.
+
+    Returns
+    -------
+    ndarray
+        A new float array of ``value``'s shape.
+
+    Raises
+    ------
+    DimensionError
+        ``value`` is not numeric, is ragged, or holds an integer beyond the
+        float range.
+    """
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError, OverflowError) as exc:  # (OverflowError: an int beyond float)
@@ -118,6 +157,18 @@ def as_matrix(value: object, name: str, shape: Shape | None = None) -> np.ndarra
         The user's name for it, used in error messages.
     shape : sequence of int or None, optional
         Expected shape; ``None`` entries match any size.
+
+    Returns
+    -------
+    ndarray, shape (r, c)
+        A new float array.
+
+    Raises
+    ------
+    DimensionError
+        ``value`` is not numeric, not 2-D, or not of ``shape``.
+    NonFiniteError
+        ``value`` holds NaN or inf.
     """
     arr = as_float_array(value, name)
     if arr.ndim == 0 and shape is not None and tuple(shape) == (1, 1):
@@ -130,7 +181,29 @@ def as_matrix(value: object, name: str, shape: Shape | None = None) -> np.ndarra
 
 
 def as_vector(value: object, name: str, length: int | None = None) -> np.ndarray:
-    """Return ``value`` as a finite 1-D float array (a scalar becomes length 1); always a copy."""
+    """Return ``value`` as a finite 1-D float array (a scalar becomes length 1); always a copy.
+
+    Parameters
+    ----------
+    value : array_like, shape (length,)
+        The vector, or a scalar.
+    name : str
+        The user's name for it, used in error messages.
+    length : int or None, optional
+        Expected length; None accepts any.
+
+    Returns
+    -------
+    ndarray, shape (length,)
+        A new float array.
+
+    Raises
+    ------
+    DimensionError
+        ``value`` is not numeric, not 1-D (nor a scalar), or not of ``length``.
+    NonFiniteError
+        ``value`` holds NaN or inf.
+    """
     if type(value) is np.ndarray and value.dtype == np.float64 and value.ndim == 1 and (
             length is None or value.shape[0] == length):
         return check_finite(value.copy(), name)  # the common case of one sample, without np.array's parsing
@@ -148,6 +221,33 @@ def as_signal(
 
     A 1-D array is accepted for a scalar signal (``width == 1``); ``None`` with
     ``width == 0`` gives an empty ``(length, 0)`` signal.
+
+    Parameters
+    ----------
+    value : array_like, shape (length, width), or None
+        The samples, one row per sample.
+    name : str
+        The user's name for it, used in error messages.
+    width : int
+        Number of channels.
+    length : int or None, optional
+        Expected number of samples; None accepts any (and then ``None`` is
+        not accepted for ``value``).
+    finite : bool, default True
+        Whether NaN and inf are refused.
+
+    Returns
+    -------
+    ndarray, shape (length, width)
+        A new float array (or the empty signal).
+
+    Raises
+    ------
+    DimensionError
+        ``value`` is None where an empty signal is not possible, is not
+        numeric, or is not of shape ``(length, width)``.
+    NonFiniteError
+        ``finite`` is True and ``value`` holds NaN or inf.
     """
     if value is None:
         if width == 0 and length is not None:
@@ -163,7 +263,31 @@ def as_signal(
 
 
 def check_symmetric(m: np.ndarray, name: str, *, rtol: float = SYMMETRY_RTOL) -> np.ndarray:
-    """Raise unless ``m`` is square and symmetric relative to its own norm."""
+    """Raise unless ``m`` is square and symmetric relative to its own norm.
+
+    Parameters
+    ----------
+    m : ndarray, shape (n, n)
+        The matrix.
+    name : str
+        The user's name for it, used in error messages.
+    rtol : float, default SYMMETRY_RTOL
+        Largest accepted ``max |m - m^T|`` relative to ``max |m|``.
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+        ``m`` itself (not symmetrised).
+
+    Raises
+    ------
+    DimensionError
+        ``m`` is not a square matrix.
+    NonFiniteError
+        ``m`` holds NaN or inf.
+    NotPositiveDefiniteError
+        ``m`` is not symmetric within ``rtol``.
+    """
     if m.ndim != 2 or m.shape[0] != m.shape[1]:
         raise DimensionError(f"{name} has shape {_shape_text(m.shape)}; expected a square matrix")
     check_finite(m, name)
@@ -185,10 +309,38 @@ def check_positive_definite(
     """Raise unless ``m`` is symmetric positive definite (or semidefinite).
 
     Definiteness is relative: the smallest eigenvalue must exceed
-    ``rtol * max(|eigenvalue|)`` (default ``rtol = n * eps``); for
-    ``semidefinite=True`` it must exceed ``-rtol * max(|eigenvalue|)``.
-    Returns the symmetrised matrix ``(m + m^T) / 2``. The eigenvalues are
-    computed at unit scale (``m`` times a power of two), so no entry overflows.
+    ``rtol * max(|eigenvalue|)`` (default ``rtol = max(n, 10) * eps``); for
+    ``semidefinite=True`` it must not be below ``-rtol * max(|eigenvalue|)``.
+    The eigenvalues are computed at unit scale (``m`` times a power of two),
+    so no entry overflows.
+
+    Parameters
+    ----------
+    m : ndarray, shape (n, n)
+        The matrix; symmetry is checked by :func:`check_symmetric` with its
+        default tolerance.
+    name : str
+        The user's name for it, used in error messages.
+    semidefinite : bool, default False
+        Accept a positive semidefinite matrix (a zero matrix included).
+    rtol : float or None, optional
+        Relative eigenvalue tolerance; None: ``max(n, 10) * eps``.
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+        The symmetrised matrix ``(m + m^T) / 2`` (``m`` itself when ``n == 0``).
+
+    Raises
+    ------
+    DimensionError
+        ``m`` is not a square matrix.
+    NonFiniteError
+        ``m`` holds NaN or inf.
+    NotPositiveDefiniteError
+        ``m`` is not symmetric, or not positive (semi)definite.
+    NumericalError
+        The eigenvalues could not be computed.
     """
     check_symmetric(m, name)
     n = m.shape[0]
@@ -226,7 +378,29 @@ def check_box(
     rtol: float = 1e-12,
 ) -> None:
     """Raise :class:`SchedulingRangeError` if a component of ``p`` lies outside
-    ``[lower, upper]`` (with a tolerance relative to the box size)."""
+    ``[lower, upper]`` (with a tolerance relative to the bounds' magnitude).
+
+    Parameters
+    ----------
+    p : ndarray, shape (n_p,)
+        One value. NaN is not caught here (it compares false): check
+        finiteness first.
+    lower, upper : ndarray, shape (n_p,)
+        The bounds of each component.
+    names : sequence of str, length n_p
+        The components' names, used in the error message.
+    what : str, default "scheduling value"
+        How the message calls ``p`` (``"<what> <name> = <value> is outside
+        its declared range [lo, hi]"``).
+    rtol : float, default 1e-12
+        Component ``j`` may lie ``rtol * max(1, |lower_j|, |upper_j|)``
+        outside its bounds.
+
+    Raises
+    ------
+    SchedulingRangeError
+        A component lies outside its bounds (the first such is named).
+    """
     if p.size <= _SMALL:  # one sample: Python floats (NaN compares False: it falls to the full check)
         if all(lo - rtol * max(1.0, abs(lo), abs(hi)) <= v <= hi + rtol * max(1.0, abs(lo), abs(hi))
                for v, lo, hi in zip(p.tolist(), lower.tolist(), upper.tolist(), strict=True)):
@@ -246,7 +420,24 @@ def check_box(
 
 def check_simplex(alpha: np.ndarray, name: str = "alpha", *, atol: float = SIMPLEX_ATOL) -> None:
     """Raise :class:`SchedulingRangeError` unless ``alpha`` lies on the unit
-    simplex (``alpha >= 0``, ``sum(alpha) == 1``, within ``atol``)."""
+    simplex (``alpha >= 0``, ``sum(alpha) == 1``, within ``atol``).
+
+    Parameters
+    ----------
+    alpha : ndarray, shape (n_v,)
+        The vertex weights of one sample.
+    name : str, default "alpha"
+        The user's name for it, used in error messages.
+    atol : float, default SIMPLEX_ATOL
+        Absolute tolerance of both conditions.
+
+    Raises
+    ------
+    NonFiniteError
+        ``alpha`` holds NaN or inf.
+    SchedulingRangeError
+        A weight is negative, or the weights do not sum to 1.
+    """
     check_finite(alpha, name)
     if alpha.size <= _SMALL:
         values = alpha.tolist()
@@ -266,7 +457,25 @@ def check_simplex(alpha: np.ndarray, name: str = "alpha", *, atol: float = SIMPL
 
 def as_rng(rng: np.random.Generator | int | None) -> np.random.Generator:
     """A :class:`numpy.random.Generator` from a generator, a seed or ``None``
-    (fresh entropy)."""
+    (fresh entropy).
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator or int or None
+        A generator (used as it is), a non-negative integer seed, or None.
+
+    Returns
+    -------
+    numpy.random.Generator
+        ``rng`` itself, or ``numpy.random.default_rng(rng)``.
+
+    Raises
+    ------
+    ArgumentError
+        ``rng`` is a negative integer.
+    ArgumentTypeError
+        ``rng`` is of another type (a bool included).
+    """
     if isinstance(rng, np.random.Generator):
         return rng
     if rng is None or (isinstance(rng, int | np.integer) and not isinstance(rng, bool)):

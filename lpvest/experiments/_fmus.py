@@ -160,12 +160,40 @@ class ExperimentFmus(FmuCache):
     missing or stale (:class:`~lpvest.fmi.FmuCache`); variant model
     files (other parameter values) are written to ``models/`` in the folder.
 
+    Parameters
+    ----------
+    directory : str or Path
+        The cache folder (created when needed).
+    progress : callable, optional
+        Called with a message before each build (the CLI prints it).
+    backend : str, default "pythonfmu"
+        The FMU backend (:data:`lpvest.fmi._build.BACKENDS`).
+
+    Raises
+    ------
+    ArgumentError
+        ``backend`` is not one of :data:`lpvest.fmi._build.BACKENDS`.
+
+    Examples
+    --------
     >>> fmus = ExperimentFmus("out/fmu-cache")                    # doctest: +SKIP
     >>> fmus["PeixotoEx1Plant"]                                    # doctest: +SKIP
     PosixPath('out/fmu-cache/PeixotoEx1Plant.fmu')
     """
 
     def known(self, identifier: str) -> bool:
+        """Whether ``identifier`` is an FMU of :data:`CATALOG`.
+
+        Parameters
+        ----------
+        identifier : str
+            An FMU identifier (``PeixotoEx1Plant``).
+
+        Returns
+        -------
+        bool
+            True for a catalog FMU.
+        """
         return identifier in CATALOG
 
     def _source(self, entry: FmuEntry) -> str | Path:
@@ -199,7 +227,27 @@ class ExperimentFmus(FmuCache):
         return path
 
     def plan(self, identifier: str) -> Any:
-        """The :class:`~lpvest.fmi.FmuPlan` of a catalog FMU."""
+        """The :class:`~lpvest.fmi.FmuPlan` of a catalog FMU.
+
+        A variant's model file is written to ``models/`` in the cache folder
+        first (rewritten only when its text changed).
+
+        Parameters
+        ----------
+        identifier : str
+            An FMU of :data:`CATALOG`.
+
+        Returns
+        -------
+        FmuPlan
+            The builder's plan of that FMU.
+
+        Raises
+        ------
+        FmuCacheError
+            ``identifier`` is not in :data:`CATALOG`, or its variant's
+            parameter values cannot be written into the example's model file.
+        """
         from ..fmi._build import plan_system
 
         entry = CATALOG.get(identifier)
@@ -235,7 +283,23 @@ def as_experiment_fmus(fmus: ExperimentFmus | str | Path | None, *, backend: str
 class CoSimSpec:
     """A co-simulation: components (``(name, FMU identifier, parameters)``),
     connections, step size and number of steps. :meth:`run` resolves the FMUs
-    in an :class:`ExperimentFmus` and runs :func:`lpvest.cosim.simulate`."""
+    in an :class:`ExperimentFmus` and runs :func:`lpvest.cosim.simulate`.
+
+    Parameters
+    ----------
+    components : tuple of (str, str, mapping of str to object)
+        ``(instance name, FMU identifier, parameter values)`` of each
+        component.
+    connections : tuple of str
+        ``"plant.y -> filter.y"`` (see :func:`lpvest.cosim.simulate`).
+    step_size : float
+        The communication step.
+    n_steps : int
+        Communication steps to run.
+    record : tuple of str or None, default None
+        Variables to record (``"comp.var"``); None: every output but String
+        ones.
+    """
 
     components: tuple[tuple[str, str, Mapping[str, Any]], ...]
     connections: tuple[str, ...]
@@ -248,6 +312,29 @@ class CoSimSpec:
         return tuple(dict.fromkeys(ident for _, ident, _ in self.components))
 
     def run(self, fmus: ExperimentFmus, *, progress: bool | None = None) -> np.ndarray:
+        """Run the co-simulation with the FMUs of ``fmus``; a discarded step
+        raises (an experiment needs every step).
+
+        Parameters
+        ----------
+        fmus : ExperimentFmus
+            The cache the FMUs come from (built there first when missing or
+            stale).
+        progress : bool or None, optional
+            Show a progress bar; None: for more than 20,000 steps.
+
+        Returns
+        -------
+        ndarray, shape (n_steps + 1,)
+            The recorded values, as :func:`lpvest.cosim.simulate` returns them.
+
+        Raises
+        ------
+        FmuCacheError
+            An FMU is not served by ``fmus`` or fails validation.
+        CoSimulationError
+            A component failed, or discarded a step.
+        """
         from ..cosim import Component, simulate
 
         comps = [Component(name, fmus.path(ident), dict(params)) for name, ident, params in self.components]
@@ -256,7 +343,13 @@ class CoSimSpec:
                         on_discard="error")  # an experiment needs every step
 
     def describe(self) -> str:
-        """``"sched (PeixotoEx1Scheduler) -> plant (PeixotoEx1Plant) ..."`` in component order."""
+        """The components in order, then the steps.
+
+        Returns
+        -------
+        str
+            E.g. ``"sched = PeixotoEx1Scheduler, plant = PeixotoEx1Plant; 1000 steps of 1"``.
+        """
         comps = ", ".join(f"{name} = {ident}" for name, ident, _ in self.components)
         return f"{comps}; {self.n_steps} steps of {self.step_size:g}"
 

@@ -57,7 +57,27 @@ __all__ = ["ExperimentRun", "reproduce", "reproduce_all", "default_workers"]
 @dataclass(frozen=True)
 class ExperimentRun:
     """One experiment as it ran: its result, where it wrote, how long it took
-    (a split experiment: its tasks' times and its last step's, added up)."""
+    (a split experiment: its tasks' times and its last step's, added up).
+
+    Parameters
+    ----------
+    name : str
+        The experiment's registered name.
+    title : str
+        Its title.
+    result : ExperimentResult
+        What it returned.
+    folder : Path
+        Where it wrote, ``out/<name>/``.
+    results_path : Path
+        Its ``results.json`` in ``folder``.
+    seconds : float
+        How long it ran.
+    options : dict
+        The keyword options it ran with: its reduced configuration
+        (:attr:`Experiment.reduced`) when ``reduced`` was asked for, else
+        empty.
+    """
 
     name: str
     title: str
@@ -342,9 +362,40 @@ def reproduce_all(
     workers: int | None = None,
 ) -> list[ExperimentRun]:
     """Every registered experiment (:func:`reproduce`), then ``out/report.md``
-    (:func:`lpvest.experiments._report.write_report`). ``fmus`` defaults to the
-    cache ``out/fmu-cache`` (``out/fmu-cache-native`` for ``backend="native"``);
-    ``workers`` as in :func:`reproduce`."""
+    (:func:`lpvest.experiments._report.write_report`).
+
+    Parameters
+    ----------
+    out : str or Path
+        The output folder; each experiment writes into ``out/<name>/``.
+    fmus : ExperimentFmus, str, Path or None, default None
+        The FMU cache (or its folder); None: ``out/fmu-cache``
+        (``out/fmu-cache-native`` for ``backend="native"``).
+    reduced : bool, default False
+        Use each experiment's quicker configuration (:attr:`Experiment.reduced`).
+    echo : callable, optional
+        Receives the printable output, as in :func:`reproduce`, then the
+        report's path.
+    backend : str or None, default None
+        The FMUs' backend (``"pythonfmu"`` or ``"native"``; default: the
+        given cache's, else ``"pythonfmu"``).
+    workers : int or None, default None
+        Dask worker processes, as in :func:`reproduce`.
+
+    Returns
+    -------
+    list of ExperimentRun
+        One per registered experiment, in the registry's order.
+
+    Raises
+    ------
+    ArgumentError
+        ``backend`` is unknown or not the given cache's, or ``workers`` is
+        not an integer >= 0.
+    SweepError
+        An experiment failed on a worker, or Dask (the ``sweep`` extra) is
+        missing.
+    """
     from . import registry
     from ._report import write_report
 

@@ -133,11 +133,42 @@ def scripts_dir() -> Path:
 class FmuPlan:
     """One FMU to build.
 
-    ``requirements`` names third-party packages the role imports inside
-    functions (module-level imports are found by the bundler); ``step_size``
-    is the default experiment's step, which is the sample time of a
-    discrete-time component; ``design`` a design file to carry instead of
-    solving one at build time.
+    Parameters
+    ----------
+    identifier : str
+        The FMU's model identifier and file stem (``PeixotoEx1Plant``).
+    role : str
+        ``Plant``, ``Scheduler``, ``Source`` or an estimator kind's role.
+    script : str
+        File name of the role's slave script in :func:`scripts_dir`.
+    system_path : Path
+        The model file the FMU carries.
+    system_name : str
+        The system's name.
+    model_key : str
+        The model of the file the FMU runs.
+    description : str
+        The model description's ``description``.
+    model_parameters : tuple of str, default ()
+        The system file's parameters that become FMU parameters.
+    requirements : tuple of str, default ()
+        Third-party packages the role imports inside functions (module-level
+        imports are found by the bundler).
+    estimator : EstimatorKind or None, default None
+        The estimator kind of an estimator role; None for the others.
+    step_size : float, default 1.0
+        The default experiment's step, which is the sample time of a
+        discrete-time component.
+    stop_time : float, default 100.0
+        The default experiment's stop time.
+    design : Path or None, default None
+        A design file to carry instead of solving one at build time.
+    design_options : tuple of (str, object), default ()
+        Keyword arguments of the estimator's design function (``epsilon``,
+        ``solver``), sorted by name.
+    design_cache : Path or None, default None
+        Folder of designs made at build time, reused by a rebuild; None: none
+        kept.
     """
 
     identifier: str
@@ -161,7 +192,20 @@ class FmuPlan:
 
 @dataclass(frozen=True)
 class ValidationResult:
-    """An FMU checked with ``fmpy.validation.validate_fmu``."""
+    """An FMU checked with ``fmpy.validation.validate_fmu``.
+
+    Parameters
+    ----------
+    path : Path
+        The FMU.
+    inputs, outputs, parameters : int
+        Its number of variables of each causality (0 when the model
+        description cannot be read).
+    size : int
+        The file's size in bytes (0 for a file that is missing or not built).
+    problems : list of str, default []
+        What the validation found; empty for a valid FMU (:attr:`ok`).
+    """
 
     path: Path
     inputs: int
@@ -181,7 +225,16 @@ class ValidationResult:
 
 @dataclass(frozen=True)
 class BuildResult:
-    """A plan, the FMU built from it, and its validation."""
+    """A plan, the FMU built from it, and its validation.
+
+    Parameters
+    ----------
+    plan : FmuPlan
+        What was to be built.
+    validation : ValidationResult
+        The FMU's validation; for an FMU that could not be built, its
+        ``problems`` say why.
+    """
 
     plan: FmuPlan
     validation: ValidationResult
@@ -216,9 +269,34 @@ def plan_system(
     """The FMUs to build for a system file (or an example's name), and notes on
     roles left out and why.
 
-    ``designs`` maps a role (``HinfPD``) to a design file the FMU carries
-    instead of solving at build time; without one, an example system's stored
-    design (:func:`lpvest.systems.stored_design`) is used when there is one.
+    Parameters
+    ----------
+    source : str or Path
+        A system file, or the name of an example system (``"peixoto-ex1"``).
+    kinds : sequence of EstimatorKind or None, optional
+        The estimator kinds to plan for; None: every registered kind.
+    designs : mapping of str to str or Path, or None, optional
+        Maps a role (``HinfPD``) to a design file the FMU carries instead of
+        solving at build time; without one, an example system's stored
+        design (:func:`lpvest.systems.stored_design`) is used when there is
+        one (and fits the plant).
+
+    Returns
+    -------
+    plans : list of FmuPlan
+        The plant first, then its Scheduler and Source when it has them, then
+        the estimators; empty when no model of the file can be a plant.
+    notes : list of str
+        One line per role left out, and why.
+
+    Raises
+    ------
+    ModelFileError
+        No such file or example, or the file is not a valid model file.
+    BuildError
+        The system has no model file, a design was given for a role the
+        system does not get, or an estimator kind names a sample-time
+        parameter it does not have.
     """
     from ..systems import AffineLPV, InnovationLPV, LPVInputOutput, LTVInputOutput, LTVStateSpace, PolytopicLPV
     from ..systems._catalog import stored_design
@@ -820,9 +898,37 @@ def build_fmu(
 ) -> Path:
     """Build one FMU into ``out_dir`` (``<identifier>.fmu``); returns its path.
 
-    ``backend``: ``"pythonfmu"`` (default) or ``"native"`` (:data:`BACKENDS`;
-    a role without a native runtime is refused there, :func:`backend_of`).
-    The same inputs give a byte-identical file (see the module documentation)."""
+    The same inputs give a byte-identical file (see the module documentation).
+
+    Parameters
+    ----------
+    plan : FmuPlan
+        What to build (:func:`plan_system`).
+    out_dir : str or Path
+        The output folder (created); the FMU replaces a file of the same name
+        only once it is complete.
+    progress : callable or None, optional
+        Called with a message on the design's progress; None: silent.
+    backend : str, default "pythonfmu"
+        ``"pythonfmu"`` or ``"native"`` (:data:`BACKENDS`; a role without a
+        native runtime is refused there, :func:`backend_of`).
+
+    Returns
+    -------
+    Path
+        The FMU, ``out_dir/<identifier>.fmu``.
+
+    Raises
+    ------
+    ArgumentError
+        ``backend`` is not one of :data:`BACKENDS`.
+    BuildError
+        The FMU cannot be made (slave scripts missing, a status bridge that
+        does not compile, a role the native backend does not build, ...).
+    LpvestError
+        The plan's design file does not fit the model, or the design made at
+        build time fails (e.g. :class:`~lpvest.core.LMIInfeasibleError`).
+    """
     if check_backend(backend) != "pythonfmu":
         return Path(resolve(BACKENDS[backend])(plan, out_dir, progress=progress))
     import pythonfmu
@@ -895,19 +1001,55 @@ def build_fmus(
     """Build and validate the FMUs of the given system files (default: every
     example system). Returns the results and the planning notes.
 
-    ``backend``: ``"pythonfmu"`` (default) or ``"native"``: every
-    discrete-time role as C; the roles the native backend does not build (the
-    continuous-time LTV plant, the B-spline observer) are pythonfmu FMUs, with
-    a note.
+    Designs made at build time are kept in ``out_dir/.designs`` and reused by
+    a rebuild with the same model file, options and lpvest version. An FMU
+    whose design fails at build time (no certified design, ...) is a result
+    with the reason as its problem; the others are built and validated.
 
-    ``roles`` keeps only the FMUs of these roles (``Plant``, ``HinfPD``, ...);
-    ``designs`` maps a role to a design file to carry (see :func:`plan_system`);
-    ``design_options`` go to the design functions of filters designed at build
-    time (``epsilon``: design there instead of searching; ``solver``). Designs
-    made at build time are kept in ``out_dir/.designs`` and reused by a rebuild
-    with the same model file, options and lpvest version. An FMU that cannot
-    be built (no certified design, ...) is a result with the reason as its
-    problem; the others are built and validated."""
+    Parameters
+    ----------
+    sources : iterable of str or Path, or None, optional
+        System files or example names; None: every example system.
+    out_dir : str or Path, default DEFAULT_OUT
+        The output folder (created).
+    kinds : sequence of EstimatorKind or None, optional
+        The estimator kinds to plan for; None: every registered kind.
+    roles : iterable of str or None, optional
+        Keep only the FMUs of these roles (``Plant``, ``HinfPD``, ...); None:
+        all.
+    designs : mapping of str to str or Path, or None, optional
+        Maps a role to a design file to carry (see :func:`plan_system`).
+    progress : callable or None, optional
+        Called with a message before each FMU and on a design's progress;
+        None: silent.
+    design_options : mapping of str to object, or None, optional
+        Keyword arguments of the design functions of filters designed at
+        build time (``epsilon``: design there instead of searching;
+        ``solver``).
+    backend : str, default "pythonfmu"
+        ``"pythonfmu"`` or ``"native"``: every discrete-time role as C; the
+        roles the native backend does not build (the continuous-time LTV
+        plant, the B-spline observer) are pythonfmu FMUs, with a note.
+
+    Returns
+    -------
+    results : list of BuildResult
+        One per planned FMU, in order.
+    notes : list of str
+        The planning notes, and one line per FMU built by another backend
+        than ``backend``.
+
+    Raises
+    ------
+    ArgumentError
+        ``backend`` is not one of :data:`BACKENDS`.
+    ModelFileError
+        A source is no model file or example, or a given design file does
+        not fit its plant.
+    BuildError
+        Planning or building fails for a reason other than a design made at
+        build time (see :func:`plan_system`, :func:`build_fmu`).
+    """
     from ..core._errors import LpvestError
 
     check_backend(backend)
@@ -953,7 +1095,19 @@ def build_fmus(
 
 def validate_fmus(paths: Iterable[str | Path]) -> list[ValidationResult]:
     """Check each FMU with ``fmpy.validation.validate_fmu`` (any problem is
-    reported; a file that cannot be read is one problem)."""
+    reported; a file that cannot be read is one problem).
+
+    Parameters
+    ----------
+    paths : iterable of str or Path
+        The FMU files.
+
+    Returns
+    -------
+    list of ValidationResult
+        One per path, in order; a missing file gives a result with the
+        problem ``"<path>: no such file"``.
+    """
     from fmpy import read_model_description
     from fmpy.validation import validate_fmu
 

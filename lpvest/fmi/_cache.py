@@ -108,6 +108,12 @@ class FmuCache:
     an identifier is one of them
     (:class:`~lpvest.experiments.ExperimentFmus`: the paper experiments').
 
+    ``fmus["PeixotoEx1Plant"]`` (or :meth:`path`) returns the FMU's path,
+    building and validating it first when it is missing or out of date.
+    :attr:`built` and :attr:`reused` list what happened. :meth:`resolved`
+    gives a copy for other processes (it pickles) that serves the FMUs
+    checked here and builds nothing.
+
     Parameters
     ----------
     directory : str or Path
@@ -119,11 +125,10 @@ class FmuCache:
         The FMU backend (:data:`lpvest.fmi._build.BACKENDS`); ``"native"``
         builds every discrete-time role as C (the others stay pythonfmu FMUs).
 
-    ``fmus["PeixotoEx1Plant"]`` (or :meth:`path`) returns the FMU's path,
-    building and validating it first when it is missing or out of date.
-    :attr:`built` and :attr:`reused` list what happened. :meth:`resolved`
-    gives a copy for other processes (it pickles) that serves the FMUs
-    checked here and builds nothing.
+    Raises
+    ------
+    ArgumentError
+        ``backend`` is not one of :data:`lpvest.fmi._build.BACKENDS`.
     """
 
     def __init__(self, directory: str | Path, *, progress: Callable[[str], None] | None = None,
@@ -177,16 +182,59 @@ class FmuCache:
 
     # -- what exists ----------------------------------------------------------
     def plan(self, identifier: str) -> Any:
-        """The :class:`~lpvest.fmi.FmuPlan` of ``identifier``."""
+        """The :class:`~lpvest.fmi.FmuPlan` of ``identifier``.
+
+        A subclass implements it; here it raises ``NotImplementedError``.
+
+        Parameters
+        ----------
+        identifier : str
+            An FMU of this cache (:meth:`known`).
+
+        Returns
+        -------
+        FmuPlan
+            What the FMU is built from.
+        """
         raise NotImplementedError
 
     def known(self, identifier: str) -> bool:
-        """Whether ``identifier`` names an FMU of this cache."""
+        """Whether ``identifier`` names an FMU of this cache.
+
+        A subclass implements it; here it raises ``NotImplementedError``.
+
+        Parameters
+        ----------
+        identifier : str
+            An FMU identifier (``PeixotoEx1Plant``).
+
+        Returns
+        -------
+        bool
+            True when :meth:`plan` can plan it.
+        """
         raise NotImplementedError
 
     # -- access ---------------------------------------------------------------
     def path(self, identifier: str) -> Path:
-        """The FMU's path; built (and validated) first when missing or stale."""
+        """The FMU's path; built (and validated) first when missing or stale.
+
+        Parameters
+        ----------
+        identifier : str
+            An FMU of this cache.
+
+        Returns
+        -------
+        Path
+            ``directory/<identifier>.fmu``, up to date.
+
+        Raises
+        ------
+        FmuCacheError
+            The FMU was not resolved for this copy (:meth:`resolved`), or the
+            built FMU fails validation.
+        """
         with self._lock:
             if identifier in self._checked:
                 return self._checked[identifier]
@@ -293,6 +341,18 @@ class FmuCache:
     __getitem__ = path
 
     def paths(self, identifiers: Iterable[str]) -> dict[str, Path]:
+        """The paths of several FMUs, each as :meth:`path` gives it.
+
+        Parameters
+        ----------
+        identifiers : iterable of str
+            FMUs of this cache.
+
+        Returns
+        -------
+        dict of str to Path
+            Each identifier's FMU, up to date, in the given order.
+        """
         return {i: self.path(i) for i in identifiers}
 
     def resolved(self, identifiers: Iterable[str]) -> Self:
@@ -333,7 +393,15 @@ class FmuCache:
     def adopt(self, paths: Mapping[str, str | Path]) -> None:
         """Take FMUs built from the current code elsewhere (e.g. a test
         session's FMU set) into the cache: copied and recorded as up to date.
-        Identifiers this cache does not know are ignored."""
+        Identifiers this cache does not know are ignored.
+
+        Parameters
+        ----------
+        paths : mapping of str to str or Path
+            FMU files by identifier. They are not rebuilt nor compared with the
+            current plan: the caller vouches that they were built from it.
+            Identifiers already checked here are left alone.
+        """
         with self._lock:
             for identifier, src in paths.items():
                 if not self.known(identifier) or identifier in self._checked:
@@ -346,7 +414,13 @@ class FmuCache:
                                           "sha256": _file_digest(target), "built": "adopted from " + str(src)})
 
     def summary(self) -> str:
-        """One line: how many FMUs were built and reused, and where."""
+        """One line: how many FMUs were built and reused, and where.
+
+        Returns
+        -------
+        str
+            E.g. ``"FMU cache <directory>: built 2 (3.1 s), reused 5 up-to-date"``.
+        """
         parts = []
         if self.built:
             parts.append(f"built {len(self.built)} ({self.build_time:.1f} s)")
