@@ -869,6 +869,12 @@ def test_reproduce_with_the_native_backend(native_fmus, tmp_path):
     assert "(native backend)" in cache.summary()
     with zipfile.ZipFile(cache["PeixotoEx1HinfPDEps150"]) as z:
         assert "binaries/linux64/PeixotoEx1HinfPDEps150.so" in z.namelist()
+    # a role the native backend supports, built by the cache itself: native, no Python inside (the cache
+    # once built every FMU with pythonfmu and recorded it under the native fingerprint)
+    fresh = ExperimentFmus(tmp_path / "fresh", backend="native")
+    with zipfile.ZipFile(fresh["PeixotoEx1Scheduler"]) as z:
+        assert "binaries/linux64/PeixotoEx1Scheduler.so" in z.namelist()
+        assert [n for n in z.namelist() if n.endswith(".py")] == []
     with pytest.raises(ArgumentError, match="builds with backend 'native', not 'pythonfmu'"):
         as_experiment_fmus(cache, backend="pythonfmu")
     with pytest.raises(ArgumentError, match="backend 'cython' is not one of pythonfmu, native"):

@@ -304,12 +304,12 @@ class FmuCache:
         FmuCacheError
             The built FMU fails validation.
         """
-        from ._build import build_fmu, validate_fmus
+        from ._build import backend_of, build_fmu, validate_fmus
 
         plan = self.plan(identifier)
         want = fingerprint(plan, self.backend)
         t = time.perf_counter()
-        path = build_fmu(plan, self.directory)
+        path = build_fmu(plan, self.directory, backend=backend_of(plan, self.backend))
         (check,) = validate_fmus([path])
         if not check.ok:
             raise FmuCacheError(f"{identifier}: the built FMU fails validation: " + "; ".join(check.problems))
