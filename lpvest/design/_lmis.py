@@ -215,7 +215,7 @@ class LMIBlock(NamedTuple):
         Vertex of ``alpha_{k+1}``: ``P(alpha_{k+1})`` is ``P_l``.
     matrix : ndarray or cvxpy expression, shape (4 nx + nz + nw, 4 nx + nz + nw)
         The symmetric matrix required to be negative definite (numpy for :func:`lmi_matrices`, cvxpy
-        inside :class:`HinfProgram`).
+        inside :class:`~lpvest.design.HinfProgram`).
     """
 
     label: str
@@ -314,7 +314,7 @@ def lmi_matrices(
     variables : mapping
         ``P1, P2, P3, X1..X6`` -> ``N`` arrays each (vertex ``j`` at index ``j``); ``H, Af, Bf, Cf, Df`` ->
         ``N`` arrays each (only index 0 is used when ``robust``); ``delta`` -> float (``gamma^2``).
-        :meth:`HinfProgram.last_variables` gives this mapping (in the rescaled coordinates).
+        :meth:`~lpvest.design.HinfProgram.last_variables` gives this mapping (in the rescaled coordinates).
     epsilon : float, optional
         The paper's scalar (finite), for the LMIs as printed, ``(a, b) = (epsilon, 1)``.
     multiplier_ab : (float, float), optional

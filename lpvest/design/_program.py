@@ -12,7 +12,7 @@ solver settings, then raises :class:`~lpvest.core.LMIInfeasibleError`.
 
 **Dual bound.** Every solve also gives a lower bound on the best ``gamma``
 at its ``epsilon`` (``gamma_lower`` of :class:`DesignAttempt` and
-:class:`EpsilonCurve`). The bound is for the strict LMIs themselves (margin
+:class:`~lpvest.design.EpsilonCurve`). The bound is for the strict LMIs themselves (margin
 0), which every certified design satisfies whatever margin it was solved
 with. Write them as ``G_i(x) <= 0``, ``G_i`` affine (``M_i(x)`` for the LMIs,
 ``-P_j(x)`` for the Lyapunov matrices), and the program as ``min delta``. For
@@ -27,7 +27,7 @@ Z_k)`` is the complementarity gap plus ``m sum_i tr Z_i``, the first-order
 cost of the margin (on Peixoto et al.'s Example 1 with Clarabel about 1e-8 and
 1e-4 relative; on a 4-vertex plant with SCS about 1e-5 and 1e-6).
 ``tests/test_hinf_design.py`` checks the bound against solves with margins
-10 and 100 times smaller. :func:`search_epsilon` uses it to tell a curve that
+10 and 100 times smaller. :func:`~lpvest.design.search_epsilon` uses it to tell a curve that
 """
 
 from __future__ import annotations

@@ -146,7 +146,7 @@ def epsilon_curve(
     kind : {"parameter-dependent", "robust"}, default "parameter-dependent"
         Theorem 1 (gain-scheduled filter) or Corollary 1 (robust filter).
     solver : str, default DEFAULT_SOLVER ("AUTO")
-        ``"AUTO"`` (Clarabel or SCS by size, :func:`choose_solver`) or a cvxpy solver name.
+        ``"AUTO"`` (Clarabel or SCS by size, :func:`~lpvest.design.choose_solver`) or a cvxpy solver name.
     margin : float, default DEFAULT_MARGIN (1e-6)
         Strictness margin of the LMIs: ``M << -margin I``, ``P_i >> margin I``.
     solver_options : mapping, optional
@@ -230,7 +230,7 @@ def search_epsilon(
     xatol : float, default 1e-3
         Absolute tolerance of the Brent search, in ``phi`` (radians).
     solver : str, default DEFAULT_SOLVER ("AUTO")
-        ``"AUTO"`` (Clarabel or SCS by size, :func:`choose_solver`) or a cvxpy solver name.
+        ``"AUTO"`` (Clarabel or SCS by size, :func:`~lpvest.design.choose_solver`) or a cvxpy solver name.
     margin : float, default DEFAULT_MARGIN (1e-6)
         Strictness margin of the LMIs: ``M << -margin I``, ``P_i >> margin I``.
     solver_options : mapping, optional
