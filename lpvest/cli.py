@@ -304,7 +304,7 @@ def _design_args(items: Sequence[str] | None) -> dict[str, Path]:
 def cmd_build(args: argparse.Namespace) -> int:
     import warnings
 
-    from .design._hinf import check_solver
+    from .design._program import check_solver
     from .fmi._build import BuildWarning, build_fmus, format_table, known_roles
 
     out = _out_dir(args.out)
@@ -343,8 +343,9 @@ def cmd_build(args: argparse.Namespace) -> int:
 
 
 def cmd_design(args: argparse.Namespace) -> int:
-    from .design._hinf import check_solver, design_hinf, search_epsilon
+    from .design._program import check_solver, design_hinf
     from .design._result import KIND_PD, KIND_ROBUST
+    from .design._search import search_epsilon
     from .systems._affine import AffineLPV
     from .systems._modelfile import load_system
     from .systems._polytopic import PolytopicLPV

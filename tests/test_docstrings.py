@@ -68,7 +68,7 @@ OBJECTS = _public_objects()
 def test_the_public_api_is_found():
     # the walk above finds the API a user imports (so the test below cannot pass by finding nothing)
     assert "lpvest.estimators.kalman._batch.kalman_filter" in OBJECTS
-    assert "lpvest.design._hinf.design_hinf" in OBJECTS
+    assert "lpvest.design._program.design_hinf" in OBJECTS
     assert "lpvest.sweep._run.run_sweep" in OBJECTS
     assert len(OBJECTS) > 250
 

@@ -46,13 +46,15 @@ def _run(code: str, *, cwd: Path | None = None, timeout: int = 900) -> dict:
 
 @pytest.mark.parametrize(("name", "present", "absent", "requirements"), [
     ("PeixotoEx1Plant", ["lpvest.systems._streaming", "lpvest.fmi._slave", "pythonfmu.fmi2slave"],
-     ["lpvest.cli", "lpvest.cosim", "lpvest.experiments._fmus", "lpvest.design._hinf", "lpvest.estimators.kalman",
-      "lpvest.fmi._build", "lpvest.cosim._ssp"], ["numpy>=1.26"]),
+     ["lpvest.cli", "lpvest.cosim", "lpvest.experiments._fmus", "lpvest.design._lmis", "lpvest.design._program",
+      "lpvest.design._search", "lpvest.estimators.kalman", "lpvest.fmi._build", "lpvest.cosim._ssp"], ["numpy>=1.26"]),
     ("CoxTothTruncationKalman", ["lpvest.estimators.kalman", "lpvest.fmi.factories._kalman"],
-     ["lpvest.estimators.bspline", "lpvest.estimators._truncated", "lpvest.design._hinf", "lpvest.cli"],
+     ["lpvest.estimators.bspline", "lpvest.estimators._truncated", "lpvest.design._lmis", "lpvest.design._program",
+      "lpvest.design._search", "lpvest.cli"],
      ["numpy>=1.26"]),
     ("PeixotoEx1HinfPD", ["lpvest.estimators._hinf", "lpvest.design._result"],
-     ["lpvest.design._hinf", "lpvest.fmi._designs", "lpvest.estimators.kalman"], ["numpy>=1.26"]),
+     ["lpvest.design._lmis", "lpvest.design._program", "lpvest.design._search", "lpvest.fmi._designs",
+      "lpvest.estimators.kalman"], ["numpy>=1.26"]),
     ("SridharLtvBSplineObserver", ["lpvest.estimators.bspline", "lpvest.estimators.bspline._kernels"],
      ["lpvest.estimators.kalman", "lpvest.cli"], ["numpy>=1.26", "scipy>=1.11"]),
 ])
@@ -305,13 +307,14 @@ def test_design_then_build_from_the_design_without_solving(tmp_path, capsys, mon
     assert doc["kind"] == "parameter-dependent" and len(doc["model_digest"]) == 64
 
     # building from the file never solves: the solver is not even importable
-    import lpvest.design._hinf as hinf
+    import lpvest.design._program as program
+    import lpvest.design._search as search
 
     def no_solver(*args, **kwargs):
         raise AssertionError("the build solved an LMI")
 
-    monkeypatch.setattr(hinf, "search_epsilon", no_solver)
-    monkeypatch.setattr(hinf, "design_hinf", no_solver)
+    monkeypatch.setattr(search, "search_epsilon", no_solver)
+    monkeypatch.setattr(program, "design_hinf", no_solver)
     for folder in ("x", "y"):
         assert main(["build", "--model", "peixoto-ex1", "--kinds", "HinfPD", "--design", str(design),
                      "--out", str(tmp_path / folder)]) == 0

@@ -29,7 +29,8 @@ from lpvest.design import (
     multiplier,
     search_epsilon,
 )
-from lpvest.design._hinf import _canonical_phi, _search
+from lpvest.design._lmis import canonical_phi
+from lpvest.design._search import _search
 from tests import hinf_oracle as oracle
 from tests.tolerances import LMI_RESOLVE_GAMMA_RTOL, roundoff
 
@@ -315,7 +316,7 @@ def _search_on(curve, n_grid=12):
     points = {}
 
     def evaluate(phi):
-        key = _canonical_phi(phi)
+        key = canonical_phi(phi)
         if key not in points:
             points[key] = _fake_attempt(*curve(key))
         return points[key].gamma
@@ -361,7 +362,7 @@ def test_a_failed_neighbour_is_no_evidence_but_an_infeasible_one_is(status, refi
     points = {}
 
     def evaluate(phi):
-        key = _canonical_phi(phi)
+        key = canonical_phi(phi)
         if key not in points:
             g, lo = curve(key)
             points[key] = _fake_attempt(g, lo, status if math.isinf(g) else "optimal")

@@ -1,4 +1,4 @@
-"""The H-infinity program's own algebra (lpvest/design/_hinf.py): the dual bound on made-up
+"""The H-infinity program's own algebra (lpvest/design/_program.py): the dual bound on made-up
 duals, the eigenvalue check that certifies a returned point, the solver fallback, and the
 small rules around them. The designs themselves are checked against oracles in
 tests/test_hinf_design.py."""
@@ -11,11 +11,14 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-import lpvest.design._hinf as hinf
+import lpvest.design._lmis as lmis
+import lpvest.design._program as program
+import lpvest.design._search as search
 from lpvest import load_system
 from lpvest.core._errors import ArgumentError, ArgumentTypeError, DimensionError, LMIInfeasibleError, NonFiniteError
 from lpvest.design import KIND_PD, KIND_ROBUST, HinfProgram
-from lpvest.design._hinf import LMIBlock, choose_solver, multiplier
+from lpvest.design._lmis import LMIBlock, multiplier
+from lpvest.design._program import choose_solver
 
 EPS = np.finfo(float).eps
 
@@ -39,7 +42,7 @@ def test_the_dual_bound_is_delta_plus_each_lmi_inner_product_minus_each_lyapunov
     P = np.array([[2.0, 0.5], [0.5, 3.0]])
     W = np.array([[0.25, -0.5], [-0.5, 1.0]])
     lmis = [LMIBlock("Phi_111", 0, 0, 0, M1), LMIBlock("Phi_112", 0, 0, 1, M2)]
-    assert np.array_equal(hinf._lyapunov_matrices(values)[0], P)  # [[P1, P3], [P3^T, P2]]
+    assert np.array_equal(program._lyapunov_matrices(values)[0], P)  # [[P1, P3], [P3^T, P2]]
     fake = SimpleNamespace(_problem=SimpleNamespace(constraints=[SimpleNamespace(dual_value=d) for d in (Z1, Z2, W)]))
     got = HinfProgram._dual_bound(fake, values, lmis)  # type: ignore[arg-type]
     # <Z1, M1> = -0.5 + 0.1 - 0.4 = -0.8; <Z2, M2> = -0.375 - 1 = -1.375; <W, P> = 0.5 - 0.5 + 3 = 3
@@ -57,7 +60,7 @@ def checked(monkeypatch):
     """HinfProgram._check with the LMIs replaced by given matrices: the check's own rules."""
     plant = load_system("peixoto-ex1").model()
     blocks: list[np.ndarray] = []
-    monkeypatch.setattr(hinf, "lmi_matrices", lambda *a, **k: [LMIBlock(f"Phi_{i}", 0, 0, 0, m)
+    monkeypatch.setattr(program, "lmi_matrices", lambda *a, **k: [LMIBlock(f"Phi_{i}", 0, 0, 0, m)
                                                                    for i, m in enumerate(blocks)])
     prog = SimpleNamespace(kind=KIND_PD, printed_phi21=False)
 
@@ -113,7 +116,7 @@ def ex1():
 def test_an_auto_chosen_scs_point_that_fails_the_check_is_solved_by_clarabel(ex1, monkeypatch):
     """SCS stopped after a few iterations returns a point that fails the check, twice (the
     second time with the larger margin); a single design then falls back to Clarabel."""
-    monkeypatch.setattr(hinf, "AUTO_CLARABEL_MAX_ROWS", 0)  # AUTO takes SCS at every size
+    monkeypatch.setattr(program, "AUTO_CLARABEL_MAX_ROWS", 0)  # AUTO takes SCS at every size
     prog = HinfProgram.for_plant(ex1, kind=KIND_ROBUST, solver_options={"max_iters": 3})
     assert prog.solver == "SCS" and prog.auto
     res = prog.attempt(ex1, 150.0)
@@ -152,11 +155,11 @@ def test_the_multiplier_of_epsilon_is_a_unit_direction_and_phi_is_taken_modulo_p
     with pytest.raises(NonFiniteError, match=r"^epsilon is NaN$"):
         multiplier(math.nan)
     for phi in (0.3, -1.2, 0.3 + math.pi, -1.2 - 2 * math.pi):
-        a, b = hinf._ab_of_phi(phi)
-        p = math.atan(hinf._epsilon_of_phi(phi))
+        a, b = lmis.ab_of_phi(phi)
+        p = math.atan(lmis.epsilon_of_phi(phi))
         assert (a, b) == pytest.approx((math.sin(p), math.cos(p)), abs=8 * EPS)
     for phi in (math.pi / 2, -math.pi / 2, 3 * math.pi / 2):
-        assert hinf._ab_of_phi(phi) == (1.0, 0.0) and hinf._epsilon_of_phi(phi) == math.inf
+        assert lmis.ab_of_phi(phi) == (1.0, 0.0) and lmis.epsilon_of_phi(phi) == math.inf
 
 
 def test_programs_refuse_bad_dimensions_kinds_and_margins(ex1):
@@ -199,7 +202,7 @@ def test_the_stability_check_covers_vertices_edges_the_barycentre_and_the_interi
     """A(alpha) is checked on these points of the unit simplex before a design is tried: each on
     the simplex, every vertex, every edge finely, the barycentre and (beyond two vertices, where
     the edge is the whole simplex) 64 interior points."""
-    pts = hinf._simplex_points(n)
+    pts = program._simplex_points(n)
     assert np.all(pts >= 0) and np.allclose(pts.sum(axis=1), 1.0, rtol=0, atol=4 * n * np.finfo(float).eps)
     per_edge = 101 if n <= 4 else 21
     edges = n * (n - 1) // 2
@@ -236,11 +239,11 @@ def test_an_epsilon_search_with_no_certified_point_says_so_naming_the_program_an
 
     def attempt(self, plant, epsilon=None, *, phi=None, **options):
         tried.append(phi)
-        return hinf.DesignAttempt(None, "infeasible", math.inf, "made-up solve: infeasible")
+        return program.DesignAttempt(None, "infeasible", math.inf, "made-up solve: infeasible")
 
     monkeypatch.setattr(HinfProgram, "attempt", attempt)
     with pytest.raises(LMIInfeasibleError) as info:
-        hinf.search_epsilon(ex1, n_grid=6)
+        search.search_epsilon(ex1, n_grid=6)
     assert str(info.value) == ("parameter-dependent H-infinity LMIs for peixoto-ex1/plant at every epsilon tried "
                                "(6 values), solver CLARABEL: no certified solution (made-up solve: infeasible)")
     assert info.value.status == "infeasible" and info.value.detail == "made-up solve: infeasible"
@@ -254,7 +257,7 @@ def test_an_epsilon_search_with_no_certified_point_says_so_naming_the_program_an
 def test_a_solver_that_cannot_solve_lmis_is_refused_before_compiling(solver):
     """An unknown name, or an installed solver without semidefinite cones (OSQP): one
     ArgumentError naming the solvers that can, not cvxpy's SolverError after the compile."""
-    from lpvest.design._hinf import sdp_solvers
+    from lpvest.design._program import sdp_solvers
 
     assert {"CLARABEL", "SCS"} <= set(sdp_solvers()) and "OSQP" not in sdp_solvers()
     with pytest.raises(ArgumentError, match=r"solver .*: expected AUTO or an installed cvxpy solver of "

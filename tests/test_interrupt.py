@@ -70,7 +70,7 @@ def test_scs_stopped_by_its_own_sigint_handler_is_an_interruption_not_a_failed_p
         import os, sys, threading
         import cvxpy as cp, numpy as np
         from lpvest.core._interrupt import Interrupted, abandoned_calls, call_interruptibly, handling_signals
-        from lpvest.design._hinf import _interruptible_scs
+        from lpvest.design._program import _interruptible_scs
 
         n = 60
         rng = np.random.default_rng(0)

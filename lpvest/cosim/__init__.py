@@ -17,12 +17,11 @@ Examples
 from __future__ import annotations
 
 from ._cosimfile import CoSimFile, CoSimResult, load_cosim
+from ._errors import AlgebraicLoopError, CoSimulationError
 from ._master import (
-    AlgebraicLoopError,
     Component,
     Connection,
     CoSimulation,
-    CoSimulationError,
     DiscardedStep,
     DiscardedStepWarning,
     simulate,

@@ -51,7 +51,8 @@ import numpy as np
 from ..core._errors import ModelFileError, abbreviate, shorten
 from ..core._plotting import save_figure
 from ..core._toml import describe_value, read_toml
-from ._master import Component, Connection, CoSimulation, CoSimulationError, DiscardedStep, step_count
+from ._errors import CoSimulationError
+from ._master import Component, Connection, CoSimulation, DiscardedStep, step_count
 
 __all__ = ["CoSimFile", "CoSimResult", "load_cosim", "DEFAULT_FMU_DIR"]
 

@@ -8,7 +8,8 @@ variables in dependency order, records, then calls ``doStep`` on every
 component. Direct feedthrough is read from each FMU's ``ModelStructure``
 (an output without a ``dependencies`` list depends on every input, as FMI 2.0
 says) and can be overridden per component. A cycle through feedthrough paths is
-an algebraic loop and a clear error.
+an algebraic loop and a clear error. The order is a pure function of that data
+(``_graph.py``: :func:`~lpvest.cosim._graph.evaluation_order`).
 
 Per step the master makes one ``fmi2SetReal`` and one ``fmi2GetReal`` per
 component at most (value references looked up once; only outputs that are
@@ -47,55 +48,19 @@ import numpy as np
 
 from ..core._errors import LpvestError, abbreviate, shorten
 from ..core._interrupt import interruptible, raise_if_pending
+from ._errors import CoSimulationError
+from ._graph import Block, batches, evaluation_order
 
 __all__ = [
     "Component",
     "Connection",
     "CoSimulation",
-    "CoSimulationError",
-    "AlgebraicLoopError",
     "DiscardedStep",
     "DiscardedStepWarning",
     "simulate",
     "whole_steps",
     "step_count",
 ]
-
-
-class CoSimulationError(LpvestError, RuntimeError):
-    """A component failed, or the set-up is invalid (names, types, units).
-
-    Parameters
-    ----------
-    message : str
-        The error message.
-    where : str, default ""
-        The field the error is about (stored as :attr:`where`, see below).
-
-    Attributes
-    ----------
-    where : str
-        What in the set-up the error is about, in the terms of a co-simulation
-        file (:mod:`lpvest.cosim`): ``"connections[2]"`` (1-based),
-        ``"components.plant"``, ``"components.plant.parameters.x0"``,
-        ``"record[1]"``, ``"step_size"``; ``""`` when it is about no one field.
-    """
-
-    def __init__(self, message: str, *, where: str = "") -> None:
-        super().__init__(message)
-        self.where = where
-
-
-class AlgebraicLoopError(CoSimulationError):
-    """The connections close a loop through direct-feedthrough paths.
-
-    Parameters
-    ----------
-    message : str
-        The error message (names the variables on the loop).
-    where : str, default ""
-        The field the error is about (``"connections"`` when raised by the master).
-    """
 
 
 class DiscardedStepWarning(UserWarning):
@@ -663,68 +628,18 @@ class CoSimulation:
 
     def _order(self) -> list[tuple[str, int, list[Any]]]:
         """Operations per step: ``("get", comp, [_Var, ...])`` reads outputs, ``("set",
-        comp, links)`` copies upstream values into inputs, in dependency order."""
-        # nodes: ("o", comp, output) and ("i", comp, input)
-        edges: dict[tuple, set[tuple]] = {}
-        for u_i, u in enumerate(self._units):
-            for o, ins in u.depends.items():
-                edges.setdefault(("o", u_i, o), set())
-                for i in ins:
-                    edges.setdefault(("i", u_i, i), set()).add(("o", u_i, o))
-        for s, d in self._links:
-            edges.setdefault(("o", s.comp, s.name), set()).add(("i", d.comp, d.name))
-            edges.setdefault(("i", d.comp, d.name), set())
-        indeg = {n: 0 for n in edges}
-        for outs in edges.values():
-            for m in outs:
-                indeg[m] = indeg.get(m, 0) + 1
-        # Kahn's algorithm; among ready nodes prefer the lowest component index
-        # and, within a component, "set" before "get": every input of a
-        # component is then set before any of its outputs is read, so it
-        # computes its outputs once per step, and batches stay together.
-        def key(n: tuple) -> tuple:
-            return (n[1], n[0] == "o", n[2])
-
-        ready = sorted([n for n, d in indeg.items() if d == 0], key=key)
-        order = []
-        while ready:
-            n = ready.pop(0)
-            order.append(n)
-            for m in sorted(edges.get(n, ()), key=key):
-                indeg[m] -= 1
-                if indeg[m] == 0:
-                    ready.append(m)
-            ready.sort(key=key)
-        if len(order) < len(indeg):
-            stuck = [n for n, d in indeg.items() if d > 0]
-            names = sorted(f"{self._units[n[1]].spec.name}.{n[2]}" for n in stuck)
-            raise AlgebraicLoopError(
-                "algebraic loop: these variables depend on each other through direct feedthrough: "
-                + ", ".join(names)
-                + " (declare feedthrough=False for a component whose outputs do not depend on its inputs)",
-                where="connections",
-            )
-        # group into batches: consecutive ops on the same component and kind
-        # (outputs that are neither connected nor recorded are not read)
+        comp, links)`` copies upstream values into inputs, in dependency order
+        (:func:`~lpvest.cosim._graph.evaluation_order`); outputs that are neither
+        connected nor recorded are not read."""
+        blocks = [Block(u.spec.name, u.depends) for u in self._units]
+        order = evaluation_order(blocks, [((s.comp, s.name), (d.comp, d.name)) for s, d in self._links])
         link_of = {(d.comp, d.name): (s, d) for s, d in self._links}
         needed = {(s.comp, s.name) for s, _ in self._links} | {(v.comp, v.name) for v in self._record}
-        schedule: list[tuple[str, int, list]] = []
-        for kind, comp, name in order:
-            if kind == "i":
-                if (comp, name) not in link_of:
-                    continue
-                item = link_of[(comp, name)]
-                op = "set"
-            else:
-                if (comp, name) not in needed:
-                    continue
-                item = self._units[comp].variables[name]
-                op = "get"
-            if schedule and schedule[-1][0] == op and schedule[-1][1] == comp:
-                schedule[-1][2].append(item)
-            else:
-                schedule.append((op, comp, [item]))
-        return schedule
+        return [
+            (b.op, b.component,
+             [link_of[b.component, n] if b.op == "set" else self._units[b.component].variables[n] for n in b.names])
+            for b in batches(order, connected=link_of.keys(), read=needed)
+        ]
 
     def _record_list(self, record: Sequence[str] | None) -> list[_Var]:
         if record is None:

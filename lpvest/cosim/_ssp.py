@@ -107,7 +107,8 @@ import numpy as np
 from ..core._errors import abbreviate, shorten
 from ..fmi._build import write_zip_entry
 from ..fmi._parameters import SPEC_FILE
-from ._master import Component, Connection, CoSimulation, CoSimulationError, whole_steps
+from ._errors import CoSimulationError
+from ._master import Component, Connection, CoSimulation, whole_steps
 
 __all__ = ["write_ssp", "read_ssp", "SspSystem", "simulate_ssp", "IMPORTERS"]
 

@@ -1,6 +1,13 @@
 """Filter design (at build time; cvxpy is imported inside the functions that
 need it, so importing this package needs only numpy).
 
+The H-infinity design of Peixoto et al. in three levels, each importing only
+the ones before it: ``_lmis.py`` (the LMIs, written once for numpy and cvxpy),
+``_program.py`` (:class:`HinfProgram`, compiled once: solver choice, the
+eigenvalue check, retries, warm starts, the dual bound; :func:`design_hinf`)
+and ``_search.py`` (the search over ``epsilon``); ``_result.py`` holds the
+design (:class:`HinfDesign`) as data.
+
 Examples
 --------
 Theorem 1 for Peixoto et al.'s Example 1 at the paper's ``epsilon = 150``
@@ -12,20 +19,18 @@ Theorem 1 for Peixoto et al.'s Example 1 at the paper's ``epsilon = 150``
 ('parameter-dependent', 1.214)
 """
 
-from ._hinf import (
+from ._lmis import (
+    LMIBlock as LMIBlock,
+    lmi_matrices as lmi_matrices,
+    multiplier as multiplier,
+)
+from ._program import (
     DEFAULT_MARGIN as DEFAULT_MARGIN,
     DEFAULT_SOLVER as DEFAULT_SOLVER,
     DesignAttempt as DesignAttempt,
-    EpsilonCurve as EpsilonCurve,
-    EpsilonSearch as EpsilonSearch,
     HinfProgram as HinfProgram,
-    LMIBlock as LMIBlock,
     choose_solver as choose_solver,
     design_hinf as design_hinf,
-    epsilon_curve as epsilon_curve,
-    lmi_matrices as lmi_matrices,
-    multiplier as multiplier,
-    search_epsilon as search_epsilon,
 )
 from ._result import (
     DESIGN_FORMAT as DESIGN_FORMAT,
@@ -34,6 +39,12 @@ from ._result import (
     KIND_ROBUST as KIND_ROBUST,
     FilterMatrices as FilterMatrices,
     HinfDesign as HinfDesign,
+)
+from ._search import (
+    EpsilonCurve as EpsilonCurve,
+    EpsilonSearch as EpsilonSearch,
+    epsilon_curve as epsilon_curve,
+    search_epsilon as search_epsilon,
 )
 
 __all__ = [

@@ -56,7 +56,7 @@ is the error of (2) on (1). The LMIs involve only ``A, Bw, Cz, Dz, Cy, Dy``
 (no condition on the input matrices is needed). QED
 
 The copy runs open loop, so it needs ``A(alpha)`` stable, which the LMIs
-imply (:func:`lpvest.design._hinf._instability`). It needs ``alpha``, so a
+imply (:func:`lpvest.design._program.instability`). It needs ``alpha``, so a
 robust filter for a plant whose input path depends on ``alpha`` takes the
 scheduling input as well; its gains stay constant. ``test_hinf_filter.py``
 checks ``e`` with and without ``u`` to rounding and the certified gamma on

@@ -18,7 +18,8 @@ def _best(model: Any, kind: str, *, epsilon: float | None = None, solver: str = 
     """The design at ``epsilon``, or the best over every epsilon
     (:func:`lpvest.design.search_epsilon`), as JSON. A model with general
     noise is taken in its H-infinity setting."""
-    from ..design._hinf import design_hinf, search_epsilon
+    from ..design._program import design_hinf
+    from ..design._search import search_epsilon
 
     if epsilon is not None:
         return design_hinf(model, epsilon=float(epsilon), kind=kind, solver=solver).to_json()

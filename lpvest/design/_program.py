@@ -1,69 +1,18 @@
-r"""H-infinity filter design by LMIs: Theorem 1 and Corollary 1 of Peixoto et al.
+r"""The H-infinity LMI program of Peixoto et al., compiled once: solver choice,
+the eigenvalue check, margins and retries, warm starts, the dual bound.
 
-Paper: 001_00f62b5a0c49ad87.txt ("A novel H-infinity filter design condition for
-discrete-time LPV systems"). For the polytopic plant (1) and the filter (2),
-the LMIs (6)-(7) certify ``||e||_2 < gamma ||w||_2`` (zero initial state) for
-every parameter sequence ``alpha_k`` on the simplex, varying arbitrarily fast.
-:func:`design_hinf` solves them at a given ``epsilon``; :func:`search_epsilon`
-finds the best ``epsilon`` over the whole real line (and its limit
-``epsilon -> infinity``); :func:`epsilon_curve` gives ``gamma(epsilon)``.
-
-How the LMIs are built (and where they differ from the printed text)
---------------------------------------------------------------------
-Every block comes from the proof, which is Finsler's lemma: with
-``zeta = (x_{k+1}, x_{f,k+1}, x_k, x_{f,k}, e_k, w_k)`` (block sizes
-``nx, nx, nx, nx, nz, nw``), the closed loop (3) is ``G zeta = 0`` with ::
-
-    G = [[-I,  0,  A,              0,   0,  Bw            ],   x_{k+1} = A x + Bw w
-         [ 0, -H,  Bf Cy,          Af,  0,  Bf Dy         ],   H x_{f,k+1} = Af x_f + Bf y
-         [ 0,  0,  Cz - Df Cy,    -Cf, -I,  Dz - Df Dy    ]]   e = z - z_f
-
-and the dissipation inequality ``V(xi_{k+1}) - V(xi_k) + e'e - delta w'w < 0``
-is ``zeta' Q zeta < 0`` with ``Q = diag(P(alpha_{k+1}), -P(alpha_k), I, -delta I)``,
-``P = [[P1, P3], [P3', P2]]``. Finsler: ``Q + He{X G} < 0`` implies it on
-``ker G``, for the multiplier ::
-
-    X = [[X1, a I, 0], [X2, I, 0], [X3, b I, 0], [X4, 0, 0], [X5, 0, I], [X6, 0, 0]].
-
-With ``(a, b) = (epsilon, 1)`` this is the paper's ``Phi`` block for block,
-except ``Phi_21``: it is ``-X2 - eps H' + P3(alpha_{k+1})'`` (vertex ``l``),
-not ``P_{3,j}'`` as printed (``test_hinf_design.py`` checks the identity on
-random data, and shows that the printed block certifies a gamma far below the
-filter's true worst-case gain).
-
-Two further deviations, both sound:
-
-* **Exact rescaling.** At large ``epsilon`` the printed LMIs are badly
-  conditioned (the filter variables scale like ``1/epsilon`` and
-  ``1/epsilon^2``). Take ``(a, b)`` with ``a / b = epsilon``, ``s = 1/b``, the
-  congruence ``T = diag(I, sI, I, sI, I, I)`` and the change of variables
-  ``P2 -> s^2 P2``, ``P3, X2, X4 -> s (.)``, ``H, Af -> s^2 (.)``,
-  ``Bf, Cf -> s (.)`` (the others unchanged). Block by block, ``T Phi T`` of
-  the paper's LMI at ``epsilon`` is the LMI above at ``(a, b)`` in the new
-  variables (e.g. ``s (-X2 - eps H' + P3') = -X2^ - a H^' + P3^'`` and
-  ``s (-H + ...) = -b H^ + ...``). ``T`` is nonsingular and the variable map is
-  a bijection, ``T diag(P, P) T > 0`` iff ``P > 0``, and ``delta`` is
-  untouched: both problems have the same feasible ``delta``, hence the same
-  optimal ``gamma``. The new filter matrices are the same filter in the state
-  coordinates ``x_f / s = b x_f`` (``H^-1 Af`` is unchanged, ``H^-1 Bf`` and
-  ``Cf`` scale by ``1/s`` and ``s``): same input-output map, same ``gamma``.
-  We use ``a = sin(phi)``, ``b = cos(phi)``, ``epsilon = tan(phi)``: every
-  coefficient is at most 1 in size, and ``b = 0`` is the limit
-  ``epsilon -> infinity`` (still a valid Finsler multiplier, so its ``gamma``
-  is certified too). ``a`` and ``b`` enter as ``cp.Parameter`` (with the
-  plant's vertex matrices), so a program compiles once (DPP) and serves every
-  ``epsilon`` and every plant of the same dimensions. ``test_hinf_design.py``
-  checks ``Phi_paper = T^-1 Phi T^-1`` at a solution and that both
-  realizations filter identically.
-* **P(alpha) > 0.** The proof needs ``V >= 0``; ``P1, P2 > 0`` alone do not
-  give it (an unstable plant can satisfy the LMIs with an indefinite ``P``).
-  We impose ``P_i > 0`` at each vertex. When the plant is stable under
-  arbitrary switching this loses nothing: the LMIs then make ``V`` strictly
-  decrease along every trajectory of a stable system, hence ``V > 0``.
+:class:`HinfProgram` holds the LMIs of :mod:`lpvest.design._lmis` (Theorem 1,
+or Corollary 1 for a robust filter) as a cvxpy problem whose plant and
+multiplier are parameters; :func:`design_hinf` solves them at a given
+``epsilon`` (through a per-process cache of compiled programs).
+Strict inequalities are ``M << -margin I``. Every returned point is checked:
+the eigenvalues of every assembled LMI and of every ``P_i`` (numpy, float64)
+must be strictly negative / positive. A failed check is retried with tighter
+solver settings, then raises :class:`~lpvest.core.LMIInfeasibleError`.
 
 **Dual bound.** Every solve also gives a lower bound on the best ``gamma``
 at its ``epsilon`` (``gamma_lower`` of :class:`DesignAttempt` and
-:class:`EpsilonCurve`). The bound is for the strict LMIs themselves (margin
+:class:`~lpvest.design.EpsilonCurve`). The bound is for the strict LMIs themselves (margin
 0), which every certified design satisfies whatever margin it was solved
 with. Write them as ``G_i(x) <= 0``, ``G_i`` affine (``M_i(x)`` for the LMIs,
 ``-P_j(x)`` for the Lyapunov matrices), and the program as ``min delta``. For
@@ -78,16 +27,7 @@ Z_k)`` is the complementarity gap plus ``m sum_i tr Z_i``, the first-order
 cost of the margin (on Peixoto et al.'s Example 1 with Clarabel about 1e-8 and
 1e-4 relative; on a 4-vertex plant with SCS about 1e-5 and 1e-6).
 ``tests/test_hinf_design.py`` checks the bound against solves with margins
-10 and 100 times smaller. :func:`search_epsilon` uses it to tell a curve that
-is flat to the solver's accuracy from one that slopes.
-
-The Lemma 1 relaxation (``Phi_iil < 0``, ``Phi_ijl + Phi_jil < 0`` for
-``i < j``) is applied for any number of vertices ``N``: ``N^2 (N + 1) / 2``
-LMIs of size ``4 nx + nz + nw``. Strict inequalities are ``M << -margin I``.
-Every returned point is checked: the eigenvalues of every assembled LMI and of
-every ``P_i`` (numpy, float64) must be strictly negative / positive. A failed
-check is retried with tighter solver settings, then raises
-:class:`~lpvest.core.LMIInfeasibleError`.
+10 and 100 times smaller. :func:`~lpvest.design.search_epsilon` uses it to tell a curve that
 """
 
 from __future__ import annotations
@@ -99,9 +39,9 @@ import signal
 import threading
 import time
 import warnings
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
@@ -111,30 +51,28 @@ from ..core._errors import (
     DimensionError,
     InternalError,
     LMIInfeasibleError,
-    NonFiniteError,
     abbreviate,
 )
 from ..systems._affine import AffineLPV
 from ..systems._polytopic import PolytopicLPV, hinf_setting
+from ._lmis import LMIBlock, ab_of_phi, epsilon_of_phi, lmi_blocks, lmi_matrices, multiplier
 from ._result import KIND_PD, KIND_ROBUST, HinfDesign, model_digest
 
 __all__ = [
     "design_hinf",
-    "search_epsilon",
-    "epsilon_curve",
     "HinfProgram",
-    "EpsilonCurve",
-    "EpsilonSearch",
-    "multiplier",
-    "lmi_matrices",
-    "LMIBlock",
     "DesignAttempt",
     "DEFAULT_SOLVER",
     "DEFAULT_MARGIN",
     "AUTO_CLARABEL_MAX_ROWS",
+    "RETRY_MARGIN_FACTOR",
     "choose_solver",
     "check_solver",
     "sdp_solvers",
+    "hinf_plant",
+    "instability",
+    "infeasible_message",
+    "program_for",
 ]
 
 #: Solver used unless told otherwise: ``"AUTO"`` picks by problem size (see
@@ -229,256 +167,6 @@ def choose_solver(n_vertices: int, nx: int, nz: int, nw: int, kind: str = KIND_P
     rows = n_lmis * size * (size + 1) // 2
     return "CLARABEL" if rows <= AUTO_CLARABEL_MAX_ROWS else "SCS"
 
-
-# ---------------------------------------------------------------------------
-# epsilon <-> multiplier
-# ---------------------------------------------------------------------------
-def multiplier(epsilon: float) -> tuple[float, float]:
-    """The normalized multiplier ``(a, b) = (sin phi, cos phi)``, ``phi = atan(epsilon)``.
-
-    ``epsilon = a / b``; ``epsilon = +-inf`` gives ``(1, 0)``.
-
-    Parameters
-    ----------
-    epsilon : float
-        The paper's scalar: any real number, or ``+-math.inf``.
-
-    Returns
-    -------
-    a : float
-        ``sin phi = epsilon / sqrt(1 + epsilon^2)``.
-    b : float
-        ``cos phi = 1 / sqrt(1 + epsilon^2)``, in ``[0, 1]`` (0 for an infinite ``epsilon``).
-
-    Raises
-    ------
-    NonFiniteError
-        ``epsilon`` is NaN.
-
-    Examples
-    --------
-    >>> multiplier(0.0)
-    (0.0, 1.0)
-    >>> multiplier(float("inf"))
-    (1.0, 0.0)
-    """
-    eps = float(epsilon)
-    if math.isnan(eps):
-        raise NonFiniteError("epsilon is NaN")
-    if math.isinf(eps):
-        return (1.0, 0.0)
-    r = math.hypot(1.0, eps)
-    return (eps / r, 1.0 / r)
-
-
-def _canonical_phi(phi: float) -> float:
-    """``phi`` modulo pi, in ``(-pi/2, pi/2]``."""
-    p = math.remainder(phi, math.pi)  # in [-pi/2, pi/2]
-    return math.pi / 2 if p <= -math.pi / 2 + 1e-15 else p
-
-
-def _epsilon_of_phi(phi: float) -> float:
-    p = _canonical_phi(phi)
-    return math.inf if abs(math.pi / 2 - p) < 1e-12 else math.tan(p)
-
-
-def _ab_of_phi(phi: float) -> tuple[float, float]:
-    p = _canonical_phi(phi)
-    if abs(math.pi / 2 - p) < 1e-12:
-        return (1.0, 0.0)
-    return (math.sin(p), math.cos(p))
-
-
-# ---------------------------------------------------------------------------
-# the LMIs, written once for numpy arrays and for cvxpy expressions
-# ---------------------------------------------------------------------------
-def _xg_rows(d: Mapping[str, Any], v: Mapping[str, Any], a: Any, b: Any) -> list[list[Any]]:
-    """The 6 x 6 blocks of ``X G`` (see the module documentation) for plant
-    vertex data ``d`` (with ``aCy = a Cy`` etc. precomputed, so that cvxpy sees
-    parameter x variable products only) and variables ``v`` of one vertex."""
-    nx, nw = d["Bw"].shape
-    nz = d["Cz"].shape[0]
-    X1, X2, X3, X4, X5, X6 = (v[k] for k in ("X1", "X2", "X3", "X4", "X5", "X6"))
-    H, Af, Bf, Cf, Df = (v[k] for k in ("H", "Af", "Bf", "Cf", "Df"))
-    A, Bw, Cz, Dz, Cy, Dy = (d[k] for k in ("A", "Bw", "Cz", "Dz", "Cy", "Dy"))
-    zxx, zxz = np.zeros((nx, nx)), np.zeros((nx, nz))
-    zzx, zwx, zwz = np.zeros((nz, nx)), np.zeros((nw, nx)), np.zeros((nw, nz))
-    return [
-        [-X1, -a * H, X1 @ A + Bf @ d["aCy"], a * Af, zxz, X1 @ Bw + Bf @ d["aDy"]],
-        [-X2, -H, X2 @ A + Bf @ Cy, Af, zxz, X2 @ Bw + Bf @ Dy],
-        [-X3, -b * H, X3 @ A + Bf @ d["bCy"], b * Af, zxz, X3 @ Bw + Bf @ d["bDy"]],
-        [-X4, zxx, X4 @ A, zxx, zxz, X4 @ Bw],
-        [-X5, zzx, X5 @ A + Cz - Df @ Cy, -Cf, -np.eye(nz), X5 @ Bw + Dz - Df @ Dy],
-        [-X6, zwx, X6 @ A, zwx, zwz, X6 @ Bw],
-    ]
-
-
-def _q_next(P1: Any, P2: Any, P3: Any, n_rest: int, bmat: Callable[[list[list[Any]]], Any]) -> Any:
-    """``diag(P(alpha_{k+1}), 0)``: the ``V(xi_{k+1})`` part of ``Q``."""
-    nx = P3.shape[0]
-    z = np.zeros((2 * nx, n_rest))
-    return bmat([[bmat([[P1, P3], [P3.T, P2]]), z], [z.T, np.zeros((n_rest, n_rest))]])
-
-
-def _q_now(P1: Any, P2: Any, P3: Any, delta: Any, nz: int, nw: int, bmat: Callable[..., Any]) -> Any:
-    """``diag(0, -P(alpha_k), I, -delta I)``: the rest of ``Q``."""
-    nx = P3.shape[0]
-    zxx = np.zeros((nx, nx))
-    zxz, zxw, zzw = np.zeros((nx, nz)), np.zeros((nx, nw)), np.zeros((nz, nw))
-    rows = [
-        [zxx, zxx, zxx, zxx, zxz, zxw],
-        [zxx, zxx, zxx, zxx, zxz, zxw],
-        [zxx, zxx, -P1, -P3, zxz, zxw],
-        [zxx, zxx, -P3.T, -P2, zxz, zxw],
-        [zxz.T, zxz.T, zxz.T, zxz.T, np.eye(nz), zzw],
-        [zxw.T, zxw.T, zxw.T, zxw.T, zzw.T, -delta * np.eye(nw)],
-    ]
-    return bmat(rows)
-
-
-class LMIBlock(NamedTuple):
-    """One LMI of (6)-(7): ``matrix < 0`` with ``matrix = Phi_iil`` (``i == j``)
-    or ``Phi_ijl + Phi_jil`` (``i < j``); indices are 0-based.
-
-    Parameters
-    ----------
-    label : str
-        ``"Phi_iil"`` or ``"Phi_ijl + Phi_jil"`` with the paper's 1-based indices (e.g. ``"Phi_121 + Phi_211"``).
-    i, j : int
-        Vertices (``i <= j``) of ``alpha_k`` in Lemma 1's products ``alpha_i alpha_j``; in ``Phi_ijl`` the
-        plant's matrices are those of vertex ``i`` and the decision variables (``X``, ``P(alpha_k)``, the
-        filter's) those of vertex ``j``.
-    l : int
-        Vertex of ``alpha_{k+1}``: ``P(alpha_{k+1})`` is ``P_l``.
-    matrix : ndarray or cvxpy expression, shape (4 nx + nz + nw, 4 nx + nz + nw)
-        The symmetric matrix required to be negative definite (numpy for :func:`lmi_matrices`, cvxpy
-        inside :class:`HinfProgram`).
-    """
-
-    label: str
-    i: int
-    j: int
-    l: int  # noqa: E741 - the paper's index
-    matrix: Any
-
-
-def _lmis(
-    data: Sequence[Mapping[str, Any]],
-    var: Mapping[str, Any],
-    a: Any,
-    b: Any,
-    *,
-    robust: bool,
-    bmat: Callable[..., Any],
-    printed_phi21: bool = False,
-) -> list[LMIBlock]:
-    """The LMIs (6)-(7) after Lemma 1, each matrix required ``< 0``.
-
-    ``var`` maps names to per-vertex lists (``P1, P2, P3, X1..X6`` of length
-    ``N``; ``H, Af, Bf, Cf, Df`` of length ``N``, or 1 when ``robust``) and
-    ``delta`` to the scalar. ``printed_phi21`` reproduces the paper's misprint
-    (``P_{3,j}`` in ``Phi_21``); it exists to document that trap in the tests.
-    """
-    n = len(data)
-    nx, nw = data[0]["Bw"].shape
-    nz = data[0]["Cz"].shape[0]
-    n_rest = 2 * nx + nz + nw
-
-    def vertex_vars(j: int) -> dict[str, Any]:
-        f = 0 if robust else j
-        out = {k: var[k][j] for k in ("X1", "X2", "X3", "X4", "X5", "X6")}
-        out.update({k: var[k][f] for k in ("H", "Af", "Bf", "Cf", "Df")})
-        return out
-
-    K: dict[tuple[int, int], Any] = {}
-    for i in range(n):
-        for j in range(n):
-            L = bmat(_xg_rows(data[i], vertex_vars(j), a, b))
-            K[i, j] = L + L.T
-    Qc = [_q_now(var["P1"][j], var["P2"][j], var["P3"][j], var["delta"], nz, nw, bmat) for j in range(n)]
-
-    def qn(j: int, nxt: int) -> Any:
-        # P(alpha_{k+1}) at vertex nxt (the paper's l); the misprint puts P_{3,j} in Phi_21
-        m = j if printed_phi21 else nxt
-        return _q_next(var["P1"][nxt], var["P2"][nxt], var["P3"][m], n_rest, bmat)
-
-    out: list[LMIBlock] = []
-    for l in range(n):  # noqa: E741 - the paper's index
-        for i in range(n):
-            out.append(LMIBlock(f"Phi_{i + 1}{i + 1}{l + 1}", i, i, l, qn(i, l) + Qc[i] + K[i, i]))
-            for j in range(i + 1, n):
-                phi_ijl = qn(j, l) + Qc[j] + K[i, j]
-                phi_jil = qn(i, l) + Qc[i] + K[j, i]
-                label = f"Phi_{i + 1}{j + 1}{l + 1} + Phi_{j + 1}{i + 1}{l + 1}"
-                out.append(LMIBlock(label, i, j, l, phi_ijl + phi_jil))
-    return out
-
-
-def _vertex_data(plant: PolytopicLPV, a: float, b: float) -> list[dict[str, np.ndarray]]:
-    v = plant.vertices
-    out = []
-    for i in range(plant.n_vertices):
-        d = {"A": v.A[i], "Bw": v.Bw[i], "Cz": v.Cz[i], "Dz": v.Dz[i], "Cy": v.Cy[i], "Dy": v.Dy[i]}
-        d.update(aCy=a * v.Cy[i], bCy=b * v.Cy[i], aDy=a * v.Dy[i], bDy=b * v.Dy[i])
-        out.append(d)
-    return out
-
-
-def _np_bmat(rows: list[list[Any]]) -> np.ndarray:
-    return np.block([[np.asarray(x, dtype=float) for x in row] for row in rows])
-
-
-def lmi_matrices(
-    plant: PolytopicLPV,
-    variables: Mapping[str, Any],
-    epsilon: float | None = None,
-    *,
-    multiplier_ab: tuple[float, float] | None = None,
-    robust: bool = False,
-    printed_phi21: bool = False,
-) -> list[LMIBlock]:
-    """The LMIs (6)-(7) (after Lemma 1) evaluated with numpy at given variables.
-
-    Used to check a solver's answer, and by the tests. ``variables`` maps
-    ``P1, P2, P3, X1..X6, H, Af, Bf, Cf, Df`` to per-vertex sequences and
-    ``delta`` to a float. Give ``epsilon`` for the paper's form
-    ``(a, b) = (epsilon, 1)``, or ``multiplier_ab`` for the rescaled form.
-
-    Parameters
-    ----------
-    plant : PolytopicLPV
-        The plant (1): its vertex matrices ``A, Bw, Cz, Dz, Cy, Dy``.
-    variables : mapping
-        ``P1, P2, P3, X1..X6`` -> ``N`` arrays each (vertex ``j`` at index ``j``); ``H, Af, Bf, Cf, Df`` ->
-        ``N`` arrays each (only index 0 is used when ``robust``); ``delta`` -> float (``gamma^2``).
-        :meth:`HinfProgram.last_variables` gives this mapping (in the rescaled coordinates).
-    epsilon : float, optional
-        The paper's scalar (finite), for the LMIs as printed, ``(a, b) = (epsilon, 1)``.
-    multiplier_ab : (float, float), optional
-        The rescaled multiplier ``(a, b) = (sin phi, cos phi)`` (:func:`multiplier`), for variables in the
-        rescaled coordinates of the module documentation.
-    robust : bool, default False
-        Corollary 1: one set of filter matrices (index 0) at every vertex.
-    printed_phi21 : bool, default False
-        Use the paper's misprinted ``P_{3,j}`` in ``Phi_21`` instead of ``P_{3,l}`` (for tests documenting
-        the trap).
-
-    Returns
-    -------
-    list of LMIBlock
-        The ``N^2 (N + 1) / 2`` LMIs, numpy matrices of size ``4 nx + nz + nw``, ordered by ``l``, then
-        ``i``, then ``j``; each must be negative definite.
-
-    Raises
-    ------
-    ArgumentError
-        Both or neither of ``epsilon`` and ``multiplier_ab`` are given.
-    """
-    if (epsilon is None) == (multiplier_ab is None):
-        raise ArgumentError("give exactly one of epsilon and multiplier_ab")
-    a, b = (float(epsilon), 1.0) if multiplier_ab is None else multiplier_ab  # type: ignore[arg-type]
-    var = {k: ([np.asarray(m, dtype=float) for m in v] if k != "delta" else float(v)) for k, v in variables.items()}
-    return _lmis(_vertex_data(plant, a, b), var, a, b, robust=robust, bmat=_np_bmat, printed_phi21=printed_phi21)
 
 
 # ---------------------------------------------------------------------------
@@ -613,7 +301,7 @@ class HinfProgram:
             "Df": vars_("Df", (nz, ny), nf),
             "delta": cp.Variable(name="delta"),
         }
-        lmis = _lmis(
+        lmis = lmi_blocks(
             self._data, self._var, self._a, self._b,
             robust=(kind == KIND_ROBUST), bmat=cp.bmat, printed_phi21=self.printed_phi21,
         )
@@ -650,7 +338,7 @@ class HinfProgram:
         HinfProgram
             A newly compiled program (not the cache that :func:`design_hinf` uses).
         """
-        plant = _setting(plant)
+        plant = hinf_plant(plant)
         return cls(plant.n_vertices, plant.nx, plant.ny, plant.nz, plant.nw, **options)
 
     # -- parameters -----------------------------------------------------------------
@@ -687,7 +375,7 @@ class HinfProgram:
     def last_variables(self) -> dict[str, Any]:
         """Every decision variable of the last solve (``P1, P2, P3, X1..X6``
         per vertex, the filter matrices, ``delta``), in the rescaled
-        coordinates of the module documentation; raises if none is available.
+        coordinates of :mod:`lpvest.design._lmis`; raises if none is available.
 
         Returns
         -------
@@ -846,13 +534,13 @@ class HinfProgram:
         if (epsilon is None) == (phi is None):
             raise ArgumentError("give exactly one of epsilon and phi")
         if phi is not None:
-            a, b = _ab_of_phi(phi)
-            eps = _epsilon_of_phi(phi)
+            a, b = ab_of_phi(phi)
+            eps = epsilon_of_phi(phi)
         else:
             eps = float(epsilon)  # type: ignore[arg-type]
             a, b = multiplier(eps)
             eps = abs(eps) if math.isinf(eps) else eps
-        detail = _instability(plant)
+        detail = instability(plant)
         if detail is not None:
             return DesignAttempt(None, "infeasible", math.inf, detail)
         self._set_parameters(plant.vertices._asdict(), a, b)
@@ -910,7 +598,7 @@ class HinfProgram:
         res = self.attempt(plant, epsilon)
         if res.design is None:
             raise LMIInfeasibleError(
-                _infeasible_message(plant, self, f"epsilon = {epsilon:g}", res.detail), status=res.status,
+                infeasible_message(plant, self, f"epsilon = {epsilon:g}", res.detail), status=res.status,
                 detail=res.detail,
             )
         return res.design
@@ -973,7 +661,7 @@ def _check_plant(plant: object) -> None:
         )
 
 
-def _setting(plant: object) -> PolytopicLPV:
+def hinf_plant(plant: object) -> PolytopicLPV:
     """A model with general noise in the H-infinity setting (hinf_setting); a
     polytopic plant unchanged; anything else an error."""
     out = hinf_setting(plant) if isinstance(plant, AffineLPV) else plant
@@ -994,7 +682,7 @@ def _simplex_points(n_vertices: int) -> np.ndarray:
     return np.vstack([eye, *edges, np.full((1, n_vertices), 1.0 / n_vertices), interior])
 
 
-def _instability(plant: PolytopicLPV) -> str | None:
+def instability(plant: PolytopicLPV) -> str | None:
     """Why no filter exists when ``A(alpha)`` is not Schur somewhere on the
     simplex (``None`` when it is Schur at every point checked).
 
@@ -1022,7 +710,7 @@ def _instability(plant: PolytopicLPV) -> str | None:
             "they are a Lyapunov inequality), so no filter exists")
 
 
-def _infeasible_message(plant: PolytopicLPV, prog: HinfProgram, where: str, detail: str) -> str:
+def infeasible_message(plant: PolytopicLPV, prog: HinfProgram, where: str, detail: str) -> str:
     """One line: what failed, and the start of why (``LMIInfeasibleError.detail`` holds all of it)."""
     name = plant.name or "(unnamed plant)"
     reason = " ".join(detail.split())
@@ -1067,7 +755,7 @@ def _cached_program(
     return HinfProgram(*dims, kind=kind, solver=solver, margin=margin, solver_options=dict(options))
 
 
-def _program_for(
+def program_for(
     plant: PolytopicLPV,
     kind: str,
     solver: str,
@@ -1075,6 +763,8 @@ def _program_for(
     solver_options: Mapping[str, Any] | None,
     program: HinfProgram | None,
 ) -> HinfProgram:
+    """``program`` checked against the plant and ``kind``, or else the cached
+    program compiled for the plant's dimensions and these settings (checked first)."""
     _check_plant(plant)
     if program is not None:
         program._check_dims(plant)
@@ -1147,328 +837,6 @@ def design_hinf(
     >>> round(d.gamma, 1)
     8.2
     """
-    plant = _setting(plant)
-    prog = _program_for(plant, kind, solver, margin, solver_options, program)
+    plant = hinf_plant(plant)
+    prog = program_for(plant, kind, solver, margin, solver_options, program)
     return prog.solve(plant, epsilon)
-
-
-@dataclass(frozen=True, eq=False)
-class EpsilonCurve:
-    """``gamma(epsilon)`` sampled: the certified bound at each ``epsilon``.
-
-    ``gamma`` is ``inf`` where no certified design exists (``status`` says why).
-    ``phi = atan(epsilon)`` in ``(-pi/2, pi/2]`` (``epsilon = inf`` at ``pi/2``).
-    ``gamma_lower`` is the solver's dual bound on the best ``gamma`` at each
-    ``epsilon`` (module documentation, "Dual bound"): the best design at that
-    ``epsilon`` lies in ``[gamma_lower, gamma]``, up to the solver's dual
-    residual, so ``gamma - gamma_lower`` is how far each point may be from its
-    own optimum (about 1e-8 relative with Clarabel, 1e-5 with SCS).
-
-    Parameters
-    ----------
-    epsilon : ndarray, shape (M,)
-        The sampled values of the paper's scalar.
-    phi : ndarray, shape (M,)
-        ``atan(epsilon)``.
-    gamma : ndarray, shape (M,)
-        The certified bound at each ``epsilon``; ``inf`` where no certified design exists.
-    status : tuple of str, length M
-        The final status of each solve (:attr:`DesignAttempt.status`).
-    gamma_lower : ndarray, shape (M,)
-        The dual bound at each ``epsilon``; nan where ``gamma`` is inf.
-    """
-
-    epsilon: np.ndarray
-    phi: np.ndarray
-    gamma: np.ndarray
-    status: tuple[str, ...]
-    gamma_lower: np.ndarray
-
-    def __post_init__(self) -> None:
-        for name in ("epsilon", "phi", "gamma", "gamma_lower"):  # read-only, as HinfDesign's arrays
-            value = np.array(getattr(self, name), dtype=float)
-            value.setflags(write=False)
-            object.__setattr__(self, name, value)
-
-    def best(self) -> tuple[float, float]:
-        """``(epsilon, gamma)`` of the smallest sampled ``gamma``.
-
-        Returns
-        -------
-        epsilon : float
-            The ``epsilon`` of the first smallest ``gamma`` (of the first sample when every ``gamma`` is inf).
-        gamma : float
-            That ``gamma``.
-        """
-        k = int(np.argmin(self.gamma))
-        return float(self.epsilon[k]), float(self.gamma[k])
-
-
-@dataclass(frozen=True, eq=False)
-class EpsilonSearch:
-    """Result of :func:`search_epsilon`: the best design and every point tried.
-
-    Parameters
-    ----------
-    design : HinfDesign
-        The design at the evaluated ``epsilon`` with the smallest ``gamma``.
-    curve : EpsilonCurve
-        Every evaluated point, sorted by ``phi``.
-    n_evaluations : int
-        Epsilon values evaluated (a retry with a larger margin counts once).
-    """
-
-    design: HinfDesign
-    curve: EpsilonCurve
-    n_evaluations: int
-
-
-def _curve(points: Mapping[float, DesignAttempt]) -> EpsilonCurve:
-    phis = sorted(points)
-    return EpsilonCurve(
-        epsilon=np.array([_epsilon_of_phi(p) for p in phis]),
-        phi=np.array([_canonical_phi(p) for p in phis]),
-        gamma=np.array([points[p].gamma for p in phis]),
-        status=tuple(points[p].status for p in phis),
-        gamma_lower=np.array([points[p].gamma_lower for p in phis]),
-    )
-
-
-def epsilon_curve(
-    plant: PolytopicLPV | AffineLPV,
-    epsilons: Sequence[float] | np.ndarray,
-    *,
-    kind: str = KIND_PD,
-    solver: str = DEFAULT_SOLVER,
-    margin: float = DEFAULT_MARGIN,
-    solver_options: Mapping[str, Any] | None = None,
-    program: HinfProgram | None = None,
-) -> EpsilonCurve:
-    """``gamma(epsilon)`` at the given ``epsilons`` (one compiled program).
-
-    Parameters
-    ----------
-    plant : PolytopicLPV or AffineLPV
-        The plant (1); a model with general noise is taken in its H-infinity setting
-        (:func:`lpvest.systems.hinf_setting`).
-    epsilons : sequence of float or ndarray
-        The values of ``epsilon`` (flattened, shape (M,)); any real number or ``+-math.inf``.
-    kind : {"parameter-dependent", "robust"}, default "parameter-dependent"
-        Theorem 1 (gain-scheduled filter) or Corollary 1 (robust filter).
-    solver : str, default DEFAULT_SOLVER ("AUTO")
-        ``"AUTO"`` (Clarabel or SCS by size, :func:`choose_solver`) or a cvxpy solver name.
-    margin : float, default DEFAULT_MARGIN (1e-6)
-        Strictness margin of the LMIs: ``M << -margin I``, ``P_i >> margin I``.
-    solver_options : mapping, optional
-        Extra keyword arguments for the solver.
-    program : HinfProgram, optional
-        A compiled program to reuse (by default one is compiled for the plant's dimensions and cached for
-        the process). Its ``kind`` must be ``kind``; its own solver, margin and options are used.
-
-    Returns
-    -------
-    EpsilonCurve
-        One point per ``epsilon``, in the given order; a point without a certified design has
-        ``gamma = inf`` (no error is raised).
-
-    Examples
-    --------
-    >>> import lpvest
-    >>> plant = lpvest.load_system("peixoto-ex1").model()
-    >>> c = epsilon_curve(plant, [1.0, 150.0])
-    >>> c.gamma.shape
-    (2,)
-    """
-    plant = _setting(plant)
-    prog = _program_for(plant, kind, solver, margin, solver_options, program)
-    eps = np.asarray(epsilons, dtype=float).ravel()
-    with prog.warm_starts():
-        out = [prog.attempt(plant, float(e)) for e in eps]
-    return EpsilonCurve(
-        epsilon=np.where(np.isinf(eps), math.inf, eps),  # -inf and inf are one multiplier: phi = pi/2
-        phi=np.array([math.pi / 2 if math.isinf(e) else math.atan(e) for e in eps]),
-        gamma=np.array([r.gamma for r in out]),
-        status=tuple(r.status for r in out),
-        gamma_lower=np.array([r.gamma_lower for r in out]),
-    )
-
-
-def search_epsilon(
-    plant: PolytopicLPV | AffineLPV,
-    *,
-    kind: str = KIND_PD,
-    n_grid: int = 24,
-    n_refine: int = 2,
-    xatol: float = 1e-3,
-    solver: str = DEFAULT_SOLVER,
-    margin: float = DEFAULT_MARGIN,
-    solver_options: Mapping[str, Any] | None = None,
-    program: HinfProgram | None = None,
-    progress: bool = False,
-) -> EpsilonSearch:
-    """The best ``gamma`` over every real ``epsilon`` (and ``epsilon -> inf``).
-
-    ``epsilon = tan(phi)`` maps the whole line plus infinity onto the circle
-    ``phi in (-pi/2, pi/2]``, and the LMIs depend continuously on
-    ``(sin phi, cos phi)`` (see the module documentation). The search
-    evaluates a uniform grid of ``n_grid`` angles (both signs of epsilon,
-    magnitudes from ``pi/n_grid`` (``pi/(2 n_grid)`` for an odd ``n_grid``; an
-    even one includes ``epsilon = 0``) up to infinity), then refines the
-    ``n_refine`` best local minima of the grid by a bounded Brent search
-    (``scipy.optimize.minimize_scalar``) between their grid neighbours, to
-    ``xatol`` in ``phi``. A minimum whose two neighbours are equal to it within
-    the solver's accuracy (their intervals ``[gamma_lower, gamma]``, see
-    :class:`EpsilonCurve`, share a point) is not refined: the curve is flat
-    there to what the solver can tell. Every evaluation reuses the compiled program (and,
-    with SCS, starts from the previous evaluation's point: the search starts
-    cold, so its result depends on the plant and the settings alone).
-    ``progress=True`` shows a progress bar (tqdm) of the designs solved.
-
-    Parameters
-    ----------
-    plant : PolytopicLPV or AffineLPV
-        The plant (1); a model with general noise is taken in its H-infinity setting
-        (:func:`lpvest.systems.hinf_setting`).
-    kind : {"parameter-dependent", "robust"}, default "parameter-dependent"
-        Theorem 1 (gain-scheduled filter) or Corollary 1 (robust filter).
-    n_grid : int, default 24
-        Number of grid angles ``phi`` (at least 3), spaced ``pi / n_grid`` and ending at ``pi/2``
-        (``epsilon = inf``).
-    n_refine : int, default 2
-        How many of the best local minima of the grid are refined (a minimum where the curve is flat to
-        the solver's accuracy is skipped); 0: none.
-    xatol : float, default 1e-3
-        Absolute tolerance of the Brent search, in ``phi`` (radians).
-    solver : str, default DEFAULT_SOLVER ("AUTO")
-        ``"AUTO"`` (Clarabel or SCS by size, :func:`choose_solver`) or a cvxpy solver name.
-    margin : float, default DEFAULT_MARGIN (1e-6)
-        Strictness margin of the LMIs: ``M << -margin I``, ``P_i >> margin I``.
-    solver_options : mapping, optional
-        Extra keyword arguments for the solver.
-    program : HinfProgram, optional
-        A compiled program to reuse (by default one is compiled for the plant's dimensions and cached for
-        the process). Its ``kind`` must be ``kind``; its own solver, margin and options are used.
-    progress : bool, default False
-        Show a tqdm progress bar.
-
-    Returns
-    -------
-    EpsilonSearch
-        ``design`` at the best ``epsilon`` found, ``curve`` of every evaluated
-        point, ``n_evaluations``.
-
-    Raises
-    ------
-    LMIInfeasibleError
-        No grid point gives a certified design. Also raised at once, before any
-        solve, when ``A(alpha)`` is not Schur somewhere on the simplex.
-
-    Examples
-    --------
-    >>> import lpvest
-    >>> plant = lpvest.load_system("peixoto-ex1").model()
-    >>> best = search_epsilon(plant, kind="robust")
-    >>> best.design.gamma < 8.18
-    True
-    """
-    if isinstance(n_grid, bool) or not isinstance(n_grid, int) or n_grid < 3:
-        raise ArgumentError(f"n_grid must be an integer, at least 3; found {abbreviate(n_grid, 30)}")
-    plant = _setting(plant)
-    prog = _program_for(plant, kind, solver, margin, solver_options, program)
-    unstable = _instability(plant)
-    if unstable is not None:  # no epsilon can help: say so at once
-        raise LMIInfeasibleError(_infeasible_message(plant, prog, "every epsilon", unstable), status="infeasible",
-                                 detail=unstable)
-    points: dict[float, DesignAttempt] = {}
-    bar = _progress_bar(progress, f"epsilon search ({prog.kind}, {prog.solver})", n_grid)
-
-    def evaluate(phi: float) -> float:
-        key = _canonical_phi(phi)
-        if key not in points:
-            points[key] = prog.attempt(plant, phi=key)
-            if bar is not None:
-                best = min(p.gamma for p in points.values())
-                if bar.n >= bar.total:  # the grid is done: each refinement step adds one
-                    bar.total = bar.n + 1
-                    bar.set_description_str(f"epsilon search ({prog.kind}, {prog.solver}), refining", refresh=False)
-                bar.set_postfix_str(f"best gamma {best:.6g}", refresh=False)
-                bar.update(1)
-        return points[key].gamma
-
-    with prog.warm_starts(), contextlib.ExitStack() as stack:
-        if bar is not None:
-            stack.callback(bar.close)
-        return _search(plant, prog, evaluate, points, n_grid, n_refine, xatol)
-
-
-def _progress_bar(progress: bool, desc: str, total: int) -> Any:
-    """A bar of the designs solved, out of ``total`` (the grid; a refinement
-    raises it by one a step), with its ETA; it stays when done. Only on a
-    terminal: never carriage returns into a redirected log."""
-    import sys
-
-    if not progress or not sys.stderr.isatty():
-        return None
-    from tqdm import tqdm
-
-    return tqdm(desc=desc, total=total, unit="design", leave=True)
-
-
-def _search(
-    plant: PolytopicLPV,
-    prog: HinfProgram,
-    evaluate: Callable[[float], float],
-    points: dict[float, DesignAttempt],
-    n_grid: int,
-    n_refine: int,
-    xatol: float,
-) -> EpsilonSearch:
-    """The grid and the Brent refinements of :func:`search_epsilon`."""
-    from scipy.optimize import minimize_scalar
-
-    step = math.pi / n_grid
-    grid = [-math.pi / 2 + step * (k + 1) for k in range(n_grid)]
-    gam = [evaluate(p) for p in grid]
-    finite = [g for g in gam if math.isfinite(g)]
-    if not finite:
-        tried = [points[_canonical_phi(p)] for p in grid]
-        statuses = sorted({t.status for t in tried})
-        detail = "; ".join(sorted({t.detail for t in tried}))
-        raise LMIInfeasibleError(
-            _infeasible_message(plant, prog, f"every epsilon tried ({n_grid} values)", detail),
-            status=statuses[0] if len(statuses) == 1 else " | ".join(statuses), detail=detail,
-        )
-    penalty = 10.0 * max(finite) + 1.0
-    minima = [
-        k for k in range(n_grid)
-        if math.isfinite(gam[k]) and gam[k] <= gam[k - 1] and gam[k] <= gam[(k + 1) % n_grid]
-    ]
-    minima.sort(key=lambda k: gam[k])
-
-    def flat(k: int) -> bool:
-        # the grid points k-1, k, k+1 are consistent with one constant gamma:
-        # the intervals [gamma_lower, gamma] that hold each point's optimum share
-        # a point. Refining there would chase the solver's tolerance (SCS's
-        # 1e-5 makes a flat curve look rugged), not a better epsilon. A
-        # neighbour whose solve failed (no certified design, but not proved
-        # infeasible) tells nothing about the curve and is left out; an
-        # infeasible neighbour is a real rise of the curve.
-        tried = [points[_canonical_phi(grid[i % n_grid])] for i in (k - 1, k, k + 1)]
-        if any(t.status.startswith("infeasible") for t in tried):
-            return False
-        known = [t for t in tried if math.isfinite(t.gamma)]
-        if len(known) < 2 or not all(math.isfinite(t.gamma_lower) for t in known):
-            return False
-        return max(min(t.gamma, t.gamma_lower) for t in known) <= min(max(t.gamma, t.gamma_lower) for t in known)
-
-    for k in [k for k in minima if not flat(k)][: max(0, n_refine)]:
-        minimize_scalar(
-            lambda p: min(evaluate(p), penalty),
-            bounds=(grid[k] - step, grid[k] + step),
-            method="bounded",
-            options={"xatol": xatol},
-        )
-    best_phi = min(points, key=lambda p: points[p].gamma)
-    design = points[best_phi].design
-    assert design is not None
-    return EpsilonSearch(design=design, curve=_curve(points), n_evaluations=len(points))
