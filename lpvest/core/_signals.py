@@ -318,10 +318,6 @@ class SignalSpec:
             table_values=t_values,
         )
 
-    @property
-    def is_random(self) -> bool:
-        return self.kind in ("gaussian", "random")
-
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Per-component interval that holds every value the signal can take.
 
