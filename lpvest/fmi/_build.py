@@ -554,10 +554,10 @@ def _design_cache_file(plan: FmuPlan) -> Path | None:
     design function and its options, the lpvest version)."""
     if plan.design_cache is None or plan.estimator is None:
         return None
-    key = json.dumps({"model_file_sha256": _sha(Path(plan.system_path).read_bytes()), "model_key": plan.model_key,
+    key = json.dumps({"model_file_sha256": sha256_hex(Path(plan.system_path).read_bytes()), "model_key": plan.model_key,
                       "design": plan.estimator.design, "options": sorted(map(list, plan.design_options)),
                       "lpvest_version": __version__}, sort_keys=True, default=str)
-    return plan.design_cache / f"{plan.identifier}-{_sha(key.encode())[:16]}.json"
+    return plan.design_cache / f"{plan.identifier}-{sha256_hex(key.encode())[:16]}.json"
 
 
 def manifest_inputs_version() -> str:
@@ -565,29 +565,33 @@ def manifest_inputs_version() -> str:
     return __version__
 
 
-def _sha(data: bytes) -> str:
-    return hashlib.sha256(data).hexdigest()
+def plan_inputs(plan: FmuPlan, design: str | bytes | None = None, *, requirements: bool) -> dict[str, object]:
+    """The inputs of a build that both backends' manifests record, in this
+    order: the plan, the estimator (with its Python ``requirements`` when
+    asked: the native backend carries none), lpvest's version, and the
+    SHA-256 of the model file and of the carried ``design``. No path, no time.
 
+    Parameters
+    ----------
+    plan : FmuPlan
+        The FMU to build.
+    design : str or bytes, optional
+        The design the FMU carries.
+    requirements : bool
+        Record the estimator's Python requirements.
 
-def manifest_inputs(plan: FmuPlan, bundle: Bundle | None = None, design: str | bytes | None = None) -> dict[str, Any]:
-    """Every input of an FMU's build and its SHA-256 (what ``manifest.json``
-    records and what an FMU cache compares): the plan, the model file, the
-    carried code (the bundle digest), the design when one is carried, and the
-    versions of pythonfmu and the C compiler. No path, no time."""
-    import pythonfmu
-
-    bundle = bundle or _bundle(plan)
+    Returns
+    -------
+    dict
+        The manifest entries, in the order the manifests write them.
+    """
     est = None
     if plan.estimator is not None:
-        est = plan.estimator.to_json() | {"design": plan.estimator.design, "models": list(plan.estimator.models),
-                                           "requirements": list(plan.estimator.requirements)}
+        est = plan.estimator.to_json() | {"design": plan.estimator.design, "models": list(plan.estimator.models)}
+        if requirements:
+            est["requirements"] = list(plan.estimator.requirements)
         if plan.design_options:
             est["design_options"] = {k: v for k, v in sorted(plan.design_options)}
-    bridges = {}
-    for platform in BRIDGE_PLATFORMS:
-        bridge = status_bridge(platform)
-        bridges[platform] = None if bridge is None else {"sha256": _sha(bridge.read_bytes()),
-                                                          "compiler": _bridge_compiler(platform)}
     return {
         "identifier": plan.identifier,
         "role": plan.role,
@@ -599,9 +603,29 @@ def manifest_inputs(plan: FmuPlan, bundle: Bundle | None = None, design: str | b
         "stop_time": plan.stop_time,
         "estimator": est,
         "lpvest_version": __version__,
-        "model_file_sha256": _sha(Path(plan.system_path).read_bytes()),
-        "design_sha256": None if design is None else _sha(design.encode() if isinstance(design, str) else design),
-        "design_file_sha256": None if plan.design is None else _sha(plan.design.read_bytes()),
+        "model_file_sha256": sha256_hex(Path(plan.system_path).read_bytes()),
+        "design_sha256": None if design is None else sha256_hex(design.encode() if isinstance(design, str) else design),
+    }
+
+
+def manifest_inputs(
+    plan: FmuPlan, bundle: Bundle | None = None, design: str | bytes | None = None
+) -> dict[str, object]:
+    """Every input of an FMU's build and its SHA-256 (what ``manifest.json``
+    records and what an FMU cache compares): the plan, the model file, the
+    carried code (the bundle digest), the design when one is carried, and the
+    versions of pythonfmu and the C compiler. No path, no time."""
+    import pythonfmu
+
+    bundle = bundle or _bundle(plan)
+    bridges = {}
+    for platform in BRIDGE_PLATFORMS:
+        bridge = status_bridge(platform)
+        bridges[platform] = None if bridge is None else {"sha256": sha256_hex(bridge.read_bytes()),
+                                                          "compiler": _bridge_compiler(platform)}
+    return {
+        **plan_inputs(plan, design, requirements=True),
+        "design_file_sha256": None if plan.design is None else sha256_hex(plan.design.read_bytes()),
         "bundle": {"package": bundle.package, "digest": bundle.digest, "requirements": list(bundle.requirements)},
         "pythonfmu": pythonfmu.__version__,
         "status_bridges": bridges,
@@ -760,7 +784,7 @@ def write_fmu_zip(target: Path, entries: Mapping[str, tuple[bytes, bool]]) -> Pa
 
 def sha256_hex(data: bytes) -> str:
     """The SHA-256 of ``data`` in hex (what manifests record)."""
-    return _sha(data)
+    return hashlib.sha256(data).hexdigest()
 
 
 def write_zip_entry(z: zipfile.ZipFile, name: str, data: bytes, executable: bool = False) -> None:
@@ -836,7 +860,7 @@ def build_fmu(
         staging.mkdir()
         bundle, manifest = _stage(plan, staging, progress)
         manifest_text = json.dumps(manifest, indent=1, sort_keys=True) + "\n"
-        guid = "{" + str(uuid.UUID(hex=_sha(manifest_text.encode())[:32])) + "}"
+        guid = "{" + str(uuid.UUID(hex=sha256_hex(manifest_text.encode())[:32])) + "}"
         xml, *_ = _model_description(plan, bundle, staging, guid)
         (staging / MANIFEST_FILE).write_text(manifest_text, encoding="utf-8")
         entries: dict[str, tuple[bytes, bool]] = {"modelDescription.xml": (xml, False)}
