@@ -370,14 +370,13 @@ def _lmis(
     *,
     robust: bool,
     bmat: Callable[..., Any],
-    printed_phi21: bool = False,
 ) -> list[LMIBlock]:
     """The LMIs (6)-(7) after Lemma 1, each matrix required ``< 0``.
 
     ``var`` maps names to per-vertex lists (``P1, P2, P3, X1..X6`` of length
     ``N``; ``H, Af, Bf, Cf, Df`` of length ``N``, or 1 when ``robust``) and
-    ``delta`` to the scalar. ``printed_phi21`` reproduces the paper's misprint
-    (``P_{3,j}`` in ``Phi_21``); it exists to document that trap in the tests.
+    ``delta`` to the scalar. (``tests/hinf_misprint.py`` builds the paper's
+    misprinted variant, ``P_{3,j}`` in ``Phi_21``, to document that trap.)
     """
     n = len(data)
     nx, nw = data[0]["Bw"].shape
@@ -399,8 +398,7 @@ def _lmis(
 
     def qn(j: int, nxt: int) -> Any:
         # P(alpha_{k+1}) at vertex nxt (the paper's l); the misprint puts P_{3,j} in Phi_21
-        m = j if printed_phi21 else nxt
-        return _q_next(var["P1"][nxt], var["P2"][nxt], var["P3"][m], n_rest, bmat)
+        return _q_next(var["P1"][nxt], var["P2"][nxt], var["P3"][nxt], n_rest, bmat)
 
     out: list[LMIBlock] = []
     for l in range(n):  # noqa: E741 - the paper's index
@@ -435,7 +433,6 @@ def lmi_matrices(
     *,
     multiplier_ab: tuple[float, float] | None = None,
     robust: bool = False,
-    printed_phi21: bool = False,
 ) -> list[LMIBlock]:
     """The LMIs (6)-(7) (after Lemma 1) evaluated with numpy at given variables.
 
@@ -459,9 +456,6 @@ def lmi_matrices(
         rescaled coordinates of the module documentation.
     robust : bool, default False
         Corollary 1: one set of filter matrices (index 0) at every vertex.
-    printed_phi21 : bool, default False
-        Use the paper's misprinted ``P_{3,j}`` in ``Phi_21`` instead of ``P_{3,l}`` (for tests documenting
-        the trap).
 
     Returns
     -------
@@ -478,7 +472,7 @@ def lmi_matrices(
         raise ArgumentError("give exactly one of epsilon and multiplier_ab")
     a, b = (float(epsilon), 1.0) if multiplier_ab is None else multiplier_ab  # type: ignore[arg-type]
     var = {k: ([np.asarray(m, dtype=float) for m in v] if k != "delta" else float(v)) for k, v in variables.items()}
-    return _lmis(_vertex_data(plant, a, b), var, a, b, robust=robust, bmat=_np_bmat, printed_phi21=printed_phi21)
+    return _lmis(_vertex_data(plant, a, b), var, a, b, robust=robust, bmat=_np_bmat)
 
 
 # ---------------------------------------------------------------------------
@@ -535,8 +529,6 @@ class HinfProgram:
         Strict inequalities as ``M << -margin I``, ``P_i >> margin I``.
     solver_options : mapping, optional
         Extra keyword arguments for the solver.
-    printed_phi21 : bool
-        Use the paper's misprinted ``Phi_21`` (for tests documenting the trap).
 
     Examples
     --------
@@ -559,7 +551,6 @@ class HinfProgram:
         solver: str = DEFAULT_SOLVER,
         margin: float = DEFAULT_MARGIN,
         solver_options: Mapping[str, Any] | None = None,
-        printed_phi21: bool = False,
     ) -> None:
         import cvxpy as cp
 
@@ -582,7 +573,6 @@ class HinfProgram:
         self._returned_point = False  # the last solve returned a point (last_variables)
         self.margin = float(margin)
         self.solver_options = dict(solver_options or {})
-        self.printed_phi21 = bool(printed_phi21)
         N = self.n_vertices
         nf = 1 if kind == KIND_ROBUST else N
 
@@ -615,7 +605,7 @@ class HinfProgram:
         }
         lmis = _lmis(
             self._data, self._var, self._a, self._b,
-            robust=(kind == KIND_ROBUST), bmat=cp.bmat, printed_phi21=self.printed_phi21,
+            robust=(kind == KIND_ROBUST), bmat=cp.bmat,
         )
         size = 4 * nx + nz + nw
         constraints = [blk.matrix << -self._margin * np.eye(size) for blk in lmis]
@@ -642,8 +632,7 @@ class HinfProgram:
         plant : PolytopicLPV or AffineLPV
             The plant whose ``(N, nx, ny, nz, nw)`` the program is compiled for.
         **options
-            Keyword arguments of the constructor: ``kind``, ``solver``, ``margin``, ``solver_options``,
-            ``printed_phi21``.
+            Keyword arguments of the constructor: ``kind``, ``solver``, ``margin``, ``solver_options``.
 
         Returns
         -------
@@ -782,9 +771,7 @@ class HinfProgram:
             values["delta"]
         ):
             return False, -math.inf, -math.inf, "the solver returned non-finite values", []
-        lmis = lmi_matrices(
-            plant, values, multiplier_ab=(a, b), robust=(self.kind == KIND_ROBUST), printed_phi21=self.printed_phi21
-        )
+        lmis = lmi_matrices(plant, values, multiplier_ab=(a, b), robust=(self.kind == KIND_ROBUST))
         worst, worst_label = -math.inf, ""
         ok = True
         for label, *_, m in lmis:
