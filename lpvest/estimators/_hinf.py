@@ -405,7 +405,7 @@ class HinfFilter(Component):
         self._xu = np.zeros(0 if self.plant is None else self.plant.nx)
         self._k = 0
 
-    def _read(self, inputs: Mapping[str, Any]) -> tuple[np.ndarray | None, np.ndarray, np.ndarray | None]:
+    def _read(self, inputs: Mapping[str, object]) -> tuple[np.ndarray | None, np.ndarray, np.ndarray | None]:
         missing = [n for n in self._in_names if n not in inputs]
         if missing or len(inputs) != len(self._in_names):
             unknown = sorted(set(inputs) - set(self._in_names))
@@ -425,7 +425,9 @@ class HinfFilter(Component):
                 checked["p"] = space.check(as_vector(inputs["p"], "p", space.dim))
         return self._read_checked(checked)
 
-    def _read_checked(self, inputs: Mapping[str, Any]) -> tuple[np.ndarray | None, np.ndarray, np.ndarray | None]:
+    def _read_checked(
+        self, inputs: Mapping[str, np.ndarray]
+    ) -> tuple[np.ndarray | None, np.ndarray, np.ndarray | None]:
         """:meth:`_read` of inputs checked at the boundary (:meth:`Component._read_checked`)."""
         u = None if self.plant is None else inputs["u"]
         alpha: np.ndarray | None = None
@@ -461,7 +463,7 @@ class HinfFilter(Component):
             self._xu = _InputPath.next_state(a, self._xu, u)
         self._k += 1
 
-    def get_state(self) -> dict[str, Any]:
+    def get_state(self) -> dict[str, object]:
         """``{"xf": x_f,k, "k": k}`` and, with a known input, ``"xu"``: the
         state of the filter's copy of the plant driven by ``u`` (copies).
 
@@ -471,7 +473,7 @@ class HinfFilter(Component):
             ``"xf"`` (n_x,) the filter state, ``"k"`` (int) the sample
             counter and, with a known input, ``"xu"`` (the plant's n_x,).
         """
-        out: dict[str, Any] = {"xf": self._xf.copy(), "k": self._k}
+        out: dict[str, object] = {"xf": self._xf.copy(), "k": self._k}
         if self.plant is not None:
             out["xu"] = self._xu.copy()
         return out

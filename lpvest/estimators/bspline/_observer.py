@@ -192,7 +192,7 @@ class BSplineObserver(Component):
         out["t_est"][0] = self.t0 + self._k * self.dt - self.delay
         return out
 
-    def _read(self, inputs: Mapping[str, np.ndarray]) -> tuple[float, float]:
+    def _read(self, inputs: Mapping[str, object]) -> tuple[float, float]:
         missing = [p.name for p in self.input_ports if p.name not in inputs]
         if missing:
             raise DimensionError(f"missing input {missing[0]!r}; the observer needs u and y")
@@ -290,7 +290,7 @@ class BSplineObserver(Component):
             x, a0, a1, b0, b1`` (hop,) or (hop, 2) for ``x`` (zeros before the
             first fit), and ``"held_<port>"`` for every output port (copies).
         """
-        state: dict[str, Any] = {
+        state: dict[str, object] = {
             "k": self._k,
             "head": self._head,
             "ring_u": self._ring_u.copy(),
