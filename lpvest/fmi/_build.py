@@ -68,7 +68,7 @@ import zipfile
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 from xml.dom.minidom import parseString
 from xml.etree.ElementTree import Element, SubElement, tostring
 
@@ -127,6 +127,14 @@ def scripts_dir() -> Path:
         if (candidate / "lpvest_plant.py").is_file():
             return candidate
     raise BuildError(f"the FMU slave scripts are missing (looked in {here.parent / 'fmus'})")
+
+
+class _PlanSource(TypedDict):
+    """The fields of an :class:`FmuPlan` that every plan of one system shares."""
+
+    system_path: Path
+    system_name: str
+    model_key: str
 
 
 @dataclass(frozen=True)
@@ -246,7 +254,7 @@ def plan_system(
     model = system.models[key]
     params = tuple(system.parameters)
     title = system.title or system.name
-    common: dict[str, Any] = {"system_path": system.path, "system_name": system.name, "model_key": key}
+    common = _PlanSource(system_path=system.path, system_name=system.name, model_key=key)
     plans: list[FmuPlan] = []
     if isinstance(model, LTVStateSpace | LTVInputOutput):
         plans.append(FmuPlan(f"{stem}Plant", "Plant", "lpvest_ltv_plant.py",
@@ -633,7 +641,7 @@ def manifest_inputs(
     }
 
 
-def _stage(plan: FmuPlan, staging: Path, progress: Callable[[str], None] | None) -> tuple[Bundle, dict[str, Any]]:
+def _stage(plan: FmuPlan, staging: Path, progress: Callable[[str], None] | None) -> tuple[Bundle, dict[str, object]]:
     """Write ``resources/`` into ``staging``; returns the bundle and the manifest."""
     bundle = _bundle(plan)
     for rel, data in bundle.files.items():
@@ -643,7 +651,7 @@ def _stage(plan: FmuPlan, staging: Path, progress: Callable[[str], None] | None)
     shutil.copyfile(plan.system_path, staging / "model.toml")
     (staging / "slavemodule.txt").write_text(bundle.entry)
     (staging / "requirements.txt").write_text("".join(r + "\n" for r in bundle.requirements))
-    spec: dict[str, Any] = {
+    spec: dict[str, object] = {
         "format": SPEC_FORMAT,
         "identifier": plan.identifier,
         "role": plan.role,
@@ -669,7 +677,7 @@ def _stage(plan: FmuPlan, staging: Path, progress: Callable[[str], None] | None)
             spec["design_file"] = "design.json"
             spec["design_origin"] = origin
     (staging / SPEC_FILE).write_text(json.dumps(spec, indent=2) + "\n")
-    manifest = {
+    manifest: dict[str, object] = {
         "format": _MANIFEST_FORMAT,
         "inputs": manifest_inputs(plan, bundle, design),
         "modules": list(bundle.modules),
@@ -913,7 +921,7 @@ def build_fmus(
     roles: Iterable[str] | None = None,
     designs: Mapping[str, str | Path] | None = None,
     progress: Callable[[str], None] | None = None,
-    design_options: Mapping[str, Any] | None = None,
+    design_options: Mapping[str, object] | None = None,
     backend: str = "pythonfmu",
 ) -> tuple[list[BuildResult], list[str]]:
     """Build and validate the FMUs of the given system files (default: every

@@ -247,7 +247,7 @@ def build_native_fmu(plan: FmuPlan, out_dir: str | Path, *, progress: Callable[[
         staging = Path(tmp) / "resources"
         staging.mkdir()
         shutil.copyfile(plan.system_path, staging / "model.toml")
-        spec: dict[str, Any] = {
+        spec: dict[str, object] = {
             "format": SPEC_FORMAT, "identifier": plan.identifier, "role": plan.role, "description": plan.description,
             "lpvest_version": __version__, "backend": "native", "system": plan.system_name,
             "model_file": "model.toml", "model_key": plan.model_key, "model_parameters": list(plan.model_parameters),
