@@ -28,6 +28,8 @@ import numpy as np
 from ._errors import ExpressionError, abbreviate, shorten
 
 if TYPE_CHECKING:
+    from types import CodeType
+
     from numpy.typing import ArrayLike
 
 __all__ = [
@@ -147,7 +149,7 @@ class _PowerAsCall(ast.NodeTransformer):
 
 @dataclass(frozen=True)
 class _Compiled:
-    code: Any
+    code: CodeType
     #: the formula calls numpy (a power or a function), which warns where IEEE
     #: arithmetic gives nan or inf unless evaluated under np.errstate
     calls_numpy: bool
@@ -309,7 +311,7 @@ def _real(value: Any) -> Any:
     return np.asarray(value, dtype=float)[()]
 
 
-def _has_complex(result: Any) -> bool:
+def _has_complex(result: object) -> bool:
     if isinstance(result, tuple):
         return any(isinstance(r, complex) for r in result)
     return isinstance(result, complex)

@@ -470,7 +470,7 @@ def lmi_matrices(
     """
     if (epsilon is None) == (multiplier_ab is None):
         raise ArgumentError("give exactly one of epsilon and multiplier_ab")
-    a, b = (float(epsilon), 1.0) if multiplier_ab is None else multiplier_ab  # type: ignore[arg-type]
+    a, b = (float(epsilon), 1.0) if multiplier_ab is None else multiplier_ab  # type: ignore[arg-type]  # one is given
     var = {k: ([np.asarray(m, dtype=float) for m in v] if k != "delta" else float(v)) for k, v in variables.items()}
     return _lmis(_vertex_data(plant, a, b), var, a, b, robust=robust, bmat=_np_bmat)
 
@@ -836,7 +836,7 @@ class HinfProgram:
             a, b = _ab_of_phi(phi)
             eps = _epsilon_of_phi(phi)
         else:
-            eps = float(epsilon)  # type: ignore[arg-type]
+            eps = float(epsilon)  # type: ignore[arg-type]  # not None: exactly one of epsilon, phi
             a, b = multiplier(eps)
             eps = abs(eps) if math.isinf(eps) else eps
         detail = _instability(plant)

@@ -305,7 +305,7 @@ def plan_system(
     return plans, notes
 
 
-def _design_fits(path: Path, model: Any) -> bool:
+def _design_fits(path: Path, model: object) -> bool:
     from ..core._errors import ModelFileError
     from ..design._result import HinfDesign
     from ..systems._polytopic import hinf_setting
@@ -538,7 +538,7 @@ def _design_summary(text: str) -> str:
         return ""
 
 
-def _check_design_file(plan: FmuPlan, model: Any = None) -> str:
+def _check_design_file(plan: FmuPlan, model: object = None) -> str:
     """The text of ``plan.design``, checked against the plan's model (its
     dimensions and digest); :class:`BuildError` or the design's own error."""
     from ..design._result import HinfDesign

@@ -67,7 +67,7 @@ from pythonfmu.variables import Boolean, Integer, Real, String
 from .._version import __version__
 from ..core._errors import ArgumentError
 from ..core._interrupt import hold
-from ..core._protocol import Component, Port, whole_samples
+from ..core._protocol import Component, Port, Sampled, Timed, whole_samples
 from ._naming import element_names
 from ._parameters import Parameter, read_spec
 from ._state import copy_state, decode_state, encode_state
@@ -286,7 +286,7 @@ class LpvestSlave(Fmi2Slave):
         self._construction_log = list(self.log_queue)
         del self.log_queue[:]
 
-    def _direct_outputs(self, component: Any) -> tuple[str, ...]:
+    def _direct_outputs(self, component: Sampled | Timed) -> tuple[str, ...]:
         """The outputs that depend on an input at the same instant: they hold their
         value after a step until inputs are set (the model description declares
         the dependencies of the default configuration, which includes these)."""

@@ -154,7 +154,7 @@ class AffineDependence:
                 if not terms:
                     raise DimensionError(f"{key} has no terms")
                 # shape is now the last term's shape (ints); mypy still sees the given (int | None) pair
-                stack = np.zeros((1 + len(basis), *shape))  # type: ignore[misc]
+                stack = np.zeros((1 + len(basis), *shape))  # type: ignore[misc]  # see above
                 for pos, m in terms.items():
                     stack[pos] = m
             else:
