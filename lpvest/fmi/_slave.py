@@ -845,7 +845,7 @@ class LpvestSlave(Fmi2Slave):
         self._guard("fmi2SetString", lambda: self._set(vrs, values, "String"), None)
 
     # -- FMU state ---------------------------------------------------------------------
-    def _snapshot(self) -> dict[str, Any]:
+    def _snapshot(self) -> dict[str, object]:
         return {
             "identifier": self.modelName,
             "params": copy_state(self._params),
@@ -909,7 +909,7 @@ class LpvestSlave(Fmi2Slave):
         self._guard("fmi2SetFMUstate", run, None)
 
     @staticmethod
-    def _fmu_state_to_bytes(state: Any) -> bytes:
+    def _fmu_state_to_bytes(state: object) -> bytes:
         return bytes(state) if isinstance(state, bytes | bytearray) else b""
 
     @staticmethod
