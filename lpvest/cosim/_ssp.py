@@ -603,7 +603,7 @@ def read_ssp(path: str | Path) -> SspSystem:
                      connectors, sources)
 
 
-def _typed(typ: str, text: str) -> Any:
+def _typed(typ: str, text: str) -> float | int | bool | str:
     if typ == "Real":
         return float(text)
     if typ == "Integer":
