@@ -1,7 +1,7 @@
 """Estimator FMU: any streaming estimator of lpvest (slave script).
 
 A generic adapter over the step protocol of
-:mod:`lpvest.estimators.base`: the estimator is built by the factory its
+:class:`lpvest.core.Component`: the estimator is built by the factory its
 registration names (``lpvest.fmi._registry``), from the model file and the
 optional design carried in ``resources/``, with the FMU parameters as keywords.
 Its input ports become FMI inputs (``p[j]`` with the scheduling box as declared

@@ -318,7 +318,7 @@ def cmd_build(args: argparse.Namespace) -> int:
         unknown = [r for r in roles if r not in known_roles()]
         if unknown:
             raise ArgumentError(f"--kinds: no role {abbreviate(unknown[0], 30)} (roles: {', '.join(known_roles())})")
-    options: dict[str, Any] = {}
+    options: dict[str, object] = {}
     if args.epsilon is not None:
         options["epsilon"] = args.epsilon
     if args.solver is not None:

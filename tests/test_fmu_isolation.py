@@ -280,6 +280,35 @@ def test_the_same_inputs_give_a_byte_identical_fmu(tmp_path):
     assert _read(first["HinfPD"], "resources/design.json") == stored
 
 
+@pytest.mark.parametrize("system", ["peixoto-ex1", "cox-toth-truncation"])
+def test_both_backends_record_a_plan_alike(system):
+    """The entries the pythonfmu and the native manifests both record are the
+    same values, in the same order, for every plan: the plan's (identifier to
+    design_sha256); the native estimator entry lacks only the Python
+    requirements."""
+    from lpvest.fmi._build import manifest_inputs, plan_system
+    from lpvest.fmi.native._build import native_manifest_inputs
+
+    plans = plan_system(system)[0]
+    assert any(p.estimator is not None for p in plans)
+    for plan in plans:
+        for design in (None, '{"a design": 1}'):
+            py = manifest_inputs(plan, design=design)
+            native = native_manifest_inputs(plan, design)
+            common = [k for k in py if k in native]
+            assert common == [k for k in native if k in py] == [
+                "identifier", "role", "system", "model_key", "description", "model_parameters", "step_size",
+                "stop_time", "estimator", "lpvest_version", "model_file_sha256", "design_sha256"], plan.identifier
+            for key in common:
+                if key == "estimator" and plan.estimator is not None:
+                    py_est, native_est = py[key], native[key]
+                    assert "requirements" not in native_est and "requirements" in py_est
+                    assert {k: v for k, v in py_est.items() if k != "requirements"} == native_est
+                else:
+                    assert py[key] == native[key], (plan.identifier, key)
+            assert (py["design_sha256"] is None) == (design is None)
+
+
 def test_every_example_fmu_rebuilt_elsewhere_is_byte_identical(fmus, tmp_path):
     """Every FMU ``lpvest build`` writes for the example systems (the session's
     set, built in this process), built again in a fresh process into another

@@ -9,6 +9,7 @@ on a grid of (alpha_k, alpha_{k+1}).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 
@@ -32,6 +33,7 @@ from lpvest.design import (
 from lpvest.design._lmis import canonical_phi
 from lpvest.design._search import _search
 from tests import hinf_oracle as oracle
+from tests.hinf_misprint import printed_phi21
 from tests.tolerances import LMI_RESOLVE_GAMMA_RTOL, roundoff
 
 
@@ -145,7 +147,7 @@ def test_lmis_are_q_plus_he_xg_on_random_data(rng, robust):
 @pytest.mark.blas_sensitive
 def test_printed_blocks_agree_except_phi21(rng):
     """At (a, b) = (epsilon, 1) our blocks are the printed ones with Phi_21 using
-    P_{3,l} (alpha_{k+1}); the printed P_{3,j} is what the misprint option builds."""
+    P_{3,l} (alpha_{k+1}); the printed P_{3,j} is what tests/hinf_misprint.py builds."""
     N, nx, ny, nz, nw = 2, 2, 1, 2, 1
     plant = PolytopicLPV(oracle.random_plant_data(rng, N, nx, ny, nz, nw))
     var = oracle.random_variables(rng, N, nx, ny, nz, nw)
@@ -160,7 +162,8 @@ def test_printed_blocks_agree_except_phi21(rng):
         return oracle.printed_phi(data[i], v, Pn, Pc, var["delta"], eps, phi21_p3=p3)
 
     for misprint in (False, True):
-        lmis = lmi_matrices(plant, var, epsilon=eps, printed_phi21=misprint)
+        with printed_phi21() if misprint else contextlib.nullcontext():
+            lmis = lmi_matrices(plant, var, epsilon=eps)
         for blk in lmis:
             def one(i, j, nxt):
                 return printed(i, j, nxt, var["P3"][j] if misprint else var["P3"][nxt])  # noqa: B023
@@ -169,7 +172,8 @@ def test_printed_blocks_agree_except_phi21(rng):
             np.testing.assert_allclose(blk.matrix, want, rtol=0, atol=_block_tol(plant, var, (eps,)))
     # and the two differ exactly where P_{3,j} != P_{3,l}
     good = lmi_matrices(plant, var, epsilon=eps)
-    bad = lmi_matrices(plant, var, epsilon=eps, printed_phi21=True)
+    with printed_phi21():
+        bad = lmi_matrices(plant, var, epsilon=eps)
     diffs = [np.max(np.abs(g.matrix - b.matrix)) for g, b in zip(good, bad, strict=True)]
     assert [d > 0 for d in diffs] == [g.l != g.i or g.l != g.j for g in good]
 
@@ -406,8 +410,9 @@ def test_printed_phi21_certifies_a_false_gamma(rng):
     """The trap: with the printed Phi_21 (P_{3,j}) the robust design for Example 1
     reports gamma ~ 2.63, but vertex switching drives the filter's gain far above."""
     plant = ex1()
-    prog = HinfProgram.for_plant(plant, kind=KIND_ROBUST, printed_phi21=True)
-    d = prog.solve(plant, 150.0)
+    with printed_phi21():
+        prog = HinfProgram.for_plant(plant, kind=KIND_ROBUST)
+        d = prog.solve(plant, 150.0)
     assert d.gamma == pytest.approx(2.63, abs=0.02)
     gain, where = oracle.worst_case_gain(plant, d, rng, max_period=4, n_random=0)
     assert gain > 4 * d.gamma, where  # > 10: the "certificate" is false

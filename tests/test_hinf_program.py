@@ -62,7 +62,7 @@ def checked(monkeypatch):
     blocks: list[np.ndarray] = []
     monkeypatch.setattr(program, "lmi_matrices", lambda *a, **k: [LMIBlock(f"Phi_{i}", 0, 0, 0, m)
                                                                    for i, m in enumerate(blocks)])
-    prog = SimpleNamespace(kind=KIND_PD, printed_phi21=False)
+    prog = SimpleNamespace(kind=KIND_PD)
 
     def run(values, *lmis):
         blocks[:] = lmis

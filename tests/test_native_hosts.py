@@ -6,7 +6,6 @@ fmpy; byte-identical builds."""
 
 from __future__ import annotations
 
-import json
 import shutil
 import subprocess
 import sys
@@ -18,6 +17,7 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 
+from tests import libcosim_driver
 from tests.native_hosts import HostDriver, sanitized_library, wine
 
 #: one FMU of every role and model kind, the lifecycle and sanitizer runs use them
@@ -158,33 +158,7 @@ def test_every_native_fmu_loads_and_steps_in_libcosim(native_fmus):
     twice over, each with its own sample time."""
     names = sorted(n for n, p in native_fmus.paths.items()
                    if not read_model_description(str(p)).coSimulation.needsExecutionTool)
-    steps = {n: float(read_model_description(str(native_fmus[n])).defaultExperiment.stepSize) for n in names}
-    code = textwrap.dedent(f"""
-        import json, math
-        from libcosimpy.CosimExecution import CosimExecution
-        from libcosimpy.CosimSlave import CosimLocalSlave
-        from libcosimpy.CosimObserver import CosimObserver
-        from libcosimpy.CosimLogging import log_output_level, CosimLogLevel
-        log_output_level(CosimLogLevel.ERROR)
-        paths = {json.dumps({n: str(native_fmus[n]) for n in names})}
-        steps = {json.dumps(steps)}
-        out = {{}}
-        for round_ in range(2):
-            for name, path in paths.items():
-                ex = CosimExecution.from_step_size(step_size=int(round(steps[name] * 1e9)))
-                i = ex.add_local_slave(CosimLocalSlave(fmu_path=path, instance_name=name))
-                refs = [v.reference for v in ex.slave_variables(i) if v.causality == 2]
-                obs = CosimObserver.create_last_value()
-                ex.add_observer(obs)
-                ok = ex.step(5)
-                values = obs.last_real_values(i, refs) if refs else []
-                out[f"{{round_}}:{{name}}"] = bool(ok) and all(math.isfinite(v) for v in values)
-                del ex
-        print("RESULT" + json.dumps(out))
-    """)
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, check=False)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    result = json.loads(next(x for x in proc.stdout.splitlines() if x.startswith("RESULT"))[len("RESULT"):])
+    result = libcosim_driver.load_and_step({n: native_fmus[n] for n in names})
     assert result == {f"{r}:{n}": True for r in range(2) for n in names}
 
 

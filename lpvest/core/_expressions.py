@@ -21,11 +21,16 @@ import math
 import warnings
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ._errors import ExpressionError, abbreviate, shorten
+
+if TYPE_CHECKING:
+    from types import CodeType
+
+    from numpy.typing import ArrayLike
 
 __all__ = [
     "Expression",
@@ -40,7 +45,7 @@ __all__ = [
 ]
 
 #: Functions a formula may call (numpy ufuncs, so formulas work on arrays).
-FUNCTIONS: dict[str, Any] = {
+FUNCTIONS: dict[str, object] = {
     "sin": np.sin,
     "cos": np.cos,
     "tan": np.tan,
@@ -69,7 +74,7 @@ _BINOPS = (ast.Add, ast.Sub, ast.Mult, ast.Div, ast.Pow)
 # ``a ** b`` is compiled as a call of numpy's power (see _compile)
 _POWER = "__power__"
 # the only globals a formula sees: the whitelisted functions, no builtins
-_GLOBALS: dict[str, Any] = {"__builtins__": {}, **FUNCTIONS, _POWER: np.power}
+_GLOBALS: dict[str, object] = {"__builtins__": {}, **FUNCTIONS, _POWER: np.power}
 _SHIFT_PREFIX = "__shift__"
 
 
@@ -144,7 +149,7 @@ class _PowerAsCall(ast.NodeTransformer):
 
 @dataclass(frozen=True)
 class _Compiled:
-    code: Any
+    code: CodeType
     #: the formula calls numpy (a power or a function), which warns where IEEE
     #: arithmetic gives nan or inf unless evaluated under np.errstate
     calls_numpy: bool
@@ -306,13 +311,13 @@ def _real(value: Any) -> Any:
     return np.asarray(value, dtype=float)[()]
 
 
-def _has_complex(result: Any) -> bool:
+def _has_complex(result: object) -> bool:
     if isinstance(result, tuple):
         return any(isinstance(r, complex) for r in result)
     return isinstance(result, complex)
 
 
-def _evaluate(compiled: _Compiled, values: Mapping[str, Any]) -> Any:
+def _evaluate(compiled: _Compiled, values: Mapping[str, ArrayLike]) -> Any:
     code = compiled.code
     if not compiled.calls_numpy and all(type(v) is float for v in values.values()):
         # one sample (the per-step path) of plain arithmetic: Python floats need no
@@ -531,7 +536,7 @@ class Expression:
     def __call__(self, **values: Any) -> Any:
         return self.evaluate(values)
 
-    def evaluate(self, values: Mapping[str, Any]) -> Any:
+    def evaluate(self, values: Mapping[str, ArrayLike]) -> Any:
         """Evaluate with ``values`` for the free names (arrays broadcast).
 
         Arithmetic follows IEEE floating point whatever the type of the values
@@ -697,7 +702,7 @@ def _const_op(op: ast.operator, a: float, b: float) -> float:
 def _bin(left: ast.expr, op: ast.operator, right: ast.expr) -> ast.expr:
     """``left op right`` with zeros, ones and constants folded."""
     if _is_c(left) and _is_c(right):
-        return _c(_const_op(op, left.value, right.value))  # type: ignore[attr-defined]
+        return _c(_const_op(op, left.value, right.value))  # type: ignore[attr-defined]  # _is_c: ast.Constant
     if isinstance(op, ast.Add):
         if _is_c(left, 0.0):
             return right
@@ -734,7 +739,7 @@ def _call(fname: str, arg: ast.expr) -> ast.expr:
 
 def _neg(x: ast.expr) -> ast.expr:
     if _is_c(x):
-        return _c(-x.value)  # type: ignore[attr-defined]
+        return _c(-x.value)  # type: ignore[attr-defined]  # _is_c: an ast.Constant
     if isinstance(x, ast.UnaryOp) and isinstance(x.op, ast.USub):
         return x.operand
     return ast.UnaryOp(ast.USub(), x)
@@ -929,7 +934,7 @@ class FormulaMatrix:
     def is_constant(self) -> bool:
         return all(e.is_constant for row in self.entries for e in row)
 
-    def evaluate(self, values: Mapping[str, Any]) -> np.ndarray:
+    def evaluate(self, values: Mapping[str, ArrayLike]) -> np.ndarray:
         """Evaluate every entry; array values give a stacked ``(..., rows, cols)``.
 
         Parameters
@@ -1000,7 +1005,7 @@ class FormulaVector:
         self._code = _compile(ast.Tuple([f.tree.body for f in self.formulas], ast.Load()), "<lpvest formulas>")
         self._names = frozenset().union(*(f.names for f in self.formulas))
 
-    def evaluate(self, values: Mapping[str, Any]) -> np.ndarray:
+    def evaluate(self, values: Mapping[str, ArrayLike]) -> np.ndarray:
         """The formulas' values, shape ``(n,)`` for scalar values or
         ``(*shape, n)`` for arrays of a common ``shape``.
 

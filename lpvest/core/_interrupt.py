@@ -38,7 +38,7 @@ import os
 import signal
 import threading
 from collections.abc import Callable, Iterator
-from typing import Any, TypeVar
+from typing import Any, ParamSpec, TypeVar
 
 __all__ = ["Interrupted", "handling_signals", "raise_if_pending", "call_interruptibly", "hold", "holds",
            "interruptible", "exit_status", "abandoned_calls"]
@@ -126,10 +126,11 @@ def handling_signals() -> Iterator[None]:
             signal.signal(number, handler)
 
 
-F = TypeVar("F", bound=Callable[..., Any])
+P = ParamSpec("P")
+R = TypeVar("R")
 
 
-def interruptible(fn: F) -> F:
+def interruptible(fn: Callable[P, R]) -> Callable[P, R]:
     """Decorator: ``fn`` runs within :func:`handling_signals`.
 
     Parameters
@@ -145,11 +146,11 @@ def interruptible(fn: F) -> F:
     """
 
     @functools.wraps(fn)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
+    def wrapper(*args: P.args, **kwargs: P.kwargs) -> R:
         with handling_signals():
             return fn(*args, **kwargs)
 
-    return wrapper  # type: ignore[return-value]
+    return wrapper
 
 
 def call_interruptibly(fn: Callable[[], T], *, on_abandon: Callable[[threading.Thread], None] | None = None) -> T:

@@ -74,11 +74,18 @@ from abc import ABC, abstractmethod
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import Any, ClassVar, Protocol, runtime_checkable
+from typing import Any, ClassVar, Generic, Protocol, TypeVar, cast, runtime_checkable
 
 import numpy as np
 
 from ._errors import ArgumentError, ArgumentTypeError, DimensionError, abbreviate
+
+#: What a component's ``_read`` gives its ``_evaluate`` (one checked sample).
+SampleT = TypeVar("SampleT")
+#: What a component's ``_evaluate`` prepares for its ``_commit``.
+PendingT = TypeVar("PendingT")
+#: :func:`input_key`: per input its name, shape and the bytes of its float64 values.
+InputKey = tuple[tuple[str, tuple[int, ...], bytes], ...]
 
 __all__ = [
     "Port",
@@ -147,7 +154,7 @@ class Sampled(Protocol):
     def reset(self) -> None:
         """Back to the initial state."""
 
-    def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    def outputs(self, inputs: Mapping[str, object]) -> dict[str, np.ndarray]:
         """Outputs at the current sample for these inputs; no state change.
 
         Parameters
@@ -163,7 +170,7 @@ class Sampled(Protocol):
         """
         ...
 
-    def step(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    def step(self, inputs: Mapping[str, object]) -> dict[str, np.ndarray]:
         """Consume the current sample: return :meth:`outputs` and advance.
 
         Parameters
@@ -179,7 +186,7 @@ class Sampled(Protocol):
         """
         ...
 
-    def get_state(self) -> dict[str, Any]:
+    def get_state(self) -> dict[str, object]:
         """A copy of the whole internal state (numpy arrays and scalars).
 
         Returns
@@ -228,7 +235,7 @@ class Timed(Protocol):
             The start time.
         """
 
-    def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    def outputs(self, inputs: Mapping[str, object]) -> dict[str, np.ndarray]:
         """Outputs at the current time for these inputs; no state change.
 
         Parameters
@@ -244,7 +251,7 @@ class Timed(Protocol):
         """
         ...
 
-    def step(self, inputs: Mapping[str, Any], *, dt: float, t_end: float | None = None) -> dict[str, np.ndarray]:
+    def step(self, inputs: Mapping[str, object], *, dt: float, t_end: float | None = None) -> dict[str, np.ndarray]:
         """Return :meth:`outputs` at the current time, then advance by ``dt`` (to ``t_end``).
 
         Parameters
@@ -265,7 +272,7 @@ class Timed(Protocol):
         """
         ...
 
-    def get_state(self) -> dict[str, Any]:
+    def get_state(self) -> dict[str, object]:
         """A copy of the whole internal state, the time included.
 
         Returns
@@ -286,7 +293,7 @@ class Timed(Protocol):
         """
 
 
-def input_key(inputs: Mapping[str, Any], names: tuple[str, ...] | None = None) -> tuple[Any, ...] | None:
+def input_key(inputs: Mapping[str, object], names: tuple[str, ...] | None = None) -> InputKey | None:
     """An exact, hashable fingerprint of one sample's inputs: per input its
     name, shape and the bytes of its values as float64 (``names``: only these
     inputs, in this order; default every item of ``inputs``).
@@ -327,7 +334,7 @@ def input_key(inputs: Mapping[str, Any], names: tuple[str, ...] | None = None) -
         return None
 
 
-class Component(ABC):
+class Component(ABC, Generic[SampleT, PendingT]):
     """The base of every sampled streaming component (see the module documentation).
 
     A subclass passes its ports to ``__init__``, then writes ``_reset``,
@@ -350,7 +357,7 @@ class Component(ABC):
         self._in = tuple(inputs)
         self._out = tuple(outputs)
         self._in_names = tuple(p.name for p in self._in)
-        self._memo: tuple[Any, dict[str, np.ndarray], Any] | None = None
+        self._memo: tuple[InputKey | None, dict[str, np.ndarray], PendingT] | None = None
         self.reset()
 
     # -- ports ------------------------------------------------------------------------
@@ -368,10 +375,10 @@ class Component(ABC):
         """Set the initial state."""
 
     @abstractmethod
-    def _read(self, inputs: Mapping[str, Any]) -> Any:
+    def _read(self, inputs: Mapping[str, object]) -> SampleT:
         """One sample's inputs, checked (raise a typed error, change nothing)."""
 
-    def _read_checked(self, inputs: Mapping[str, Any]) -> Any:
+    def _read_checked(self, inputs: Mapping[str, np.ndarray]) -> SampleT:
         """:meth:`_read` for inputs checked at the boundary (``prepare(checked=True)``).
 
         The caller guarantees every input port is present as a float64 array
@@ -386,15 +393,15 @@ class Component(ABC):
         return self._read(inputs)
 
     @abstractmethod
-    def _evaluate(self, sample: Any) -> tuple[dict[str, np.ndarray], Any]:
+    def _evaluate(self, sample: SampleT) -> tuple[dict[str, np.ndarray], PendingT]:
         """``(outputs, pending)`` for a checked sample; no state change."""
 
     @abstractmethod
-    def _commit(self, pending: Any) -> None:
+    def _commit(self, pending: PendingT) -> None:
         """Advance to the next sample with what :meth:`_evaluate` prepared."""
 
     @abstractmethod
-    def get_state(self) -> dict[str, Any]:
+    def get_state(self) -> dict[str, object]:
         """A copy of the whole internal state.
 
         Returns
@@ -425,7 +432,7 @@ class Component(ABC):
         self._set_state(state)
         self._memo = None
 
-    def outputs(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    def outputs(self, inputs: Mapping[str, object]) -> dict[str, np.ndarray]:
         """The outputs at the current sample for these inputs; no state change
         (the evaluation is kept for a following :meth:`step` with the same inputs).
 
@@ -450,7 +457,7 @@ class Component(ABC):
             out = memo[1]
         return {name: value.copy() for name, value in out.items()}
 
-    def _take(self, inputs: Mapping[str, Any]) -> tuple[dict[str, np.ndarray], Any]:
+    def _take(self, inputs: Mapping[str, object]) -> tuple[dict[str, np.ndarray], PendingT]:
         memo = self._memo
         if memo is not None:
             self._memo = None
@@ -460,7 +467,7 @@ class Component(ABC):
                 return memo[1], memo[2]
         return self._evaluate(self._read(inputs))
 
-    def step(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    def step(self, inputs: Mapping[str, object]) -> dict[str, np.ndarray]:
         """The outputs at the current sample; then advance to the next one.
 
         The evaluation kept by :meth:`outputs` is reused when ``inputs`` have the
@@ -481,7 +488,7 @@ class Component(ABC):
         self._commit(pending)
         return out
 
-    def prepare(self, inputs: Mapping[str, Any], *, checked: bool = False) -> dict[str, np.ndarray]:
+    def prepare(self, inputs: Mapping[str, object], *, checked: bool = False) -> dict[str, np.ndarray]:
         """Evaluate the current sample for a following :meth:`advance`, for a
         caller that guarantees these inputs stay unchanged (the FMU adapter):
         like :meth:`outputs`, without fingerprinting the inputs and without
@@ -502,11 +509,13 @@ class Component(ABC):
         outputs : dict of str to ndarray
             The value of every output port, by port name (not copies).
         """
-        out, pending = self._evaluate(self._read_checked(inputs) if checked else self._read(inputs))
+        # checked: the caller guarantees float64 arrays of the ports' shapes (see _read_checked)
+        out, pending = self._evaluate(self._read_checked(cast(Mapping[str, np.ndarray], inputs)) if checked
+                                      else self._read(inputs))
         self._memo = (None, out, pending)  # only advance() takes it: step() never reuses a None key
         return out
 
-    def _kept(self) -> tuple[dict[str, np.ndarray], Any] | None:
+    def _kept(self) -> tuple[dict[str, np.ndarray], PendingT] | None:
         memo = self._memo
         self._memo = None
         return None if memo is None else (memo[1], memo[2])
@@ -530,7 +539,7 @@ class Component(ABC):
         return kept[0]
 
 
-class TimedComponent(Component):
+class TimedComponent(Component[SampleT, PendingT]):
     """The base of every streaming component that keeps time: ``reset(t0)``,
     ``step(inputs, dt=h, t_end=t + h)`` (``t_end``: the master's communication
     point, free of the round-off of summed steps). ``_commit`` receives
@@ -567,7 +576,7 @@ class TimedComponent(Component):
         self._reset()
 
     @abstractmethod
-    def _commit(self, pending: Any, t_end: float = 0.0) -> None:
+    def _commit(self, pending: PendingT, t_end: float = 0.0) -> None:
         """Advance to ``t_end`` with what :meth:`_evaluate` prepared."""
 
     @property
@@ -575,8 +584,8 @@ class TimedComponent(Component):
     def time(self) -> float:
         """The current time."""
 
-    def step(  # type: ignore[override]
-        self, inputs: Mapping[str, Any], *, dt: float, t_end: float | None = None
+    def step(  # type: ignore[override]  # the timed protocol: step(inputs, dt=h, t_end=t + h)
+        self, inputs: Mapping[str, object], *, dt: float, t_end: float | None = None
     ) -> dict[str, np.ndarray]:
         """The outputs at the current time; then advance by ``dt`` (to ``t_end`` when given).
 
@@ -631,7 +640,14 @@ class TimedComponent(Component):
         return kept[0]
 
 
-class MeasurementDelay(Component):
+#: MeasurementDelay's sample: this step's on-time and late inputs.
+_DelaySample = tuple[dict[str, np.ndarray], dict[str, np.ndarray]]
+#: MeasurementDelay's pending step: the on-time inputs to keep, and what the wrapped component
+#: commits (its pending step, or the paired inputs of a protocol-only component), None while waiting.
+_DelayPending = tuple[dict[str, np.ndarray], tuple[object] | None]
+
+
+class MeasurementDelay(Component[_DelaySample, _DelayPending]):
     """A sampled component whose measurement arrives ``delay`` samples late:
     each late input is paired with the other inputs of its own sample.
 
@@ -745,55 +761,55 @@ class MeasurementDelay(Component):
         self._inner.reset()
         self._queue = deque()
 
-    def _arrived(self, inputs: Mapping[str, Any]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    def _arrived(self, inputs: Mapping[str, object]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
         """The checked inputs of this step as float64 copies: (on time, late)."""
         on_time = {p.name: np.array(inputs[p.name], dtype=float).reshape(p.shape) for p in self._on_time}
         late = {p.name: np.array(inputs[p.name], dtype=float).reshape(p.shape) for p in self._late_ports}
         return on_time, late
 
-    def _read(self, inputs: Mapping[str, Any]) -> Any:
+    def _read(self, inputs: Mapping[str, object]) -> _DelaySample:
         inner = self._inner
         if self._inner_is_component:
-            inner._read(inputs)  # type: ignore[attr-defined]  # the component's own checks, as they arrive
+            cast(Component, inner)._read(inputs)  # the component's own checks, as they arrive
         else:
             inner.outputs(inputs)  # a component of the protocol only: its checks, no state change
         return self._arrived(inputs)
 
-    def _read_checked(self, inputs: Mapping[str, Any]) -> Any:
+    def _read_checked(self, inputs: Mapping[str, np.ndarray]) -> _DelaySample:
         inner = self._inner
         if self._inner_is_component:
-            inner._read_checked(inputs)  # type: ignore[attr-defined]
+            cast(Component, inner)._read_checked(inputs)
         else:
             inner.outputs(inputs)
         return self._arrived(inputs)
 
-    def _evaluate(self, sample: Any) -> tuple[dict[str, np.ndarray], Any]:
+    def _evaluate(self, sample: _DelaySample) -> tuple[dict[str, np.ndarray], _DelayPending]:
         on_time, late = sample
         if len(self._queue) < self._delay:  # no measurement of a sample yet
             return {p.name: np.zeros(p.shape) for p in self._out}, (on_time, None)
         paired = {**(self._queue[0] if self._delay else on_time), **late}
         if self._inner_is_component:
-            inner: Any = self._inner
+            inner = cast(Component, self._inner)
             # every value of the pair passed the component's checks when it arrived
             out, pending = inner._evaluate(inner._read_checked(paired))
             return out, (on_time, (pending,))
         return self._inner.outputs(paired), (on_time, (paired,))
 
-    def _commit(self, pending: Any) -> None:
+    def _commit(self, pending: _DelayPending) -> None:
         on_time, inner_pending = pending
         if inner_pending is not None:
             if self._inner_is_component:
-                inner: Any = self._inner
+                inner = cast(Component, self._inner)
                 inner._memo = None
                 inner._commit(inner_pending[0])
             else:
-                self._inner.step(inner_pending[0])
+                self._inner.step(cast("dict[str, np.ndarray]", inner_pending[0]))  # the paired inputs
         if self._delay:
             if len(self._queue) == self._delay:
                 self._queue.popleft()
             self._queue.append(on_time)
 
-    def get_state(self) -> dict[str, Any]:
+    def get_state(self) -> dict[str, object]:
         """The component's state and the kept inputs.
 
         Returns
@@ -912,10 +928,10 @@ def run_streaming(
             raise DimensionError("no input sequences: give steps=T for a component without inputs")
         T = steps
     else:
-        found = set(lengths.values())
+        found = {n for n in lengths.values() if n is not None}  # (none is None: checked above)
         if len(found) != 1:
             raise DimensionError(f"input sequences have different lengths: {lengths}")
-        T = int(found.pop())  # type: ignore[arg-type]
+        T = int(found.pop())
         if steps is not None and steps != T:
             raise DimensionError(f"steps = {steps}, but the input sequences have {T} samples")
     out = {p.name: np.empty((T, *p.shape)) for p in estimator.output_ports}

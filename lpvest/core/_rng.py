@@ -231,12 +231,12 @@ class Stream:
         return self._bits
 
     @property
-    def state(self) -> dict[str, Any]:
+    def state(self) -> dict[str, object]:
         """The bit generator's state (``bit_generator.state``); assign to restore it."""
         return dict(self._bits.state)
 
     @state.setter
-    def state(self, value: dict[str, Any]) -> None:
+    def state(self, value: dict[str, object]) -> None:
         self._bits.state = value
 
     def raw(self, size: int) -> np.ndarray:

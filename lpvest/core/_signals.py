@@ -39,15 +39,21 @@ Examples
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ._errors import DimensionError, LpvestError, abbreviate
 from ._protocol import Port, TimedComponent
 from ._rng import Stream
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from ..systems._polytopic import SimplexMap
+    from ._scheduling import SchedulingSpace
 
 __all__ = [
     "SIGNAL_KINDS",
@@ -186,15 +192,15 @@ class SignalSpec:
         kind: str,
         n: int,
         *,
-        amplitude: Any = 1.0,
-        omega: Any = 1.0,
-        phase: Any = 0.0,
-        offset: Any = 0.0,
-        decay: Any = 0.0,
-        std: Any = 1.0,
-        rate: Any = 1.0,
-        lower: Any = -np.inf,
-        upper: Any = np.inf,
+        amplitude: ArrayLike = 1.0,
+        omega: ArrayLike = 1.0,
+        phase: ArrayLike = 0.0,
+        offset: ArrayLike = 0.0,
+        decay: ArrayLike = 0.0,
+        std: ArrayLike = 1.0,
+        rate: ArrayLike = 1.0,
+        lower: ArrayLike = -np.inf,
+        upper: ArrayLike = np.inf,
         onset: float = 0.0,
         seed: int = 0,
         table: str | tuple[Sequence[float], Sequence[Sequence[float]]] | None = None,
@@ -259,7 +265,7 @@ class SignalSpec:
         if n < 0:
             raise SignalError(f"a signal needs n >= 0 components; found {n}")
 
-        def vec(value: Any, label: str, *, finite: bool = True, nonneg: bool = False) -> np.ndarray:
+        def vec(value: ArrayLike, label: str, *, finite: bool = True, nonneg: bool = False) -> np.ndarray:
             try:
                 arr = np.array(value, dtype=float)
             except (TypeError, ValueError):
@@ -317,10 +323,6 @@ class SignalSpec:
             table_times=t_times,
             table_values=t_values,
         )
-
-    @property
-    def is_random(self) -> bool:
-        return self.kind in ("gaussian", "random")
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Per-component interval that holds every value the signal can take.
@@ -469,7 +471,7 @@ class SignalGenerator:
             self._value = spec.deterministic_value(t)
         return self.value
 
-    def get_state(self) -> dict[str, Any]:
+    def get_state(self) -> dict[str, object]:
         """A copy of the whole state, for :meth:`set_state`.
 
         Returns
@@ -582,7 +584,9 @@ class SchedulerComponent(TimedComponent):
     (array([0.]), array([0.5, 0.5]), array([0.24740396]))
     """
 
-    def __init__(self, signal: SignalSpec, space: Any, simplex_map: Any = None, *, prefix: str = "") -> None:
+    def __init__(
+        self, signal: SignalSpec, space: SchedulingSpace, simplex_map: SimplexMap | None = None, *, prefix: str = ""
+    ) -> None:
         if signal.n != space.dim:
             raise SignalError(f"the scheduling signal has {signal.n} components; the model has {space.dim}")
         lo, hi = signal.bounds()
@@ -622,7 +626,7 @@ class SchedulerComponent(TimedComponent):
     def _reset(self) -> None:
         self._gen.start(self.t0)
 
-    def _read(self, inputs: Any) -> None:
+    def _read(self, inputs: Mapping[str, object]) -> None:
         return None
 
     def _evaluate(self, sample: None) -> tuple[dict[str, np.ndarray], None]:
@@ -635,7 +639,7 @@ class SchedulerComponent(TimedComponent):
     def _commit(self, pending: None, t_end: float = 0.0) -> None:
         self._gen.advance(t_end)
 
-    def get_state(self) -> dict[str, Any]:
+    def get_state(self) -> dict[str, object]:
         """A copy of the whole state (that of the signal's generator).
 
         Returns
@@ -645,7 +649,7 @@ class SchedulerComponent(TimedComponent):
         """
         return self._gen.get_state()
 
-    def _set_state(self, state: Any) -> None:
+    def _set_state(self, state: Mapping[str, object]) -> None:
         self._gen.set_state(dict(state))
 
 
@@ -677,7 +681,7 @@ class SourceComponent(TimedComponent):
         for gen in self._gens.values():
             gen.start(self.t0)
 
-    def _read(self, inputs: Any) -> None:
+    def _read(self, inputs: Mapping[str, object]) -> None:
         return None
 
     def _evaluate(self, sample: None) -> tuple[dict[str, np.ndarray], None]:
@@ -687,7 +691,7 @@ class SourceComponent(TimedComponent):
         for gen in self._gens.values():
             gen.advance(t_end)
 
-    def get_state(self) -> dict[str, Any]:
+    def get_state(self) -> dict[str, object]:
         """A copy of the whole state (that of every signal's generator).
 
         Returns
@@ -697,6 +701,6 @@ class SourceComponent(TimedComponent):
         """
         return {name: gen.get_state() for name, gen in self._gens.items()}
 
-    def _set_state(self, state: Any) -> None:
+    def _set_state(self, state: Mapping[str, Mapping[str, object]]) -> None:
         for name, gen in self._gens.items():
             gen.set_state(dict(state[name]))

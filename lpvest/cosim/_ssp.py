@@ -466,7 +466,7 @@ def _member(path: Path, where: str, source: str) -> str:
 
 def _number(path: Path, where: str, text: str | None, *, positive: bool = False) -> float:
     try:
-        value = float(text)  # type: ignore[arg-type]
+        value = float(text)  # type: ignore[arg-type]  # None raises the TypeError caught below
     except (TypeError, ValueError):
         raise _ssp_error(path, f"{where}: expected a number, found {abbreviate(text, 30)}") from None
     if not math.isfinite(value) or (positive and not value > 0):
@@ -604,7 +604,7 @@ def read_ssp(path: str | Path) -> SspSystem:
                      connectors, sources)
 
 
-def _typed(typ: str, text: str) -> Any:
+def _typed(typ: str, text: str) -> float | int | bool | str:
     if typ == "Real":
         return float(text)
     if typ == "Integer":

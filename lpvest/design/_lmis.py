@@ -233,14 +233,13 @@ def lmi_blocks(
     *,
     robust: bool,
     bmat: Callable[..., Any],
-    printed_phi21: bool = False,
 ) -> list[LMIBlock]:
     """The LMIs (6)-(7) after Lemma 1, each matrix required ``< 0``.
 
     ``var`` maps names to per-vertex lists (``P1, P2, P3, X1..X6`` of length
     ``N``; ``H, Af, Bf, Cf, Df`` of length ``N``, or 1 when ``robust``) and
-    ``delta`` to the scalar. ``printed_phi21`` reproduces the paper's misprint
-    (``P_{3,j}`` in ``Phi_21``); it exists to document that trap in the tests.
+    ``delta`` to the scalar. (``tests/hinf_misprint.py`` builds the paper's
+    misprinted variant, ``P_{3,j}`` in ``Phi_21``, to document that trap.)
     """
     n = len(data)
     nx, nw = data[0]["Bw"].shape
@@ -262,8 +261,7 @@ def lmi_blocks(
 
     def qn(j: int, nxt: int) -> Any:
         # P(alpha_{k+1}) at vertex nxt (the paper's l); the misprint puts P_{3,j} in Phi_21
-        m = j if printed_phi21 else nxt
-        return _q_next(var["P1"][nxt], var["P2"][nxt], var["P3"][m], n_rest, bmat)
+        return _q_next(var["P1"][nxt], var["P2"][nxt], var["P3"][nxt], n_rest, bmat)
 
     out: list[LMIBlock] = []
     for l in range(n):  # noqa: E741 - the paper's index
@@ -298,7 +296,6 @@ def lmi_matrices(
     *,
     multiplier_ab: tuple[float, float] | None = None,
     robust: bool = False,
-    printed_phi21: bool = False,
 ) -> list[LMIBlock]:
     """The LMIs (6)-(7) (after Lemma 1) evaluated with numpy at given variables.
 
@@ -322,9 +319,6 @@ def lmi_matrices(
         rescaled coordinates of the module documentation.
     robust : bool, default False
         Corollary 1: one set of filter matrices (index 0) at every vertex.
-    printed_phi21 : bool, default False
-        Use the paper's misprinted ``P_{3,j}`` in ``Phi_21`` instead of ``P_{3,l}`` (for tests documenting
-        the trap).
 
     Returns
     -------
@@ -341,4 +335,4 @@ def lmi_matrices(
         raise ArgumentError("give exactly one of epsilon and multiplier_ab")
     a, b = (float(epsilon), 1.0) if multiplier_ab is None else multiplier_ab  # type: ignore[arg-type]
     var = {k: ([np.asarray(m, dtype=float) for m in v] if k != "delta" else float(v)) for k, v in variables.items()}
-    return lmi_blocks(_vertex_data(plant, a, b), var, a, b, robust=robust, bmat=_np_bmat, printed_phi21=printed_phi21)
+    return lmi_blocks(_vertex_data(plant, a, b), var, a, b, robust=robust, bmat=_np_bmat)

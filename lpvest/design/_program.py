@@ -223,8 +223,6 @@ class HinfProgram:
         Strict inequalities as ``M << -margin I``, ``P_i >> margin I``.
     solver_options : mapping, optional
         Extra keyword arguments for the solver.
-    printed_phi21 : bool
-        Use the paper's misprinted ``Phi_21`` (for tests documenting the trap).
 
     Examples
     --------
@@ -247,7 +245,6 @@ class HinfProgram:
         solver: str = DEFAULT_SOLVER,
         margin: float = DEFAULT_MARGIN,
         solver_options: Mapping[str, Any] | None = None,
-        printed_phi21: bool = False,
     ) -> None:
         import cvxpy as cp
 
@@ -270,7 +267,6 @@ class HinfProgram:
         self._returned_point = False  # the last solve returned a point (last_variables)
         self.margin = float(margin)
         self.solver_options = dict(solver_options or {})
-        self.printed_phi21 = bool(printed_phi21)
         N = self.n_vertices
         nf = 1 if kind == KIND_ROBUST else N
 
@@ -303,7 +299,7 @@ class HinfProgram:
         }
         lmis = lmi_blocks(
             self._data, self._var, self._a, self._b,
-            robust=(kind == KIND_ROBUST), bmat=cp.bmat, printed_phi21=self.printed_phi21,
+            robust=(kind == KIND_ROBUST), bmat=cp.bmat,
         )
         size = 4 * nx + nz + nw
         constraints = [blk.matrix << -self._margin * np.eye(size) for blk in lmis]
@@ -330,8 +326,7 @@ class HinfProgram:
         plant : PolytopicLPV or AffineLPV
             The plant whose ``(N, nx, ny, nz, nw)`` the program is compiled for.
         **options
-            Keyword arguments of the constructor: ``kind``, ``solver``, ``margin``, ``solver_options``,
-            ``printed_phi21``.
+            Keyword arguments of the constructor: ``kind``, ``solver``, ``margin``, ``solver_options``.
 
         Returns
         -------
@@ -470,9 +465,7 @@ class HinfProgram:
             values["delta"]
         ):
             return False, -math.inf, -math.inf, "the solver returned non-finite values", []
-        lmis = lmi_matrices(
-            plant, values, multiplier_ab=(a, b), robust=(self.kind == KIND_ROBUST), printed_phi21=self.printed_phi21
-        )
+        lmis = lmi_matrices(plant, values, multiplier_ab=(a, b), robust=(self.kind == KIND_ROBUST))
         worst, worst_label = -math.inf, ""
         ok = True
         for label, *_, m in lmis:
@@ -537,7 +530,7 @@ class HinfProgram:
             a, b = ab_of_phi(phi)
             eps = epsilon_of_phi(phi)
         else:
-            eps = float(epsilon)  # type: ignore[arg-type]
+            eps = float(epsilon)  # type: ignore[arg-type]  # not None: exactly one of epsilon, phi
             a, b = multiplier(eps)
             eps = abs(eps) if math.isinf(eps) else eps
         detail = instability(plant)

@@ -37,13 +37,14 @@ written with ``repr`` precision, so a round trip is exact.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple, cast
 
 import numpy as np
 
@@ -188,6 +189,8 @@ class HinfDesign:
     nw: int
     plant: str = ""
     model_digest: str = ""
+    if TYPE_CHECKING:  # not a field: set in __post_init__ (a frozen class); declared for the type checker only
+        _stack: MatrixStack = dataclasses.field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.kind not in (KIND_PD, KIND_ROBUST):
@@ -320,10 +323,11 @@ class HinfDesign:
         if check:
             alpha = as_vector(alpha, "alpha", self.n_vertices)
             check_simplex(alpha, "alpha")
-        return FilterMatrices(**self._stack.at(alpha))  # type: ignore[attr-defined]  # set in __post_init__ (frozen)
+        # check=False: the caller gives a validated ndarray (see above)
+        return FilterMatrices(**self._stack.at(cast(np.ndarray, alpha)))
 
     # -- JSON -------------------------------------------------------------------
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         """The JSON-able dictionary described in the module documentation.
 
         Returns
@@ -380,7 +384,7 @@ class HinfDesign:
         return text
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any], *, source: str = "design") -> HinfDesign:
+    def from_dict(cls, data: Mapping[str, object], *, source: str = "design") -> HinfDesign:
         """Inverse of :meth:`to_dict`; raises :class:`~lpvest.core.ModelFileError`
         naming ``source`` and the field when the data are malformed.
 
@@ -398,7 +402,7 @@ class HinfDesign:
             The design; its dimensions agree with ``n_vertices, nx, ny, nz`` of ``data``.
         """
 
-        def field(mapping: Mapping[str, Any], key: str, where: str = "") -> Any:
+        def field(mapping: Mapping[str, object], key: str, where: str = "") -> Any:
             if not isinstance(mapping, Mapping) or key not in mapping:
                 raise ModelFileError(f"{source}: missing field {where}{key!r}")
             return mapping[key]
@@ -424,7 +428,8 @@ class HinfDesign:
                 Df=np.array(field(filt, "Df", "filter."), dtype=float),
                 gamma=float(field(data, "gamma")),
                 epsilon=math.inf if eps is None else float(eps),
-                multiplier=tuple(float(v) for v in field(data, "multiplier")),  # type: ignore[arg-type]
+                # a tuple of any length to mypy; __post_init__ unpacks it into (a, b)
+                multiplier=tuple(float(v) for v in field(data, "multiplier")),  # type: ignore[arg-type]  # see above
                 lyapunov=np.array(field(data, "lyapunov"), dtype=float),
                 solver=str(field(solver, "name", "solver.")),
                 status=str(field(solver, "status", "solver.")),

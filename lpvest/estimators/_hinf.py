@@ -74,7 +74,7 @@ from ..core._errors import ArgumentTypeError, DimensionError, NumericalError
 from ..core._linalg import MatrixStack
 from ..core._protocol import Component, Port
 from ..core._validation import as_signal, as_vector, check_simplex
-from ..design._result import HinfDesign
+from ..design._result import FilterMatrices, HinfDesign
 from ..systems._polytopic import POLYTOPIC_INPUT_MATRICES, PolytopicLPV, SimplexMap
 
 __all__ = ["HinfFilter", "HinfStep", "HinfRun", "hinf_step", "hinf_filter_batch", "needs_scheduling"]
@@ -143,7 +143,7 @@ def hinf_step(design: HinfDesign, xf: np.ndarray, alpha: np.ndarray | None, y: n
 
 
 def _step_with(
-    m: Any, xf: np.ndarray, alpha: np.ndarray | None, y: np.ndarray, zhat: np.ndarray | None = None
+    m: FilterMatrices, xf: np.ndarray, alpha: np.ndarray | None, y: np.ndarray, zhat: np.ndarray | None = None
 ) -> HinfStep:
     """:func:`hinf_step` with the matrices at ``alpha`` (and ``zhat``) already evaluated."""
     if zhat is None:
@@ -322,7 +322,15 @@ def needs_scheduling(design: HinfDesign, plant: PolytopicLPV | None = None) -> b
     return design.scheduled or (plant is not None and plant.known_input is not None and plant.input_path_varies())
 
 
-class HinfFilter(Component):
+#: HinfFilter's sample: (alpha or None, y, u or None).
+_Sample = tuple[np.ndarray | None, np.ndarray, np.ndarray | None]
+#: HinfFilter's pending step: the matrices, alpha, y (without u's response), zhat (of the filter part), and the
+#: known-input path's matrices and u (None without a known input).
+_Pending = tuple[FilterMatrices, np.ndarray | None, np.ndarray, np.ndarray, dict[str, np.ndarray] | None,
+                 np.ndarray | None]
+
+
+class HinfFilter(Component[_Sample, _Pending]):
     """Streaming H-infinity filter (2), a streaming component (:mod:`lpvest.core`)
     over the pure step :func:`hinf_step`.
 
@@ -405,7 +413,7 @@ class HinfFilter(Component):
         self._xu = np.zeros(0 if self.plant is None else self.plant.nx)
         self._k = 0
 
-    def _read(self, inputs: Mapping[str, Any]) -> tuple[np.ndarray | None, np.ndarray, np.ndarray | None]:
+    def _read(self, inputs: Mapping[str, object]) -> tuple[np.ndarray | None, np.ndarray, np.ndarray | None]:
         missing = [n for n in self._in_names if n not in inputs]
         if missing or len(inputs) != len(self._in_names):
             unknown = sorted(set(inputs) - set(self._in_names))
@@ -425,7 +433,9 @@ class HinfFilter(Component):
                 checked["p"] = space.check(as_vector(inputs["p"], "p", space.dim))
         return self._read_checked(checked)
 
-    def _read_checked(self, inputs: Mapping[str, Any]) -> tuple[np.ndarray | None, np.ndarray, np.ndarray | None]:
+    def _read_checked(
+        self, inputs: Mapping[str, np.ndarray]
+    ) -> tuple[np.ndarray | None, np.ndarray, np.ndarray | None]:
         """:meth:`_read` of inputs checked at the boundary (:meth:`Component._read_checked`)."""
         u = None if self.plant is None else inputs["u"]
         alpha: np.ndarray | None = None
@@ -439,7 +449,7 @@ class HinfFilter(Component):
 
     def _evaluate(
         self, sample: tuple[np.ndarray | None, np.ndarray, np.ndarray | None]
-    ) -> tuple[dict[str, np.ndarray], Any]:
+    ) -> tuple[dict[str, np.ndarray], _Pending]:
         """``zhat`` and ``xf`` at the current sample; the matrices are kept for the step."""
         alpha, y, u = sample
         m = self.design.matrices_at(alpha if self.design.scheduled else None, check=False)
@@ -454,14 +464,14 @@ class HinfFilter(Component):
         zhat = path.estimate(a, self._xu, u, z_f)
         return {"zhat": zhat, "xf": self._xf.copy()}, (m, alpha, y_w, z_f, a, u)
 
-    def _commit(self, pending: Any) -> None:
+    def _commit(self, pending: _Pending) -> None:
         m, alpha, y, zhat, a, u = pending
         self._xf = _step_with(m, self._xf, alpha, y, zhat).xf_next
-        if a is not None:
+        if a is not None and u is not None:  # (both or neither: see _evaluate)
             self._xu = _InputPath.next_state(a, self._xu, u)
         self._k += 1
 
-    def get_state(self) -> dict[str, Any]:
+    def get_state(self) -> dict[str, object]:
         """``{"xf": x_f,k, "k": k}`` and, with a known input, ``"xu"``: the
         state of the filter's copy of the plant driven by ``u`` (copies).
 
@@ -471,7 +481,7 @@ class HinfFilter(Component):
             ``"xf"`` (n_x,) the filter state, ``"k"`` (int) the sample
             counter and, with a known input, ``"xu"`` (the plant's n_x,).
         """
-        out: dict[str, Any] = {"xf": self._xf.copy(), "k": self._k}
+        out: dict[str, object] = {"xf": self._xf.copy(), "k": self._k}
         if self.plant is not None:
             out["xu"] = self._xu.copy()
         return out

@@ -68,7 +68,7 @@ import zipfile
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 from xml.dom.minidom import parseString
 from xml.etree.ElementTree import Element, SubElement, tostring
 
@@ -127,6 +127,14 @@ def scripts_dir() -> Path:
         if (candidate / "lpvest_plant.py").is_file():
             return candidate
     raise BuildError(f"the FMU slave scripts are missing (looked in {here.parent / 'fmus'})")
+
+
+class _PlanSource(TypedDict):
+    """The fields of an :class:`FmuPlan` that every plan of one system shares."""
+
+    system_path: Path
+    system_name: str
+    model_key: str
 
 
 @dataclass(frozen=True)
@@ -324,7 +332,7 @@ def plan_system(
     model = system.models[key]
     params = tuple(system.parameters)
     title = system.title or system.name
-    common: dict[str, Any] = {"system_path": system.path, "system_name": system.name, "model_key": key}
+    common = _PlanSource(system_path=system.path, system_name=system.name, model_key=key)
     plans: list[FmuPlan] = []
     if isinstance(model, LTVStateSpace | LTVInputOutput):
         plans.append(FmuPlan(f"{stem}Plant", "Plant", "lpvest_ltv_plant.py",
@@ -375,7 +383,7 @@ def plan_system(
     return plans, notes
 
 
-def _design_fits(path: Path, model: Any) -> bool:
+def _design_fits(path: Path, model: object) -> bool:
     from ..core._errors import ModelFileError
     from ..design._result import HinfDesign
     from ..systems._polytopic import hinf_setting
@@ -608,7 +616,7 @@ def _design_summary(text: str) -> str:
         return ""
 
 
-def _check_design_file(plan: FmuPlan, model: Any = None) -> str:
+def _check_design_file(plan: FmuPlan, model: object = None) -> str:
     """The text of ``plan.design``, checked against the plan's model (its
     dimensions and digest); :class:`BuildError` or the design's own error."""
     from ..design._result import HinfDesign
@@ -632,10 +640,10 @@ def _design_cache_file(plan: FmuPlan) -> Path | None:
     design function and its options, the lpvest version)."""
     if plan.design_cache is None or plan.estimator is None:
         return None
-    key = json.dumps({"model_file_sha256": _sha(Path(plan.system_path).read_bytes()), "model_key": plan.model_key,
+    key = json.dumps({"model_file_sha256": sha256_hex(Path(plan.system_path).read_bytes()), "model_key": plan.model_key,
                       "design": plan.estimator.design, "options": sorted(map(list, plan.design_options)),
                       "lpvest_version": __version__}, sort_keys=True, default=str)
-    return plan.design_cache / f"{plan.identifier}-{_sha(key.encode())[:16]}.json"
+    return plan.design_cache / f"{plan.identifier}-{sha256_hex(key.encode())[:16]}.json"
 
 
 def manifest_inputs_version() -> str:
@@ -643,29 +651,33 @@ def manifest_inputs_version() -> str:
     return __version__
 
 
-def _sha(data: bytes) -> str:
-    return hashlib.sha256(data).hexdigest()
+def plan_inputs(plan: FmuPlan, design: str | bytes | None = None, *, requirements: bool) -> dict[str, object]:
+    """The inputs of a build that both backends' manifests record, in this
+    order: the plan, the estimator (with its Python ``requirements`` when
+    asked: the native backend carries none), lpvest's version, and the
+    SHA-256 of the model file and of the carried ``design``. No path, no time.
 
+    Parameters
+    ----------
+    plan : FmuPlan
+        The FMU to build.
+    design : str or bytes, optional
+        The design the FMU carries.
+    requirements : bool
+        Record the estimator's Python requirements.
 
-def manifest_inputs(plan: FmuPlan, bundle: Bundle | None = None, design: str | bytes | None = None) -> dict[str, Any]:
-    """Every input of an FMU's build and its SHA-256 (what ``manifest.json``
-    records and what an FMU cache compares): the plan, the model file, the
-    carried code (the bundle digest), the design when one is carried, and the
-    versions of pythonfmu and the C compiler. No path, no time."""
-    import pythonfmu
-
-    bundle = bundle or _bundle(plan)
+    Returns
+    -------
+    dict
+        The manifest entries, in the order the manifests write them.
+    """
     est = None
     if plan.estimator is not None:
-        est = plan.estimator.to_json() | {"design": plan.estimator.design, "models": list(plan.estimator.models),
-                                           "requirements": list(plan.estimator.requirements)}
+        est = plan.estimator.to_json() | {"design": plan.estimator.design, "models": list(plan.estimator.models)}
+        if requirements:
+            est["requirements"] = list(plan.estimator.requirements)
         if plan.design_options:
             est["design_options"] = {k: v for k, v in sorted(plan.design_options)}
-    bridges = {}
-    for platform in BRIDGE_PLATFORMS:
-        bridge = status_bridge(platform)
-        bridges[platform] = None if bridge is None else {"sha256": _sha(bridge.read_bytes()),
-                                                          "compiler": _bridge_compiler(platform)}
     return {
         "identifier": plan.identifier,
         "role": plan.role,
@@ -677,9 +689,29 @@ def manifest_inputs(plan: FmuPlan, bundle: Bundle | None = None, design: str | b
         "stop_time": plan.stop_time,
         "estimator": est,
         "lpvest_version": __version__,
-        "model_file_sha256": _sha(Path(plan.system_path).read_bytes()),
-        "design_sha256": None if design is None else _sha(design.encode() if isinstance(design, str) else design),
-        "design_file_sha256": None if plan.design is None else _sha(plan.design.read_bytes()),
+        "model_file_sha256": sha256_hex(Path(plan.system_path).read_bytes()),
+        "design_sha256": None if design is None else sha256_hex(design.encode() if isinstance(design, str) else design),
+    }
+
+
+def manifest_inputs(
+    plan: FmuPlan, bundle: Bundle | None = None, design: str | bytes | None = None
+) -> dict[str, object]:
+    """Every input of an FMU's build and its SHA-256 (what ``manifest.json``
+    records and what an FMU cache compares): the plan, the model file, the
+    carried code (the bundle digest), the design when one is carried, and the
+    versions of pythonfmu and the C compiler. No path, no time."""
+    import pythonfmu
+
+    bundle = bundle or _bundle(plan)
+    bridges = {}
+    for platform in BRIDGE_PLATFORMS:
+        bridge = status_bridge(platform)
+        bridges[platform] = None if bridge is None else {"sha256": sha256_hex(bridge.read_bytes()),
+                                                          "compiler": _bridge_compiler(platform)}
+    return {
+        **plan_inputs(plan, design, requirements=True),
+        "design_file_sha256": None if plan.design is None else sha256_hex(plan.design.read_bytes()),
         "bundle": {"package": bundle.package, "digest": bundle.digest, "requirements": list(bundle.requirements)},
         "pythonfmu": pythonfmu.__version__,
         "status_bridges": bridges,
@@ -687,7 +719,7 @@ def manifest_inputs(plan: FmuPlan, bundle: Bundle | None = None, design: str | b
     }
 
 
-def _stage(plan: FmuPlan, staging: Path, progress: Callable[[str], None] | None) -> tuple[Bundle, dict[str, Any]]:
+def _stage(plan: FmuPlan, staging: Path, progress: Callable[[str], None] | None) -> tuple[Bundle, dict[str, object]]:
     """Write ``resources/`` into ``staging``; returns the bundle and the manifest."""
     bundle = _bundle(plan)
     for rel, data in bundle.files.items():
@@ -697,7 +729,7 @@ def _stage(plan: FmuPlan, staging: Path, progress: Callable[[str], None] | None)
     shutil.copyfile(plan.system_path, staging / "model.toml")
     (staging / "slavemodule.txt").write_text(bundle.entry)
     (staging / "requirements.txt").write_text("".join(r + "\n" for r in bundle.requirements))
-    spec: dict[str, Any] = {
+    spec: dict[str, object] = {
         "format": SPEC_FORMAT,
         "identifier": plan.identifier,
         "role": plan.role,
@@ -723,7 +755,7 @@ def _stage(plan: FmuPlan, staging: Path, progress: Callable[[str], None] | None)
             spec["design_file"] = "design.json"
             spec["design_origin"] = origin
     (staging / SPEC_FILE).write_text(json.dumps(spec, indent=2) + "\n")
-    manifest = {
+    manifest: dict[str, object] = {
         "format": _MANIFEST_FORMAT,
         "inputs": manifest_inputs(plan, bundle, design),
         "modules": list(bundle.modules),
@@ -838,7 +870,7 @@ def write_fmu_zip(target: Path, entries: Mapping[str, tuple[bytes, bool]]) -> Pa
 
 def sha256_hex(data: bytes) -> str:
     """The SHA-256 of ``data`` in hex (what manifests record)."""
-    return _sha(data)
+    return hashlib.sha256(data).hexdigest()
 
 
 def write_zip_entry(z: zipfile.ZipFile, name: str, data: bytes, executable: bool = False) -> None:
@@ -942,7 +974,7 @@ def build_fmu(
         staging.mkdir()
         bundle, manifest = _stage(plan, staging, progress)
         manifest_text = json.dumps(manifest, indent=1, sort_keys=True) + "\n"
-        guid = "{" + str(uuid.UUID(hex=_sha(manifest_text.encode())[:32])) + "}"
+        guid = "{" + str(uuid.UUID(hex=sha256_hex(manifest_text.encode())[:32])) + "}"
         xml, *_ = _model_description(plan, bundle, staging, guid)
         (staging / MANIFEST_FILE).write_text(manifest_text, encoding="utf-8")
         entries: dict[str, tuple[bytes, bool]] = {"modelDescription.xml": (xml, False)}
@@ -995,7 +1027,7 @@ def build_fmus(
     roles: Iterable[str] | None = None,
     designs: Mapping[str, str | Path] | None = None,
     progress: Callable[[str], None] | None = None,
-    design_options: Mapping[str, Any] | None = None,
+    design_options: Mapping[str, object] | None = None,
     backend: str = "pythonfmu",
 ) -> tuple[list[BuildResult], list[str]]:
     """Build and validate the FMUs of the given system files (default: every

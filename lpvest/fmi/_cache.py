@@ -32,9 +32,12 @@ import time
 from collections.abc import Callable, Iterable, Mapping
 from functools import cache
 from pathlib import Path
-from typing import Any, Self
+from typing import TYPE_CHECKING, Any, Self
 
 from ..core._errors import LpvestError
+
+if TYPE_CHECKING:
+    from ._build import FmuPlan
 
 __all__ = ["FmuCache", "FmuCacheError", "fingerprint", "default_cache_dir", "CACHE_FORMAT"]
 
@@ -62,7 +65,7 @@ def _solver_versions() -> str:
     return ";".join(out)
 
 
-def fingerprint(plan: Any, backend: str = "pythonfmu") -> str:
+def fingerprint(plan: FmuPlan, backend: str = "pythonfmu") -> str:
     """SHA-256 of everything an FMU of ``plan`` (a :class:`~lpvest.fmi.FmuPlan`)
     is made from: the inputs its manifest records (:func:`lpvest.fmi._build.manifest_inputs`:
     plan, model file, carried code, design file, pythonfmu, compiler; for the
@@ -146,13 +149,13 @@ class FmuCache:
         #: only the checked FMUs are served (a copy made by :meth:`resolved`)
         self._fixed = False
 
-    def __getstate__(self) -> dict[str, Any]:
+    def __getstate__(self) -> dict[str, object]:
         state = dict(self.__dict__)
         del state["_lock"]
         state["progress"] = None  # a callback of this process
         return state
 
-    def __setstate__(self, state: dict[str, Any]) -> None:
+    def __setstate__(self, state: dict[str, object]) -> None:
         self.__dict__.update(state)
         self._lock = threading.Lock()
 
@@ -171,7 +174,7 @@ class FmuCache:
         fmus = data.get("fmus", {})
         return fmus if isinstance(fmus, dict) else {}
 
-    def _record(self, identifier: str, entry: dict[str, Any]) -> None:
+    def _record(self, identifier: str, entry: dict[str, object]) -> None:
         fmus = self._manifest()
         fmus[identifier] = entry
         self.directory.mkdir(parents=True, exist_ok=True)
@@ -181,7 +184,7 @@ class FmuCache:
         tmp.replace(self.manifest_path)
 
     # -- what exists ----------------------------------------------------------
-    def plan(self, identifier: str) -> Any:
+    def plan(self, identifier: str) -> FmuPlan:
         """The :class:`~lpvest.fmi.FmuPlan` of ``identifier``.
 
         A subclass implements it; here it raises ``NotImplementedError``.
@@ -377,7 +380,7 @@ class FmuCache:
                            "build_time": 0.0})
         return view
 
-    def _build(self, plan: Any, want: str, target: Path) -> None:
+    def _build(self, plan: FmuPlan, want: str, target: Path) -> None:
         from ._build import backend_of
 
         if self.progress is not None:

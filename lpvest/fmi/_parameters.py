@@ -126,7 +126,7 @@ class Parameter:
     minimum: float | None = None
     maximum: float | None = None
 
-    def for_model(self, model: Any) -> Parameter:
+    def for_model(self, model: object) -> Parameter:
         """This parameter with a :class:`ModelDefault` start replaced by the model's value.
 
         Parameters
@@ -163,7 +163,7 @@ class Parameter:
     def shape(self) -> tuple[int, ...]:
         return np.shape(self.start) if isinstance(self.start, list | tuple | np.ndarray) else ()
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         """The parameter as stored in the FMU spec (inverse of :meth:`from_json`).
 
         Returns

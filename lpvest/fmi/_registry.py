@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from ..core._errors import ArgumentError, ArgumentTypeError
-from ..core._protocol import MeasurementDelay
+from ..core._protocol import MeasurementDelay, Sampled, Timed
 from ._parameters import MODEL_P0, MODEL_X0, SCHEDULING_CENTRE, Parameter
 
 __all__ = ["EstimatorKind", "ESTIMATOR_KINDS", "MEASUREMENT_DELAY", "estimator_kinds", "resolve", "build_estimator"]
@@ -193,7 +193,7 @@ def resolve(target: str) -> Callable[..., Any]:
     module, sep, name = target.partition(":")
     if not sep or not module or not name:
         raise ArgumentError(f"{target!r} is not of the form 'module:function'")
-    obj: Any = importlib.import_module(module)
+    obj: object = importlib.import_module(module)
     for part in name.split("."):
         obj = getattr(obj, part)
     if not callable(obj):
@@ -201,7 +201,7 @@ def resolve(target: str) -> Callable[..., Any]:
     return obj
 
 
-def build_estimator(kind: dict[str, Any], model: Any, design: Any, params: dict[str, Any]) -> Any:
+def build_estimator(kind: dict[str, Any], model: object, design: object, params: dict[str, Any]) -> Sampled | Timed:
     """The streaming component of an estimator FMU: the kind's factory called
     with the kind's parameters, wrapped in :class:`~lpvest.core.MeasurementDelay`
     when the kind has late inputs and ``params["measurement_delay"]`` is > 0.

@@ -57,7 +57,7 @@ import math
 import weakref
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from pythonfmu.enums import Fmi2Causality, Fmi2Status, Fmi2Variability
@@ -67,10 +67,12 @@ from pythonfmu.variables import Boolean, Integer, Real, String
 from .._version import __version__
 from ..core._errors import ArgumentError
 from ..core._interrupt import hold
-from ..core._protocol import Component, whole_samples
+from ..core._protocol import Component, Port, Sampled, Timed, whole_samples
 from ._naming import element_names
 from ._parameters import Parameter, read_spec
 from ._state import copy_state, decode_state, encode_state
+
+T = TypeVar("T")
 
 __all__ = ["LpvestSlave", "MAX_MESSAGE", "INT32"]
 
@@ -83,8 +85,8 @@ MAX_MESSAGE = 1000
 INT32 = (-(2**31), 2**31 - 1)
 
 try:  # numpy >= 2: the floating-point error state is a context variable, set here with a prepared value
-    # numpy's private API, deliberately (a prepared error state per FMU instance); not in its stubs
-    from numpy._core._ufunc_config import _extobj_contextvar, _make_extobj  # type: ignore[attr-defined]
+    # numpy's private API, deliberately (a prepared error state per FMU instance)
+    from numpy._core._ufunc_config import _extobj_contextvar, _make_extobj  # type: ignore[attr-defined]  # not in numpy's stubs
 except ImportError:  # pragma: no cover - numpy 1.x: np.errstate
     _extobj_contextvar = _make_extobj = None
 
@@ -107,10 +109,10 @@ class _WeakCall:
 
     __slots__ = ("_ref",)
 
-    def __init__(self, method: Any) -> None:
+    def __init__(self, method: Callable[..., object]) -> None:
         self._ref = weakref.WeakMethod(method)
 
-    def __call__(self, *args: Any) -> None:
+    def __call__(self, *args: object) -> None:
         method = self._ref()
         if method is not None:
             method(*args)
@@ -148,15 +150,15 @@ class LpvestSlave(Fmi2Slave):
         """The streaming component for these parameter values."""
         raise NotImplementedError
 
-    def input_range(self, port: Any, index: int) -> tuple[float | None, float | None, str]:
+    def input_range(self, port: Port, index: int) -> tuple[float | None, float | None, str]:
         """Declared ``(min, max, label)`` of element ``index`` of an input port."""
         return None, None, ""
 
-    def output_range(self, port: Any, index: int) -> tuple[float | None, float | None, str]:
+    def output_range(self, port: Port, index: int) -> tuple[float | None, float | None, str]:
         """Declared ``(min, max, label)`` of element ``index`` of an output port."""
         return None, None, ""
 
-    def output_dependencies(self, port: Any) -> list[str] | None:
+    def output_dependencies(self, port: Port) -> list[str] | None:
         """Names of the input ports an output depends on at the same instant
         (``None``: all of them; default: all, or none for a port with
         ``direct = False``)."""
@@ -195,7 +197,7 @@ class LpvestSlave(Fmi2Slave):
                                  maximum=rng.upper if rng else None))
         return out
 
-    def scheduling_range(self, port: Any, index: int) -> tuple[float | None, float | None, str]:
+    def scheduling_range(self, port: Port, index: int) -> tuple[float | None, float | None, str]:
         """The declared range of ``p[j]`` (the model's scheduling box) and of
         ``alpha[i]`` ([0, 1]); nothing for other ports."""
         if port.name == "alpha":
@@ -284,7 +286,7 @@ class LpvestSlave(Fmi2Slave):
         self._construction_log = list(self.log_queue)
         del self.log_queue[:]
 
-    def _direct_outputs(self, component: Any) -> tuple[str, ...]:
+    def _direct_outputs(self, component: Sampled | Timed) -> tuple[str, ...]:
         """The outputs that depend on an input at the same instant: they hold their
         value after a step until inputs are set (the model description declares
         the dependencies of the default configuration, which includes these)."""
@@ -332,7 +334,7 @@ class LpvestSlave(Fmi2Slave):
                 description=par.description or None,
             )
 
-    def _add_port(self, port: Any, kind: str) -> None:
+    def _add_port(self, port: Port, kind: str) -> None:
         for i, name in enumerate(element_names(port.name, tuple(port.shape))):
             lo, hi, label = (self.input_range if kind == "input" else self.output_range)(port, i)
             element = _Element(name, kind, port.name, i, "Real", label, lo, hi)
@@ -474,7 +476,7 @@ class LpvestSlave(Fmi2Slave):
         else:
             component.reset()
 
-    def _store_outputs(self, values: Mapping[str, Any], *, check: bool = True) -> None:
+    def _store_outputs(self, values: Mapping[str, np.ndarray], *, check: bool = True) -> None:
         """Keep a copy of the component's outputs, and the flat list of their
         values in the order of the output variables (what fmi2GetReal reads).
         With ``check``, a value that is not finite is remembered (named in
@@ -496,7 +498,7 @@ class LpvestSlave(Fmi2Slave):
     def _fp_warning(self, kind: str, flag: int) -> None:
         self._log(Fmi2Status.warning, f"numpy: floating-point {kind} at t = {_num(self._time)}")
 
-    def _compute(self, fn: Callable[[], Any]) -> Any:
+    def _compute(self, fn: Callable[[], T]) -> T:
         """Run component code with numpy's floating-point warnings sent to the FMI logger.
 
         What ``np.errstate(over/invalid/divide="call", under="ignore", call=...)``
@@ -535,7 +537,7 @@ class LpvestSlave(Fmi2Slave):
                 if not checked:
                     checked = self._inputs_in_range = all(
                         lo <= arr[i] <= hi for arr, i, lo, hi in self._input_targets.values())
-                values: Mapping[str, Any] = prepare(inputs, checked=checked)
+                values: Mapping[str, np.ndarray] = prepare(inputs, checked=checked)
             else:
                 values = component.outputs(inputs)
             self._step_inputs = inputs
@@ -559,7 +561,7 @@ class LpvestSlave(Fmi2Slave):
     def _fail(self, where: str, exc: BaseException) -> None:
         self._log(Fmi2Status.error, f"{where}: {type(exc).__name__}: {exc}")
 
-    def _guard(self, where: str, fn: Callable[[], Any], default: Any) -> Any:
+    def _guard(self, where: str, fn: Callable[[], T], default: T) -> T:
         try:
             return fn()
         except Exception as exc:  # noqa: BLE001 - nothing may reach pythonfmu (fmi2Fatal)
@@ -750,7 +752,7 @@ class LpvestSlave(Fmi2Slave):
                 return None
         return dict(values)
 
-    def _not_finite(self, values: Mapping[str, Any]) -> list[str]:
+    def _not_finite(self, values: Mapping[str, np.ndarray]) -> list[str]:
         """The output variables among ``values`` (by port) that are NaN or inf."""
         bad = []
         for p in self._output_ports:
@@ -784,7 +786,7 @@ class LpvestSlave(Fmi2Slave):
                 return self._guard("fmi2GetReal", lambda: self._get(vrs, "Real", math.nan), [math.nan] * len(vrs))
             if len(self._output_reads) >= 256:
                 self._output_reads.clear()
-            positions = self._output_reads[key] = [e.position for e in elements]  # type: ignore[union-attr]
+            positions = self._output_reads[key] = [e.position for e in elements if e is not None]  # (all are)
         if self._dirty:
             try:
                 self._compute(self._refresh)
@@ -824,7 +826,7 @@ class LpvestSlave(Fmi2Slave):
                 if all(t is not None and math.isfinite(v) and t[2] <= v <= t[3]
                        for t, v in zip(found, values, strict=True)):
                     for t, v in zip(found, values, strict=True):
-                        t[0][t[1]] = v  # type: ignore[index]
+                        t[0][t[1]] = v  # type: ignore[index]  # t is not None: checked just above (hot path)
                     self._held = None
                     self._dirty = True
                     self._step_inputs = None
@@ -843,7 +845,7 @@ class LpvestSlave(Fmi2Slave):
         self._guard("fmi2SetString", lambda: self._set(vrs, values, "String"), None)
 
     # -- FMU state ---------------------------------------------------------------------
-    def _snapshot(self) -> dict[str, Any]:
+    def _snapshot(self) -> dict[str, object]:
         return {
             "identifier": self.modelName,
             "params": copy_state(self._params),
@@ -907,7 +909,7 @@ class LpvestSlave(Fmi2Slave):
         self._guard("fmi2SetFMUstate", run, None)
 
     @staticmethod
-    def _fmu_state_to_bytes(state: Any) -> bytes:
+    def _fmu_state_to_bytes(state: object) -> bytes:
         return bytes(state) if isinstance(state, bytes | bytearray) else b""
 
     @staticmethod

@@ -34,7 +34,7 @@ _ARRAY = "__ndarray__"
 _TUPLE = "__tuple__"
 
 
-def _encode(obj: Any) -> Any:
+def _encode(obj: object) -> object:
     if isinstance(obj, np.ndarray):
         arr = np.ascontiguousarray(obj)
         if arr.dtype.kind not in "fiub":

@@ -12,8 +12,8 @@ is the discrete-time LPV state-space model with general noise of
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import Any, NamedTuple
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -74,6 +74,8 @@ class AffineDependence:
     space: SchedulingSpace
     basis: tuple[BasisFunction, ...]
     coefficients: Mapping[str, np.ndarray]
+    if TYPE_CHECKING:  # not a field: set in __post_init__ (a frozen class); declared for the type checker only
+        _stack: MatrixStack = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         n_terms = 1 + len(self.basis)
@@ -151,7 +153,8 @@ class AffineDependence:
                     shape = terms[pos].shape
                 if not terms:
                     raise DimensionError(f"{key} has no terms")
-                stack = np.zeros((1 + len(basis), *shape))  # type: ignore[misc]
+                # shape is now the last term's shape (ints); mypy still sees the given (int | None) pair
+                stack = np.zeros((1 + len(basis), *shape))  # type: ignore[misc]  # see above
                 for pos, m in terms.items():
                     stack[pos] = m
             else:
@@ -179,7 +182,7 @@ class AffineDependence:
         tuple of int
             ``(rows, cols)`` of the matrix ``name``.
         """
-        return self._stack.shapes[name]  # type: ignore[attr-defined]  # set in __post_init__ (frozen)
+        return self._stack.shapes[name]
 
     def psi(self, p: np.ndarray, *, check: bool = True) -> np.ndarray:
         """``[1, psi_1(p), ..., psi_n(p)]`` for one scheduling vector.
@@ -261,7 +264,7 @@ class AffineDependence:
         dict of str to ndarray, shape (rows, cols)
             ``sum_i psi[i] M_i`` for every name of :attr:`coefficients` (fresh arrays).
         """
-        return self._stack.at(psi)  # type: ignore[attr-defined]  # set in __post_init__ (frozen)
+        return self._stack.at(psi)
 
     def evaluate_batch(self, p: np.ndarray, *, check: bool = True) -> dict[str, np.ndarray]:
         """Every matrix along a trajectory ``p`` (T, n_p): arrays ``(T, rows, cols)``;
@@ -279,7 +282,7 @@ class AffineDependence:
         dict of str to ndarray, shape (T, rows, cols)
             Every matrix of :attr:`coefficients` along ``p``.
         """
-        return self._stack.at_batch(self.psi_batch(p, check=check))  # type: ignore[attr-defined]  # set in __post_init__ (frozen)
+        return self._stack.at_batch(self.psi_batch(p, check=check))
 
     def subset(self, names: Sequence[str]) -> AffineDependence:
         """The dependence restricted to ``names``.
@@ -765,7 +768,7 @@ class AffineLPV:
 
 
     # -- text forms ---------------------------------------------------------------------
-    def to_toml(self) -> dict[str, Any]:
+    def to_toml(self) -> dict[str, object]:
         """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.systems`).
 
         Returns
@@ -775,7 +778,7 @@ class AffineLPV:
             (:func:`~lpvest.systems._affine.dependence_table`), ``Q``, ``R``,
             ``S``, ``x0``, ``P0`` and, when set, ``Cz``.
         """
-        out: dict[str, Any] = {"type": "affine", **dependence_table(self.dependence)}
+        out: dict[str, object] = {"type": "affine", **dependence_table(self.dependence)}
         out.update(Q=matrix_table(self.noise.Q), R=matrix_table(self.noise.R), S=matrix_table(self.noise.S))
         out.update(x0=[number(v) for v in self.x0], P0=matrix_table(self.P0))
         if self.Cz is not None:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
@@ -349,7 +349,7 @@ class InnovationLPV:
 
 
     # -- text forms ---------------------------------------------------------------------
-    def to_toml(self) -> dict[str, Any]:
+    def to_toml(self) -> dict[str, object]:
         """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.systems`).
 
         Returns
@@ -359,7 +359,7 @@ class InnovationLPV:
             (:func:`~lpvest.systems._affine.dependence_table`), ``K`` (numbers
             and formula text), ``innovation_covariance`` and ``x0``.
         """
-        out: dict[str, Any] = {"type": "innovation", **dependence_table(self.dependence)}
+        out: dict[str, object] = {"type": "innovation", **dependence_table(self.dependence)}
         out["K"] = self.K.to_list()
         out["innovation_covariance"] = matrix_table(self.innovation_covariance)
         out["x0"] = [number(v) for v in self.x0]
@@ -528,7 +528,7 @@ class LPVInputOutput:
 
 
     # -- text forms ---------------------------------------------------------------------
-    def to_toml(self) -> dict[str, Any]:
+    def to_toml(self) -> dict[str, object]:
         """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.systems`).
 
         Returns

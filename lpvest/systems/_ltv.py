@@ -190,9 +190,9 @@ class TimeFunction:
         return f"TimeFunction({self.text!r})"
 
 
-def _input_and_x0_table(u: TimeFunction | None, x0: np.ndarray | None) -> dict[str, Any]:
+def _input_and_x0_table(u: TimeFunction | None, x0: np.ndarray | None) -> dict[str, object]:
     """The optional ``input`` and ``x0`` entries of an LTV model's table."""
-    out: dict[str, Any] = {}
+    out: dict[str, object] = {}
     if u is not None:
         out["input"] = time_value(u, "input")
     if x0 is not None:
@@ -265,7 +265,7 @@ class _Coefficients:
         fs = self.functions + extra
         exprs = [f.expression for f in fs]
         if all(e is not None for e in exprs):
-            vec = FormulaVector(exprs)  # type: ignore[arg-type]
+            vec = FormulaVector([e for e in exprs if e is not None])  # (none is)
 
             def values(t: float) -> np.ndarray:
                 return vec.evaluate({"t": float(t)})
@@ -524,7 +524,7 @@ class LTVStateSpace:
 
 
     # -- text forms ---------------------------------------------------------------------
-    def to_toml(self) -> dict[str, Any]:
+    def to_toml(self) -> dict[str, object]:
         """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.systems`).
 
         Returns
@@ -538,7 +538,7 @@ class LTVStateSpace:
         ModelFileError
             A matrix or the input is a Python callable.
         """
-        out: dict[str, Any] = {"type": "ltv-ss"}
+        out: dict[str, object] = {"type": "ltv-ss"}
         for n in ("A", "B", "C"):
             fm = self.formulas[n]
             if fm is None:
@@ -829,11 +829,11 @@ class LTVInputOutput:
         LTVTrajectory
             The trajectory; ``x`` holds the realization's states (``x_1 = y``).
         """
-        return self.to_state_space().simulate(t, **kwargs)  # type: ignore[arg-type]
+        return self.to_state_space().simulate(t, **kwargs)  # type: ignore[arg-type]  # the same keywords, checked there
 
 
     # -- text forms ---------------------------------------------------------------------
-    def to_toml(self) -> dict[str, Any]:
+    def to_toml(self) -> dict[str, object]:
         """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.systems`).
 
         Returns
@@ -847,7 +847,7 @@ class LTVInputOutput:
         ModelFileError
             A coefficient or the input is a Python callable.
         """
-        out: dict[str, Any] = {
+        out: dict[str, object] = {
             "type": "ltv-io",
             "a": [time_value(f, f"a[{i}]") for i, f in enumerate(self.a)],
             "b": [time_value(f, f"b[{i}]") for i, f in enumerate(self.b)],

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -189,6 +189,9 @@ class FormulaSimplexMap:
 
     space: SchedulingSpace
     formulas: tuple[Expression, ...]
+    if TYPE_CHECKING:  # not fields: set in __init__ (a frozen class); declared for the type checker only
+        _vector: FormulaVector = field(init=False, repr=False)
+        _last: tuple[bytes, np.ndarray] | None = field(init=False, repr=False)  #: the last p (bytes) and alpha
 
     def __init__(self, space: SchedulingSpace, formulas: Sequence[str | Expression]) -> None:
         exprs = tuple(
@@ -218,10 +221,10 @@ class FormulaSimplexMap:
         p = np.asarray(p, dtype=float).reshape(-1)
         # a plant and its filter map the same p in one sample: the last value is kept
         key = p.tobytes()
-        last = self._last  # type: ignore[attr-defined]
+        last = self._last
         if last is not None and last[0] == key:
             return last[1].copy()
-        alpha = np.asarray(self._vector.evaluate(  # type: ignore[attr-defined]
+        alpha = np.asarray(self._vector.evaluate(
             {n: float(v) for n, v in zip(self.space.names, p, strict=True)}), dtype=np.float64)
         object.__setattr__(self, "_last", (key, alpha))
         return alpha.copy()
@@ -240,11 +243,11 @@ class FormulaSimplexMap:
             The weights ``f_i(p)``.
         """
         p = np.asarray(p, dtype=float)
-        out = self._vector.evaluate(self.space.as_dict(p))  # type: ignore[attr-defined]
+        out = self._vector.evaluate(self.space.as_dict(p))
         return np.broadcast_to(out, (*p.shape[:-1], self.n_vertices)).astype(float)
 
 
-    def to_toml(self) -> dict[str, Any]:
+    def to_toml(self) -> dict[str, object]:
         """The ``map`` table of a model file.
 
         Returns
@@ -356,7 +359,7 @@ class MultilinearSimplexMap:
         return alpha
 
 
-    def to_toml(self) -> dict[str, Any]:
+    def to_toml(self) -> dict[str, object]:
         """The ``map`` table of a model file.
 
         Returns
@@ -416,7 +419,8 @@ def affine_to_polytopic(
         raise ExpressionError("the matrices do not depend on the scheduling: nothing to convert")
     multiaffine = all(isinstance(b, Monomial) and b.is_multiaffine for b in basis)
     if multiaffine:
-        used = sorted({j for b in basis for j, e in enumerate(b.exponents) if e})  # type: ignore[attr-defined]
+        # every b is a Monomial (multiaffine)
+        used = sorted({j for b in basis if isinstance(b, Monomial) for j, e in enumerate(b.exponents) if e})
         coords: list[BasisFunction] = [Monomial.component(j, space) for j in used]
         lo = space.lower[used]
         hi = space.upper[used]
@@ -832,7 +836,7 @@ class PolytopicLPV:
 
 
     # -- text forms ---------------------------------------------------------------------
-    def to_toml(self) -> dict[str, Any]:
+    def to_toml(self) -> dict[str, object]:
         """This model as the ``[models.KEY]`` table of a model file (:mod:`lpvest.systems`).
 
         Returns
@@ -848,7 +852,7 @@ class PolytopicLPV:
             The simplex map (or a basis function of the affine form) has no
             text form.
         """
-        out: dict[str, Any] = {"type": "polytopic"}
+        out: dict[str, object] = {"type": "polytopic"}
         if self.simplex_map is not None:
             to_toml = getattr(self.simplex_map, "to_toml", None)
             if to_toml is None:

@@ -366,7 +366,7 @@ class DiscretePlant(Component):
             return np.zeros(n)
         return self._rng.correlated(self._chol, 1)[0]
 
-    def _read(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    def _read(self, inputs: Mapping[str, object]) -> dict[str, np.ndarray]:
         val = {}
         for name, size in self._sizes:
             if name not in inputs:
@@ -375,7 +375,7 @@ class DiscretePlant(Component):
         self._rules.check(val)
         return val
 
-    def _read_checked(self, inputs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    def _read_checked(self, inputs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
         """:meth:`_read` of inputs checked at the boundary (:meth:`Component._read_checked`)."""
         val = {name: inputs[name] for name, _ in self._sizes}
         self._rules.derive(val)
@@ -395,7 +395,7 @@ class DiscretePlant(Component):
         """The index ``k`` of the current sample."""
         return self._k
 
-    def get_state(self) -> dict[str, Any]:
+    def get_state(self) -> dict[str, object]:
         """A copy of the whole state, for :meth:`set_state`.
 
         Returns
@@ -503,7 +503,7 @@ class LTVPlant(TimedComponent):
         self._x = self._x0.copy()
         self._solution: LTVSolution | None = None
 
-    def _read(self, inputs: Mapping[str, Any]) -> TimeFunction | float:
+    def _read(self, inputs: Mapping[str, object]) -> TimeFunction | float:
         if "u" not in inputs:
             raise DimensionError("input 'u' is missing (inputs: u)")
         u = float(as_vector(inputs["u"], "u", 1)[0])
@@ -534,7 +534,7 @@ class LTVPlant(TimedComponent):
         self._x = self._solution(t_end)
         self._t = t_end
 
-    def get_state(self) -> dict[str, Any]:
+    def get_state(self) -> dict[str, object]:
         """A copy of the whole state, for :meth:`set_state`.
 
         Returns
@@ -546,7 +546,7 @@ class LTVPlant(TimedComponent):
             shape (n,)) and ``"anchor_u"``, the held input it applies (float;
             NaN for the model's input function).
         """
-        state: dict[str, Any] = {"t": self._t, "x": self._x.copy()}
+        state: dict[str, object] = {"t": self._t, "x": self._x.copy()}
         sol = self._solution
         if sol is not None:
             t_a, x_a = sol.anchor

@@ -19,7 +19,7 @@ Examples
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -100,7 +100,7 @@ def basis_name(b: BasisFunction) -> str:
     return b.name
 
 
-def dependence_table(dep: AffineDependence) -> dict[str, Any]:
+def dependence_table(dep: AffineDependence) -> dict[str, object]:
     """``basis``, ``bounds`` and one entry per matrix (a plain matrix when only
     the constant term is nonzero, else a table by basis function).
 
@@ -121,7 +121,7 @@ def dependence_table(dep: AffineDependence) -> dict[str, Any]:
     ModelFileError
         A basis function is a Python callable.
     """
-    out: dict[str, Any] = {}
+    out: dict[str, object] = {}
     names = [basis_name(b) for b in dep.basis]
     if names:
         out["basis"] = names

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
@@ -103,7 +103,7 @@ class KernelFit:
     values: dict[str, np.ndarray]
     coefficients: dict[str, TimeFunction]
     constants: dict[str, float]
-    splines: dict[str, Any]
+    splines: dict[str, object]
     beta: np.ndarray
     labels: tuple[str, ...]
     residual_rms: float
@@ -268,7 +268,7 @@ def _combine(values: np.ndarray, coef: np.ndarray) -> np.ndarray:
 
 def _fitted(
     plan: RegressionPlan, terms: KernelParts, beta: np.ndarray, u: np.ndarray
-) -> tuple[dict[str, np.ndarray], dict[str, TimeFunction], dict[str, float], dict[str, Any], np.ndarray, np.ndarray]:
+) -> tuple[dict[str, np.ndarray], dict[str, TimeFunction], dict[str, float], dict[str, object], np.ndarray, np.ndarray]:
     """Every coefficient (known or estimated) at the samples and as a function,
     and ``y_E``, ``y_E'`` from (9), (10) with the estimated coefficients."""
     from scipy.interpolate import BSpline
@@ -279,7 +279,7 @@ def _fitted(
     sample_values = {name: f(t) for name, f in terms.functions.items()}
     functions = dict(terms.functions)
     constants: dict[str, float] = {}
-    splines: dict[str, Any] = {}
+    splines: dict[str, object] = {}
     ident = terms.known_ident.copy()
     deriv = terms.known_deriv.copy()
     for block in plan.blocks:

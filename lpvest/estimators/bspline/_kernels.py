@@ -63,7 +63,7 @@ True
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any, NamedTuple
 
@@ -79,8 +79,6 @@ __all__ = [
     "moment_rows",
     "KernelIdentity",
     "kernel_identity",
-    "kernel_functions",
-    "KernelFunctions",
     "slot_identity",
     "slot_derivative",
     "free_identity",
@@ -137,7 +135,7 @@ class ProductQuadrature:
         Gauss weights (they sum to ``b - a``).
     moment_weights : ndarray, shape (2, 4, N)
         ``weights * (x - a)^k`` (forward, ``[0, k]``) and ``weights * (b - x)^k``
-        (backward, ``[1, k]``), ``k = 0..3``; also as ``s_weights``, ``r_weights``.
+        (backward, ``[1, k]``), ``k = 0..3``.
     piece_interval : ndarray of int, shape (P,)
         Sample interval ``j`` (``a + j h <= x <= a + (j + 1) h``) of each piece:
         ``j`` for piece ``j < m - 1``.
@@ -188,15 +186,6 @@ class ProductQuadrature:
         """Sample interval of each node, shape (N,)."""
         return np.tile(self.piece_interval, self.nodes_per_piece)
 
-    @property
-    def s_weights(self) -> np.ndarray:
-        """``weights * (x - a)^k``, shape (4, N)."""
-        return self.moment_weights[0]
-
-    @property
-    def r_weights(self) -> np.ndarray:
-        """``weights * (b - x)^k``, shape (4, N)."""
-        return self.moment_weights[1]
 
     def shifted(self, a: float) -> ProductQuadrature:
         """The same rule on the window starting at ``a`` (same ``h`` and ``m``;
@@ -840,90 +829,3 @@ def kernel_identity(
         ident, deriv = ident + di, deriv + dd
     y_e, dy_e = finish_identity(quad, ident, deriv, funcs["a1"](samples), funcs["b1"](samples), uu)
     return KernelIdentity(samples, y_e, dy_e)
-
-
-# -- the kernels as printed, pointwise (a reference for tests and plots) ----------------------
-
-
-class KernelFunctions(NamedTuple):
-    """The kernels (13)-(19) and their ``t``-derivatives at points ``(t, tau)``.
-
-    Parameters
-    ----------
-    Ky : ndarray
-        (18).
-    Ku : ndarray
-        (19).
-    dKy : ndarray
-        d/dt of (18) without the jump at tau = t.
-    dKu : ndarray
-        d/dt of (19).
-    C : ndarray
-        ``C_[a,b](t)``.
-    """
-
-    Ky: np.ndarray
-    Ku: np.ndarray
-    dKy: np.ndarray
-    dKu: np.ndarray
-    C: np.ndarray
-
-
-def kernel_functions(
-    t: np.ndarray,
-    tau: np.ndarray,
-    a: float,
-    b: float,
-    coefficients: dict[str, Callable[[np.ndarray], np.ndarray]],
-) -> KernelFunctions:
-    """The kernels (13)-(19) evaluated literally, pointwise.
-
-    ``coefficients`` maps ``a0, a1, da1, b0, b1, db1`` to callables of time
-    (missing ones are zero). The kernels are the paper's full ones, including
-    the part that depends on no coefficient. Not used by the estimator (which
-    works with moments); a reference implementation for checks.
-
-    Parameters
-    ----------
-    t : array_like
-        Times ``t`` (broadcast against ``tau``).
-    tau : array_like
-        Integration variable ``xi`` (for ``tau <= t``) or ``zeta`` (``tau > t``).
-    a, b : float
-        The window ``[a, b]``.
-    coefficients : dict of str to callable
-        ``a0, a1, da1, b0, b1, db1`` as callables of time (missing ones are zero).
-
-    Returns
-    -------
-    KernelFunctions
-        The kernels divided by ``C``, and ``C``, broadcast over ``t`` and ``tau``.
-    """
-    t = np.asarray(t, dtype=float)
-    tau = np.asarray(tau, dtype=float)
-
-    def get(name: str) -> np.ndarray:
-        f = coefficients.get(name)
-        return np.zeros_like(tau) if f is None else np.asarray(f(tau), dtype=float)
-
-    a0, a1, da1 = get("a0"), get("a1"), get("da1")
-    b0, b1, db1 = get("b0"), get("b1"), get("db1")
-    s = tau - a
-    r = b - tau
-    KFy = 4 * s - s**2 * a1 + (t - tau) * (-2 + 2 * s * a1 + s**2 * da1 - s**2 * a0)  # (13)
-    KFu = -(s**2) * b1 + (t - tau) * (2 * s * b1 + s**2 * db1 - s**2 * b0)  # (14)
-    KBy = 4 * r + r**2 * a1 + (t - tau) * (2 + 2 * r * a1 - r**2 * da1 + r**2 * a0)  # (16)
-    KBu = r**2 * b1 + (t - tau) * (2 * r * b1 - r**2 * db1 + r**2 * b0)  # (17)
-    dKFy = -2 + 2 * s * a1 + s**2 * da1 - s**2 * a0
-    dKFu = 2 * s * b1 + s**2 * db1 - s**2 * b0
-    dKBy = 2 + 2 * r * a1 - r**2 * da1 + r**2 * a0
-    dKBu = 2 * r * b1 - r**2 * db1 + r**2 * b0
-    C = window_weight(t, a, b)
-    fwd = tau <= t
-    return KernelFunctions(
-        np.where(fwd, KFy, KBy) / C,
-        np.where(fwd, KFu, KBu) / C,
-        np.where(fwd, dKFy, dKBy) / C,
-        np.where(fwd, dKFu, dKBu) / C,
-        C,
-    )

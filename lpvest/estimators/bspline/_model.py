@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
@@ -210,7 +209,7 @@ class KernelModel:
             raise DimensionError(f"unknown coefficient name {abbreviate(bad[0], 30)}; expected one of "
                                  f"{', '.join(COEFFICIENTS)}")
         b = (*io.b, *(TimeFunction.of(0.0) for _ in range(2 - len(io.b))))
-        known: dict[str, Any] = {"a0": io.a[0], "a1": io.a[1], "b0": b[0], "b1": b[1]}
+        known: dict[str, object] = {"a0": io.a[0], "a1": io.a[1], "b0": b[0], "b1": b[1]}
         known.update(unknown)
         return cls(**known)
 

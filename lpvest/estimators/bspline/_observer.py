@@ -39,7 +39,11 @@ def _samples_of(duration: float, dt: float, name: str) -> int:
     return int(round(k))
 
 
-class BSplineObserver(Component):
+#: BSplineObserver's pending step: u, y, the new fit's arrays (None: no refit) and the outputs.
+_Pending = tuple[float, float, dict[str, np.ndarray] | None, dict[str, np.ndarray]]
+
+
+class BSplineObserver(Component[tuple[float, float], _Pending]):
     """Sliding-window joint parameter and state estimator (the observer FMU's engine).
 
     Samples arrive at a fixed step ``dt`` (time is *not* an input: sample
@@ -192,7 +196,7 @@ class BSplineObserver(Component):
         out["t_est"][0] = self.t0 + self._k * self.dt - self.delay
         return out
 
-    def _read(self, inputs: Mapping[str, np.ndarray]) -> tuple[float, float]:
+    def _read(self, inputs: Mapping[str, object]) -> tuple[float, float]:
         missing = [p.name for p in self.input_ports if p.name not in inputs]
         if missing:
             raise DimensionError(f"missing input {missing[0]!r}; the observer needs u and y")
@@ -257,12 +261,12 @@ class BSplineObserver(Component):
             out[n] = np.array([arrays[n][offset]])
         return out
 
-    def _evaluate(self, sample: tuple[float, float]) -> tuple[dict[str, np.ndarray], Any]:
+    def _evaluate(self, sample: tuple[float, float]) -> tuple[dict[str, np.ndarray], _Pending]:
         u, y = sample
         arrays, out = self._compute(u, y)
         return out, (u, y, arrays, out)
 
-    def _commit(self, pending: Any) -> None:
+    def _commit(self, pending: _Pending) -> None:
         u, y, arrays, out = pending
         if arrays is not None:
             if arrays:  # a successful refit
@@ -290,7 +294,7 @@ class BSplineObserver(Component):
             x, a0, a1, b0, b1`` (hop,) or (hop, 2) for ``x`` (zeros before the
             first fit), and ``"held_<port>"`` for every output port (copies).
         """
-        state: dict[str, Any] = {
+        state: dict[str, object] = {
             "k": self._k,
             "head": self._head,
             "ring_u": self._ring_u.copy(),

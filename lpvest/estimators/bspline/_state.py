@@ -63,7 +63,7 @@ def reconstruct_state(
 
         def dC(tt: float) -> np.ndarray:
             hh = 1e-20
-            val = np.asarray(realization.C(tt + 1j * hh))  # type: ignore[arg-type]
+            val = np.asarray(realization.C(tt + 1j * hh))  # type: ignore[arg-type]  # complex step: C takes complex t
             if np.iscomplexobj(val):
                 return val.imag / hh
             # a callable that ignores its argument (e.g. the constant output map of

@@ -4,14 +4,17 @@ per sample (notes: :mod:`lpvest.estimators.kalman`)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import NamedTuple
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, NamedTuple, TypedDict
 
 import numpy as np
 
 from ...core._errors import ArgumentTypeError, DimensionError
 from ...core._validation import as_matrix, as_signal, as_vector, check_positive_definite
 from ...systems._affine import AffineLPV, NoiseCovariance
+
+if TYPE_CHECKING:
+    from ...core._scheduling import BasisFunction
 
 __all__ = ["KalmanMatrices", "StepMatrices", "KalmanModel"]
 
@@ -137,6 +140,23 @@ def _monomial_pairs(k: int) -> list[tuple[int, int]]:
     return [(i, j) for i in range(1, k + 1) for j in range(i, k + 1)]
 
 
+class _Compiled(TypedDict):
+    """What :meth:`KalmanModel._compile` computes once (``KalmanModel._c``)."""
+
+    packed: np.ndarray  #: (n_z, rows * cols): the coefficients of the packed matrix F
+    plain: np.ndarray  #: (n_z, ...): A, B, C, D, G Q G^T, G S H^T, H R H^T side by side
+    plain_shapes: list[tuple[int, ...]]  #: their shapes
+    scan: np.ndarray  #: plain followed by A^T
+    shape: tuple[int, int]  #: the shape of F
+    pairs: list[tuple[int, int]]  #: the products psi_i psi_j in z (1-based)
+    k: int  #: number of basis functions
+    basis: tuple[BasisFunction, ...]
+    exponents: list[tuple[int, ...]] | None  #: every psi_i a monomial: its exponents
+    components: list[int] | None  #: every psi_i = p_j: the j
+    lo: list[float]  #: the scheduling box, widened by the tolerance
+    hi: list[float]
+
+
 @dataclass(frozen=True, eq=False)
 class KalmanModel:
     """An :class:`~lpvest.systems.AffineLPV` compiled for the Kalman recursion.
@@ -165,6 +185,8 @@ class KalmanModel:
 
     model: AffineLPV
     noise: NoiseCovariance
+    if TYPE_CHECKING:  # not a field: set by _compile (a frozen class); declared for the type checker only
+        _c: _Compiled = field(init=False, repr=False)
 
     def __init__(self, model: AffineLPV, *, noise: NoiseCovariance | object | None = None) -> None:
         if not isinstance(model, AffineLPV):
@@ -289,8 +311,8 @@ class KalmanModel:
         shape : (int, int)
             ``(2 n_x + n_y, 3 n_x + n_u + n_y)``.
         """
-        c = self._c  # type: ignore[attr-defined]  # set in _compile (frozen)
-        return c["packed"], tuple(c["pairs"]), tuple(c["shape"])
+        c = self._c
+        return c["packed"], tuple(c["pairs"]), c["shape"]
 
     # -- dimensions -----------------------------------------------------------
     @property
@@ -329,7 +351,7 @@ class KalmanModel:
         SchedulingRangeError
             ``p`` lies outside the scheduling box.
         """
-        c = self._c  # type: ignore[attr-defined]
+        c = self._c
         for v, lo, hi in zip(p.tolist(), c["lo"], c["hi"], strict=True):
             if v < lo or v > hi:
                 what = "scheduling value" if t is None else f"scheduling value at t={t}:"
@@ -348,7 +370,7 @@ class KalmanModel:
         z : list of float, length n_z
             ``n_z = 1 + k + k (k + 1) / 2`` for ``k`` basis functions ``psi_i``.
         """
-        c = self._c  # type: ignore[attr-defined]
+        c = self._c
         comps = c["components"]
         exps = c["exponents"]
         if comps is not None:
@@ -380,7 +402,7 @@ class KalmanModel:
         z : ndarray, shape (T, n_z)
             Row ``t`` is :meth:`z` at ``p[t]``.
         """
-        c = self._c  # type: ignore[attr-defined]
+        c = self._c
         T = p.shape[0]
         psi = np.empty((T, c["k"]))
         for i, b in enumerate(c["basis"]):
@@ -421,7 +443,7 @@ class KalmanModel:
         StepMatrices
             The packed matrices of the recursion at ``p``.
         """
-        c = self._c  # type: ignore[attr-defined]
+        c = self._c
         return StepMatrices(np.dot(self.z(p), c["packed"]).reshape(c["shape"]), self.nx, self.nu, self.ny)
 
     def step_matrices_batch(self, p: np.ndarray, *, check: bool = True) -> StepMatrices:
@@ -442,7 +464,7 @@ class KalmanModel:
         p = as_signal(p, "p", self.n_p)
         if check:
             self.check_box_batch(p)
-        c = self._c  # type: ignore[attr-defined]
+        c = self._c
         F = (self.z_batch(p) @ c["packed"]).reshape(p.shape[0], *c["shape"])
         return StepMatrices(F, self.nx, self.nu, self.ny)
 
@@ -460,7 +482,7 @@ class KalmanModel:
             Some ``p[t]`` lies outside the scheduling box (widened as in
             :meth:`check_p`).
         """
-        c = self._c  # type: ignore[attr-defined]
+        c = self._c
         bad = np.any((p < np.asarray(c["lo"])) | (p > np.asarray(c["hi"])), axis=1)
         if np.any(bad):
             t = int(np.argmax(bad))
@@ -484,7 +506,7 @@ class KalmanModel:
         pv = as_vector(p, "p", self.n_p)
         if check:
             self.check_p(pv)
-        c = self._c  # type: ignore[attr-defined]
+        c = self._c
         flat = np.dot(self.z(pv), c["plain"])
         out, pos = [], 0
         for shp in c["plain_shapes"]:
@@ -496,7 +518,7 @@ class KalmanModel:
     def _scan_matrices_batch(self, p: np.ndarray) -> tuple[KalmanMatrices, np.ndarray]:
         """:class:`KalmanMatrices` along a checked trajectory and ``A^T``
         (T, n_x, n_x), every matrix contiguous, from one product."""
-        c = self._c  # type: ignore[attr-defined]
+        c = self._c
         flat = self.z_batch(p) @ c["scan"]
         T = p.shape[0]
         out, pos = [], 0
@@ -524,7 +546,7 @@ class KalmanModel:
         p = as_signal(p, "p", self.n_p)
         if check:
             self.check_box_batch(p)
-        c = self._c  # type: ignore[attr-defined]
+        c = self._c
         flat = self.z_batch(p) @ c["plain"]
         T = p.shape[0]
         out, pos = [], 0

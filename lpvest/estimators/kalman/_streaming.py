@@ -38,7 +38,7 @@ class InputReader:
         self._nu = km.nu
         self._keys = frozenset(self.names)
 
-    def _vec(self, inputs: Mapping[str, Any], name: str) -> np.ndarray:
+    def _vec(self, inputs: Mapping[str, object], name: str) -> np.ndarray:
         try:
             value = inputs[name]
         except KeyError:
@@ -54,7 +54,7 @@ class InputReader:
             a = as_vector(value, name, n)
         return a
 
-    def read(self, inputs: Mapping[str, Any], t: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def read(self, inputs: Mapping[str, object], t: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Validate one sample's inputs: names, shapes, finite values and the scheduling range.
 
         Parameters
@@ -206,7 +206,7 @@ class LPVKalmanFilter(Component):
         self._state = KalmanState(self._x0, self._P0, 0)
         self._loglik = 0.0
 
-    def _read(self, inputs: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _read(self, inputs: Mapping[str, object]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self._reader.read(inputs, self._state.t)
 
     def _evaluate(self, sample: tuple[np.ndarray, np.ndarray, np.ndarray]) -> tuple[dict[str, np.ndarray],
@@ -278,7 +278,7 @@ class LPVKalmanFilter(Component):
         return self._evaluate(self._read(self._inputs(p, u, y)))[1]
 
     # -- state -----------------------------------------------------------------------
-    def get_state(self) -> dict[str, Any]:
+    def get_state(self) -> dict[str, object]:
         """A copy of the whole internal state (for :meth:`set_state`).
 
         Returns

@@ -59,17 +59,17 @@ class SampledObserver(TimedComponent):
             self._obs = self._build(self.t0)
         self._obs.reset()
 
-    def _read(self, inputs: Mapping[str, Any]) -> Mapping[str, Any]:
+    def _read(self, inputs: Mapping[str, object]) -> Mapping[str, object]:
         return inputs  # checked by the observer
 
-    def _evaluate(self, inputs: Mapping[str, Any]) -> tuple[dict[str, np.ndarray], Mapping[str, Any]]:
+    def _evaluate(self, inputs: Mapping[str, object]) -> tuple[dict[str, np.ndarray], Mapping[str, object]]:
         return self._obs.outputs(inputs), inputs  # the observer keeps its evaluation for the step
 
-    def _commit(self, inputs: Mapping[str, Any], t_end: float = 0.0) -> None:
+    def _commit(self, inputs: Mapping[str, object], t_end: float = 0.0) -> None:
         self._obs.step(inputs)  # step() checked that this is the observer's next sample
 
     def step(  # type: ignore[override]  # the timed protocol: step(inputs, dt=h, t_end=t + h)
-        self, inputs: Mapping[str, Any], *, dt: float, t_end: float | None = None
+        self, inputs: Mapping[str, object], *, dt: float, t_end: float | None = None
     ) -> dict[str, np.ndarray]:
         if abs(dt - self.dt) > 1e-9 * self.dt:
             raise SamplingError(
@@ -88,7 +88,7 @@ class SampledObserver(TimedComponent):
         """The FMU's fast path: not taken (the sample-time checks live in :meth:`step`)."""
         return None
 
-    def get_state(self) -> dict[str, Any]:
+    def get_state(self) -> dict[str, object]:
         return self._obs.get_state()
 
     def _set_state(self, state: Mapping[str, Any]) -> None:

@@ -3,8 +3,6 @@ Peixoto et al. with the design the FMU carries."""
 
 from __future__ import annotations
 
-from typing import Any
-
 from ...core._errors import LpvestError
 from ...design._result import HinfDesign
 from ...estimators._hinf import HinfFilter, needs_scheduling
@@ -13,7 +11,7 @@ from ...systems._polytopic import hinf_setting
 __all__ = ["build"]
 
 
-def build(model: Any, *, design: Any) -> HinfFilter:
+def build(model: object, *, design: HinfDesign | str | None) -> HinfFilter:
     """The H-infinity filter (2) of a design carried by the FMU (JSON text).
 
     A model with general noise (affine) is taken in its H-infinity setting

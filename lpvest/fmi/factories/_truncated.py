@@ -3,12 +3,17 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ...core._errors import LpvestError
 from ...estimators._truncated import TruncatedKalmanFilter
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from ...systems._affine import AffineLPV
 
 __all__ = ["build", "STARTS"]
 
@@ -16,7 +21,9 @@ __all__ = ["build", "STARTS"]
 STARTS = ("theorem", "steady-state")
 
 
-def build(model: Any, *, design: Any = None, tau: int, start: str, start_p: Any = None) -> TruncatedKalmanFilter:
+def build(
+    model: AffineLPV, *, design: object = None, tau: int, start: str, start_p: ArrayLike | None = None
+) -> TruncatedKalmanFilter:
     """The truncated filter with memory ``tau``; ``start = "steady-state"`` starts
     the restarted recursion from the steady-state covariance of the model frozen
     at the scheduling value ``start_p`` (scipy's DARE)."""

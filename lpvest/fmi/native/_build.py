@@ -49,6 +49,7 @@ from .._build import (
     FmuPlan,
     design_text,
     model_description_xml,
+    plan_inputs,
     scripts_dir,
     sha256_hex,
     slave_class_name,
@@ -166,29 +167,13 @@ def compile_binary(platform: str, folder: Path, identifier: str) -> bytes:
     return data
 
 
-def native_manifest_inputs(plan: FmuPlan, design: str | bytes | None = None) -> dict[str, Any]:
+def native_manifest_inputs(plan: FmuPlan, design: str | bytes | None = None) -> dict[str, object]:
     """Every input of a native FMU's build and its SHA-256: the plan, the model
     file, the design, the runtime's sources, lpvest's version, zig and the
     flags. No path, no time."""
-    est = None
-    if plan.estimator is not None:
-        est = plan.estimator.to_json() | {"design": plan.estimator.design, "models": list(plan.estimator.models)}
-        if plan.design_options:
-            est["design_options"] = {k: v for k, v in sorted(plan.design_options)}
     return {
         "backend": "native",
-        "identifier": plan.identifier,
-        "role": plan.role,
-        "system": plan.system_name,
-        "model_key": plan.model_key,
-        "description": plan.description,
-        "model_parameters": list(plan.model_parameters),
-        "step_size": plan.step_size,
-        "stop_time": plan.stop_time,
-        "estimator": est,
-        "lpvest_version": __version__,
-        "model_file_sha256": sha256_hex(Path(plan.system_path).read_bytes()),
-        "design_sha256": None if design is None else sha256_hex(design.encode() if isinstance(design, str) else design),
+        **plan_inputs(plan, design, requirements=False),
         "runtime_sha256": _runtime_digest(),
         "compiler": f"zig {_zig()}",
         "cflags": list(CFLAGS),
@@ -262,7 +247,7 @@ def build_native_fmu(plan: FmuPlan, out_dir: str | Path, *, progress: Callable[[
         staging = Path(tmp) / "resources"
         staging.mkdir()
         shutil.copyfile(plan.system_path, staging / "model.toml")
-        spec: dict[str, Any] = {
+        spec: dict[str, object] = {
             "format": SPEC_FORMAT, "identifier": plan.identifier, "role": plan.role, "description": plan.description,
             "lpvest_version": __version__, "backend": "native", "system": plan.system_name,
             "model_file": "model.toml", "model_key": plan.model_key, "model_parameters": list(plan.model_parameters),

@@ -25,9 +25,9 @@ the runtime: the build says so, naming the parameter.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -35,6 +35,16 @@ from ...core._errors import LpvestError
 from ...core._expressions import Expression
 from ...core._scheduling import FormulaBasis, Monomial
 from ._formulas import OPS, CompiledFormula, compile_formula
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from ...core._protocol import Component, Port
+    from ...core._signals import SchedulerComponent, SourceComponent
+    from ...estimators._hinf import HinfFilter
+    from ...estimators._truncated import TruncatedKalmanFilter
+    from ...estimators.kalman._streaming import LPVKalmanFilter
+    from ...systems._streaming import DiscretePlant
 
 __all__ = ["NativeExportError", "RoleData", "role_data", "model_data_c", "native_unsupported", "ROLE_CODES"]
 
@@ -82,7 +92,7 @@ class RoleData:
     field that model-parameter entries write into (array 0)."""
 
     ctype: str
-    fields: dict[str, Any] = field(default_factory=dict)
+    fields: dict[str, _Field] = field(default_factory=dict)
     entries_target: str | None = None
 
 
@@ -104,10 +114,16 @@ class _Ints:
 @dataclass(frozen=True)
 class _Struct:
     ctype: str
-    fields: tuple[tuple[str, Any], ...]
+    fields: tuple[tuple[str, _Field], ...]
 
 
-def _doubles(a: Any) -> np.ndarray:
+#: A value of a C struct field: a number, a string, NULL, an array of doubles, ints, strings or formulas, a
+#: nested struct or an array of structs (what _Writer.value writes)
+_Field = (None | bool | int | float | str | np.integer | np.bool_ | np.ndarray | _Ints | _Strings | _Formulas | _Struct
+         | tuple[_Struct, ...])
+
+
+def _doubles(a: ArrayLike) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(a, dtype=np.float64)).reshape(-1)
 
 
@@ -124,7 +140,7 @@ def _monomial_code(m: Monomial) -> CompiledFormula:
     return CompiledFormula(tuple(code), tuple(constants), 3, m.name)
 
 
-def _basis_code(b: Any, names: Sequence[str]) -> CompiledFormula:
+def _basis_code(b: object, names: Sequence[str]) -> CompiledFormula:
     if isinstance(b, Monomial):
         return _monomial_code(b)
     if isinstance(b, FormulaBasis):
@@ -135,7 +151,7 @@ def _basis_code(b: Any, names: Sequence[str]) -> CompiledFormula:
                             "needs formulas (build it with the pythonfmu backend)")
 
 
-def _map(simplex_map: Any, names: Sequence[str]) -> _Struct:
+def _map(simplex_map: object, names: Sequence[str]) -> _Struct:
     """An lpv_map of a simplex map (None: LPV_MAP_NONE)."""
     from ...systems._polytopic import FormulaSimplexMap, MultilinearSimplexMap
 
@@ -169,7 +185,7 @@ def _stack(named: Mapping[str, np.ndarray], order: Sequence[str]) -> tuple[_Stru
     return struct, offsets, rows
 
 
-def _port_offsets(ports: Sequence[Any]) -> dict[str, int]:
+def _port_offsets(ports: Sequence[Port]) -> dict[str, int]:
     out, pos = {}, 0
     for p in ports:
         out[p.name] = pos
@@ -177,13 +193,13 @@ def _port_offsets(ports: Sequence[Any]) -> dict[str, int]:
     return out
 
 
-def _plant(component: Any, ins: dict[str, int], outs: dict[str, int]) -> RoleData:
+def _plant(component: DiscretePlant, ins: dict[str, int], outs: dict[str, int]) -> RoleData:
     from ...systems._affine import AffineLPV
     from ...systems._innovation import InnovationLPV, LPVInputOutput
     from ...systems._polytopic import PolytopicLPV
 
     model = component.model
-    f: dict[str, Any] = {}
+    f: dict[str, _Field] = {}
     nu = getattr(model, "nu", 0)
     if isinstance(model, PolytopicLPV):
         order: tuple[str, ...] = ("A", "Bw", "Cz", "Dz", "Cy", "Dy", "Bu", "Dzu", "Dyu")
@@ -230,7 +246,7 @@ def _plant(component: Any, ins: dict[str, int], outs: dict[str, int]) -> RoleDat
     return RoleData("lpv_plant_data", f, "stack.rows")
 
 
-def _scheduler(component: Any, outs: dict[str, int]) -> RoleData:
+def _scheduler(component: SchedulerComponent, outs: dict[str, int]) -> RoleData:
     space = component.space
     return RoleData("lpv_scheduler_data", {
         "n_p": space.dim, "lower": _doubles(space.lower), "upper": _doubles(space.upper),
@@ -238,14 +254,16 @@ def _scheduler(component: Any, outs: dict[str, int]) -> RoleData:
         "out_p": outs.get("p", -1), "out_alpha": outs.get("alpha", -1)})
 
 
-def _source(component: Any, outs: dict[str, int]) -> RoleData:
+def _source(component: SourceComponent, outs: dict[str, int]) -> RoleData:
     defs = tuple(_Struct("lpv_signal_def", (("name", name), ("prefix", f"{name}."), ("n", spec.n),
                                             ("out", outs[name])))
                  for name, spec in component.signals.items())
     return RoleData("lpv_source_data", {"n_signals": len(defs), "signals": defs})
 
 
-def _kalman(component: Any, ins: dict[str, int], outs: dict[str, int], truncated: bool) -> RoleData:
+def _kalman(
+    component: LPVKalmanFilter | TruncatedKalmanFilter, ins: dict[str, int], outs: dict[str, int], truncated: bool
+) -> RoleData:
     from ...estimators._truncated import theorem_start_covariance
     from ...estimators.kalman import KalmanModel
 
@@ -253,7 +271,7 @@ def _kalman(component: Any, ins: dict[str, int], outs: dict[str, int], truncated
     km = KalmanModel(model)
     packed, pairs, shape = km.packing
     names = model.space.names
-    f: dict[str, Any] = dict(
+    f: dict[str, _Field] = dict(
         nx=km.nx, nu=km.nu, ny=km.ny, n_p=model.n_p, n_basis=len(model.basis),
         basis=_Formulas(tuple(_basis_code(b, names) for b in model.basis)), n_z=packed.shape[0],
         pairs=_Ints(tuple(v for pq in pairs for v in pq)), f_rows=shape[0], f_cols=shape[1], packed=_doubles(packed),
@@ -271,13 +289,13 @@ def _kalman(component: Any, ins: dict[str, int], outs: dict[str, int], truncated
     return RoleData("lpv_kalman_data", f, "packed")
 
 
-def _hinf(component: Any, ins: dict[str, int], outs: dict[str, int]) -> RoleData:
+def _hinf(component: HinfFilter, ins: dict[str, int], outs: dict[str, int]) -> RoleData:
     design = component.design
     stack, off, _ = _stack({n: getattr(design, n) for n in ("H", "Af", "Bf", "Cf", "Df")},
                            ("H", "Af", "Bf", "Cf", "Df"))
     plant = component.plant
     names = component.simplex_map.space.names if component.simplex_map is not None else ()
-    f: dict[str, Any] = dict(
+    f: dict[str, _Field] = dict(
         nx=design.nx, ny=design.ny, nz=design.nz, scheduled=int(design.scheduled), n_vertices=design.n_vertices,
         design=stack, fmat=_Ints(tuple(off[n] for n in ("H", "Af", "Bf", "Cf", "Df"))),
         needs_alpha=int(component.scheduled), map=_map(component.simplex_map, names))
@@ -295,7 +313,7 @@ def _hinf(component: Any, ins: dict[str, int], outs: dict[str, int]) -> RoleData
     return RoleData("lpv_hinf_data", f)
 
 
-def role_data(role: str, component: Any) -> RoleData:
+def role_data(role: str, component: object) -> RoleData:
     """The runtime's data of a component (the slave's ``make_component``).
 
     Parameters
@@ -311,19 +329,20 @@ def role_data(role: str, component: Any) -> RoleData:
     RoleData
         Its data.
     """
-    inner = getattr(component, "component", component)  # MeasurementDelay -> the filter
+    # the role names the component's class (what the role script's make_component builds)
+    inner = cast("Component", getattr(component, "component", component))  # MeasurementDelay -> the filter
     ins = _port_offsets(inner.input_ports)
     outs = _port_offsets(inner.output_ports)
     if role == "Plant":
-        return _plant(inner, ins, outs)
+        return _plant(cast("DiscretePlant", inner), ins, outs)
     if role == "Scheduler":
-        return _scheduler(inner, outs)
+        return _scheduler(cast("SchedulerComponent", inner), outs)
     if role == "Source":
-        return _source(inner, outs)
+        return _source(cast("SourceComponent", inner), outs)
     if role in ("Kalman", "TruncatedKalman"):
-        return _kalman(inner, ins, outs, role == "TruncatedKalman")
+        return _kalman(cast("LPVKalmanFilter | TruncatedKalmanFilter", inner), ins, outs, role == "TruncatedKalman")
     if role in ("HinfPD", "HinfRobust"):
-        return _hinf(inner, ins, outs)
+        return _hinf(cast("HinfFilter", inner), ins, outs)
     raise NativeExportError(f"the {role} role has no native runtime")
 
 
@@ -332,7 +351,7 @@ def role_data(role: str, component: Any) -> RoleData:
 # ---------------------------------------------------------------------------
 
 
-def _flat(value: Any, prefix: str, out: dict[str, Any]) -> None:
+def _flat(value: object, prefix: str, out: dict[str, object]) -> None:
     """Every leaf of a role's data by path (arrays as bytes, formulas as code)."""
     if isinstance(value, _Struct):
         for k, v in value.fields:
@@ -352,12 +371,12 @@ def _flat(value: Any, prefix: str, out: dict[str, Any]) -> None:
 
 
 def _array_at(data: RoleData, path: str) -> np.ndarray:
-    flat: dict[str, Any] = {}
+    flat: dict[str, object] = {}
     _flat(data.fields, "", flat)
     return np.asarray(flat[path])
 
 
-def _candidate_formulas(model_table: Any, names: Iterable[str]) -> list[Expression]:
+def _candidate_formulas(model_table: object, names: Iterable[str]) -> list[Expression]:
     """The model file's formulas (strings) that use the parameters ``names`` only."""
     wanted = set(names)
     found: list[Expression] = []
@@ -391,11 +410,11 @@ class Entry:
 def parameter_entries(
     identifier: str,
     role: str,
-    make: Any,
-    params: Mapping[str, Any],
+    make: Callable[[dict[str, float | str]], object],
+    params: Mapping[str, float | str],
     model_params: Sequence[str],
     ranges: Mapping[str, tuple[float | None, float | None]],
-    model_table: Any,
+    model_table: object,
 ) -> list[Entry]:
     """The carried numbers that follow the model parameters, as formulas of them.
 
@@ -413,7 +432,7 @@ def parameter_entries(
         return []
     base = role_data(role, make(dict(params)))
     target = base.entries_target
-    base_flat: dict[str, Any] = {}
+    base_flat: dict[str, object] = {}
     _flat(base.fields, "", base_flat)
     candidates = _candidate_formulas(model_table, model_params)
     compiled = {id(e): compile_formula(e, list(model_params)) for e in candidates}
@@ -434,7 +453,7 @@ def parameter_entries(
                 other = role_data(role, make(dict(params, **values)))
             except LpvestError:
                 continue
-            other_flat: dict[str, Any] = {}
+            other_flat: dict[str, object] = {}
             _flat(other.fields, "", other_flat)
             for key, v in base_flat.items():
                 w = other_flat[key]
@@ -553,7 +572,7 @@ class _Writer:
         self.decls.append(f"static const lpv_formula {n}[{len(items)}] = {{{', '.join(inits)}}};")
         return n
 
-    def value(self, v: Any, key: str = "") -> str:
+    def value(self, v: object, key: str = "") -> str:
         if v is None:
             return "NULL"
         if isinstance(v, bool | np.bool_):
