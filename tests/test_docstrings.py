@@ -32,6 +32,7 @@ PUBLIC_PACKAGES = (
     "lpvest.core._protocol",
     "lpvest.fmi",
     "lpvest.cosim",
+    "lpvest.parallel",
     "lpvest.sweep",
     "lpvest.experiments",
 )

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 from ..core._errors import InternalError
 
 if TYPE_CHECKING:
-    from ..sweep._tasks import Task, TaskResult
+    from ..parallel._tasks import Task, TaskResult
     from ._fmus import FmuRun
 
 __all__ = [
@@ -106,7 +106,7 @@ class ExperimentResult:
 class Split:
     """An experiment as independent tasks and a last step on their results:
     ``finish([fn(shared, task) for task in tasks])`` is the experiment's
-    result, whichever process ran each task (:func:`~lpvest.sweep.map_tasks`
+    result, whichever process ran each task (:func:`~lpvest.parallel.map_tasks`
     gives the same numbers serially and on Dask workers).
 
     Parameters
@@ -119,7 +119,7 @@ class Split:
         The tasks, in the order ``finish`` takes their results.
     finish : callable
         ``finish(results) -> ExperimentResult``, ``results`` the
-        :class:`~lpvest.sweep.TaskResult` of each task in order; it
+        :class:`~lpvest.parallel.TaskResult` of each task in order; it
         writes the experiment's files.
     desc : str
         What the tasks are, for a progress bar (``"Example 2: rho sweep"``).

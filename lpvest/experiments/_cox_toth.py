@@ -45,14 +45,14 @@ from ..core._plotting import save_figure
 from ..core._rng import Stream
 from ..estimators._truncated import assumption_bounds
 from ..estimators.kalman import KalmanModel, kalman_filter
-from ..sweep._tasks import Task, TaskResult, map_tasks
+from ..parallel._tasks import Task, TaskResult, map_tasks
 from ..systems import AffineLPV, InnovationLPV, LPVInputOutput
 from ..systems._modelfile import load_system
 from . import Experiment, ExperimentResult, show_progress
 from ._fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
 
 if TYPE_CHECKING:
-    from ..sweep._engine import Engine
+    from ..parallel._engine import Engine
 
 __all__ = [
     "EXPERIMENTS",
@@ -307,7 +307,7 @@ def run_truncation(
     ``runs`` Monte Carlo trajectories (the same ones for every filter) check
     the exact prediction-error variances; averages are over ``t >= burn_in``.
     One task per filter (:func:`prediction_error_task`), run in this process
-    or, with ``engine`` (a :class:`lpvest.sweep.Engine`), on Dask workers:
+    or, with ``engine`` (a :class:`lpvest.parallel.Engine`), on Dask workers:
     the same numbers either way. ``progress``: progress bars (default:
     :func:`~lpvest.experiments.show_progress`).
 

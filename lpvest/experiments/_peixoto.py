@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..core._plotting import save_figure
-from ..sweep._tasks import Task, TaskResult, map_tasks
+from ..parallel._tasks import Task, TaskResult, map_tasks
 from ..systems import PolytopicLPV
 from . import Experiment, ExperimentResult, Split, show_progress
 from ._fmus import (
@@ -49,7 +49,7 @@ from ._fmus import (
 )
 
 if TYPE_CHECKING:
-    from ..sweep._engine import Engine
+    from ..parallel._engine import Engine
 
 __all__ = [
     "EXPERIMENTS",
@@ -691,7 +691,7 @@ def run_example2(
     parameters), one per process. ``progress=None`` shows a tqdm bar when
     writing files with stderr a terminal (:func:`~lpvest.experiments.show_progress`).
     One task per ``rho`` (:func:`example2_task`, :func:`split_example2`), run in
-    this process or, with ``engine`` (a :class:`lpvest.sweep.Engine`), on Dask
+    this process or, with ``engine`` (a :class:`lpvest.parallel.Engine`), on Dask
     workers: the same numbers either way.
 
     Fig. 3 is a design sweep (library only). Through FMUs

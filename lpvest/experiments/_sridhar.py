@@ -55,14 +55,14 @@ import numpy as np
 from ..core._plotting import save_figure
 from ..core._protocol import run_streaming
 from ..estimators.bspline import BSplineObserver, KernelModel, UnknownConstant, UnknownSpline, fit_kernel_model
-from ..sweep._tasks import Task, TaskResult, map_tasks
+from ..parallel._tasks import Task, TaskResult, map_tasks
 from ..systems import LTVInputOutput
 from ..systems._modelfile import load_system
 from . import Experiment, ExperimentResult, show_progress
 from ._fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
 
 if TYPE_CHECKING:
-    from ..sweep._engine import Engine
+    from ..parallel._engine import Engine
 
 __all__ = [
     "EXPERIMENTS",
@@ -419,7 +419,7 @@ def run_noisy(
     plant FMU's samples over [0, 9] s with the noise added to ``y`` per seed.
 
     One task per seed (:func:`noisy_seed_task`), run in this process or, with
-    ``engine`` (a :class:`lpvest.sweep.Engine`), on Dask workers: the same
+    ``engine`` (a :class:`lpvest.parallel.Engine`), on Dask workers: the same
     numbers either way. ``progress``: progress bars (default:
     :func:`~lpvest.experiments.show_progress`)."""
     progress = show_progress(progress, out_dir)

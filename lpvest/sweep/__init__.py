@@ -7,11 +7,12 @@ core) or on an existing cluster, with the results written as tasks finish
 (summary as Parquet, trajectories as Zarr) and a rerun resuming where the
 last one stopped.
 
-- :mod:`~lpvest.sweep`: the sweep file (axes, seeds, metrics, kept signals);
-- :mod:`~lpvest.sweep`: the summary metrics of a co-simulation;
-- :mod:`~lpvest.sweep`: a co-simulation file or an experiment as tasks;
-- :mod:`~lpvest.sweep`: Dask; :mod:`~lpvest.sweep`: tasks, seeds, the in-process runner;
-- :mod:`~lpvest.sweep`: the output folder; :mod:`~lpvest.sweep`: a figure per metric.
+- the sweep file (axes, seeds, metrics, kept signals): :func:`load_sweep`;
+- the summary metrics of a co-simulation: :class:`Metric`;
+- a co-simulation file or an experiment as tasks (:func:`experiment_studies`);
+- the tasks, their seeds and the Dask engine, from :mod:`lpvest.parallel`
+  (re-exported here: :class:`Engine`, :class:`Task`, :func:`map_tasks`, ...);
+- the output folder and a figure per metric: :func:`run_sweep`.
 
 Dask, pyarrow and zarr come with the extra ``pip install 'lpvest[sweep]'``;
 they are imported when a sweep runs, not with this package.
@@ -25,9 +26,19 @@ Examples
 
 from __future__ import annotations
 
-from ._engine import (
+from ..parallel._engine import (
     LOCAL_WORKER_CONFIG as LOCAL_WORKER_CONFIG,
     Engine as Engine,
+)
+from ..parallel._tasks import (
+    Outcome as Outcome,
+    SweepError as SweepError,
+    Task as Task,
+    TaskResult as TaskResult,
+    execute as execute,
+    map_tasks as map_tasks,
+    one_blas_thread as one_blas_thread,
+    task_seeds as task_seeds,
 )
 from ._metrics import METRIC_KINDS as METRIC_KINDS, Metric as Metric
 from ._run import SweepInterrupted as SweepInterrupted, SweepResult as SweepResult, run_sweep as run_sweep
@@ -38,16 +49,6 @@ from ._sweepfile import (
     SweepSpec as SweepSpec,
     load_sweep as load_sweep,
     sweep_spec as sweep_spec,
-)
-from ._tasks import (
-    Outcome as Outcome,
-    SweepError as SweepError,
-    Task as Task,
-    TaskResult as TaskResult,
-    execute as execute,
-    map_tasks as map_tasks,
-    one_blas_thread as one_blas_thread,
-    task_seeds as task_seeds,
 )
 
 __all__ = [

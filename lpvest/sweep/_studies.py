@@ -19,7 +19,7 @@ after a failure it starts from fresh instances.
 
 **Experiments** (:func:`experiment_studies`): the Monte Carlo parts of the
 paper reproductions, the same task functions the experiments run
-(:func:`~lpvest.sweep.map_tasks`).
+(:func:`~lpvest.parallel.map_tasks`).
 
 =========================  ==========================================  ======================================
 experiment                 axes (defaults)                             per task
@@ -47,8 +47,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..core._errors import ModelFileError
+from ..parallel._tasks import Task, TaskResult, digest
 from ._metrics import Metric, check as check_metric, compute as compute_metric, expand, select
-from ._tasks import Task, TaskResult, digest
 
 if TYPE_CHECKING:
     from ._sweepfile import SweepSpec

@@ -54,8 +54,8 @@ from typing import TYPE_CHECKING, Any
 
 from ..core._errors import ModelFileError
 from ..core._toml import describe_value
+from ..parallel._tasks import Task, task_seeds
 from ._metrics import Metric, parse as parse_metric
-from ._tasks import Task, task_seeds
 
 if TYPE_CHECKING:
     from ..cosim._cosimfile import CoSimFile
