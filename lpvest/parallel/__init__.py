@@ -12,7 +12,8 @@ order in which tasks run. :func:`execute` turns a task's exception into a
 failed :class:`Outcome`, so one bad task never stops the others.
 
 :mod:`lpvest.experiments` runs its Monte Carlo parts through this package,
-:mod:`lpvest.sweep` its sweeps.
+:mod:`lpvest.sweep` its sweeps; a study of either returns a
+:class:`Prepared` (the task function, the shared data, the metric names).
 
 Only numpy is needed to import it; Dask comes with the extra
 ``pip install 'lpvest[sweep]'`` and is imported when an :class:`Engine`
@@ -31,6 +32,7 @@ Examples
 from __future__ import annotations
 
 from ._engine import LOCAL_WORKER_CONFIG, Engine, require_sweep_extra
+from ._prepared import Prepared
 from ._tasks import (
     Outcome,
     SweepError,
@@ -47,6 +49,7 @@ __all__ = [
     "Engine",
     "LOCAL_WORKER_CONFIG",
     "Outcome",
+    "Prepared",
     "SweepError",
     "Task",
     "TaskResult",

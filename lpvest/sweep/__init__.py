@@ -9,7 +9,8 @@ last one stopped.
 
 - the sweep file (axes, seeds, metrics, kept signals): :func:`load_sweep`;
 - the summary metrics of a co-simulation: :class:`Metric`;
-- a co-simulation file or an experiment as tasks (:func:`experiment_studies`);
+- a co-simulation file as tasks, or an experiment's study
+  (:func:`experiment_studies`, from :mod:`lpvest.experiments`);
 - the tasks, their seeds and the Dask engine, from :mod:`lpvest.parallel`
   (re-exported here: :class:`Engine`, :class:`Task`, :func:`map_tasks`, ...);
 - the output folder and a figure per metric: :func:`run_sweep`.
@@ -26,6 +27,7 @@ Examples
 
 from __future__ import annotations
 
+from ..experiments._studies import experiment_studies as experiment_studies
 from ..parallel._engine import (
     LOCAL_WORKER_CONFIG as LOCAL_WORKER_CONFIG,
     Engine as Engine,
@@ -42,7 +44,6 @@ from ..parallel._tasks import (
 )
 from ._metrics import METRIC_KINDS as METRIC_KINDS, Metric as Metric
 from ._run import SweepInterrupted as SweepInterrupted, SweepResult as SweepResult, run_sweep as run_sweep
-from ._studies import experiment_studies as experiment_studies
 from ._sweepfile import (
     Axis as Axis,
     Seeds as Seeds,

@@ -39,8 +39,8 @@ from typing import Any
 
 import numpy as np
 
+from ..parallel._prepared import Prepared
 from ..parallel._tasks import Outcome, SweepError, Task
-from ._studies import Prepared
 from ._sweepfile import Axis, SweepSpec
 
 __all__ = ["SweepStore", "FORMAT"]
