@@ -35,6 +35,7 @@ PUBLIC_PACKAGES = (
     "lpvest.estimators.bspline",
     "lpvest.fmi",
     "lpvest.cosim",
+    "lpvest.parallel",
     "lpvest.sweep",
     "lpvest.experiments",
 )

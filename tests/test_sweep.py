@@ -29,6 +29,7 @@ import pytest
 from lpvest.cli import main
 from lpvest.core._errors import ModelFileError
 from lpvest.cosim import Component, CoSimulation, CoSimulationError, simulate
+from lpvest.parallel._tasks import Task
 from lpvest.sweep import (
     Engine,
     SweepError,
@@ -40,7 +41,6 @@ from lpvest.sweep import (
     task_seeds,
 )
 from lpvest.sweep._metrics import Metric, compute
-from lpvest.sweep._tasks import Task
 from tests.interrupting import interrupt_at
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -505,7 +505,7 @@ def test_sridhar_noisy_through_the_engine_is_the_serial_experiment(engine2, expe
 
     serial = run_noisy(None, seeds=2, fmus=experiment_fmus)
     on_dask = run_noisy(None, seeds=2, fmus=experiment_fmus, engine=engine2)
-    # a task runs with BLAS on one thread in this process as on a worker (lpvest.sweep._tasks.execute):
+    # a task runs with BLAS on one thread in this process as on a worker (lpvest.parallel._tasks.execute):
     # without that, the least-squares sums of a multithreaded BLAS round in another order and the
     # GCV fits moved by up to 3e-8 relative; with it, the same numbers bit for bit
     assert on_dask.results == serial.results

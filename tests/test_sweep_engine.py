@@ -1,4 +1,4 @@
-"""The sweep engine's handling of results (lpvest/sweep/_engine.py) against a stubbed Dask client.
+"""The sweep engine's handling of results (lpvest/parallel/_engine.py) against a stubbed Dask client.
 
 The futures, their completion order and their statuses are scripted, so each case the engine
 must handle (a result that arrives while its future is already lost, a task that could not run,
@@ -11,9 +11,9 @@ from __future__ import annotations
 import distributed
 import pytest
 
-import lpvest.sweep._engine as engine_module
-from lpvest.sweep._engine import LOCAL_WORKER_CONFIG, Engine, require_sweep_extra
-from lpvest.sweep._tasks import Outcome, SweepError, Task, TaskResult
+import lpvest.parallel._engine as engine_module
+from lpvest.parallel._engine import LOCAL_WORKER_CONFIG, Engine, require_sweep_extra
+from lpvest.parallel._tasks import Outcome, SweepError, Task, TaskResult
 
 
 class Future:
@@ -284,7 +284,7 @@ def test_the_local_cluster_is_worker_processes_of_one_thread_each_quiet_and_conf
         monkeypatch.setattr(logging.getLogger(name), "level", logging.NOTSET)
     eng = Engine(workers=workers, quiet=quiet, start_timeout=9.0).start()
     assert made["cluster"] == {"n_workers": workers or 7, "threads_per_worker": 1, "processes": True,
-                               "dashboard_address": ":0", "preload": ["lpvest.sweep._worker"],
+                               "dashboard_address": ":0", "preload": ["lpvest.parallel._worker"],
                                "silence_logs": logging.CRITICAL if quiet else logging.WARNING}
     assert made["config"] == LOCAL_WORKER_CONFIG
     assert made["client"][0] is eng._cluster and made["client"][1] == 9.0
@@ -293,6 +293,22 @@ def test_the_local_cluster_is_worker_processes_of_one_thread_each_quiet_and_conf
     assert levels == ({logging.ERROR} if quiet else {logging.NOTSET})
     eng.close()
     assert made["closed"] == 9.0
+
+
+def test_the_preload_the_engine_names_is_a_module_that_leaves_ctrl_c_to_the_client():
+    """The engine names its workers' preload by a string (above), which no import checks: that
+    module exists and its ``dask_setup`` (what Dask calls in each new worker) ignores SIGINT."""
+    import importlib
+    import signal
+
+    module = importlib.import_module("lpvest.parallel._worker")
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        module.dask_setup(None)
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def test_a_local_cluster_that_cannot_start_is_a_sweep_error(monkeypatch):

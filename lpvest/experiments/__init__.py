@@ -18,7 +18,10 @@ side on Dask workers is declared with each: the FMUs it runs
 that share a computation and so run as one task (:attr:`Experiment.group`),
 and, for an experiment made of many independent computations, its
 :class:`Split` (:attr:`Experiment.split`): tasks that run anywhere, then a
-last step on their results.
+last step on their results. An experiment whose Monte Carlo part a sweep file
+can run on its own (``experiment = NAME`` in :mod:`lpvest.sweep`) holds it as
+its :class:`ExperimentStudy` (:attr:`Experiment.study`);
+:func:`experiment_studies` collects them.
 """
 
 from __future__ import annotations
@@ -33,8 +36,9 @@ from typing import TYPE_CHECKING, Any
 from ..core._errors import InternalError
 
 if TYPE_CHECKING:
-    from ..sweep._tasks import Task, TaskResult
+    from ..parallel._tasks import Task, TaskResult
     from ._fmus import FmuRun
+    from ._studies import ExperimentStudy
 
 __all__ = [
     "Experiment",
@@ -48,6 +52,8 @@ __all__ = [
     "ExperimentRun",
     "reproduce",
     "reproduce_all",
+    "ExperimentStudy",
+    "experiment_studies",
 ]
 
 
@@ -106,7 +112,7 @@ class ExperimentResult:
 class Split:
     """An experiment as independent tasks and a last step on their results:
     ``finish([fn(shared, task) for task in tasks])`` is the experiment's
-    result, whichever process ran each task (:func:`~lpvest.sweep.map_tasks`
+    result, whichever process ran each task (:func:`~lpvest.parallel.map_tasks`
     gives the same numbers serially and on Dask workers).
 
     Parameters
@@ -119,7 +125,7 @@ class Split:
         The tasks, in the order ``finish`` takes their results.
     finish : callable
         ``finish(results) -> ExperimentResult``, ``results`` the
-        :class:`~lpvest.sweep.TaskResult` of each task in order; it
+        :class:`~lpvest.parallel.TaskResult` of each task in order; it
         writes the experiment's files.
     desc : str
         What the tasks are, for a progress bar (``"Example 2: rho sweep"``).
@@ -166,6 +172,10 @@ class Experiment:
         the same experiment as independent tasks and a last step, which
         ``lpvest reproduce`` spreads over its workers; ``run`` is then
         ``split`` with the tasks run in order.
+    study : ExperimentStudy or None, default None
+        Its Monte Carlo (or design sweep) part as a study a sweep file can run
+        (``experiment = NAME`` in :mod:`lpvest.sweep`), of the same name;
+        ``None``: none.
     """
 
     name: str
@@ -175,6 +185,7 @@ class Experiment:
     fmus: tuple[str, ...] = ()
     group: str = ""
     split: Callable[..., Split] | None = None
+    study: ExperimentStudy | None = None
 
 
 def registry() -> dict[str, Experiment]:
@@ -255,4 +266,8 @@ from ._reproduce import (  # noqa: E402 - defined on top of the classes above
     ExperimentRun as ExperimentRun,
     reproduce as reproduce,
     reproduce_all as reproduce_all,
+)
+from ._studies import (  # noqa: E402 - defined on top of registry above
+    ExperimentStudy as ExperimentStudy,
+    experiment_studies as experiment_studies,
 )

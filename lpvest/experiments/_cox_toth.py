@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._version import __version__
 from ..analysis._fading_memory import (
     compare_filters,
     decay_rate,
@@ -45,14 +46,16 @@ from ..core._plotting import save_figure
 from ..core._rng import Stream
 from ..estimators._truncated import assumption_bounds
 from ..estimators.kalman import KalmanModel, kalman_filter
-from ..sweep._tasks import Task, TaskResult, map_tasks
+from ..parallel._prepared import Prepared
+from ..parallel._tasks import Task, TaskResult, map_tasks
 from ..systems import AffineLPV, InnovationLPV, LPVInputOutput
 from ..systems._modelfile import load_system
 from . import Experiment, ExperimentResult, show_progress
 from ._fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
+from ._studies import ExperimentStudy, StudySpec, select_task
 
 if TYPE_CHECKING:
-    from ..sweep._engine import Engine
+    from ..parallel._engine import Engine
 
 __all__ = [
     "EXPERIMENTS",
@@ -64,6 +67,10 @@ __all__ = [
     "PredictionErrorSetup",
     "prediction_error_setup",
     "prediction_error_task",
+    "TRUNCATION_METRICS",
+    "TRUNCATION_STUDY_OPTIONS",
+    "prepare_truncation_study",
+    "TRUNCATION_STUDY",
 ]
 
 
@@ -291,6 +298,67 @@ def prediction_error_task(setup: PredictionErrorSetup, task: Task) -> TaskResult
     )
 
 
+#: The metrics of :func:`prediction_error_task`, in column order.
+TRUNCATION_METRICS = ("mean_trace", "monte_carlo_mean_trace", "relative_difference")
+#: The options of the truncation study and their defaults (those of :func:`run_truncation`).
+TRUNCATION_STUDY_OPTIONS: dict[str, Any] = {"steps": 300, "runs": 2000, "burn_in": 50, "seed": 7}
+
+
+def prepare_truncation_study(spec: StudySpec, fmus: Any) -> Prepared:
+    """The truncation study of a sweep file: one :func:`prediction_error_task`
+    per filter, on :func:`prediction_error_setup` with the spec's options.
+
+    Parameters
+    ----------
+    spec : StudySpec
+        The sweep's spec: options (:data:`TRUNCATION_STUDY_OPTIONS`), the
+        ``filter`` axis (names in :data:`PREDICTION_FILTERS`), the metrics and
+        signals kept.
+    fmus : object
+        Not used (the study runs no FMU).
+
+    Returns
+    -------
+    Prepared
+        The task function, the set-up every task reads, the metrics.
+
+    Raises
+    ------
+    Exception
+        ``spec.error(...)`` for an option out of range or an unknown filter.
+    """
+    opts = {**TRUNCATION_STUDY_OPTIONS, **spec.options}
+    for key, low in (("steps", 2), ("runs", 1), ("burn_in", 0), ("seed", 0)):
+        if opts[key] < low:
+            raise spec.error(f"options.{key}", f"expected an integer >= {low}, found {opts[key]!r}")
+    if opts["burn_in"] >= opts["steps"]:
+        raise spec.error("options.burn_in", f"expected fewer than steps = {opts['steps']}, found {opts['burn_in']}")
+    setup = prediction_error_setup(steps=opts["steps"], runs=opts["runs"], burn_in=opts["burn_in"],
+                                   seed=opts["seed"])
+    for a in spec.axes:
+        for j, v in enumerate(a.values):
+            if v not in setup.gains:
+                raise spec.error(f"parameters.filter[{j + 1}]", f"no filter {v!r} (filters: {', '.join(setup.gains)})")
+    steps = opts["steps"]
+    signals = {s: ((steps,), ()) for s in spec.keep}
+    return Prepared(select_task(prediction_error_task, spec, TRUNCATION_METRICS), setup,
+                    spec.metric_names or TRUNCATION_METRICS, signals,
+                    {"experiment": "cox-toth-truncation", "lpvest": __version__, "options": opts},
+                    np.arange(steps, dtype=float),
+                    f"Cox & Toth prediction-error moments: {opts['runs']} Monte Carlo runs per filter, "
+                    f"{steps} samples")
+
+
+#: The Monte Carlo part of ``cox-toth-truncation`` as a study (``experiment = "cox-toth-truncation"``).
+TRUNCATION_STUDY = ExperimentStudy(
+    "cox-toth-truncation",
+    "Cox & Toth: prediction-error variance of exact, truncated and frozen-gain filters, Monte Carlo against "
+    "the exact moments",
+    prepare_truncation_study, {"filter": PREDICTION_FILTERS}, 0, TRUNCATION_STUDY_OPTIONS, TRUNCATION_METRICS,
+    ("monte_carlo_trace", "exact_trace"),
+)
+
+
 def run_truncation(
     out_dir: Path | None = None,
     *,
@@ -307,7 +375,7 @@ def run_truncation(
     ``runs`` Monte Carlo trajectories (the same ones for every filter) check
     the exact prediction-error variances; averages are over ``t >= burn_in``.
     One task per filter (:func:`prediction_error_task`), run in this process
-    or, with ``engine`` (a :class:`lpvest.sweep.Engine`), on Dask workers:
+    or, with ``engine`` (a :class:`lpvest.parallel.Engine`), on Dask workers:
     the same numbers either way. ``progress``: progress bars (default:
     :func:`~lpvest.experiments.show_progress`).
 
@@ -615,5 +683,6 @@ EXPERIMENTS = [
         reduced={"runs": 200},
         fmus=("CoxTothTruncationPlant", "CoxTothTruncationScheduler", "CoxTothTruncationSource",
               "CoxTothTruncationKalman", "CoxTothTruncationTruncatedKalman"),
+        study=TRUNCATION_STUDY,
     ),
 ]

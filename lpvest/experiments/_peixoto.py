@@ -32,8 +32,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._version import __version__
 from ..core._plotting import save_figure
-from ..sweep._tasks import Task, TaskResult, map_tasks
+from ..parallel._prepared import Prepared
+from ..parallel._tasks import Task, TaskResult, map_tasks
 from ..systems import PolytopicLPV
 from . import Experiment, ExperimentResult, Split, show_progress
 from ._fmus import (
@@ -47,9 +49,10 @@ from ._fmus import (
     column,
     design_difference,
 )
+from ._studies import ExperimentStudy, StudySpec, select_task
 
 if TYPE_CHECKING:
-    from ..sweep._engine import Engine
+    from ..parallel._engine import Engine
 
 __all__ = [
     "EXPERIMENTS",
@@ -67,6 +70,9 @@ __all__ = [
     "EXAMPLE2_FMU_RHOS",
     "example2_cosim",
     "example2_task",
+    "EXAMPLE2_METRICS",
+    "prepare_example2_study",
+    "EXAMPLE2_STUDY",
 ]
 
 #: Table 1 of the paper: (method, filter, gamma).
@@ -622,6 +628,38 @@ def example2_task(_shared: Any, task: Task) -> TaskResult:
                        "n_evaluations": float(n)}, value=design)
 
 
+#: The metrics of :func:`example2_task`, in column order.
+EXAMPLE2_METRICS = ("gamma", "design_epsilon", "n_evaluations")
+
+
+def prepare_example2_study(spec: StudySpec, fmus: Any) -> Prepared:
+    """The Example 2 study of a sweep file: one :func:`example2_task` per
+    ``rho`` (and ``epsilon``, when swept).
+
+    Parameters
+    ----------
+    spec : StudySpec
+        The sweep's spec: the metrics kept.
+    fmus : object
+        Not used (the study runs no FMU).
+
+    Returns
+    -------
+    Prepared
+        The task function and the metrics (no shared data, no signals).
+    """
+    return Prepared(select_task(example2_task, spec, EXAMPLE2_METRICS), None, spec.metric_names or EXAMPLE2_METRICS,
+                    {}, {"experiment": "peixoto-example2", "lpvest": __version__}, None,
+                    "Peixoto et al. Example 2: Theorem 1 per rho (best epsilon, or the given epsilon)")
+
+
+#: The gamma(rho) curve of ``peixoto-example2`` as a study (``experiment = "peixoto-example2"``).
+EXAMPLE2_STUDY = ExperimentStudy(
+    "peixoto-example2", "Peixoto et al. Example 2: gamma of Theorem 1 over rho (and epsilon)", prepare_example2_study,
+    {"rho": tuple(float(r) for r in range(1, 22)), "epsilon": None}, 0, {}, EXAMPLE2_METRICS, (),
+)
+
+
 def split_example2(
     out_dir: Path | None = None,
     *,
@@ -691,7 +729,7 @@ def run_example2(
     parameters), one per process. ``progress=None`` shows a tqdm bar when
     writing files with stderr a terminal (:func:`~lpvest.experiments.show_progress`).
     One task per ``rho`` (:func:`example2_task`, :func:`split_example2`), run in
-    this process or, with ``engine`` (a :class:`lpvest.sweep.Engine`), on Dask
+    this process or, with ``engine`` (a :class:`lpvest.parallel.Engine`), on Dask
     workers: the same numbers either way.
 
     Fig. 3 is a design sweep (library only). Through FMUs
@@ -838,5 +876,5 @@ EXPERIMENTS = [
                reduced={"rhos": EXAMPLE2_FMU_RHOS},
                fmus=("PeixotoEx2Plant", "PeixotoEx2Scheduler", "PeixotoEx2Source", "PeixotoEx2HinfPD",
                      "PeixotoEx2Rho11HinfPD", "PeixotoEx2Rho21HinfPD"),
-               split=split_example2),
+               split=split_example2, study=EXAMPLE2_STUDY),
 ]

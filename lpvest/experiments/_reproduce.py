@@ -6,7 +6,7 @@ The FMUs come from an :class:`~lpvest.experiments.ExperimentFmus` cache
 up to date.
 
 **Side by side.** With ``workers`` (default: one per core) the experiments
-run as tasks on the project's Dask engine (:class:`lpvest.sweep.Engine`, an
+run as tasks on the project's Dask engine (:class:`lpvest.parallel.Engine`, an
 embedded ``LocalCluster`` of worker processes): one task per experiment, one
 for each group of experiments that share a computation
 (:attr:`~lpvest.experiments.Experiment.group`: the three Sridhar experiments
@@ -18,7 +18,7 @@ checked first and the missing or stale ones built side by side on the
 workers, each recorded in the cache's manifest by this process only; the
 experiments' tasks then only read them.
 Every task runs with BLAS on one thread, in this process too
-(:func:`~lpvest.sweep.one_blas_thread`), so the numbers are the same,
+(:func:`~lpvest.parallel.one_blas_thread`), so the numbers are the same,
 bit for bit, whatever the number of workers, and so is the report (but for
 the times it states). ``workers=0`` runs everything in this process, one
 experiment after another; so does a run with a single task.
@@ -47,7 +47,7 @@ from pathlib import Path
 from typing import Any
 
 from ..core._errors import ArgumentError, LpvestError, abbreviate
-from ..sweep._tasks import Outcome, SweepError, Task, TaskResult, one_blas_thread
+from ..parallel._tasks import Outcome, SweepError, Task, TaskResult, one_blas_thread
 from . import Experiment, ExperimentResult, Split, write_results
 from ._fmus import ExperimentFmus, as_experiment_fmus
 
@@ -232,7 +232,7 @@ def _build_on_workers(engine: Any, cache: ExperimentFmus, needed: list[str], say
 
 
 def _on_workers(groups: list[list[Experiment]], cache: ExperimentFmus, rep: _Reporter, workers: int) -> None:
-    from ..sweep._engine import Engine
+    from ..parallel._engine import Engine
 
     with Engine(workers=workers) as engine:
         _run_on(engine, groups, cache, rep)

@@ -45,6 +45,7 @@ next to the FMU ones.
 from __future__ import annotations
 
 import functools
+import hashlib
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,17 +53,20 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._version import __version__
 from ..core._plotting import save_figure
 from ..core._protocol import run_streaming
 from ..estimators.bspline import BSplineObserver, KernelModel, UnknownConstant, UnknownSpline, fit_kernel_model
-from ..sweep._tasks import Task, TaskResult, map_tasks
+from ..parallel._prepared import Prepared
+from ..parallel._tasks import Task, TaskResult, map_tasks
 from ..systems import LTVInputOutput
 from ..systems._modelfile import load_system
 from . import Experiment, ExperimentResult, show_progress
 from ._fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_experiment_fmus, column
+from ._studies import ExperimentStudy, StudySpec, select_task
 
 if TYPE_CHECKING:
-    from ..sweep._engine import Engine
+    from ..parallel._engine import Engine
 
 __all__ = [
     "EXPERIMENTS",
@@ -80,6 +84,8 @@ __all__ = [
     "noisy_setup",
     "noisy_seed_task",
     "NOISY_METRICS",
+    "prepare_noisy_study",
+    "NOISY_STUDY",
 ]
 
 #: Section V-A: "The estimated constant value of a_1 is 0.9617".
@@ -410,6 +416,38 @@ def noisy_seed_task(setup: NoisySetup, task: Task) -> TaskResult:
     return TaskResult(metrics, {"a0": fit.values["a0"], "y": fit.y, "dy": fit.dy})
 
 
+def prepare_noisy_study(spec: StudySpec, fmus: Any) -> Prepared:
+    """The Section V-B study of a sweep file: one :func:`noisy_seed_task` per
+    seed, on the plant FMU's samples (:func:`noisy_setup`).
+
+    Parameters
+    ----------
+    spec : StudySpec
+        The sweep's spec: the metrics and signals kept.
+    fmus : ExperimentFmus, str, Path or None
+        The experiments' FMU cache (or its folder; ``None``: the default).
+
+    Returns
+    -------
+    Prepared
+        The task function, the set-up every task reads, the metrics; its
+        identity names the samples by their SHA-256.
+    """
+    setup = noisy_setup(sridhar_data(as_experiment_fmus(fmus), progress=False))
+    data_sha = hashlib.sha256(b"".join(np.ascontiguousarray(a).tobytes() for a in
+                                       (setup.t, setup.u, setup.y, setup.x, setup.batch_y))).hexdigest()
+    signals = {s: ((setup.t.size,), ()) for s in spec.keep}
+    return Prepared(select_task(noisy_seed_task, spec, NOISY_METRICS), setup, spec.metric_names or NOISY_METRICS,
+                    signals, {"experiment": "sridhar-noisy", "lpvest": __version__, "data": data_sha}, setup.t,
+                    "Sridhar et al. V-B: 30 dB output noise on the plant FMU's samples over [0, 9] s, "
+                    "two fits per seed")
+
+
+#: The noise realizations of ``sridhar-noisy`` as a study (``experiment = "sridhar-noisy"``).
+NOISY_STUDY = ExperimentStudy("sridhar-noisy", "Sridhar et al. V-B: B-spline fits under 30 dB output noise, per seed",
+                              prepare_noisy_study, {}, 20, {}, NOISY_METRICS, ("a0", "y", "dy"))
+
+
 def run_noisy(
     out_dir: Path | None = None, *, seeds: int = 20, fmus: ExperimentFmus | str | Path | None = None,
     engine: Engine | None = None, progress: bool | None = None,
@@ -419,7 +457,7 @@ def run_noisy(
     plant FMU's samples over [0, 9] s with the noise added to ``y`` per seed.
 
     One task per seed (:func:`noisy_seed_task`), run in this process or, with
-    ``engine`` (a :class:`lpvest.sweep.Engine`), on Dask workers: the same
+    ``engine`` (a :class:`lpvest.parallel.Engine`), on Dask workers: the same
     numbers either way. ``progress``: progress bars (default:
     :func:`~lpvest.experiments.show_progress`)."""
     progress = show_progress(progress, out_dir)
@@ -608,7 +646,7 @@ EXPERIMENTS = [
     Experiment("sridhar-noiseless", "Sridhar et al. V-A: a_0(t), a_1, y, y' noiseless (n = 86)", run_noiseless,
                fmus=_FMUS, group="sridhar"),
     Experiment("sridhar-noisy", "Sridhar et al. V-B: 30 dB output noise, 20 seeds (n = 16)", run_noisy,
-               reduced={"seeds": 5}, fmus=_FMUS, group="sridhar"),
+               reduced={"seeds": 5}, fmus=_FMUS, group="sridhar", study=NOISY_STUDY),
     Experiment("sridhar-sliding", "Sridhar et al.: sliding-window observer over [0, 20] s", run_sliding,
                fmus=_FMUS, group="sridhar"),
 ]

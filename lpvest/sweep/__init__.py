@@ -7,11 +7,13 @@ core) or on an existing cluster, with the results written as tasks finish
 (summary as Parquet, trajectories as Zarr) and a rerun resuming where the
 last one stopped.
 
-- :mod:`~lpvest.sweep`: the sweep file (axes, seeds, metrics, kept signals);
-- :mod:`~lpvest.sweep`: the summary metrics of a co-simulation;
-- :mod:`~lpvest.sweep`: a co-simulation file or an experiment as tasks;
-- :mod:`~lpvest.sweep`: Dask; :mod:`~lpvest.sweep`: tasks, seeds, the in-process runner;
-- :mod:`~lpvest.sweep`: the output folder; :mod:`~lpvest.sweep`: a figure per metric.
+- the sweep file (axes, seeds, metrics, kept signals): :func:`load_sweep`;
+- the summary metrics of a co-simulation: :class:`Metric`;
+- a co-simulation file as tasks, or an experiment's study
+  (:func:`experiment_studies`, from :mod:`lpvest.experiments`);
+- the tasks, their seeds and the Dask engine, from :mod:`lpvest.parallel`
+  (re-exported here: :class:`Engine`, :class:`Task`, :func:`map_tasks`, ...);
+- the output folder and a figure per metric: :func:`run_sweep`.
 
 Dask, pyarrow and zarr come with the extra ``pip install 'lpvest[sweep]'``;
 they are imported when a sweep runs, not with this package.
@@ -25,21 +27,12 @@ Examples
 
 from __future__ import annotations
 
-from ._engine import (
+from ..experiments._studies import experiment_studies as experiment_studies
+from ..parallel._engine import (
     LOCAL_WORKER_CONFIG as LOCAL_WORKER_CONFIG,
     Engine as Engine,
 )
-from ._metrics import METRIC_KINDS as METRIC_KINDS, Metric as Metric
-from ._run import SweepInterrupted as SweepInterrupted, SweepResult as SweepResult, run_sweep as run_sweep
-from ._studies import experiment_studies as experiment_studies
-from ._sweepfile import (
-    Axis as Axis,
-    Seeds as Seeds,
-    SweepSpec as SweepSpec,
-    load_sweep as load_sweep,
-    sweep_spec as sweep_spec,
-)
-from ._tasks import (
+from ..parallel._tasks import (
     Outcome as Outcome,
     SweepError as SweepError,
     Task as Task,
@@ -48,6 +41,15 @@ from ._tasks import (
     map_tasks as map_tasks,
     one_blas_thread as one_blas_thread,
     task_seeds as task_seeds,
+)
+from ._metrics import METRIC_KINDS as METRIC_KINDS, Metric as Metric
+from ._run import SweepInterrupted as SweepInterrupted, SweepResult as SweepResult, run_sweep as run_sweep
+from ._sweepfile import (
+    Axis as Axis,
+    Seeds as Seeds,
+    SweepSpec as SweepSpec,
+    load_sweep as load_sweep,
+    sweep_spec as sweep_spec,
 )
 
 __all__ = [

@@ -19,11 +19,11 @@ from pathlib import Path
 from typing import Any
 
 from ..core._interrupt import exit_status, hold, holds, interruptible
-from ._engine import Engine
+from ..parallel._engine import Engine
+from ..parallel._tasks import Outcome, SweepError, digest, execute
 from ._store import FORMAT, SweepStore
 from ._studies import prepare
 from ._sweepfile import SweepSpec, load_sweep
-from ._tasks import Outcome, SweepError, digest, execute
 
 __all__ = ["run_sweep", "SweepResult", "SweepInterrupted"]
 

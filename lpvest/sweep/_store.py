@@ -39,9 +39,9 @@ from typing import Any
 
 import numpy as np
 
-from ._studies import Prepared
+from ..parallel._prepared import Prepared
+from ..parallel._tasks import Outcome, SweepError, Task
 from ._sweepfile import Axis, SweepSpec
-from ._tasks import Outcome, SweepError, Task
 
 __all__ = ["SweepStore", "FORMAT"]
 
@@ -105,7 +105,7 @@ class SweepStore:
         flush_every: int = 256,
         flush_seconds: float = 1.0,
     ) -> None:
-        from ._engine import require_sweep_extra
+        from ..parallel._engine import require_sweep_extra
 
         require_sweep_extra("pyarrow", "zarr")
         self.out = Path(out)

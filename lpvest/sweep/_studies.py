@@ -1,9 +1,10 @@
-"""What a sweep runs: a co-simulation file, or a registered experiment.
+"""What a sweep runs: a co-simulation file, or a registered experiment's study.
 
 :func:`prepare` turns a :class:`~lpvest.sweep.SweepSpec` into a
-:class:`Prepared` sweep: the task function, the data every task reads, the
-metric names, the shapes of the kept signals, and the identity of what the
-results depend on (its SHA-256 names the sweep in its output folder).
+:class:`~lpvest.parallel.Prepared` sweep: the task function, the data every
+task reads, the metric names, the shapes of the kept signals, and the
+identity of what the results depend on (its SHA-256 names the sweep in its
+output folder).
 
 **A co-simulation file.** Everything is checked in this process before a
 task runs (swept and seed parameters are settable variables of the right
@@ -17,58 +18,32 @@ instances, each after :meth:`~lpvest.cosim.CoSimulation.reset` with the
 task's parameters and seeds (``fmi2Reset``: the state after instantiation);
 after a failure it starts from fresh instances.
 
-**Experiments** (:func:`experiment_studies`): the Monte Carlo parts of the
-paper reproductions, the same task functions the experiments run
-(:func:`~lpvest.sweep.map_tasks`).
-
-=========================  ==========================================  ======================================
-experiment                 axes (defaults)                             per task
-=========================  ==========================================  ======================================
-``cox-toth-truncation``    ``filter`` (all of ``PREDICTION_FILTERS``)  ``runs`` Monte Carlo trajectories
-                                                                       (options ``steps``, ``runs``,
-                                                                       ``burn_in``, ``seed``)
-``sridhar-noisy``          seeds (20)                                  one 30 dB noise realization, two fits
-``peixoto-example2``       ``rho`` (1 .. 21), ``epsilon`` (optional:   the best-epsilon search, or one design
-                           else the best epsilon)                      at ``epsilon``
-=========================  ==========================================  ======================================
+**Experiments** (``experiment = NAME``): the study the experiment holds
+(:func:`lpvest.experiments.experiment_studies`), the Monte Carlo part of a
+paper reproduction with the same task functions the experiment runs.
 """
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import os
 import tempfile
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..core._errors import ModelFileError
+from ..experiments._studies import study
+from ..parallel._prepared import Prepared
+from ..parallel._tasks import Task, TaskResult, digest
 from ._metrics import Metric, check as check_metric, compute as compute_metric, expand, select
-from ._tasks import Task, TaskResult, digest
 
 if TYPE_CHECKING:
     from ._sweepfile import SweepSpec
 
-__all__ = ["Prepared", "ExperimentStudy", "experiment_studies", "study", "prepare",
-           "CosimPayload", "run_cosim_task", "release_simulation"]
-
-
-@dataclass(frozen=True)
-class Prepared:
-    """A sweep ready to run: what each task calls and what it returns."""
-
-    fn: Callable[[Any, Task], TaskResult]  #: module-level task function
-    shared: Any  #: what every task reads
-    metrics: tuple[str, ...]  #: metric names, in column order
-    #: kept signal -> (shape per task, element labels)
-    signals: Mapping[str, tuple[tuple[int, ...], tuple[str, ...]]] = field(default_factory=dict)
-    identity: Mapping[str, Any] = field(default_factory=dict)  #: what the results depend on besides the spec
-    time: np.ndarray | None = None  #: the first axis of every signal (co-simulation time), if any
-    description: str = ""
+__all__ = ["prepare", "CosimPayload", "run_cosim_task", "release_simulation"]
 
 
 # ---------------------------------------------------------------------------
@@ -272,147 +247,13 @@ def _prepare_cosim(spec: SweepSpec, *, ship_fmus: bool) -> Prepared:
                     f"{cosim.path.name}: {n} FMUs, {cosim.n_steps} steps of {cosim.step_size:g}")
 
 
-# ---------------------------------------------------------------------------
-# experiments
-# ---------------------------------------------------------------------------
-@dataclass(frozen=True)
-class ExperimentStudy:
-    """The Monte Carlo (or design sweep) part of a paper experiment."""
-
-    name: str
-    title: str
-    prepare: Callable[[SweepSpec, Any], Prepared]  #: (spec, FMU cache) -> Prepared
-    axes: Mapping[str, tuple[Any, ...] | None]  #: axis -> default values (None: optional, no default)
-    seeds: int  #: default number of seeds (0: no seed axis)
-    options: Mapping[str, Any]  #: option -> default
-    metrics: tuple[str, ...]
-    signals: tuple[str, ...]
-
-    @property
-    def seeded(self) -> bool:
-        return self.seeds > 0
-
-
-def _select_metrics(spec: SweepSpec, all_metrics: tuple[str, ...]) -> tuple[str, ...]:
-    return spec.metric_names or all_metrics
-
-
-def _cox_toth_prepare(spec: SweepSpec, fmus: Any) -> Prepared:
-    from .._version import __version__
-    from ..experiments._cox_toth import prediction_error_setup, prediction_error_task
-
-    opts = {**STUDIES_OPTIONS["cox-toth-truncation"], **spec.options}
-    for key, low in (("steps", 2), ("runs", 1), ("burn_in", 0), ("seed", 0)):
-        if opts[key] < low:
-            raise spec.error(f"options.{key}", f"expected an integer >= {low}, found {opts[key]!r}")
-    if opts["burn_in"] >= opts["steps"]:
-        raise spec.error("options.burn_in", f"expected fewer than steps = {opts['steps']}, found {opts['burn_in']}")
-    setup = prediction_error_setup(steps=opts["steps"], runs=opts["runs"], burn_in=opts["burn_in"],
-                                   seed=opts["seed"])
-    for a in spec.axes:
-        for j, v in enumerate(a.values):
-            if v not in setup.gains:
-                raise spec.error(f"parameters.filter[{j + 1}]", f"no filter {v!r} (filters: {', '.join(setup.gains)})")
-    steps = opts["steps"]
-    signals = {s: ((steps,), ()) for s in spec.keep}
-    return Prepared(_experiment_task(prediction_error_task, spec), setup, _select_metrics(spec, _COX_METRICS),
-                    signals, {"experiment": "cox-toth-truncation", "lpvest": __version__, "options": opts},
-                    np.arange(steps, dtype=float),
-                    f"Cox & Toth prediction-error moments: {opts['runs']} Monte Carlo runs per filter, "
-                    f"{steps} samples")
-
-
-def _sridhar_prepare(spec: SweepSpec, fmus: Any) -> Prepared:
-    from .._version import __version__
-    from ..experiments._fmus import as_experiment_fmus
-    from ..experiments._sridhar import NOISY_METRICS, noisy_seed_task, noisy_setup, sridhar_data
-
-    setup = noisy_setup(sridhar_data(as_experiment_fmus(fmus), progress=False))
-    data_sha = hashlib.sha256(b"".join(np.ascontiguousarray(a).tobytes() for a in
-                                       (setup.t, setup.u, setup.y, setup.x, setup.batch_y))).hexdigest()
-    signals = {s: ((setup.t.size,), ()) for s in spec.keep}
-    return Prepared(_experiment_task(noisy_seed_task, spec), setup, _select_metrics(spec, NOISY_METRICS), signals,
-                    {"experiment": "sridhar-noisy", "lpvest": __version__, "data": data_sha}, setup.t,
-                    "Sridhar et al. V-B: 30 dB output noise on the plant FMU's samples over [0, 9] s, "
-                    "two fits per seed")
-
-
-def _peixoto_prepare(spec: SweepSpec, fmus: Any) -> Prepared:
-    from .._version import __version__
-    from ..experiments._peixoto import example2_task
-
-    return Prepared(_experiment_task(example2_task, spec), None, _select_metrics(spec, _PEIXOTO_METRICS), {},
-                    {"experiment": "peixoto-example2", "lpvest": __version__}, None,
-                    "Peixoto et al. Example 2: Theorem 1 per rho (best epsilon, or the given epsilon)")
-
-
-@dataclass(frozen=True)
-class _Selected:
-    """A task function whose metrics are cut to a selection (picklable)."""
-
-    fn: Callable[[Any, Task], TaskResult]
-    metrics: tuple[str, ...]
-    signals: tuple[str, ...]
-
-    def __call__(self, shared: Any, task: Task) -> TaskResult:
-        r = self.fn(shared, task)
-        return TaskResult({k: r.metrics[k] for k in self.metrics}, {k: r.signals[k] for k in self.signals})
-
-
-def _experiment_task(fn: Callable[[Any, Task], TaskResult], spec: SweepSpec) -> Callable[[Any, Task], TaskResult]:
-    st = study(spec.experiment)  # type: ignore[arg-type]
-    return _Selected(fn, spec.metric_names or st.metrics, spec.keep)
-
-
-_COX_METRICS = ("mean_trace", "monte_carlo_mean_trace", "relative_difference")
-_PEIXOTO_METRICS = ("gamma", "design_epsilon", "n_evaluations")
-STUDIES_OPTIONS: dict[str, dict[str, Any]] = {
-    "cox-toth-truncation": {"steps": 300, "runs": 2000, "burn_in": 50, "seed": 7},
-}
-
-
-def _prediction_filters() -> tuple[str, ...]:
-    from ..experiments._cox_toth import PREDICTION_FILTERS
-
-    return PREDICTION_FILTERS
-
-
-def _noisy_metrics() -> tuple[str, ...]:
-    from ..experiments._sridhar import NOISY_METRICS
-
-    return NOISY_METRICS
-
-
-@functools.cache
-def experiment_studies() -> dict[str, ExperimentStudy]:
-    """The registered experiment studies (``experiment = NAME`` in a sweep file), by name."""
-    return {s.name: s for s in (
-        ExperimentStudy("cox-toth-truncation", "Cox & Toth: prediction-error variance of exact, truncated and "
-                        "frozen-gain filters, Monte Carlo against the exact moments", _cox_toth_prepare,
-                        {"filter": _prediction_filters()}, 0, STUDIES_OPTIONS["cox-toth-truncation"], _COX_METRICS,
-                        ("monte_carlo_trace", "exact_trace")),
-        ExperimentStudy("sridhar-noisy", "Sridhar et al. V-B: B-spline fits under 30 dB output noise, per seed",
-                        _sridhar_prepare, {}, 20, {}, _noisy_metrics(), ("a0", "y", "dy")),
-        ExperimentStudy("peixoto-example2", "Peixoto et al. Example 2: gamma of Theorem 1 over rho (and epsilon)",
-                        _peixoto_prepare, {"rho": tuple(float(r) for r in range(1, 22)), "epsilon": None}, 0, {},
-                        _PEIXOTO_METRICS, ()),
-    )}
-
-
-def study(name: str, *, where: str = "experiment") -> ExperimentStudy:
-    """The registered experiment study ``name``."""
-    studies = experiment_studies()
-    if name not in studies:
-        raise ModelFileError(f"{where}: no experiment {name!r} to sweep (experiments: {', '.join(studies)})")
-    return studies[name]
-
-
 def prepare(spec: SweepSpec, *, fmus: Any = None, ship_fmus: bool = True) -> Prepared:
-    """The :class:`Prepared` sweep of ``spec`` (FMUs read, set-up checked).
+    """The :class:`~lpvest.parallel.Prepared` sweep of ``spec`` (FMUs read, set-up checked).
 
     ``fmus``: the experiments' FMU cache (an
     :class:`~lpvest.experiments.ExperimentFmus` or its folder) for
-    experiments that run FMUs.
+    experiments that run FMUs; an experiment's spec goes to its study's
+    ``prepare``.
     """
     if spec.cosim is not None:
         return _prepare_cosim(spec, ship_fmus=ship_fmus)

@@ -54,8 +54,8 @@ from typing import TYPE_CHECKING, Any
 
 from ..core._errors import ModelFileError
 from ..core._toml import describe_value
+from ..parallel._tasks import Task, task_seeds
 from ._metrics import Metric, parse as parse_metric
-from ._tasks import Task, task_seeds
 
 if TYPE_CHECKING:
     from ..cosim._cosimfile import CoSimFile
@@ -472,7 +472,7 @@ def sweep_spec(
                 raise r.error("steps", f"expected a positive integer, found {describe_value(steps)}")
             cosim = replace(cosim, n_steps=steps)
     else:
-        from ._studies import study
+        from ..experiments._studies import study
 
         name = data["experiment"]
         if not isinstance(name, str):
@@ -535,7 +535,7 @@ def sweep_spec(
         if not metrics and not keep:
             raise r.error("metrics", "missing: name at least one metric or a kept signal (keep)")
     else:
-        from ._studies import study
+        from ..experiments._studies import study
 
         st = study(experiment)  # type: ignore[arg-type]
         if "metrics" in data:
@@ -591,7 +591,7 @@ def with_defaults(spec: SweepSpec) -> SweepSpec:
     """
     if spec.experiment is None:
         return spec
-    from ._studies import study
+    from ..experiments._studies import study
 
     st = study(spec.experiment)
     given = {a.name for a in spec.axes}

@@ -13,7 +13,7 @@ How a sweep runs on it (:meth:`Engine.map`):
   model) is submitted once, as the argument of one task; Dask copies its result
   to each worker once, and recomputes it if every copy is lost.
 - One future per task. A task's exception is caught on the worker
-  (:func:`~lpvest.sweep.execute`) and comes back as a failed outcome; a
+  (:func:`~lpvest.parallel.execute`) and comes back as a failed outcome; a
   worker that dies takes no result with it: the scheduler runs its tasks
   again elsewhere (up to ``distributed.scheduler.allowed-failures`` deaths
   per task, then the task fails with ``KilledWorker``). Each task's outcome is
@@ -57,7 +57,18 @@ LOCAL_WORKER_CONFIG = {
 
 
 def require_sweep_extra(*modules: str) -> None:
-    """Import ``modules`` or raise a :class:`SweepError` saying how to install them."""
+    """Import ``modules`` or raise a :class:`SweepError` saying how to install them.
+
+    Parameters
+    ----------
+    *modules : str
+        Module names of the ``sweep`` extra (``"distributed"``, ``"pyarrow"``).
+
+    Raises
+    ------
+    SweepError
+        If one of them cannot be imported (chained to its ``ImportError``).
+    """
     import importlib
 
     for name in modules:
@@ -105,7 +116,7 @@ class Engine:
         ``os.cpu_count()``); not used with ``scheduler``.
     idle_timeout : float, optional
         Seconds to wait for the next task to finish before giving up
-        (:class:`~lpvest.sweep.SweepError`); default: no limit.
+        (:class:`~lpvest.parallel.SweepError`); default: no limit.
     start_timeout : float
         Seconds to wait for the cluster to start, or to connect to it.
     quiet : bool
@@ -180,10 +191,10 @@ class Engine:
         try:
             if self.scheduler is None:
                 n = self.workers or os.cpu_count() or 1
-                # the workers ignore SIGINT: Ctrl-C is the client's to handle (lpvest.sweep._worker)
+                # the workers ignore SIGINT: Ctrl-C is the client's to handle (lpvest.parallel._worker)
                 with dask.config.set(LOCAL_WORKER_CONFIG):
                     self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                                 dashboard_address=":0", preload=["lpvest.sweep._worker"],
+                                                 dashboard_address=":0", preload=["lpvest.parallel._worker"],
                                                  silence_logs=logging.CRITICAL if self.quiet else logging.WARNING)
                 self._client = Client(self._cluster, timeout=self.start_timeout)
             else:

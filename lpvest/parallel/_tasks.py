@@ -9,7 +9,7 @@ way on a Dask worker and in this process: an exception becomes a failed
 
 This module needs only numpy: the experiments import it whether or not the
 ``sweep`` extra (Dask, pyarrow, zarr) is installed, and run their tasks through
-:func:`map_tasks` serially or on an :class:`~lpvest.sweep.Engine`.
+:func:`map_tasks` serially or on an :class:`~lpvest.parallel.Engine`.
 """
 
 from __future__ import annotations
@@ -240,7 +240,7 @@ def map_tasks(
     desc: str = "tasks",
 ) -> list[TaskResult]:
     """Run ``fn`` over ``points`` and return the results in order, serially in
-    this process (``engine=None``) or on a Dask :class:`~lpvest.sweep.Engine`.
+    this process (``engine=None``) or on a Dask :class:`~lpvest.parallel.Engine`.
 
     The experiments run their Monte Carlo members through this function: the
     same task function gives the same numbers either way.
