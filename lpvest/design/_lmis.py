@@ -333,6 +333,6 @@ def lmi_matrices(
     """
     if (epsilon is None) == (multiplier_ab is None):
         raise ArgumentError("give exactly one of epsilon and multiplier_ab")
-    a, b = (float(epsilon), 1.0) if multiplier_ab is None else multiplier_ab  # type: ignore[arg-type]
+    a, b = (float(epsilon), 1.0) if multiplier_ab is None else multiplier_ab  # type: ignore[arg-type]  # one is given
     var = {k: ([np.asarray(m, dtype=float) for m in v] if k != "delta" else float(v)) for k, v in variables.items()}
     return lmi_blocks(_vertex_data(plant, a, b), var, a, b, robust=robust, bmat=_np_bmat)
