@@ -133,6 +133,8 @@ def _names(names: Iterable[object]) -> str:
 
 
 def _did_you_mean(given: object, choices: Iterable[object]) -> str:
+    if len(str(given)) > 100:  # junk, not a typo (and no time spent comparing it)
+        return ""
     close = difflib.get_close_matches(str(given), [str(c) for c in choices], n=1)
     return f", did you mean {abbreviate(close[0], 30)}?" if close else ""
 
@@ -168,6 +170,10 @@ class TomlReader:
     ...
     lpvest.core._errors.ModelFileError: run.toml: step_size: expected a positive number, found a number (-1.0)
     """
+
+    #: What a number is called in "expected ..." when it is not one (a format
+    #: that also takes formulas says so).
+    number_what = "a number"
 
     def __init__(self, origin: str | Path) -> None:
         self.origin = str(origin)
@@ -224,7 +230,7 @@ class TomlReader:
     def number(self, value: object, where: str, *, positive: bool = False, what: str | None = None) -> float:
         """``value``, a finite number (an integer or a float, not a boolean)
         as a float; ``positive``: greater than 0."""
-        what = what or ("a positive number" if positive else "a number")
+        what = what or ("a positive number" if positive else self.number_what)
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise self.expected(where, what, value)
         try:
@@ -364,7 +370,7 @@ class TomlTable(Mapping[str, Any]):
 
     def number(self, key: str, default: Any = REQUIRED, *, positive: bool = False) -> float:
         """The finite number ``key`` (``default`` when absent, if given)."""
-        found, value = self._get(key, default, "a positive number" if positive else "a number")
+        found, value = self._get(key, default, "a positive number" if positive else self.reader.number_what)
         return self.reader.number(value, self.path(key), positive=positive) if found else value
 
     def integer(self, key: str, default: Any = REQUIRED, *, minimum: int | None = None) -> int:
