@@ -222,3 +222,111 @@ def test_missing_required_keys_are_named_at_their_path_with_what_belongs_there(r
         t.check_keys({"A", "C"}, {"A": "a matrix", "C": "a matrix"})
     with refused("f.toml: models.m.F: unknown key (expected one of: C)"):  # unknown before missing
         reader.check_keys({"F": 1}, "models.m", {"C"}, {"C": "a matrix"})
+
+
+# -- one style: the same mistake in a model, a co-simulation and a sweep file ----------------------
+
+MODEL = """
+[system]
+name = "one"
+title = "a model"
+
+[scheduling]
+names = ["p"]
+lower = [-1.0]
+upper = [1.0]
+
+[models.m]
+type = "affine"
+A = { "1" = [[0.5]], p = [[0.1]] }
+C = [[1.0]]
+Q = [[0.1]]
+R = [[0.01]]
+"""
+
+COSIM = """
+title = "a co-simulation"
+step_size = 1.0
+steps = 10
+
+[components.plant]
+fmu = "plant.fmu"
+"""
+
+SWEEP = """
+title = "a sweep"
+cosim = "run.toml"
+
+[metrics]
+rms = { kind = "rms", of = "plant.y" }
+"""
+
+
+def _edit(text: str, old: str, new: str) -> str:
+    assert old in text
+    return text.replace(old, new, 1)
+
+
+#: mistake -> (the edit of each file: model, co-simulation, sweep) and the field each names
+SAME_MISTAKES = {
+    "a number where a string belongs": (
+        [("title = \"a model\"", "title = 3"), ("title = \"a co-simulation\"", "title = 3"),
+         ("title = \"a sweep\"", "title = 3")],
+        ["system.title", "title", "title"],
+        r"expected a string, found a number \(3\)",
+    ),
+    "a boolean where a number belongs": (
+        [("C = [[1.0]]", "C = [[true]]"), ("step_size = 1.0", "step_size = true"),
+         ('of = "plant.y" }', 'of = "plant.y", start = true }')],
+        [r"models.m.C[1,1]", "step_size", "metrics.rms.start"],
+        r"expected a (number or formula|positive number|non-negative integer), found a boolean \(true\)",
+    ),
+    "a misspelt key": (
+        [('title = "a model"', 'titel = "a model"\ntitle = "a model"'),
+         ('fmu = "plant.fmu"', 'fmu = "plant.fmu"\nfmuu = 1'),
+         ('of = "plant.y" }', 'of = "plant.y", strat = 1 }')],
+        ["system.titel", "components.plant.fmuu", "metrics.rms.strat"],
+        r"unknown key, did you mean '(title|fmu|start)'\? \(expected one of: [\w, ]+\)",
+    ),
+    "a missing required key": (
+        [("R = [[0.01]]\n", ""), ('fmu = "plant.fmu"\n', "parameters = {}\n"),
+         ('kind = "rms", of = "plant.y"', 'kind = "rms"')],
+        ["models.m.R", "components.plant.fmu", "metrics.rms.of"],
+        r"missing \(expected (a matrix|a built FMU's name or a path to an \.fmu file|"
+        r"a recorded variable 'component\.variable')\)",
+    ),
+}
+
+
+@pytest.mark.parametrize("mistake", list(SAME_MISTAKES))
+def test_the_same_mistake_reads_the_same_in_model_cosimulation_and_sweep_files(tmp_path, mistake):
+    from lpvest.cosim.files import load_cosim
+    from lpvest.sweep import load_sweep
+    from lpvest.systems import load_system
+
+    edits, fields, message = SAME_MISTAKES[mistake]
+    (tmp_path / "plant.fmu").write_bytes(b"")  # the file is looked for, not opened, when a sweep file is read
+    texts = {"model.toml": MODEL, "run.toml": COSIM, "sweep.toml": SWEEP}
+    loaders = {"model.toml": load_system, "run.toml": load_cosim, "sweep.toml": load_sweep}
+    for (name, text), (old, new), field in zip(texts.items(), edits, fields, strict=True):
+        for other, good in texts.items():
+            (tmp_path / other).write_text(good)
+        path = tmp_path / name
+        path.write_text(_edit(text, old, new))
+        with pytest.raises(ModelFileError) as info:
+            loaders[name](path)
+        assert re.fullmatch(f"{re.escape(str(path))}: {re.escape(field)}: {message}", str(info.value)), \
+            str(info.value)
+
+
+def test_the_unedited_files_of_the_same_mistake_test_are_accepted(tmp_path):
+    from lpvest.cosim.files import load_cosim
+    from lpvest.sweep import load_sweep
+    from lpvest.systems import load_system
+
+    (tmp_path / "plant.fmu").write_bytes(b"")
+    for name, text in {"model.toml": MODEL, "run.toml": COSIM, "sweep.toml": SWEEP}.items():
+        (tmp_path / name).write_text(text)
+    assert load_system(tmp_path / "model.toml").name == "one"
+    assert load_cosim(tmp_path / "run.toml").n_steps == 10
+    assert [m.name for m in load_sweep(tmp_path / "sweep.toml").metrics] == ["rms"]
