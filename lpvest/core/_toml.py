@@ -355,7 +355,7 @@ class TomlTable(Mapping[str, Any]):
 
     def table(self, key: str, *, required: bool = True, what: str = "a table") -> TomlTable:
         """The sub-table ``key``; an absent optional one is empty."""
-        found, value = self._get(key, REQUIRED if required else {}, what)
+        _, value = self._get(key, REQUIRED if required else {}, what)
         return self.reader.table(value, self.path(key), what=what)
 
     def array(self, key: str, default: Any = REQUIRED, *, what: str = "a list", nonempty: bool = False) -> list:
