@@ -97,7 +97,8 @@ def test_number_accepts_integers_and_floats(reader, value, number):
     ([1.0], "expected a number, found a list"),
     (math.nan, "expected a finite number, found a number (nan)"),
     (-math.inf, "expected a finite number, found a number (-inf)"),
-    (10**400, "expected a finite number, found a number (" + "1" + "0" * 400 + ")"),
+    # a Python int of a dict given to sweep_spec: beyond the float range, and shortened in the message
+    (10**400, "expected a finite number, found a number (1" + "0" * 36 + "...)"),
 ])
 def test_number_refuses_what_is_not_a_finite_number(reader, value, message):
     with refused(f"f.toml: t.x: {message}"):

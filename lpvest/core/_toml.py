@@ -81,8 +81,8 @@ def describe_value(value: Any) -> str:
     """
     if isinstance(value, bool):
         return f"a boolean ({str(value).lower()})"
-    if isinstance(value, int | float):
-        return f"a number ({value!r})"
+    if isinstance(value, int | float):  # (a float's repr has at most 24 characters, a TOML integer's 20)
+        return f"a number ({abbreviate(value, 40)})"
     if isinstance(value, str):
         return f"a string ({abbreviate(value, 30)})"
     if isinstance(value, dict):
