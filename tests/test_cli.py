@@ -126,7 +126,8 @@ def _run(*argv, cwd=None):
          "peixoto-ex2, sridhar-ltv; or give a .toml file)"),
         (["systems", "show", "peixoto-ex2", "--param", "rho"], "lpvest: error: --param 'rho': expected NAME=VALUE"),
         (["systems", "show", "peixoto-ex2", "--param", "rho=nan"],
-         "lpvest: error: ROOT/models/peixoto_ex2.toml: parameters.rho (override): expected a finite number, found nan"),
+         "lpvest: error: ROOT/models/peixoto_ex2.toml: parameters.rho (override): expected a finite number, "
+         "found a number (nan)"),
         (["reproduce", "nothing"], "lpvest: error: no experiment 'nothing' (known: "),
         (["bogus"], "lpvest: error: argument COMMAND: invalid choice: 'bogus' (choose from "),
         # issue 21: refused before any slow work, one line naming the culprit

@@ -144,10 +144,13 @@ ERRORS = [
     (lambda t: t + "[", "not valid TOML: "),
     (lambda t: "speed = 2\n" + t, "speed: unknown key (expected one of: components, connections, description, "
      "fmu_dir, plots, record, start_time, step_size, steps, stop_time, title)"),
-    (lambda t: _edit(t, "step_size = 1.0", "step_size = -1.0"), "step_size: expected a positive number, found -1.0"),
+    (lambda t: "stepz = 2\n" + t, "stepz: unknown key, did you mean 'steps'? (expected one of: components, "
+     "connections, description, fmu_dir, plots, record, start_time, step_size, steps, stop_time, title)"),
+    (lambda t: _edit(t, "step_size = 1.0", "step_size = -1.0"),
+     "step_size: expected a positive number, found a number (-1.0)"),
     (lambda t: _edit(t, "step_size = 1.0", 'step_size = "1"'),
-     "step_size: expected a finite number, found a string ('1')"),
-    (lambda t: _edit(t, "step_size = 1.0\n", ""), "step_size: missing (expected a number)"),
+     "step_size: expected a positive number, found a string ('1')"),
+    (lambda t: _edit(t, "step_size = 1.0\n", ""), "step_size: missing (expected a positive number)"),
     (lambda t: _edit(t, "steps = 10", "steps = 10\nstop_time = 10.0"),
      "steps: give either steps or stop_time (exactly one)"),
     (lambda t: _edit(t, "steps = 10", "steps = 2.5"), "steps: expected a positive integer, found a number (2.5)"),
@@ -155,12 +158,14 @@ ERRORS = [
      "stop_time: expected start_time + a positive whole number of steps of 1, found 10.25 (10.25 steps)"),
     (lambda t: t.split("[components.sched]")[0],
      "components: missing (expected a table [components.NAME] per component)"),
+    (lambda t: t.split("[components.sched]")[0] + "components = {}\n",
+     "components: expected at least one [components.NAME] table"),
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Scheduler"', 'fmu = "PeixotoEx1Scheduler"\ngain = 2'),
      "components.sched.gain: unknown key (expected one of: feedthrough, fmu, parameters)"),
     (lambda t: _edit(t, "[components.src]", '[components."2src"]'),
      "components.2src: is not a valid component name (expected a letter, then letters, digits, _)"),
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Scheduler"', "fmu = 3"),
-     "components.sched.fmu: expected a string, found a number (3)"),
+     "components.sched.fmu: expected a built FMU's name or a path to an .fmu file, found a number (3)"),
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Scheduler"', 'parameters = { omega = [0.3] }'),
      "components.sched.fmu: missing (expected a built FMU's name or a path to an .fmu file)"),
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Scheduler"', 'fmu = "PeixotoEx9Scheduler"'),
@@ -232,7 +237,7 @@ def test_command_line_error_is_one_line_with_status_2(fmus, tmp_path, capsys):
     f.write_text(_edit(BASE, "step_size = 1.0", "step_size = 0"))
     assert main(["cosim", str(f), "--fmus", str(fmus.out), "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
-    assert err == f"lpvest: error: {f}: step_size: expected a positive number, found 0\n"
+    assert err == f"lpvest: error: {f}: step_size: expected a positive number, found a number (0)\n"
 
 
 def test_fmu_dir_of_the_file_is_relative_to_the_file(fmus, tmp_path):

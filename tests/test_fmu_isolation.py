@@ -196,7 +196,7 @@ def _copy_of_lpvest(tmp_path: Path, version: str) -> Path:
     text, n = re.subn(r'__version__ = "([^"]+)"', rf'__version__ = "\1+{version}"', init.read_text(), count=1)
     assert n == 1
     init.write_text(text)
-    polytopic = tree / "lpvest" / "systems" / "polytopic.py"
+    polytopic = tree / "lpvest" / "systems" / "_polytopic.py"
     code = polytopic.read_text()
     old = 'y, z, nxt = m["Cy"] @ x + m["Dy"] @ w,'
     assert old in code

@@ -40,9 +40,8 @@ Examples
 from __future__ import annotations
 
 import math
-import re
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -50,7 +49,7 @@ import numpy as np
 
 from ..core._errors import ModelFileError, abbreviate, shorten
 from ..core._plotting import save_figure
-from ..core._toml import describe_value, read_toml
+from ..core._toml import TomlReader, element_path, read_toml
 from ._errors import CoSimulationError
 from ._master import Component, Connection, CoSimulation, DiscardedStep, step_count
 
@@ -63,15 +62,6 @@ DEFAULT_FMU_DIR = "fmu-build"
 #: The most steps a file may ask for: the master keeps every recorded value in
 #: memory (8 bytes per variable and step).
 MAX_STEPS = 100_000_000
-
-_PLAIN_KEY = re.compile(r"[A-Za-z0-9_-]{1,40}")
-
-
-def _key(key: object) -> str:
-    """A TOML key as it appears in a field path: bare when it is a plain short
-    name, else quoted (and shortened)."""
-    return key if isinstance(key, str) and _PLAIN_KEY.fullmatch(key) else abbreviate(key, 30)
-
 
 def _path_text(path: Path, limit: int = 120) -> str:
     """A path for a message: as is, or shortened when longer than ``limit``."""
@@ -154,7 +144,7 @@ class CoSimFile:
         ModelFileError
             With the message ``"<path>: <where>: <message>"`` (not raised).
         """
-        return ModelFileError(f"{self.path}: {where}: {message}" if where else f"{self.path}: {message}")
+        return TomlReader(self.path).error(where, message)
 
     def _reword(self, exc: CoSimulationError) -> ModelFileError:
         """A set-up or run error of the master, as an error of this file's field."""
@@ -438,41 +428,14 @@ class CoSimResult:
 # -- reading ------------------------------------------------------------------
 
 
-class _Reader:
-    def __init__(self, path: Path) -> None:
-        self.path = path
-
-    def error(self, where: str, message: str) -> ModelFileError:
-        return ModelFileError(f"{self.path}: {where}: {message}")
-
-    def number(self, data: Mapping, key: str, *, positive: bool = False, default: float | None = None) -> float:
-        if key not in data:
-            if default is None:
-                raise self.error(key, "missing (expected a number)")
-            return default
-        value = data[key]
-        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-            raise self.error(key, f"expected a finite number, found {describe_value(value)}")
-        if positive and not value > 0:
-            raise self.error(key, f"expected a positive number, found {value!r}")
-        return float(value)
-
-    def strings(self, data: Mapping, key: str) -> list[str]:
-        value = data[key]
-        if not isinstance(value, list):
-            raise self.error(key, f"expected a list of strings, found {describe_value(value)}")
-        for i, v in enumerate(value):
-            if not isinstance(v, str):
-                raise self.error(f"{key}[{i + 1}]", f"expected a string, found {describe_value(v)}")
-        return list(value)
-
-    def variable(self, text: str, where: str, components: Sequence[str]) -> None:
-        comp, sep, name = text.partition(".")
-        if not sep or not comp or not name:
-            raise self.error(where, f"expected 'component.variable', found {abbreviate(text)}")
-        if comp not in components:
-            raise self.error(where, f"no component {abbreviate(comp, 24)} in {abbreviate(text)} "
-                                    f"(components: {shorten(', '.join(components), 60)})")
+def _variable(r: TomlReader, text: str, where: str, components: Sequence[str]) -> None:
+    """``text`` names a variable of one of ``components``: ``comp.variable``."""
+    comp, sep, name = text.partition(".")
+    if not sep or not comp or not name:
+        raise r.error(where, f"expected 'component.variable', found {abbreviate(text)}")
+    if comp not in components:
+        raise r.error(where, f"no component {abbreviate(comp, 24)} in {abbreviate(text)} "
+                             f"(components: {shorten(', '.join(components), 60)})")
 
 
 def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimFile:
@@ -497,31 +460,24 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
     ------
     ModelFileError
         One line naming the file and the field, e.g.
-        ``run.toml: step_size: expected a positive number, found -1.0``.
+        ``run.toml: step_size: expected a positive number, found a number (-1.0)``.
     """
     path = Path(path)
-    data = read_toml(path)
-    r = _Reader(path)
-    unknown = sorted(set(data) - _TOP_KEYS)
-    if unknown:
-        raise r.error(_key(unknown[0]), f"unknown key (expected one of: {', '.join(sorted(_TOP_KEYS))})")
-    title = data.get("title", "")
-    if not isinstance(title, str):
-        raise r.error("title", f"expected a string, found {describe_value(title)}")
+    r = TomlReader(path)
+    data = r.root(read_toml(path))
+    data.check_keys(_TOP_KEYS)
+    title = data.string("title", "")
 
     # timing
-    h = r.number(data, "step_size", positive=True)
-    t0 = r.number(data, "start_time", default=0.0)
+    h = data.number("step_size", positive=True)
+    t0 = data.number("start_time", 0.0)
     if ("steps" in data) == ("stop_time" in data):
         raise r.error("steps", "give either steps or stop_time (exactly one)")
     if "steps" in data:
-        steps = data["steps"]
-        if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
-            raise r.error("steps", f"expected a positive integer, found {describe_value(steps)}")
-        n_steps = int(steps)
+        n_steps = data.integer("steps", minimum=1)
         where_steps = "steps"
     else:
-        stop = r.number(data, "stop_time")
+        stop = data.number("stop_time")
         count, ratio = step_count(t0, stop, h)
         if not math.isfinite(ratio):
             raise r.error("stop_time", f"expected start_time + a positive whole number of steps of {h:g}, "
@@ -539,35 +495,26 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
                                    "is not a finite number")
 
     # components
-    comps_raw = data.get("components")
-    if comps_raw is None:
-        raise r.error("components", "missing (expected a table [components.NAME] per component)")
-    if not isinstance(comps_raw, dict) or not comps_raw:
-        raise r.error("components", f"expected a table of components, found {describe_value(comps_raw)}")
+    comps_raw = data.table("components", what="a table [components.NAME] per component")
+    if not comps_raw:
+        raise r.error("components", "expected at least one [components.NAME] table")
     if fmu_dir is not None:
         folder = Path(fmu_dir)
     elif "fmu_dir" in data:
-        if not isinstance(data["fmu_dir"], str):
-            raise r.error("fmu_dir", f"expected a string (a folder), found {describe_value(data['fmu_dir'])}")
-        folder = path.parent / data["fmu_dir"]
+        folder = path.parent / data.string("fmu_dir", what="a string (a folder)")
     else:
         folder = Path(DEFAULT_FMU_DIR)
     components = []
-    for name, spec in comps_raw.items():
-        where = f"components.{_key(name)}"
+    for name in comps_raw:
+        where = comps_raw.path(name)
         if not name.isidentifier():
             # the name is in the field path already (as a model file says of a parameter name)
             raise r.error(where, "is not a valid component name (expected a letter, then letters, digits, _)")
-        if not isinstance(spec, dict):
-            raise r.error(where, f"expected a table, found {describe_value(spec)}")
-        bad = sorted(set(spec) - _COMPONENT_KEYS)
-        if bad:
-            raise r.error(f"{where}.{_key(bad[0])}",
-                          f"unknown key (expected one of: {', '.join(sorted(_COMPONENT_KEYS))})")
-        fmu = spec.get("fmu")
-        if not isinstance(fmu, str) or not fmu:
-            raise r.error(f"{where}.fmu", "missing (expected a built FMU's name or a path to an .fmu file)"
-                          if fmu is None else f"expected a string, found {describe_value(fmu)}")
+        spec = comps_raw.table(name)
+        spec.check_keys(_COMPONENT_KEYS)
+        fmu = spec.string("fmu", what="a built FMU's name or a path to an .fmu file")
+        if not fmu:
+            raise r.expected(spec.path("fmu"), "a built FMU's name or a path to an .fmu file", fmu)
         if fmu.lower().endswith(".fmu") or "/" in fmu or "\\" in fmu:
             fmu_path = path.parent / fmu
             if not _is_file(fmu_path):
@@ -580,48 +527,39 @@ def load_cosim(path: str | Path, *, fmu_dir: str | Path | None = None) -> CoSimF
                 # the folder named once: a message's length must not grow twice with a long path
                 raise r.error(f"{where}.fmu", f"no FMU {name_shown} in {shown} (build the FMUs into that "
                               f"folder with `lpvest build --out FOLDER`, or point --fmus or fmu_dir at theirs)")
-        params = spec.get("parameters", {})
-        if not isinstance(params, dict):
-            raise r.error(f"{where}.parameters", f"expected a table of start values, found {describe_value(params)}")
+        params = spec.table("parameters", required=False, what="a table of start values")
         for pname, value in params.items():
             if isinstance(value, dict) or (isinstance(value, list) and any(isinstance(v, dict | list)
                                                                            for v in value)):
-                raise r.error(f"{where}.parameters.{_key(pname)}",
-                              f"expected a number, string, boolean or a list of them, found {describe_value(value)}")
-        feed = spec.get("feedthrough")
-        if feed is not None and not isinstance(feed, bool):
-            raise r.error(f"{where}.feedthrough", f"expected true or false, found {describe_value(feed)}")
+                raise r.expected(params.path(pname), "a number, string, boolean or a list of them", value)
+        feed = spec.boolean("feedthrough", None)
         components.append(Component(name, fmu_path, dict(params), feed))
     names = [c.name for c in components]
 
     # connections, record, plots
     connections: list[str] = []
-    if "connections" in data:
-        for i, text in enumerate(r.strings(data, "connections")):
-            where = f"connections[{i + 1}]"
-            try:
-                c = Connection.parse(text)
-            except CoSimulationError:
-                raise r.error(where, f"expected 'comp.output -> comp.input', found {abbreviate(text)}") from None
-            r.variable(c.source, where, names)
-            r.variable(c.target, where, names)
-            connections.append(text)
+    for i, text in enumerate(data.strings("connections", [])):
+        where = element_path("connections", i)
+        try:
+            c = Connection.parse(text)
+        except CoSimulationError:
+            raise r.error(where, f"expected 'comp.output -> comp.input', found {abbreviate(text)}") from None
+        _variable(r, c.source, where, names)
+        _variable(r, c.target, where, names)
+        connections.append(text)
     record = None
     if "record" in data:
-        record = r.strings(data, "record")
+        record = data.strings("record")
         for i, text in enumerate(record):
-            r.variable(text, f"record[{i + 1}]", names)
+            _variable(r, text, element_path("record", i), names)
     plots: list[tuple[str, ...]] = []
-    if "plots" in data:
-        panels = data["plots"]
-        if not isinstance(panels, list):
-            raise r.error("plots", f"expected a list of panels (lists of variables), found {describe_value(panels)}")
-        for i, panel in enumerate(panels):
-            where = f"plots[{i + 1}]"
-            if not isinstance(panel, list) or not panel or not all(isinstance(v, str) for v in panel):
-                raise r.error(where, f"expected a non-empty list of variable names, found {describe_value(panel)}")
-            for v in panel:
-                r.variable(v, where, names)
-            plots.append(tuple(panel))
+    panels = data.array("plots", [], what="a list of panels (lists of variables)")
+    for i, panel in enumerate(panels):
+        where = element_path("plots", i)
+        if not isinstance(panel, list) or not panel or not all(isinstance(v, str) for v in panel):
+            raise r.expected(where, "a non-empty list of variable names", panel)
+        for v in panel:
+            _variable(r, v, where, names)
+        plots.append(tuple(panel))
     return CoSimFile(path, title, tuple(components), tuple(connections), h, n_steps, t0,
                      None if record is None else tuple(record), tuple(plots), folder)

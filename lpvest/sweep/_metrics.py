@@ -29,7 +29,6 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -203,27 +202,3 @@ def compute(metric: Metric, data: np.ndarray) -> float:
         return float(np.max(np.abs(x)))
     raise ValueError(f"unknown metric kind {kind!r}")  # pragma: no cover - checked when the spec is read
 
-
-def parse(name: str, table: Any, where: str) -> Metric | str:
-    """A :class:`Metric` from its table in a sweep spec, or the reason it is
-    not one (a message for ``where``)."""
-    if not isinstance(table, Mapping):
-        return f"expected a table {{ kind = ..., ... }}, found {type(table).__name__}"
-    kind = table.get("kind")
-    if kind not in METRIC_KINDS:
-        return f"kind: expected one of {', '.join(METRIC_KINDS)}, found {kind!r}"
-    keys, takes_start = METRIC_KINDS[kind]
-    allowed = {"kind", *keys} | ({"start"} if takes_start else set())
-    unknown = sorted(set(table) - allowed)
-    if unknown:
-        return f"{unknown[0]}: unknown key for kind {kind!r} (expected: {', '.join(sorted(allowed))})"
-    variables = {}
-    for key in keys:
-        value = table.get(key)
-        if not isinstance(value, str) or "." not in value:
-            return f"{key}: expected a recorded variable 'component.variable', found {value!r}"
-        variables[key] = value
-    start = table.get("start", 0)
-    if isinstance(start, bool) or not isinstance(start, int) or start < 0:
-        return f"start: expected a non-negative integer (a step), found {start!r}"
-    return Metric(name, kind, variables, int(start))

@@ -53,9 +53,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..core._errors import ModelFileError
-from ..core._toml import describe_value
+from ..core._toml import TomlReader, describe_value, element_path
 from ..parallel._tasks import Task, task_seeds
-from ._metrics import Metric, parse as parse_metric
+from ._metrics import METRIC_KINDS, Metric
 
 if TYPE_CHECKING:
     from ..cosim._cosimfile import CoSimFile
@@ -171,7 +171,7 @@ class SweepSpec:
         ModelFileError
             With the message ``"<origin>: <where>: <message>"`` (not raised).
         """
-        return ModelFileError(f"{self.origin}: {where}: {message}")
+        return TomlReader(self.origin).error(where, message)
 
     @property
     def axes(self) -> tuple[Axis, ...]:
@@ -255,117 +255,101 @@ class SweepSpec:
         }
 
 
-class _Reader:
-    def __init__(self, origin: str) -> None:
-        self.origin = origin
+def _axes(r: TomlReader, value: Any, where: str, *, dotted: bool) -> list[Axis]:
+    """The axes of a ``[parameters]`` or ``[[zip]]`` table: ``name = [values]``."""
+    table = r.table(value, where, what="a table of name = [values]")
+    flat: dict[str, Any] = {}
 
-    def error(self, where: str, message: str) -> ModelFileError:
-        return ModelFileError(f"{self.origin}: {where}: {message}")
+    def walk(t: Mapping, prefix: str) -> None:
+        for k, v in t.items():
+            name = f"{prefix}.{k}" if prefix else str(k)
+            if isinstance(v, Mapping):
+                walk(v, name)
+            else:
+                flat[name] = v
 
-    def axes(self, table: Any, where: str, *, dotted: bool) -> list[Axis]:
-        if not isinstance(table, Mapping):
-            raise self.error(where, f"expected a table of name = [values], found {describe_value(table)}")
-        flat: dict[str, Any] = {}
+    walk(table, "")
+    out = []
+    for name, values in flat.items():
+        w = f"{where}.{name}"
+        if dotted and not re.match(r"^[A-Za-z_]\w*\.[^.\s].*$", name):
+            raise r.error(w, "expected a parameter 'component.variable'")
+        if not dotted and not _NAME.match(name):
+            raise r.error(w, "expected an axis name of the experiment")
+        r.array(values, w, what="a non-empty list of values", nonempty=True)
+        kinds = set()
+        for i, v in enumerate(values):
+            if isinstance(v, list) and v and all(isinstance(x, int | float) and not isinstance(x, bool) for x in v):
+                kinds.add("vector")
+            elif isinstance(v, bool | int | float | str):
+                kinds.add({bool: "bool", str: "str"}.get(type(v), "number"))
+            else:
+                raise r.expected(element_path(w, i), "a number, string, boolean or a list of numbers", v)
+        if len(kinds) > 1:
+            raise r.error(w, f"mixes {' and '.join(sorted(kinds))} values (one kind per axis)")
+        out.append(Axis(name, tuple(tuple(v) if isinstance(v, list) else v for v in values)))
+    return out
 
-        def walk(t: Mapping, prefix: str) -> None:
-            for k, v in t.items():
-                name = f"{prefix}.{k}" if prefix else str(k)
-                if isinstance(v, Mapping):
-                    walk(v, name)
-                else:
-                    flat[name] = v
 
-        walk(table, "")
-        out = []
-        for name, values in flat.items():
-            w = f"{where}.{name}"
-            if dotted and not re.match(r"^[A-Za-z_]\w*\.[^.\s].*$", name):
-                raise self.error(w, "expected a parameter 'component.variable'")
-            if not dotted and not _NAME.match(name):
-                raise self.error(w, "expected an axis name of the experiment")
-            if not isinstance(values, list) or not values:
-                raise self.error(w, f"expected a non-empty list of values, found {describe_value(values)}")
-            kinds = set()
-            for i, v in enumerate(values):
-                if isinstance(v, list):
-                    if not v or not all(isinstance(x, int | float) and not isinstance(x, bool) for x in v):
-                        raise self.error(f"{w}[{i + 1}]", f"expected a number, string, boolean or a list of "
-                                         f"numbers, found {describe_value(v)} {v!r}")
-                    kinds.add("vector")
-                elif isinstance(v, bool | int | float | str):
-                    kinds.add({bool: "bool", str: "str"}.get(type(v), "number"))
-                else:
-                    raise self.error(f"{w}[{i + 1}]", f"expected a number, string, boolean or a list of numbers, "
-                                     f"found {describe_value(v)}")
-            if len(kinds) > 1:
-                raise self.error(w, f"mixes {' and '.join(sorted(kinds))} values (one kind per axis)")
-            out.append(Axis(name, tuple(tuple(v) if isinstance(v, list) else v for v in values)))
-        return out
+def _names(r: TomlReader, value: Any, where: str, *, dotted: bool = True) -> tuple[str, ...]:
+    """A list of distinct names: ``'component.variable'`` when ``dotted``."""
+    what = "'component.variable'" if dotted else "a name"
+    names = r.strings(value, where, what=what)
+    for i, v in enumerate(names):
+        if dotted and "." not in v:
+            raise r.expected(element_path(where, i), what, v)
+    if len(set(names)) != len(names):
+        dup = next(v for v in names if names.count(v) > 1)
+        raise r.error(where, f"{dup!r} is listed twice")
+    return tuple(names)
 
-    def strings(self, value: Any, where: str, *, dotted: bool = True) -> tuple[str, ...]:
-        if not isinstance(value, list):
-            raise self.error(where, f"expected a list of strings, found {describe_value(value)}")
-        for i, v in enumerate(value):
-            if not isinstance(v, str) or (dotted and "." not in v):
-                what = "'component.variable'" if dotted else "a name"
-                raise self.error(f"{where}[{i + 1}]", f"expected {what}, found {describe_value(v)}")
-        if len(set(value)) != len(value):
-            dup = next(v for v in value if value.count(v) > 1)
-            raise self.error(where, f"{dup!r} is listed twice")
-        return tuple(value)
 
-    def seeds(self, value: Any, *, cosim: bool) -> Seeds:
-        if isinstance(value, bool):
-            raise self.error("seeds", "expected a count, a list of seed keys or a table, found "
-                                      f"{describe_value(value)}")
-        if isinstance(value, int):
-            value = {"count": value}
-        elif isinstance(value, list):
-            value = {"keys": value}
-        if not isinstance(value, Mapping):
-            raise self.error("seeds", "expected a count, a list of seed keys or a table, found "
-                                      f"{describe_value(value)}")
-        unknown = sorted(set(value) - _SEED_KEYS)
-        if unknown:
-            raise self.error(f"seeds.{unknown[0]}", f"unknown key (expected one of: {', '.join(sorted(_SEED_KEYS))})")
-        if ("count" in value) == ("keys" in value):
-            raise self.error("seeds", "give either count or keys (exactly one)")
-        if "count" in value:
-            n = value["count"]
-            if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-                raise self.error("seeds.count", f"expected a positive integer, found {describe_value(n)}")
-            keys = tuple(range(n))
-        else:
-            raw = value["keys"]
-            if not isinstance(raw, list) or not raw:
-                raise self.error("seeds.keys", f"expected a non-empty list of integers, found {describe_value(raw)}")
-            for i, k in enumerate(raw):
-                if isinstance(k, bool) or not isinstance(k, int) or k < 0:
-                    raise self.error(f"seeds.keys[{i + 1}]",
-                                     f"expected a non-negative integer, found {describe_value(k)}")
-            if len(set(raw)) != len(raw):
-                raise self.error("seeds.keys", f"seed key {next(k for k in raw if raw.count(k) > 1)} is listed twice")
-            keys = tuple(raw)
-        root = value.get("root", 0)
-        if isinstance(root, bool) or not isinstance(root, int) or root < 0:
-            raise self.error("seeds.root", f"expected a non-negative integer, found {describe_value(root)}")
-        common = value.get("common", True)
-        if not isinstance(common, bool):
-            raise self.error("seeds.common", f"expected true or false, found {describe_value(common)}")
-        params: tuple[str, ...] = ()
-        if cosim:
-            if "parameters" not in value:
-                raise self.error("seeds.parameters", "missing (the FMU Integer parameters that take the per-task "
-                                 "seeds, e.g. [\"plant.seed\"])")
-            params = self.strings(value["parameters"], "seeds.parameters")
-            if not params:
-                raise self.error("seeds.parameters", "expected at least one 'component.variable'")
-        else:
-            for key in ("parameters", "root", "common"):
-                if key in value:
-                    raise self.error(f"seeds.{key}", "an experiment draws its noise from its own seeds "
-                                     "(only count or keys)")
-        return Seeds(keys, int(root), params, common)
+def _seeds(r: TomlReader, value: Any, *, cosim: bool) -> Seeds:
+    """The ``seeds`` axis: a count, a list of seed keys or a table."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        value = {"count": value}
+    elif isinstance(value, list):
+        value = {"keys": value}
+    table = r.table(value, "seeds", what="a count, a list of seed keys or a table")
+    table.check_keys(_SEED_KEYS)
+    if ("count" in table) == ("keys" in table):
+        raise r.error("seeds", "give either count or keys (exactly one)")
+    if "count" in table:
+        keys = tuple(range(table.integer("count", minimum=1)))
+    else:
+        raw = table.array("keys", what="a non-empty list of integers", nonempty=True)
+        keys = tuple(r.integer(k, element_path("seeds.keys", i), minimum=0) for i, k in enumerate(raw))
+        if len(set(keys)) != len(keys):
+            raise r.error("seeds.keys", f"seed key {next(k for k in keys if keys.count(k) > 1)} is listed twice")
+    root = table.integer("root", 0, minimum=0)
+    common = table.boolean("common", True)
+    params: tuple[str, ...] = ()
+    if cosim:
+        params = _names(r, table.value("parameters", "the FMU Integer parameters that take the per-task seeds, "
+                                                     "e.g. [\"plant.seed\"]"), "seeds.parameters")
+        if not params:
+            raise r.error("seeds.parameters", "expected at least one 'component.variable'")
+    else:
+        for key in ("parameters", "root", "common"):
+            if key in table:
+                raise r.error(f"seeds.{key}", "an experiment draws its noise from its own seeds "
+                              "(only count or keys)")
+    return Seeds(keys, root, params, common)
+
+
+def _metric(r: TomlReader, name: str, value: Any, where: str) -> Metric:
+    """A :class:`Metric` from its table ``{ kind = ..., ... }`` in ``[metrics]``."""
+    table = r.table(value, where, what="a table { kind = ..., ... }")
+    kind = table.choice("kind", METRIC_KINDS, noun="metric kind")
+    keys, takes_start = METRIC_KINDS[kind]
+    table.check_keys({"kind", *keys, *(("start",) if takes_start else ())})
+    variables = {}
+    for key in keys:
+        what = "a recorded variable 'component.variable'"
+        variables[key] = table.string(key, what=what)
+        if "." not in variables[key]:
+            raise r.expected(table.path(key), what, variables[key])
+    return Metric(name, kind, variables, table.integer("start", 0, minimum=0))
 
 
 def load_sweep(path: str | Path, *, fmu_dir: str | Path | None = None) -> SweepSpec:
@@ -439,62 +423,48 @@ def sweep_spec(
     """
     from ..cosim._cosimfile import load_cosim
 
-    r = _Reader(origin)
+    r = TomlReader(origin)
     base = Path(base)
-    if not isinstance(data, Mapping):
-        raise ModelFileError(f"{origin}: expected a table, found {describe_value(data)}")
-    unknown = sorted(set(data) - _TOP_KEYS)
-    if unknown:
-        raise r.error(unknown[0], f"unknown key (expected one of: {', '.join(sorted(_TOP_KEYS))})")
-    title = data.get("title", "")
-    if not isinstance(title, str):
-        raise r.error("title", f"expected a string, found {describe_value(title)}")
-    if ("cosim" in data) == ("experiment" in data):
+    top = r.root(data)
+    top.check_keys(_TOP_KEYS)
+    title = top.string("title", "")
+    if ("cosim" in top) == ("experiment" in top):
         raise r.error("cosim", "give either cosim (a co-simulation file) or experiment (a registered "
                       "experiment), exactly one")
     cosim = None
     experiment = None
-    if "cosim" in data:
-        if not isinstance(data["cosim"], str):
-            raise r.error("cosim", f"expected a co-simulation file (a path), found {describe_value(data['cosim'])}")
+    if "cosim" in top:
+        file = top.string("cosim", what="a co-simulation file (a path)")
         for key in ("options",):
-            if key in data:
+            if key in top:
                 raise r.error(key, "only an experiment takes options")
         folder = fmu_dir
-        if folder is None and "fmu_dir" in data:
-            if not isinstance(data["fmu_dir"], str):
-                raise r.error("fmu_dir", f"expected a folder (a path), found {describe_value(data['fmu_dir'])}")
-            folder = base / data["fmu_dir"]
-        cosim = load_cosim(base / data["cosim"], fmu_dir=folder)
-        if "steps" in data:
-            steps = data["steps"]
-            if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
-                raise r.error("steps", f"expected a positive integer, found {describe_value(steps)}")
-            cosim = replace(cosim, n_steps=steps)
+        if folder is None and "fmu_dir" in top:
+            folder = base / top.string("fmu_dir", what="a folder (a path)")
+        cosim = load_cosim(base / file, fmu_dir=folder)
+        if "steps" in top:
+            cosim = replace(cosim, n_steps=top.integer("steps", minimum=1))
     else:
         from ..experiments._studies import study
 
-        name = data["experiment"]
-        if not isinstance(name, str):
-            raise r.error("experiment", f"expected an experiment name, found {describe_value(name)}")
+        name = top.string("experiment", what="an experiment name")
         for key in ("steps", "fmu_dir"):
-            if key in data:
+            if key in top:
                 raise r.error(key, "only a co-simulation takes this key (an experiment has options)")
         study(name, where=f"{origin}: experiment")  # known?
         experiment = name
 
-    seeds = r.seeds(data["seeds"], cosim=cosim is not None) if "seeds" in data else None
-    grid = tuple(r.axes(data["parameters"], "parameters", dotted=cosim is not None)) if "parameters" in data else ()
+    seeds = _seeds(r, top["seeds"], cosim=cosim is not None) if "seeds" in top else None
+    grid = tuple(_axes(r, top["parameters"], "parameters", dotted=cosim is not None)) if "parameters" in top else ()
     zips: list[tuple[Axis, ...]] = []
-    if "zip" in data:
-        groups = data["zip"]
+    if "zip" in top:
+        groups = top["zip"]
         if isinstance(groups, Mapping):
             groups = [groups]
-        if not isinstance(groups, list):
-            raise r.error("zip", f"expected tables [[zip]] of lists of equal length, found {describe_value(groups)}")
+        r.array(groups, "zip", what="tables [[zip]] of lists of equal length")
         for i, g in enumerate(groups):
-            where = f"zip[{i + 1}]"
-            axes = tuple(r.axes(g, where, dotted=cosim is not None))
+            where = element_path("zip", i)
+            axes = tuple(_axes(r, g, where, dotted=cosim is not None))
             if not axes:
                 raise r.error(where, "expected at least one name = [values]")
             n = len(axes[0].values)
@@ -515,38 +485,33 @@ def sweep_spec(
                 raise r.error("seeds.parameters", f"{p} is also a swept parameter")
 
     keep: tuple[str, ...] = ()
-    if "keep" in data:
-        keep = r.strings(data["keep"], "keep", dotted=cosim is not None)
+    if "keep" in top:
+        keep = _names(r, top["keep"], "keep", dotted=cosim is not None)
     metrics: list[Metric] = []
     metric_names: tuple[str, ...] = ()
     options: dict[str, Any] = {}
     if cosim is not None:
-        table = data.get("metrics", {})
-        if not isinstance(table, Mapping):
-            raise r.error("metrics", f"expected a table of name = {{ kind = ..., ... }}, found {describe_value(table)}")
+        table = top.table("metrics", required=False, what="a table of name = { kind = ..., ... }")
         for name, t in table.items():
-            where = f"metrics.{name}"
+            where = table.path(name)
             if not _NAME.match(name) or name in ("task", "seed", "status", "error"):
                 raise r.error(where, "expected a metric name (letters, digits, _; not task, seed, status, error)")
-            m = parse_metric(name, t, where)
-            if isinstance(m, str):
-                raise r.error(where, m)
-            metrics.append(m)
+            metrics.append(_metric(r, name, t, where))
         if not metrics and not keep:
             raise r.error("metrics", "missing: name at least one metric or a kept signal (keep)")
     else:
         from ..experiments._studies import study
 
         st = study(experiment)  # type: ignore[arg-type]
-        if "metrics" in data:
-            metric_names = r.strings(data["metrics"], "metrics", dotted=False)
+        if "metrics" in top:
+            metric_names = _names(r, top["metrics"], "metrics", dotted=False)
             for i, m in enumerate(metric_names):
                 if m not in st.metrics:
-                    raise r.error(f"metrics[{i + 1}]", f"{experiment} has no metric {m!r} "
+                    raise r.error(element_path("metrics", i), f"{experiment} has no metric {m!r} "
                                   f"(metrics: {', '.join(st.metrics)})")
         for i, s in enumerate(keep):
             if s not in st.signals:
-                raise r.error(f"keep[{i + 1}]", f"{experiment} keeps no signal {s!r} "
+                raise r.error(element_path("keep", i), f"{experiment} keeps no signal {s!r} "
                               f"(signals: {', '.join(st.signals) or 'none'})")
         for a in (*grid, *(a for g in zips for a in g)):
             if a.name not in st.axes:
@@ -554,18 +519,13 @@ def sweep_spec(
                               f"(axes: {', '.join(st.axes) or 'none'})")
         if seeds is not None and not st.seeded:
             raise r.error("seeds", f"{experiment} has no seed axis")
-        raw = data.get("options", {})
-        if not isinstance(raw, Mapping):
-            raise r.error("options", f"expected a table, found {describe_value(raw)}")
+        raw = top.table("options", required=False)
+        raw.check_keys(st.options)
         for key, value in raw.items():
-            if key not in st.options:
-                raise r.error(f"options.{key}", f"unknown option of {experiment} "
-                              f"(options: {', '.join(st.options) or 'none'})")
             default = st.options[key]
             if isinstance(value, bool) != isinstance(default, bool) or not isinstance(value, type(default)) \
                     and not (isinstance(default, float) and isinstance(value, int)):
-                raise r.error(f"options.{key}",
-                              f"expected {describe_value(default).split(' (')[0]}, found {describe_value(value)}")
+                raise r.expected(raw.path(key), describe_value(default).split(" (")[0], value)
             options[key] = value
     spec = SweepSpec(origin, title, cosim, experiment, grid, tuple(zips), seeds, keep, tuple(metrics),
                      metric_names, options)

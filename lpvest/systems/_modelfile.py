@@ -40,24 +40,21 @@ the FMI parameter's ``min``/``max`` (so a host refuses such a value too).
 
 from __future__ import annotations
 
-import math
-import re
-from collections.abc import Callable, Iterable, Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar, overload
 
 import numpy as np
 
-from ..core._errors import LpvestError, ModelFileError, OutputError, abbreviate, shorten
+from ..core._errors import ModelFileError, OutputError, abbreviate, shorten
 from ..core._expressions import CONSTANTS, FUNCTIONS, Expression, FormulaMatrix
 from ..core._scheduling import (
     BasisFunction,
     SchedulingSpace,
     parse_basis,
 )
-from ..core._toml import describe_value, parse_toml, read_toml
+from ..core._toml import TomlReader, TomlTable, describe_value, element_path, field_path, parse_toml, read_toml
 from ._affine import CONSTANT_TERM, AffineDependence, AffineLPV
 from ._innovation import InnovationLPV, LPVInputOutput
 from ._ltv import LTVInputOutput, LTVStateSpace
@@ -247,21 +244,21 @@ MAX_MAGNITUDE = 1e100
 #: consistency checks enumerate.
 MAX_SCHEDULING = 16
 
-_PLAIN_KEY = re.compile(r"[A-Za-z0-9_-]{1,40}")
+#: What belongs at a matrix key of a model (for "missing (expected ...)").
+_MATRIX = "a matrix"
+_TERMS = "a matrix or a table of terms"
+_FORMULAS = "a list of formulas"
 
 
-def _key(key: object) -> str:
-    """A TOML key as it appears in a field path: bare when it is a plain short
-    name, else quoted (and shortened)."""
-    return key if isinstance(key, str) and _PLAIN_KEY.fullmatch(key) else abbreviate(key, 30)
+class _Reader(TomlReader):
+    """The model-file reader: the one TOML reader (every problem a one-line
+    :class:`ModelFileError` naming file and field), numbers that may be
+    formulas of the parameters, matrices and the model types."""
 
-
-class _Reader:
-    """Walks the parsed TOML and turns every problem into a one-line
-    :class:`ModelFileError` naming file and field."""
+    number_what = "a number or formula"
 
     def __init__(self, origin: str, parameters: Mapping[str, float]) -> None:
-        self.origin = origin
+        super().__init__(origin)
         self.parameters = dict(parameters)
         self.system_name = ""
 
@@ -270,85 +267,32 @@ class _Reader:
         simulations call it)."""
         return f"{self.system_name}/{key}" if self.system_name else key
 
-    def error(self, where: str, msg: str) -> ModelFileError:
-        return ModelFileError(f"{self.origin}: {where}: {msg}")
-
-    @contextmanager
-    def at(self, where: str) -> Iterator[None]:
-        try:
-            yield
-        except ModelFileError:
-            raise
-        except LpvestError as exc:
-            raise self.error(where, str(exc)) from exc
-
-    def table(self, data: Mapping, key: str, where: str, *, required: bool = True) -> dict:
-        if key not in data:
-            if required:
-                raise self.error(where, f"missing required table [{key}]" if where != key else "missing")
-            return {}
-        val = data[key]
-        if not isinstance(val, dict):
-            raise self.error(f"{where}.{key}" if where and where != key else key,
-                             f"expected a table, found {describe_value(val)}")
-        return val
-
-    def keys(self, data: Mapping, where: str, allowed: set[str] | frozenset[str],
-             required: set[str] | frozenset[str] = frozenset()) -> None:
-        unknown = sorted(set(data) - allowed)
-        if unknown:
-            raise self.error(
-                where, f"unknown key {abbreviate(unknown[0], 30)} (expected one of: {', '.join(sorted(allowed))})"
-            )
-        missing = sorted(required - set(data))
-        if missing:
-            raise self.error(where, f"missing required key {missing[0]!r}")
-
-    def string(self, data: Mapping, key: str, where: str, default: str | None = None) -> str:
-        if key not in data:
-            if default is None:
-                raise self.error(where, f"missing required key {key!r}")
-            return default
-        val = data[key]
-        if not isinstance(val, str):
-            raise self.error(f"{where}.{key}", f"expected a string, found {describe_value(val)}")
-        return val
-
-    def number(self, value: Any, where: str) -> float:
-        if isinstance(value, bool):
-            raise self.error(where, "expected a number, found a boolean")
-        if isinstance(value, int | float):
-            number = float(value)  # TOML integers have at most 64 bits
-        elif isinstance(value, str):
+    def number(self, value: object, where: str, *, positive: bool = False, what: str | None = None) -> float:
+        """A number, or a formula of the parameters (its value); finite and at
+        most :data:`MAX_MAGNITUDE` in magnitude."""
+        if isinstance(value, str):
             with self.at(where):
-                number = Expression.parse(value, parameters=self.parameters).value()
-        else:
-            raise self.error(where, f"expected a number or formula, found {describe_value(value)}")
-        if not math.isfinite(number):
-            raise self.error(where, f"expected a finite number, found {number}")
+                value = Expression.parse(value, parameters=self.parameters).value()
+        number = super().number(value, where, positive=positive, what=what)
         if abs(number) > MAX_MAGNITUDE:
             raise self.error(where, f"{number:.6g} is too large: numbers in a model file are at most "
                                     f"{MAX_MAGNITUDE:g} in magnitude")
         return number
 
-    def ranged_parameter(self, spec: dict, where: str) -> tuple[float, ParameterRange]:
+    def ranged_parameter(self, spec: TomlTable) -> tuple[float, ParameterRange]:
         """``{ value = V, lower = L, upper = U, description = "..." }`` (the
         bounds and the description optional): the value and its range."""
-        self.keys(spec, where, {"value", "lower", "upper", "description"}, {"value"})
-        value = self.number(spec["value"], f"{where}.value")
-        lower = self.number(spec["lower"], f"{where}.lower") if "lower" in spec else None
-        upper = self.number(spec["upper"], f"{where}.upper") if "upper" in spec else None
+        where = spec.where
+        spec.check_keys({"value", "lower", "upper", "description"}, {"value": self.number_what})
+        value = spec.number("value")
+        lower = spec.number("lower", None)
+        upper = spec.number("upper", None)
         if lower is not None and upper is not None and not lower <= upper:
             raise self.error(where, f"lower {lower:.15g} is above upper {upper:.15g}")
-        rng = ParameterRange(lower, upper, self.string(spec, "description", where, ""))
+        rng = ParameterRange(lower, upper, spec.string("description", ""))
         if not rng.contains(value):
             raise self.error(f"{where}.value", f"{value:.15g} is outside its declared range {rng.text()}")
         return value, rng
-
-    def numbers(self, value: Any, where: str) -> list[float]:
-        if not isinstance(value, list):
-            raise self.error(where, f"expected a list of numbers, found {describe_value(value)}")
-        return [self.number(v, f"{where}[{i + 1}]") for i, v in enumerate(value)]
 
     def matrix(self, value: Any, where: str) -> np.ndarray:
         """A numeric matrix: list of rows of numbers/formulas of the parameters."""
@@ -366,23 +310,19 @@ class _Reader:
             [[self.number(v, f"{where}[{i + 1},{j + 1}]") for j, v in enumerate(r)] for i, r in enumerate(value)]
         ).reshape(len(value), widths[0])
 
-    def strings(self, value: Any, where: str) -> list[str]:
-        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-            raise self.error(where, f"expected a list of strings, found {describe_value(value)}")
-        return list(value)
-
     # -- pieces ---------------------------------------------------------------
-    def scheduling(self, data: Mapping) -> SchedulingSpace | None:
+    def scheduling(self, data: TomlTable) -> SchedulingSpace | None:
         if "scheduling" not in data:
             return None
-        sch = self.table(data, "scheduling", "")
-        self.keys(sch, "scheduling", {"names", "lower", "upper"}, {"names", "lower", "upper"})
-        names = self.strings(sch["names"], "scheduling.names")
+        sch = data.table("scheduling")
+        sch.check_keys({"names", "lower", "upper"},
+                       {"names": "a list of strings", "lower": "a list of numbers", "upper": "a list of numbers"})
+        names = sch.strings("names")
         if not 1 <= len(names) <= MAX_SCHEDULING:
             raise self.error("scheduling.names", f"has {len(names)} names; expected 1 to {MAX_SCHEDULING} "
                                                  "(the box has 2^n corners: polytopic forms, range checks)")
-        lower = self.numbers(sch["lower"], "scheduling.lower")
-        upper = self.numbers(sch["upper"], "scheduling.upper")
+        lower = sch.numbers("lower")
+        upper = sch.numbers("upper")
         for key, vals in (("lower", lower), ("upper", upper)):
             if len(vals) != len(names):
                 raise self.error(
@@ -400,9 +340,7 @@ class _Reader:
         return space
 
     def basis(self, spec: Mapping, space: SchedulingSpace, matrices: Mapping, where: str) -> list[BasisFunction]:
-        bounds_tab = spec.get("bounds", {})
-        if not isinstance(bounds_tab, dict):
-            raise self.error(f"{where}.bounds", f"expected a table, found {describe_value(bounds_tab)}")
+        bounds_tab = self.table(spec.get("bounds", {}), field_path(where, "bounds"))
         if "basis" in spec:
             texts = self.strings(spec["basis"], f"{where}.basis")
         else:  # order of first appearance in the matrices
@@ -412,16 +350,16 @@ class _Reader:
                     texts.extend(k for k in val if k != CONSTANT_TERM and k not in texts)
         stray = sorted(set(bounds_tab) - set(texts))
         if stray:
-            raise self.error(f"{where}.bounds.{_key(stray[0])}", "is not a basis function of this model "
+            raise self.error(bounds_tab.path(stray[0]), "is not a basis function of this model "
                              f"(basis: {shorten(', '.join(texts), 60) or 'none'})")
         out: list[BasisFunction] = []
         for text in texts:
             b = bounds_tab.get(text)
             bnd = None
             if b is not None:
-                nums = self.numbers(b, f"{where}.bounds.{_key(text)}")
+                nums = bounds_tab.numbers(text)
                 if len(nums) != 2:
-                    raise self.error(f"{where}.bounds.{_key(text)}", "expected [lower, upper]")
+                    raise self.error(bounds_tab.path(text), "expected [lower, upper]")
                 bnd = (nums[0], nums[1])
             with self.at(f"{where}.basis"):
                 out.append(parse_basis(text, space, bounds=bnd))
@@ -438,7 +376,7 @@ class _Reader:
             if isinstance(val, dict):
                 if not val:
                     raise self.error(f"{where}.{n}", "has no terms")
-                out[n] = {term: self.matrix(m, f"{where}.{n}.{_key(term)}") for term, m in val.items()}
+                out[n] = {term: self.matrix(m, field_path(f"{where}.{n}", term)) for term, m in val.items()}
             else:
                 out[n] = self.matrix(val, f"{where}.{n}")
         return out
@@ -452,12 +390,11 @@ class _Reader:
             return AffineDependence.build(space, basis, mats)
 
     # -- model types ----------------------------------------------------------
-    def model(self, key: str, spec: Any, space: SchedulingSpace | None) -> Model:
-        where = f"models.{_key(key)}"
-        if not isinstance(spec, dict):
-            raise self.error(where, f"expected a table, found {describe_value(spec)}")
-        kind = self.string(spec, "type", where)
-        readers: dict[str, Callable[[str, Mapping, SchedulingSpace | None, str], Model]] = {
+    def model(self, key: str, value: Any, space: SchedulingSpace | None) -> Model:
+        spec = self.table(value, field_path("models", key))
+        where = spec.where
+        kind = spec.choice("type", MODEL_TYPES, noun="model type")
+        readers: dict[str, Callable[[str, TomlTable, SchedulingSpace | None, str], Model]] = {
             "affine": self.affine,
             "polytopic": self.polytopic,
             "innovation": self.innovation,
@@ -465,19 +402,13 @@ class _Reader:
             "ltv-io": self.ltv_io,
             "ltv-ss": self.ltv_ss,
         }
-        reader = readers.get(kind)
-        if reader is None:
-            known = ", ".join(MODEL_TYPES)
-            raise self.error(f"{where}.type", f"unknown model type {abbreviate(kind, 30)} (expected one of: {known})")
-        return reader(key, spec, space, where)
+        return readers[kind](key, spec, space, where)
 
-    def affine(self, key: str, spec: Mapping, space: SchedulingSpace | None, where: str) -> AffineLPV:
+    def affine(self, key: str, spec: TomlTable, space: SchedulingSpace | None, where: str) -> AffineLPV:
         names = ("A", "B", "C", "D", "G", "H")
-        self.keys(
-            spec,
-            where,
+        spec.check_keys(
             {"type", "title", "basis", "bounds", *names, "Q", "R", "S", "x0", "P0", "Cz"},
-            {"A", "C", "Q", "R"},
+            {"A": _TERMS, "C": _TERMS, "Q": _MATRIX, "R": _MATRIX},
         )
         space = self.need_space(space, where)
         mats = self.affine_matrices(spec, names, where)
@@ -490,42 +421,38 @@ class _Reader:
             return AffineLPV.from_matrices(space, basis, **mats, **noise, x0=x0, P0=P0, name=self.name_of(key),
                                            Cz=Cz)
 
-    def simplex_map(self, spec: Any, space: SchedulingSpace | None, where: str) -> SimplexMap:
-        if not isinstance(spec, dict):
-            raise self.error(where, f"expected a table, found {describe_value(spec)}")
+    def simplex_map(self, value: Any, space: SchedulingSpace | None, where: str) -> SimplexMap:
+        spec = self.table(value, where)
         space = self.need_space(space, where)
-        kind = self.string(spec, "kind", where)
+        kind = spec.choice("kind", ("formulas", "multilinear"), noun="map kind")
         if kind == "formulas":
-            self.keys(spec, where, {"kind", "alpha"}, {"alpha"})
-            alpha = spec["alpha"]
-            if not isinstance(alpha, list):
-                raise self.error(f"{where}.alpha", f"expected a list of formulas, found {describe_value(alpha)}")
+            spec.check_keys({"kind", "alpha"}, {"alpha": _FORMULAS})
+            alpha = spec.array("alpha", what=_FORMULAS)
             with self.at(f"{where}.alpha"):
                 return FormulaSimplexMap(
                     space, [Expression.parse(a, parameters=self.parameters, allowed=space.names) for a in alpha]
                 )
-        if kind == "multilinear":
-            self.keys(spec, where, {"kind", "over", "lower", "upper"}, {"over", "lower", "upper"})
-            over = self.strings(spec["over"], f"{where}.over")
-            if not 1 <= len(over) <= MAX_SCHEDULING:
-                raise self.error(f"{where}.over", f"has {len(over)} coordinates; expected 1 to {MAX_SCHEDULING} "
-                                                  "(the map has 2^n vertices)")
-            lower = self.numbers(spec["lower"], f"{where}.lower")
-            upper = self.numbers(spec["upper"], f"{where}.upper")
-            with self.at(where):
-                coords = [parse_basis(o, space) for o in over]
-                return MultilinearSimplexMap(space, coords, lower, upper)
-        raise self.error(f"{where}.kind",
-                         f"unknown map kind {abbreviate(kind, 30)} (expected 'formulas' or 'multilinear')")
+        # kind == "multilinear"
+        spec.check_keys({"kind", "over", "lower", "upper"},
+                        {"over": "a list of strings", "lower": "a list of numbers", "upper": "a list of numbers"})
+        over = spec.strings("over")
+        if not 1 <= len(over) <= MAX_SCHEDULING:
+            raise self.error(f"{where}.over", f"has {len(over)} coordinates; expected 1 to {MAX_SCHEDULING} "
+                                              "(the map has 2^n vertices)")
+        lower = spec.numbers("lower")
+        upper = spec.numbers("upper")
+        with self.at(where):
+            coords = [parse_basis(o, space) for o in over]
+            return MultilinearSimplexMap(space, coords, lower, upper)
 
-    def polytopic(self, key: str, spec: Mapping, space: SchedulingSpace | None, where: str) -> PolytopicLPV:
-        self.keys(spec, where, {"type", "title", "map", "vertex", "common", "affine"})
+    def polytopic(self, key: str, spec: TomlTable, space: SchedulingSpace | None, where: str) -> PolytopicLPV:
+        spec.check_keys({"type", "title", "map", "vertex", "common", "affine"})
         mapping = self.simplex_map(spec["map"], space, f"{where}.map") if "map" in spec else None
         affine = None
         if "affine" in spec:
-            aff = self.table(spec, "affine", where)
-            self.keys(aff, f"{where}.affine", {"basis", "bounds", *POLYTOPIC_MATRICES, *POLYTOPIC_INPUT_MATRICES},
-                      set(POLYTOPIC_MATRICES))
+            aff = spec.table("affine")
+            aff.check_keys({"basis", "bounds", *POLYTOPIC_MATRICES, *POLYTOPIC_INPUT_MATRICES},
+                           dict.fromkeys(POLYTOPIC_MATRICES, _TERMS))
             aff_space = self.need_space(space, f"{where}.affine")
             affine = self.dependence(aff, aff_space, (*POLYTOPIC_MATRICES, *POLYTOPIC_INPUT_MATRICES),
                                      f"{where}.affine")
@@ -543,15 +470,15 @@ class _Reader:
         vertices = spec["vertex"]
         if not isinstance(vertices, list) or not all(isinstance(v, dict) for v in vertices) or not vertices:
             raise self.error(f"{where}.vertex", "expected one or more [[vertex]] tables")
-        common = self.table(spec, "common", where, required=False)
+        common = spec.table("common", required=False)
         allowed = {*POLYTOPIC_MATRICES, *POLYTOPIC_INPUT_MATRICES}
-        self.keys(common, f"{where}.common", allowed)
+        common.check_keys(allowed)
         # a known input (Bu, and Dzu, Dyu if not zero) is optional, but then at every vertex
         inputs = [n for n in POLYTOPIC_INPUT_MATRICES if n in common or any(n in vt for vt in vertices)]
         stacks: dict[str, list[np.ndarray]] = {}
         for i, vt in enumerate(vertices):
-            vw = f"{where}.vertex[{i + 1}]"
-            self.keys(vt, vw, allowed)
+            vw = element_path(f"{where}.vertex", i)
+            self.check_keys(vt, vw, allowed)
             for n in (*POLYTOPIC_MATRICES, *inputs):
                 if n in vt and n in common:
                     raise self.error(f"{vw}.{n}", f"{n} is also given in [{where}.common]")
@@ -596,11 +523,11 @@ class _Reader:
                     f"{err:.3g} at {at}; expected agreement",
                 )
 
-    def innovation(self, key: str, spec: Mapping, space: SchedulingSpace | None, where: str) -> InnovationLPV:
+    def innovation(self, key: str, spec: TomlTable, space: SchedulingSpace | None, where: str) -> InnovationLPV:
         names = ("A", "B", "C", "D")
-        self.keys(
-            spec, where, {"type", "title", "basis", "bounds", *names, "K", "innovation_covariance", "x0"},
-            {"A", "B", "C", "D", "K", "innovation_covariance"},
+        spec.check_keys(
+            {"type", "title", "basis", "bounds", *names, "K", "innovation_covariance", "x0"},
+            {**dict.fromkeys(names, _TERMS), "K": "a matrix of formulas", "innovation_covariance": _MATRIX},
         )
         space = self.need_space(space, where)
         dep = self.dependence(spec, space, names, where)
@@ -612,16 +539,14 @@ class _Reader:
             return InnovationLPV(dep, K, omega, x0, self.name_of(key))
 
     def formulas(self, value: Any, where: str, allowed: list[str]) -> list[Expression]:
-        if not isinstance(value, list):
-            raise self.error(where, f"expected a list of formulas, found {describe_value(value)}")
         out = []
-        for i, v in enumerate(value):
-            with self.at(f"{where}[{i + 1}]"):
+        for i, v in enumerate(self.array(value, where, what=_FORMULAS)):
+            with self.at(element_path(where, i)):
                 out.append(Expression.parse(v, parameters=self.parameters, allowed=allowed))
         return out
 
-    def lpv_io(self, key: str, spec: Mapping, space: SchedulingSpace | None, where: str) -> LPVInputOutput:
-        self.keys(spec, where, {"type", "title", "y", "u", "e", "noise_variance"}, {"y", "u"})
+    def lpv_io(self, key: str, spec: TomlTable, space: SchedulingSpace | None, where: str) -> LPVInputOutput:
+        spec.check_keys({"type", "title", "y", "u", "e", "noise_variance"}, {"y": _FORMULAS, "u": _FORMULAS})
         space = self.need_space(space, where)
         names = list(space.names)
         y = self.formulas(spec["y"], f"{where}.y", names)
@@ -631,8 +556,8 @@ class _Reader:
         with self.at(where):
             return LPVInputOutput(space, y, u, e, var, self.name_of(key))
 
-    def ltv_io(self, key: str, spec: Mapping, space: SchedulingSpace | None, where: str) -> LTVInputOutput:
-        self.keys(spec, where, {"type", "title", "a", "b", "input", "x0"}, {"a", "b"})
+    def ltv_io(self, key: str, spec: TomlTable, space: SchedulingSpace | None, where: str) -> LTVInputOutput:
+        spec.check_keys({"type", "title", "a", "b", "input", "x0"}, {"a": _FORMULAS, "b": _FORMULAS})
         a = self.formulas(spec["a"], f"{where}.a", ["t"])
         b = self.formulas(spec["b"], f"{where}.b", ["t"])
         u = self.formulas([spec["input"]], f"{where}.input", ["t"])[0] if "input" in spec else None
@@ -640,8 +565,8 @@ class _Reader:
         with self.at(where):
             return LTVInputOutput(a, b, input=u, x0=x0, name=self.name_of(key))
 
-    def ltv_ss(self, key: str, spec: Mapping, space: SchedulingSpace | None, where: str) -> LTVStateSpace:
-        self.keys(spec, where, {"type", "title", "A", "B", "C", "input", "x0"}, {"A", "B", "C"})
+    def ltv_ss(self, key: str, spec: TomlTable, space: SchedulingSpace | None, where: str) -> LTVStateSpace:
+        spec.check_keys({"type", "title", "A", "B", "C", "input", "x0"}, dict.fromkeys("ABC", "a matrix of formulas"))
         mats = {}
         for n in ("A", "B", "C"):
             with self.at(f"{where}.{n}"):
@@ -745,27 +670,30 @@ def _build(
     allow_outside_range: bool = False,
 ) -> SystemFile:
     r = _Reader(origin, {})
-    r.keys(data, "file", {"system", "parameters", "scheduling", "models"}, {"system", "models"})
-    sysmeta = r.table(data, "system", "system")
-    r.keys(sysmeta, "system", {"name", "title", "source", "description", "default"}, {"name", "title"})
-    name = r.string(sysmeta, "name", "system")
-    title = r.string(sysmeta, "title", "system")
+    top = r.root(data)
+    top.check_keys({"system", "parameters", "scheduling", "models"},
+                   {"system": "a table", "models": "a table [models.NAME] per model"})
+    sysmeta = top.table("system")
+    sysmeta.check_keys({"name", "title", "source", "description", "default"},
+                       {"name": "a string", "title": "a string"})
+    name = sysmeta.string("name")
+    title = sysmeta.string("title")
     if not name.strip() or len(name) > 100 or not name.isprintable():
         raise r.error("system.name", f"expected a short printable name, found {abbreviate(name, 30)}")
     r.system_name = name
-    params_tab = r.table(data, "parameters", "parameters", required=False)
+    params_tab = top.table("parameters", required=False)
     params: dict[str, float] = {}
     ranges: dict[str, ParameterRange] = {}
     for k, v in params_tab.items():
         if not k.isidentifier() or k.startswith("__"):
-            raise r.error(f"parameters.{_key(k)}", "is not a valid name (expected a letter, then letters, digits, _)")
+            raise params_tab.error(k, "is not a valid name (expected a letter, then letters, digits, _)")
         if k in _RESERVED:
-            raise r.error(f"parameters.{k}", f"{k!r} is a name formulas reserve (t, shift, the functions and "
-                                             "constants); choose another")
+            raise params_tab.error(k, f"{k!r} is a name formulas reserve (t, shift, the functions and "
+                                      "constants); choose another")
         if isinstance(v, dict):
-            params[k], ranges[k] = r.ranged_parameter(v, f"parameters.{k}")
+            params[k], ranges[k] = r.ranged_parameter(params_tab.table(k))
         else:
-            params[k] = r.number(v, f"parameters.{k}")
+            params[k] = params_tab.number(k)
     for k, v in (overrides or {}).items():
         if k not in params:
             raise r.error("parameters", f"no parameter {abbreviate(k, 30)} to override (known: {_names(params)})")
@@ -776,12 +704,12 @@ def _build(
             raise r.error(f"parameters.{k}", f"override {params[k]:.15g} is outside its declared range "
                                              f"{ranges[k].text()}")
     r.parameters = params
-    space = r.scheduling(data)
-    models_tab = r.table(data, "models", "models")
+    space = r.scheduling(top)
+    models_tab = top.table("models", what="a table [models.NAME] per model")
     if not models_tab:
         raise r.error("models", "expected at least one [models.NAME] table")
     models = {key: r.model(key, spec, space) for key, spec in models_tab.items()}
-    default = r.string(sysmeta, "default", "system", next(iter(models)))
+    default = sysmeta.string("default", next(iter(models)))
     if default not in models:
         raise r.error("system.default", f"no model {abbreviate(default, 30)} (models: {_names(models)})")
     return SystemFile(
@@ -791,8 +719,8 @@ def _build(
         default=default,
         scheduling=space,
         parameters=params,
-        source=r.string(sysmeta, "source", "system", ""),
-        description=r.string(sysmeta, "description", "system", ""),
+        source=sysmeta.string("source", ""),
+        description=sysmeta.string("description", ""),
         path=path,
         parameter_ranges=ranges,
     )
