@@ -43,7 +43,25 @@ __all__ = ["parse_toml", "read_toml", "describe_value", "TomlReader", "TomlTable
 
 def parse_toml(text: str, origin: str) -> dict[str, Any]:
     """The parsed TOML ``text``; malformed text is a one-line
-    :class:`ModelFileError` naming ``origin``."""
+    :class:`ModelFileError` naming ``origin``.
+
+    Parameters
+    ----------
+    text : str
+        The TOML document.
+    origin : str
+        What the text is called in an error (a file name, ``"<text>"``).
+
+    Returns
+    -------
+    dict
+        The document's top-level table.
+
+    Raises
+    ------
+    ModelFileError
+        The text is not valid TOML (also when nested too deeply).
+    """
     try:
         return tomllib.loads(text)
     except RecursionError:
@@ -54,7 +72,23 @@ def parse_toml(text: str, origin: str) -> dict[str, Any]:
 
 def read_toml(path: str | Path) -> dict[str, Any]:
     """The parsed TOML file ``path``; an unreadable or malformed file is a
-    one-line :class:`ModelFileError` naming it (shared by every file lpvest reads)."""
+    one-line :class:`ModelFileError` naming it (shared by every file lpvest reads).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file, read as UTF-8 (a byte-order mark is allowed).
+
+    Returns
+    -------
+    dict
+        The file's top-level table.
+
+    Raises
+    ------
+    ModelFileError
+        The file cannot be read, is not UTF-8 text or is not valid TOML.
+    """
     path = Path(path)
     try:
         raw = path.read_bytes()
@@ -76,6 +110,19 @@ def describe_value(value: Any) -> str:
     """What a TOML value is, for a one-line message (numbers with their
     value, strings abbreviated).
 
+    Parameters
+    ----------
+    value : object
+        A value as :mod:`tomllib` parses it (or anything else).
+
+    Returns
+    -------
+    str
+        ``"a boolean (true)"``, ``"a number (2.5)"``, ``"a string ('x')"``,
+        ``"a list"``, ``"a table"``, ...
+
+    Examples
+    --------
     >>> describe_value(True), describe_value(2.5), describe_value([1]), describe_value({})
     ('a boolean (true)', 'a number (2.5)', 'a list', 'a table')
     """
