@@ -20,6 +20,7 @@ from .conftest_fmu import (  # noqa: E402
     fmus as fmus,
     foreign_fmus as foreign_fmus,
     native_fmus as native_fmus,
+    script_build as script_build,
 )
 
 # -- property-based tests (hypothesis): fixed seed in CI ---------------------------------------

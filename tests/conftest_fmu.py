@@ -1,7 +1,20 @@
-"""Shared pieces of the FMU tests: the FMU set built once per session."""
+"""Shared pieces of the FMU tests: the FMU sets, each built once per run.
+
+Under pytest-xdist (``./dev test`` runs ``pytest -n``) every worker is a
+session of its own; each set is still built once per run: the first worker to
+need it builds it into the run's shared temporary folder under a file lock
+(the pattern of pytest-xdist's documentation, "Making session-scoped fixtures
+execute only once"), the others wait for the lock and reuse what it built.
+"""
 
 from __future__ import annotations
 
+import json
+import os
+import shutil
+import subprocess
+import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -11,6 +24,7 @@ from lpvest.fmi._parameters import Parameter
 from lpvest.fmi._registry import EstimatorKind
 
 HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
 #: The walkthrough's own plant (docs/own-plant.md).
 OWN_PLANT = HERE.parent / "examples" / "own_plant.toml"
 
@@ -79,14 +93,53 @@ class FmuSet:
         return self.paths[name]
 
 
+    def to_json(self) -> dict[str, object]:
+        return {"out": str(self.out), "affine_model": str(self.affine_model),
+                "paths": {k: str(v) for k, v in self.paths.items()}}
+
+    @classmethod
+    def from_json(cls, data: dict) -> FmuSet:
+        return cls(Path(data["out"]), Path(data["affine_model"]), {k: Path(v) for k, v in data["paths"].items()})
+
+
+def built_once(factory: pytest.TempPathFactory, name: str, build: Callable[[Path], dict]) -> dict:
+    """What ``build(folder)`` returns (JSON data), built once per test run.
+
+    Without xdist: into a fresh temporary folder. Under xdist: into
+    ``<the run's temporary folder>/<name>``, by the first worker that gets
+    the file lock; the result is recorded next to it as JSON, and every other
+    worker waits for the lock and reads the record. A build that raised records
+    nothing: the next worker builds again (and reports its own error)."""
+    if os.environ.get("PYTEST_XDIST_WORKER") is None:
+        return build(factory.mktemp(name))
+    from filelock import FileLock
+
+    root = factory.getbasetemp().parent  # shared by the workers of one run
+    record = root / f"{name}.json"
+    with FileLock(root / f"{name}.lock"):
+        if record.is_file():
+            return json.loads(record.read_text(encoding="utf-8"))
+        out = root / name
+        shutil.rmtree(out, ignore_errors=True)  # what a failed build left
+        out.mkdir()
+        data = build(out)
+        part = record.with_suffix(".json.part")
+        part.write_text(json.dumps(data), encoding="utf-8")
+        part.replace(record)
+        return data
+
+
 @pytest.fixture(scope="session")
 def fmus(tmp_path_factory: pytest.TempPathFactory) -> FmuSet:
     """Every example system's FMUs, the affine demo's, the input-output demo's
-    plant, and the moving-average estimator FMU for peixoto-ex1, built once
-    into a temporary folder."""
+    plant, and the moving-average estimator FMU for peixoto-ex1, built once per
+    run into a temporary folder."""
+    return FmuSet.from_json(built_once(tmp_path_factory, "fmus", _build_fmus))
+
+
+def _build_fmus(out: Path) -> dict:
     from lpvest.fmi._build import build_fmu, build_fmus, plan_system
 
-    out = tmp_path_factory.mktemp("fmus")
     model = out / "affine_demo.toml"
     model.write_text(AFFINE_TOML)
     results, _ = build_fmus(None, out)
@@ -99,31 +152,39 @@ def fmus(tmp_path_factory: pytest.TempPathFactory) -> FmuSet:
     plans, _ = plan_system("peixoto-ex1", kinds=[MOVING_AVERAGE])
     est = next(p for p in plans if p.role == "MovingAverage")
     paths[est.identifier] = build_fmu(est, out)
-    return FmuSet(out, model, paths)
+    return FmuSet(out, model, paths).to_json()
 
 
 @pytest.fixture(scope="session")
 def experiment_fmus(fmus: FmuSet, tmp_path_factory: pytest.TempPathFactory):
-    """The experiments' FMU cache for the session: the session's FMU set
-    adopted (built from the current code), the rest (the epsilon = 150 and
-    rho-variant H-infinity FMUs) built on first use."""
-    from lpvest.experiments._fmus import ExperimentFmus
+    """The experiments' FMU cache for the run: the session's FMU set adopted
+    (built from the current code), the rest of the catalog (the epsilon = 150
+    and rho-variant H-infinity FMUs, from the stored designs: about a second
+    each) built up front, so that no two xdist workers build into the folder."""
+    from lpvest.experiments._fmus import CATALOG, ExperimentFmus
 
-    cache = ExperimentFmus(tmp_path_factory.mktemp("experiment-fmus"))
-    cache.adopt(fmus.paths)
-    return cache
+    def build(out: Path) -> dict:
+        cache = ExperimentFmus(out)
+        cache.adopt(fmus.paths)
+        cache.paths(CATALOG)
+        return {"directory": str(out)}
+
+    return ExperimentFmus(built_once(tmp_path_factory, "experiment-fmus", build)["directory"])
 
 
 @pytest.fixture(scope="session")
 def foreign_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """The foreign C FMUs of tests/foreign_fmus.py (AllTypes, Limited), built
-    once per session."""
+    once per run."""
     from .foreign_fmus import MODELS, build_foreign_fmu, compiler
 
     if compiler() is None:
         pytest.skip("the foreign test FMUs need a C compiler (cc or gcc)")
-    out = tmp_path_factory.mktemp("foreign-fmus")
-    return {name: build_foreign_fmu(name, out) for name in MODELS}
+
+    def build(out: Path) -> dict:
+        return {name: str(build_foreign_fmu(name, out)) for name in MODELS}
+
+    return {name: Path(path) for name, path in built_once(tmp_path_factory, "foreign-fmus", build).items()}
 
 
 @pytest.fixture(scope="session")
@@ -131,20 +192,48 @@ def native_fmus(fmus: FmuSet, tmp_path_factory: pytest.TempPathFactory) -> FmuSe
     """The native backend's FMUs of the same systems (every example, the affine
     demo with its designs at epsilon = 1, the own-plant example at epsilon = 1,
     the input-output demo's plant),
-    built once into a temporary folder; the designs made for the Python set are
-    reused (the same design cache)."""
-    import shutil
+    built once per run into a temporary folder; the designs made for the Python
+    set are reused (the same design cache)."""
 
-    from lpvest.fmi._build import DESIGN_CACHE, build_fmus
+    def build(out: Path) -> dict:
+        from lpvest.fmi._build import DESIGN_CACHE, build_fmus
 
-    out = tmp_path_factory.mktemp("native-fmus")
-    if (fmus.out / DESIGN_CACHE).is_dir():
-        shutil.copytree(fmus.out / DESIGN_CACHE, out / DESIGN_CACHE)
-    results, _ = build_fmus(None, out, backend="native")
-    results2, _ = build_fmus([fmus.affine_model, OWN_PLANT], out, design_options={"epsilon": 1.0}, backend="native")
-    results3, _ = build_fmus([fmus.out / "io_demo.toml"], out, roles=["Plant"], backend="native")
-    done = results + results2 + results3
-    paths = {r.plan.identifier: r.validation.path for r in done}
-    problems = {r.plan.identifier: r.validation.problems for r in done if r.validation.problems}
-    assert not problems, problems
-    return FmuSet(out, fmus.affine_model, paths)
+        if (fmus.out / DESIGN_CACHE).is_dir():
+            shutil.copytree(fmus.out / DESIGN_CACHE, out / DESIGN_CACHE)
+        results, _ = build_fmus(None, out, backend="native")
+        results2, _ = build_fmus([fmus.affine_model, OWN_PLANT], out, design_options={"epsilon": 1.0},
+                                 backend="native")
+        results3, _ = build_fmus([fmus.out / "io_demo.toml"], out, roles=["Plant"], backend="native")
+        done = results + results2 + results3
+        paths = {r.plan.identifier: r.validation.path for r in done}
+        problems = {r.plan.identifier: r.validation.problems for r in done if r.validation.problems}
+        assert not problems, problems
+        return FmuSet(out, fmus.affine_model, paths).to_json()
+
+    return FmuSet.from_json(built_once(tmp_path_factory, "native-fmus", build))
+
+
+@dataclass(frozen=True)
+class ScriptBuild:
+    """What ``python build_fmus.py --out OUT`` did: its exit status, its output, the folder."""
+
+    returncode: int
+    stdout: str
+    stderr: str
+    out: Path
+
+
+@pytest.fixture(scope="session")
+def script_build(tmp_path_factory: pytest.TempPathFactory) -> ScriptBuild:
+    """Every example system's FMUs built from scratch by ``build_fmus.py`` in a
+    fresh process (in the repository, into a folder of its own), once per run:
+    tests/test_fmu_hosts.py checks the script, tests/test_fmu_isolation.py that
+    its FMUs have the bytes of the session's set (built in another process)."""
+
+    def build(out: Path) -> dict:
+        proc = subprocess.run([sys.executable, str(ROOT / "build_fmus.py"), "--out", str(out)], capture_output=True,
+                              text=True, timeout=600, check=False, cwd=ROOT)
+        return {"returncode": proc.returncode, "stdout": proc.stdout, "stderr": proc.stderr, "out": str(out)}
+
+    data = built_once(tmp_path_factory, "script-build", build)
+    return ScriptBuild(data["returncode"], data["stdout"], data["stderr"], Path(data["out"]))

@@ -353,15 +353,14 @@ def test_a_design_that_fails_leaves_the_other_fmus_built(tmp_path, capsys):
     assert "3 FMU(s)" in table and "1 failed validation" in table
 
 
-def test_build_fmus_script_builds_every_example(tmp_path):
-    proc = subprocess.run([sys.executable, str(ROOT / "build_fmus.py"), "--out", str(tmp_path)],
-                          capture_output=True, text=True, timeout=300, check=False, cwd=ROOT)
-    assert proc.returncode == 0, proc.stderr
-    built = {p.stem for p in tmp_path.glob("*.fmu")}
+def test_build_fmus_script_builds_every_example(script_build):
+    # the run's build by the script (tests/conftest_fmu.py; test_fmu_isolation.py compares its bytes)
+    assert script_build.returncode == 0, script_build.stderr
+    built = {p.stem for p in script_build.out.glob("*.fmu")}
     # the test suite's own systems (conftest_fmu.py) are not examples: AffineDemo, IoDemo, the moving average
     test_only = ("AffineDemo", "IoDemo", "PeixotoEx1MovingAverage")
     assert built == {n for n in EXPECTED if not n.startswith(test_only)}
-    assert proc.stdout.splitlines()[0].split() == ["FMU", "variables", "(in/out/par)", "size", "validation"]
+    assert script_build.stdout.splitlines()[0].split() == ["FMU", "variables", "(in/out/par)", "size", "validation"]
 
 
 def test_lpvest_validate_fails_on_a_broken_fmu(fmus, tmp_path, capsys):

@@ -116,13 +116,12 @@ def test_scs_stopped_by_its_own_sigint_handler_is_an_interruption_not_a_failed_p
 # ---------------------------------------------------------------------------
 # co-simulation and sweeps
 # ---------------------------------------------------------------------------
-@pytest.fixture(scope="module")
-def cox_fmus(tmp_path_factory):
-    from lpvest.fmi._build import build_fmus
-
-    out = tmp_path_factory.mktemp("cox-fmus")
-    results, _ = build_fmus(["cox-toth-truncation"], out, roles=["Plant", "Scheduler", "Kalman"])
-    return {r.plan.identifier: r.validation.path for r in results}
+@pytest.fixture
+def cox_fmus(fmus):
+    """cox-toth-truncation's Plant, Scheduler and Kalman FMUs: the run's FMU set
+    (tests/conftest_fmu.py; these tests interrupt runs of them, not their build)."""
+    return {name: fmus[name] for name in ("CoxTothTruncationPlant", "CoxTothTruncationScheduler",
+                                          "CoxTothTruncationKalman")}
 
 
 @pytest.mark.parametrize(("signum", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
