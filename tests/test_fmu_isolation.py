@@ -182,7 +182,7 @@ def test_simulate_fmu_over_every_fmu_in_one_process(fmus, blocked):
         assert all(np.isfinite(result[f"forward:{name}"]))
     # the host's lpvest is its own, intact, importable afterwards
     assert result["host"][0] == str(ROOT / "lpvest" / "__init__.py")
-    assert result["host"][1] == str(ROOT / "lpvest" / "fmi" / "factories" / "kalman.py")
+    assert result["host"][1] == str(ROOT / "lpvest" / "fmi" / "factories" / "_kalman.py")
     # each FMU ran its own private package (shared only by FMUs that carry identical code)
     assert len(result["packages"]) >= 8
 

@@ -341,7 +341,7 @@ _ENTRY = '''"""Entry module of the lpvest FMU {identifier} (written by lpvest's 
 
 pythonfmu imports this module by the name in slavemodule.txt. It loads the
 FMU's private copy of lpvest, the package {package} next to this file, into
-memory under that build-unique name (see lpvest.fmi), and exposes the
+memory under that build-unique name (see lpvest.fmi._bundle), and exposes the
 slave class. Nothing else in the process is changed: no other module is
 replaced, and resources/ is taken back off sys.path.
 """
@@ -436,8 +436,8 @@ def _digest(modules: Mapping[str, _Module], roots: Sequence[SourceRoot]) -> str:
 def _init_text(module: _Module, root: SourceRoot, version: str) -> str:
     if module.name == root.name and root.target == "":
         return (f'"""lpvest {version}, as carried by an lpvest FMU: only the modules its component imports;\n'
-                f'package __init__ files are empty (see lpvest.fmi)."""\n')
-    return f'"""{module.name}, as carried by an lpvest FMU (empty: see lpvest.fmi)."""\n'
+                f'package __init__ files are empty (see lpvest.fmi._bundle)."""\n')
+    return f'"""{module.name}, as carried by an lpvest FMU (empty: see lpvest.fmi._bundle)."""\n'
 
 
 def make_bundle(
