@@ -18,7 +18,7 @@ __all__ = [
     "FmpyModelDescription",
     "FmpyFmu",
     "DaskClient",
-    "DaskFuture",
+    "DaskCluster",
     "ScipyResult",
 ]
 
@@ -32,7 +32,7 @@ FmpyModelDescription: TypeAlias = Any  # fmpy ships no type information (no py.t
 FmpyFmu: TypeAlias = Any  # fmpy ships no type information (no py.typed)
 #: A ``distributed.Client``.
 DaskClient: TypeAlias = Any  # dask/distributed ship no type information (no py.typed)
-#: A ``distributed.Future``.
-DaskFuture: TypeAlias = Any  # dask/distributed ship no type information (no py.typed)
+#: A Dask cluster (``distributed.LocalCluster``).
+DaskCluster: TypeAlias = Any  # dask/distributed ship no type information (no py.typed)
 #: A scipy result object (``OptimizeResult``, ...).
 ScipyResult: TypeAlias = Any  # scipy ships no type information (no py.typed)
