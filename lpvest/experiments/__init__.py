@@ -215,7 +215,7 @@ def registry() -> dict[str, Experiment]:
     return out
 
 
-def _jsonable(value: Any) -> Any:
+def _jsonable(value: object) -> object:
     import numpy as np
 
     if isinstance(value, Mapping):
