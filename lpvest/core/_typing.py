@@ -1,6 +1,6 @@
 """Named types for objects of libraries that ship no type information.
 
-cvxpy, fmpy, pythonfmu, dask/distributed and scipy have neither stubs nor a
+cvxpy, fmpy, pythonfmu, dask/distributed, scipy and pyarrow have neither stubs nor a
 ``py.typed`` marker (see the mypy overrides in ``pyproject.toml``), so their
 objects are ``Any`` to a type checker. Each alias below names one such kind of
 object, so that a signature says what it takes, and every ``Any`` of this kind
@@ -19,7 +19,9 @@ __all__ = [
     "FmpyFmu",
     "DaskClient",
     "DaskCluster",
-    "ScipyResult",
+    "ScipyObject",
+    "ArrowTable",
+    "ArrowObject",
 ]
 
 #: A cvxpy variable, parameter, expression or constraint.
@@ -34,5 +36,9 @@ FmpyFmu: TypeAlias = Any  # fmpy ships no type information (no py.typed)
 DaskClient: TypeAlias = Any  # dask/distributed ship no type information (no py.typed)
 #: A Dask cluster (``distributed.LocalCluster``).
 DaskCluster: TypeAlias = Any  # dask/distributed ship no type information (no py.typed)
-#: A scipy result object (``OptimizeResult``, ...).
-ScipyResult: TypeAlias = Any  # scipy ships no type information (no py.typed)
+#: A scipy object (an ``integrate`` ODE solver, its dense output, ...).
+ScipyObject: TypeAlias = Any  # scipy ships no type information (no py.typed)
+#: A ``pyarrow.Table``.
+ArrowTable: TypeAlias = Any  # pyarrow ships no type information (no py.typed)
+#: A pyarrow array or data type.
+ArrowObject: TypeAlias = Any  # pyarrow ships no type information (no py.typed)
