@@ -2,9 +2,9 @@
 
 cvxpy, fmpy, pythonfmu, dask/distributed, scipy and pyarrow have neither stubs nor a
 ``py.typed`` marker (see the mypy overrides in ``pyproject.toml``), so their
-objects are ``Any`` to a type checker. Each alias below names one such kind of
-object, so that a signature says what it takes, and every ``Any`` of this kind
-is in one place. Only for those libraries' objects: lpvest's own data has
+objects are untyped to a type checker. Each alias below names one such kind of
+object, so that a signature says what it takes, and every untyped name of this
+kind is defined in one place. Only for those libraries' objects: lpvest's own data has
 real types. Import these names under ``if TYPE_CHECKING:`` only.
 """
 
