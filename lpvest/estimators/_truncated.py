@@ -572,7 +572,7 @@ class TruncatedKalmanFilter(Component):
             return truncated_prior(win, self._start, P0=self._P0, t=self._t)
         return truncated_prior(win, self._start, t=self._t)
 
-    def _read(self, inputs: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _read(self, inputs: Mapping[str, object]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self._reader.read(inputs, self._t)
 
     def _evaluate(self, sample: tuple[np.ndarray, np.ndarray, np.ndarray]) -> tuple[
