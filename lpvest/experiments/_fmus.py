@@ -420,7 +420,7 @@ class Agreement:
                        + ("within" if self.ok else "EXCEEDS") + f" {self.tolerance:g})")
         return f"{self.what}: max |FMU - library| = {verdict}"
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         return {"what": self.what, "max_abs_difference": self.max_abs_difference, "scale": self.scale,
                 "tolerance": self.tolerance, "bit_for_bit": self.bit_for_bit, "ok": self.ok}
 
@@ -465,7 +465,7 @@ class FmuRun:
         out += [f"  note: {n}" for n in self.notes]
         return out
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         return {
             "description": self.description,
             "fmus": list(self.fmus),
