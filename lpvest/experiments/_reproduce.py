@@ -149,7 +149,7 @@ class _Part:
 @dataclass(frozen=True)
 class _Shared:
     jobs: tuple[_Run | _Part, ...]
-    split_data: dict[str, Any] = field(default_factory=dict)  #: split name -> its shared data
+    split_data: dict[str, object] = field(default_factory=dict)  #: split name -> its shared data
 
 
 def _run_experiments(run: _Run) -> list[tuple[str, ExperimentResult, float]]:
@@ -246,7 +246,7 @@ def _run_on(engine: Engine, groups: list[list[Experiment]], cache: ExperimentFmu
     _build_on_workers(engine, cache, needed, rep.say)
     view = cache.resolved(needed)  # every one checked or built: the workers only read them
     jobs: list[_Run | _Part] = []
-    split_data: dict[str, Any] = {}
+    split_data: dict[str, object] = {}
     splits: dict[str, tuple[Experiment, Split]] = {}
     for group in groups:
         if group[0].split is None:

@@ -237,7 +237,7 @@ def execute(fn: Callable[[S, Task], TaskResult], shared: S, task: Task) -> Outco
 def map_tasks(
     fn: Callable[[S, Task], TaskResult],
     shared: S,
-    points: Sequence[Mapping[str, Any] | Task],
+    points: Sequence[Mapping[str, object] | Task],
     *,
     engine: Engine | None = None,
     progress: bool = False,

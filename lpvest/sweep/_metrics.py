@@ -29,7 +29,6 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -204,7 +203,7 @@ def compute(metric: Metric, data: np.ndarray) -> float:
     raise ValueError(f"unknown metric kind {kind!r}")  # pragma: no cover - checked when the spec is read
 
 
-def parse(name: str, table: Any, where: str) -> Metric | str:
+def parse(name: str, table: object, where: str) -> Metric | str:
     """A :class:`Metric` from its table in a sweep spec, or the reason it is
     not one (a message for ``where``)."""
     if not isinstance(table, Mapping):

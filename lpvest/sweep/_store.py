@@ -402,13 +402,13 @@ class SweepStore:
         cols["error"] = pa.array([self.rows[i]["error"] for i in done], pa.string())
         return pa.table(cols).replace_schema_metadata({"lpvest_metrics": json.dumps(self.metric_definitions())})
 
-    def metric_definitions(self) -> dict[str, dict[str, Any]]:
+    def metric_definitions(self) -> dict[str, dict[str, object]]:
         """Each metric column's definition, kept in the summary's schema
         metadata (``lpvest_metrics``, JSON): a co-simulation metric's kind, the
         recorded variables it reads (estimate, truth, ...) and its first row;
         an experiment's metric names the experiment that defines it."""
         spec = {m.name: m for m in self.spec.metrics}
-        out: dict[str, dict[str, Any]] = {}
+        out: dict[str, dict[str, object]] = {}
         for name in self.prepared.metrics:
             m = spec.get(name)
             out[name] = ({"kind": m.kind, **dict(m.variables), "start": m.start} if m is not None
