@@ -646,7 +646,7 @@ class TruncatedKalmanFilter(Component):
         """
         return self._evaluate(self._read(self._inputs(p, u, y)))[1][0]
 
-    def get_state(self) -> dict[str, Any]:
+    def get_state(self) -> dict[str, object]:
         """``x``, ``t``, ``log_likelihood`` and the window of the last
         ``window_length <= tau + 1`` scheduling values (``window_p``, padded
         with zeros to ``(tau + 1, n_p)``, oldest first).

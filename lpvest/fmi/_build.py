@@ -68,7 +68,7 @@ import zipfile
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypedDict
+from typing import TYPE_CHECKING, TypedDict
 from xml.dom.minidom import parseString
 from xml.etree.ElementTree import Element, SubElement, tostring
 
@@ -196,7 +196,7 @@ class FmuPlan:
     stop_time: float = 100.0
     design: Path | None = None
     #: keyword arguments of the estimator's design function (``epsilon``, ``solver``)
-    design_options: tuple[tuple[str, Any], ...] = ()
+    design_options: tuple[tuple[str, object], ...] = ()
     #: folder of designs made at build time, reused by a rebuild (``None``: none kept)
     design_cache: Path | None = None
 
