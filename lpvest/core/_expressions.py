@@ -533,7 +533,7 @@ class Expression:
         return self.text
 
     # -- evaluation -----------------------------------------------------------
-    def __call__(self, **values: Any) -> Any:
+    def __call__(self, **values: ArrayLike) -> Any:
         return self.evaluate(values)
 
     def evaluate(self, values: Mapping[str, ArrayLike]) -> Any:

@@ -38,7 +38,10 @@ import os
 import signal
 import threading
 from collections.abc import Callable, Iterator
-from typing import Any, ParamSpec, TypeVar
+from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
+
+if TYPE_CHECKING:
+    from types import FrameType
 
 __all__ = ["Interrupted", "handling_signals", "raise_if_pending", "call_interruptibly", "hold", "holds",
            "interruptible", "exit_status", "abandoned_calls"]
@@ -87,7 +90,7 @@ _pending: int | None = None
 _depth = 0
 
 
-def _handler(signum: int, frame: Any) -> None:
+def _handler(signum: int, frame: FrameType | None) -> None:
     global _pending
     _pending = signum
     raise Interrupted(signum)

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = ["save_figure"]
 
 
-def save_figure(fig: Any, path: str | Path, *, title: str | None = None, title_size: str | None = None) -> Path:
+def save_figure(fig: Figure, path: str | Path, *, title: str | None = None, title_size: str | None = None) -> Path:
     """Finish a matplotlib figure the way every lpvest figure is finished:
     optional ``suptitle``, ``tight_layout``, saved at 120 dpi into ``path``
     (its folder created), then close it.

@@ -196,7 +196,7 @@ class Sampled(Protocol):
         """
         ...
 
-    def set_state(self, state: Mapping[str, Any]) -> None:
+    def set_state(self, state: Mapping[str, object]) -> None:
         """Restore a state from :meth:`get_state`.
 
         Parameters
@@ -282,7 +282,7 @@ class Timed(Protocol):
         """
         ...
 
-    def set_state(self, state: Mapping[str, Any]) -> None:
+    def set_state(self, state: Mapping[str, object]) -> None:
         """Restore a state from :meth:`get_state`.
 
         Parameters
@@ -411,7 +411,7 @@ class Component(ABC, Generic[SampleT, PendingT]):
         """
 
     @abstractmethod
-    def _set_state(self, state: Mapping[str, Any]) -> None:
+    def _set_state(self, state: Mapping[str, object]) -> None:
         """Restore a state from :meth:`get_state` (checked)."""
 
     # -- the protocol --------------------------------------------------------------------
@@ -420,7 +420,7 @@ class Component(ABC, Generic[SampleT, PendingT]):
         self._memo = None
         self._reset()
 
-    def set_state(self, state: Mapping[str, Any]) -> None:
+    def set_state(self, state: Mapping[str, object]) -> None:
         """Restore a state from :meth:`get_state`; a kept evaluation is dropped.
 
         Parameters

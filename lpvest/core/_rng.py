@@ -39,11 +39,14 @@ np.True_
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ._errors import ArgumentError, ArgumentTypeError
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ["Stream", "as_stream", "normal_quantile", "log", "normals_from_raw", "uniforms_from_raw",
            "psd_cholesky", "lower_times"]
@@ -81,7 +84,7 @@ def _horner(coef: tuple[float, ...], r: np.ndarray) -> np.ndarray:
     return acc
 
 
-def log(x: Any) -> np.ndarray:
+def log(x: ArrayLike) -> np.ndarray:
     """The natural logarithm of ``x > 0`` (finite), from ``+ - * /`` and ``frexp`` only.
 
     fdlibm's algorithm (``e_log.c``): ``x = 2^k (1 + f)`` with
@@ -122,7 +125,7 @@ def log(x: Any) -> np.ndarray:
     return k * _LN2_HI - ((hfsq - (s * (hfsq + r) + k * _LN2_LO)) - f)
 
 
-def normal_quantile(p: Any) -> np.ndarray:
+def normal_quantile(p: ArrayLike) -> np.ndarray:
     """The standard normal quantile (inverse distribution function) of ``p``
     in ``(0, 1)``: Wichura's AS 241 (PPND16) with :func:`log`.
 

@@ -41,7 +41,7 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -701,6 +701,6 @@ class SourceComponent(TimedComponent):
         """
         return {name: gen.get_state() for name, gen in self._gens.items()}
 
-    def _set_state(self, state: Mapping[str, Mapping[str, object]]) -> None:
-        for name, gen in self._gens.items():
-            gen.set_state(dict(state[name]))
+    def _set_state(self, state: Mapping[str, object]) -> None:
+        for name, gen in self._gens.items():  # each value: its generator's state (a mapping)
+            gen.set_state(dict(cast("Mapping[str, object]", state[name])))

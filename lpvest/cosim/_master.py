@@ -39,10 +39,10 @@ import shutil
 import sys
 import tempfile
 import warnings
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
@@ -50,6 +50,13 @@ from ..core._errors import LpvestError, abbreviate, shorten
 from ..core._interrupt import interruptible, raise_if_pending
 from ._errors import CoSimulationError
 from ._graph import Block, batches, evaluation_order
+
+if TYPE_CHECKING:
+    from ..core._typing import FmpyFmu, FmpyModelDescription
+
+T = TypeVar("T")
+#: A start value as the Python type of its FMI type (see ``_convert``).
+FmiValue = float | int | bool | str
 
 __all__ = [
     "Component",
@@ -129,7 +136,7 @@ class Component:
 
     name: str
     fmu: str | Path
-    parameters: Mapping[str, Any] = field(default_factory=dict)
+    parameters: Mapping[str, object] = field(default_factory=dict)
     feedthrough: bool | None = None
 
     def __post_init__(self) -> None:
@@ -212,16 +219,16 @@ class _Unit:
     """An FMU instance and what the master knows about it."""
 
     spec: Component
-    md: Any
-    fmu: Any
+    md: FmpyModelDescription
+    fmu: FmpyFmu
     variables: dict[str, _Var]
     inputs: list[str]
     outputs: list[str]
     depends: dict[str, set[str]]  # output -> inputs it depends on
     log: list[str]
-    funcs: dict[str, Any] = field(default_factory=dict)
-    start_values: list[tuple[_Var, Any, str]] = field(default_factory=list)  # (variable, value, parameter key)
-    callbacks: Any = None  #: the FMI callbacks given to instantiate (kept alive while the instance lives)
+    funcs: dict[str, FmpyFmu] = field(default_factory=dict)  # the instance's fmi2 functions (ctypes)
+    start_values: list[tuple[_Var, FmiValue, str]] = field(default_factory=list)  # (variable, value, parameter key)
+    callbacks: FmpyFmu = None  #: the FMI callbacks given to instantiate (kept alive while the instance lives)
 
 
 def _log_text(unit: _Unit) -> str:
@@ -240,7 +247,9 @@ _INT_RANGE = (-(2**31), 2**31 - 1)
 _DISCARD = 2
 
 
-def _convert(value: Any, fmi_type: str, what: str, where: str, items: Sequence[tuple[str, int]] = ()) -> Any:
+def _convert(
+    value: object, fmi_type: str, what: str, where: str, items: Sequence[tuple[str, int]] = ()
+) -> FmiValue:
     """A start value as the Python type of its FMI type (an Enumeration's:
     the value of the item given by name or value, among ``items``); a clear
     error otherwise."""
@@ -283,10 +292,10 @@ def _convert(value: Any, fmi_type: str, what: str, where: str, items: Sequence[t
     return value
 
 
-_DESCRIPTIONS: dict[tuple[str, int, int], Any] = {}
+_DESCRIPTIONS: dict[tuple[str, int, int], FmpyModelDescription] = {}
 
 
-def _model_description(path: Path, component: str, where: str) -> Any:
+def _model_description(path: Path, component: str, where: str) -> FmpyModelDescription:
     """fmpy's model description of the FMU at ``path`` (read once per file
     version: cached by path, size and modification time)."""
     from fmpy import read_model_description
@@ -664,7 +673,7 @@ class CoSimulation:
     def _check_parameters(self, unit: _Unit) -> None:
         """Every start value names settable variables and fits their type."""
         name = unit.spec.name
-        values: list[tuple[_Var, Any, str]] = []
+        values: list[tuple[_Var, FmiValue, str]] = []
         for par, value in unit.spec.parameters.items():
             where = f"components.{name}.parameters.{par}"
             elems = _expand(unit.variables, par)
@@ -717,7 +726,9 @@ class CoSimulation:
             unit.funcs = {n: unit.fmu._functions[n] for n in ("fmi2GetReal", "fmi2SetReal", "fmi2DoStep")}
 
     # -- running --------------------------------------------------------------
-    def _call(self, unit: _Unit, what: str, fn: Any, t: float | None = None, *, where: str | None = None) -> Any:
+    def _call(
+        self, unit: _Unit, what: str, fn: Callable[..., T], t: float | None = None, *, where: str | None = None
+    ) -> T:
         from fmpy.fmi1 import FMICallException
 
         try:
@@ -809,7 +820,7 @@ class CoSimulation:
         if (n_steps is None) == (stop_time is None):
             raise CoSimulationError("give n_steps or stop_time")
         if n_steps is None:
-            n_steps = whole_steps(self.start_time, stop_time, self.step_size)  # type: ignore[arg-type]
+            n_steps = whole_steps(self.start_time, stop_time, self.step_size)  # type: ignore[arg-type]  # not None: one of the two is given
         if n_steps < 0:
             raise CoSimulationError(f"n_steps must be non-negative; found {n_steps}")
         if on_discard not in ("stop", "error"):
@@ -876,7 +887,7 @@ class CoSimulation:
         extra_col = {i: col for col, (i, _, _) in enumerate(extra)}
         for i, (name, _) in enumerate(dtype[1:]):
             if i in extra_col:
-                out[name] = extra_data[: last + 1, extra_col[i]]  # type: ignore[index]
+                out[name] = extra_data[: last + 1, extra_col[i]]  # type: ignore[index]  # an array whenever extra is not empty
             else:
                 out[name] = data[: last + 1, rec_cols[i][1]]
         return out
@@ -1005,7 +1016,7 @@ class CoSimulation:
                 what = "reading outputs" if op == "get" else "setting inputs"
                 self._fail(unit, what + (" during initialization" if initial else ""), status, t)
 
-    def reset(self, parameters: Mapping[str, Mapping[str, Any]] | None = None) -> None:
+    def reset(self, parameters: Mapping[str, Mapping[str, object]] | None = None) -> None:
         """Return every instance to its state after instantiation
         (``fmi2Reset``), so that :meth:`run` can run again without loading the
         FMUs anew (a sweep runs many tasks on the instances of one worker).

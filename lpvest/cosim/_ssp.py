@@ -100,7 +100,7 @@ import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -109,6 +109,9 @@ from ..fmi._build import write_zip_entry
 from ..fmi._parameters import SPEC_FILE
 from ._errors import CoSimulationError
 from ._master import Component, Connection, CoSimulation, whole_steps
+
+if TYPE_CHECKING:
+    from ..core._typing import FmpyModelDescription
 
 __all__ = ["write_ssp", "read_ssp", "SspSystem", "simulate_ssp", "IMPORTERS"]
 
@@ -277,10 +280,11 @@ def write_ssp(
                 params = ET.SubElement(pset, _q("ssv", "Parameters"))
                 for v, value, _ in bound:
                     p = ET.SubElement(params, _q("ssv", "Parameter"), {"name": v.name})
-                    text = (_fmt(value) if v.type == "Real" else str(value).lower() if v.type == "Boolean"
+                    text = (_fmt(cast(float, value)) if v.type == "Real" else str(value).lower() if v.type == "Boolean"
                             else str(value))
                     if v.type == "Enumeration":  # SSP 1.0: the item's name
-                        attrs = {"value": {i: n for n, i in v.items}.get(value, text), "name": enumeration(v)}
+                        item = {i: n for n, i in v.items}.get(cast(int, value), text)
+                        attrs = {"value": item, "name": enumeration(v)}
                     else:
                         attrs = {"value": text}
                     ET.SubElement(p, _q("ssv", v.type), attrs)
@@ -703,12 +707,12 @@ def simulate_ssp(
     return out
 
 
-def _fmu_variables(path: Path, system: SspSystem) -> dict[str, dict[str, Any]]:
+def _fmu_variables(path: Path, system: SspSystem) -> dict[str, dict[str, FmpyModelDescription]]:
     """Component -> {name: fmpy's ScalarVariable} of its FMU, each FMU in the
     archive read once."""
     from fmpy import read_model_description
 
-    by_member: dict[str, dict[str, Any]] = {}
+    by_member: dict[str, dict[str, FmpyModelDescription]] = {}
     with tempfile.TemporaryDirectory(prefix="lpvest-ssp-") as tmp, zipfile.ZipFile(path) as z:
         for comp, member in system.components.items():
             if member not in by_member:
@@ -722,10 +726,12 @@ def _fmu_variables(path: Path, system: SspSystem) -> dict[str, dict[str, Any]]:
     return {comp: by_member[member] for comp, member in system.components.items()}
 
 
-def _check_against_fmus(path: Path, system: SspSystem, variables: dict[str, dict[str, Any]], importer: str) -> None:
+def _check_against_fmus(
+    path: Path, system: SspSystem, variables: dict[str, dict[str, FmpyModelDescription]], importer: str
+) -> None:
     """Every connector and bound parameter is a variable of its component's
     FMU, of the declared kind and type, which the importer can exchange."""
-    def variable(comp: str, name: str, what: str) -> Any:
+    def variable(comp: str, name: str, what: str) -> FmpyModelDescription:
         v = variables[comp].get(name)
         if v is None:
             raise CoSimulationError(f"{what}: its FMU {system.components[comp]} has no variable "
@@ -774,7 +780,7 @@ def _check_against_fmus(path: Path, system: SspSystem, variables: dict[str, dict
 _CANNOT = {"fmpy": "fmpy's simulate_ssp cannot exchange", "libcosim": "libcosim does not see"}
 
 
-def _item_value(path: Path, comp: str, variable: Any, text: str) -> int:
+def _item_value(path: Path, comp: str, variable: FmpyModelDescription, text: str) -> int:
     """The value of the Enumeration item named ``text`` of an FMU's variable."""
     items = {i.name: int(i.value) for i in variable.declaredType.items} if variable.declaredType else {}
     if text not in items:
@@ -784,7 +790,7 @@ def _item_value(path: Path, comp: str, variable: Any, text: str) -> int:
     return items[text]
 
 
-def _run_fmpy(path: Path, system: SspSystem, variables: dict[str, dict[str, Any]],
+def _run_fmpy(path: Path, system: SspSystem, variables: dict[str, dict[str, FmpyModelDescription]],
               n_steps: int) -> dict[str, np.ndarray]:
     from fmpy.ssp.simulation import simulate_ssp as fmpy_simulate
     from fmpy.ssp.ssd import Parameter, ParameterSet

@@ -73,12 +73,24 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from ..core._errors import ArgumentError, NonFiniteError
 from ..systems._polytopic import PolytopicLPV
+
+if TYPE_CHECKING:
+    from typing import TypeAlias
+
+    from ..core._typing import CvxExpression
+
+    #: A block of the LMIs: an ndarray, or a cvxpy expression in the program.
+    Block: TypeAlias = np.ndarray | CvxExpression
+    #: The multiplier's ``a`` or ``b``: a float, or a cvxpy parameter in the program.
+    Scalar: TypeAlias = float | CvxExpression
+    #: Assembles a block matrix from rows of blocks: ``numpy.block`` or ``cvxpy.bmat``.
+    Bmat: TypeAlias = Callable[[list[list[Block]]], Block]
 
 __all__ = [
     "multiplier",
@@ -155,7 +167,7 @@ def ab_of_phi(phi: float) -> tuple[float, float]:
 # ---------------------------------------------------------------------------
 # the LMIs, written once for numpy arrays and for cvxpy expressions
 # ---------------------------------------------------------------------------
-def _xg_rows(d: Mapping[str, Any], v: Mapping[str, Any], a: Any, b: Any) -> list[list[Any]]:
+def _xg_rows(d: Mapping[str, Block], v: Mapping[str, Block], a: Scalar, b: Scalar) -> list[list[Block]]:
     """The 6 x 6 blocks of ``X G`` (see the module documentation) for plant
     vertex data ``d`` (with ``aCy = a Cy`` etc. precomputed, so that cvxpy sees
     parameter x variable products only) and variables ``v`` of one vertex."""
@@ -176,14 +188,14 @@ def _xg_rows(d: Mapping[str, Any], v: Mapping[str, Any], a: Any, b: Any) -> list
     ]
 
 
-def _q_next(P1: Any, P2: Any, P3: Any, n_rest: int, bmat: Callable[[list[list[Any]]], Any]) -> Any:
+def _q_next(P1: Block, P2: Block, P3: Block, n_rest: int, bmat: Bmat) -> Block:
     """``diag(P(alpha_{k+1}), 0)``: the ``V(xi_{k+1})`` part of ``Q``."""
     nx = P3.shape[0]
     z = np.zeros((2 * nx, n_rest))
     return bmat([[bmat([[P1, P3], [P3.T, P2]]), z], [z.T, np.zeros((n_rest, n_rest))]])
 
 
-def _q_now(P1: Any, P2: Any, P3: Any, delta: Any, nz: int, nw: int, bmat: Callable[..., Any]) -> Any:
+def _q_now(P1: Block, P2: Block, P3: Block, delta: Scalar, nz: int, nw: int, bmat: Bmat) -> Block:
     """``diag(0, -P(alpha_k), I, -delta I)``: the rest of ``Q``."""
     nx = P3.shape[0]
     zxx = np.zeros((nx, nx))
@@ -222,17 +234,17 @@ class LMIBlock(NamedTuple):
     i: int
     j: int
     l: int  # noqa: E741 - the paper's index
-    matrix: Any
+    matrix: Block
 
 
 def lmi_blocks(
-    data: Sequence[Mapping[str, Any]],
-    var: Mapping[str, Any],
-    a: Any,
-    b: Any,
+    data: Sequence[Mapping[str, Block]],
+    var: Mapping[str, Block],
+    a: Scalar,
+    b: Scalar,
     *,
     robust: bool,
-    bmat: Callable[..., Any],
+    bmat: Bmat,
 ) -> list[LMIBlock]:
     """The LMIs (6)-(7) after Lemma 1, each matrix required ``< 0``.
 
@@ -246,20 +258,20 @@ def lmi_blocks(
     nz = data[0]["Cz"].shape[0]
     n_rest = 2 * nx + nz + nw
 
-    def vertex_vars(j: int) -> dict[str, Any]:
+    def vertex_vars(j: int) -> dict[str, Block]:
         f = 0 if robust else j
         out = {k: var[k][j] for k in ("X1", "X2", "X3", "X4", "X5", "X6")}
         out.update({k: var[k][f] for k in ("H", "Af", "Bf", "Cf", "Df")})
         return out
 
-    K: dict[tuple[int, int], Any] = {}
+    K: dict[tuple[int, int], Block] = {}
     for i in range(n):
         for j in range(n):
             L = bmat(_xg_rows(data[i], vertex_vars(j), a, b))
             K[i, j] = L + L.T
     Qc = [_q_now(var["P1"][j], var["P2"][j], var["P3"][j], var["delta"], nz, nw, bmat) for j in range(n)]
 
-    def qn(j: int, nxt: int) -> Any:
+    def qn(j: int, nxt: int) -> Block:
         # P(alpha_{k+1}) at vertex nxt (the paper's l); the misprint puts P_{3,j} in Phi_21
         return _q_next(var["P1"][nxt], var["P2"][nxt], var["P3"][nxt], n_rest, bmat)
 
@@ -285,13 +297,13 @@ def _vertex_data(plant: PolytopicLPV, a: float, b: float) -> list[dict[str, np.n
     return out
 
 
-def _np_bmat(rows: list[list[Any]]) -> np.ndarray:
+def _np_bmat(rows: list[list[Block]]) -> np.ndarray:
     return np.block([[np.asarray(x, dtype=float) for x in row] for row in rows])
 
 
 def lmi_matrices(
     plant: PolytopicLPV,
-    variables: Mapping[str, Any],
+    variables: Mapping[str, Block],
     epsilon: float | None = None,
     *,
     multiplier_ab: tuple[float, float] | None = None,

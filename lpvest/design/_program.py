@@ -41,7 +41,7 @@ import time
 import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -57,6 +57,9 @@ from ..systems._affine import AffineLPV
 from ..systems._polytopic import PolytopicLPV, hinf_setting
 from ._lmis import LMIBlock, ab_of_phi, epsilon_of_phi, lmi_blocks, lmi_matrices, multiplier
 from ._result import KIND_PD, KIND_ROBUST, HinfDesign, model_digest
+
+if TYPE_CHECKING:
+    from ..core._typing import CvxExpression, CvxSolver
 
 __all__ = [
     "design_hinf",
@@ -86,7 +89,7 @@ DEFAULT_MARGIN = 1e-6
 
 #: Solver settings used unless the caller overrides them: one thread is about
 #: twice as fast as two for these small problems.
-_DEFAULT_OPTIONS: dict[str, dict[str, Any]] = {"CLARABEL": {"max_threads": 1}}
+_DEFAULT_OPTIONS: dict[str, dict[str, object]] = {"CLARABEL": {"max_threads": 1}}
 
 #: A point that fails the check is solved again with the margin this much larger.
 RETRY_MARGIN_FACTOR = 30.0
@@ -244,7 +247,7 @@ class HinfProgram:
         kind: str = KIND_PD,
         solver: str = DEFAULT_SOLVER,
         margin: float = DEFAULT_MARGIN,
-        solver_options: Mapping[str, Any] | None = None,
+        solver_options: Mapping[str, object] | None = None,
     ) -> None:
         import cvxpy as cp
 
@@ -277,10 +280,10 @@ class HinfProgram:
         shapes.update(aCy=(ny, nx), bCy=(ny, nx), aDy=(ny, nw), bDy=(ny, nw))
         self._data = [{k: cp.Parameter(s, name=f"{k}_{i + 1}") for k, s in shapes.items()} for i in range(N)]
 
-        def vars_(name: str, shape: tuple[int, int], count: int, **kw: Any) -> list[Any]:
+        def vars_(name: str, shape: tuple[int, int], count: int, **kw: bool) -> list[CvxExpression]:
             return [cp.Variable(shape, name=f"{name}_{i + 1}", **kw) for i in range(count)]
 
-        self._var: dict[str, Any] = {
+        self._var: dict[str, CvxExpression] = {  # name -> cvxpy variables per vertex (delta: one)
             "P1": vars_("P1", (nx, nx), N, symmetric=True),
             "P2": vars_("P2", (nx, nx), N, symmetric=True),
             "P3": vars_("P3", (nx, nx), N),
@@ -416,7 +419,7 @@ class HinfProgram:
         self._returned_point = status in _ACCEPTED
         return status, time.perf_counter() - t0, message
 
-    def _solve_interruptibly(self, solver: str, options: Mapping[str, Any]) -> None:
+    def _solve_interruptibly(self, solver: str, options: Mapping[str, object]) -> None:
         """``problem.solve`` on a worker thread (:func:`lpvest.core.call_interruptibly`):
         Ctrl-C or SIGTERM stops the wait at once; the abandoned solve may still
         write into this program, which is then never used again (it leaves the
@@ -717,7 +720,7 @@ _SCS_SIGINT = -5
 
 
 @functools.lru_cache(maxsize=1)
-def _interruptible_scs() -> Any:
+def _interruptible_scs() -> CvxSolver:
     """cvxpy's SCS interface, except that a solve SCS stopped on SIGINT (its
     own handler catches the signal while it iterates, so Python's never runs)
     raises :class:`lpvest.core.Interrupted` instead of being one more
@@ -731,8 +734,9 @@ def _interruptible_scs() -> Any:
         def name(self) -> str:
             return "LPVEST_SCS"
 
-        def solve_via_data(self, data: Any, warm_start: bool, verbose: bool, solver_opts: Any,
-                           solver_cache: Any = None) -> Any:
+        def solve_via_data(self, data: dict[str, object], warm_start: bool, verbose: bool,
+                           solver_opts: dict[str, object],
+                           solver_cache: dict[str, object] | None = None) -> dict[str, object]:
             results = super().solve_via_data(data, warm_start, verbose, solver_opts, solver_cache)
             if results["info"]["status_val"] == _SCS_SIGINT:
                 raise Interrupted(signal.SIGINT)
@@ -743,7 +747,7 @@ def _interruptible_scs() -> Any:
 
 @functools.lru_cache(maxsize=16)
 def _cached_program(
-    dims: tuple[int, int, int, int, int], kind: str, solver: str, margin: float, options: tuple[tuple[str, Any], ...]
+    dims: tuple[int, int, int, int, int], kind: str, solver: str, margin: float, options: tuple[tuple[str, object], ...]
 ) -> HinfProgram:
     return HinfProgram(*dims, kind=kind, solver=solver, margin=margin, solver_options=dict(options))
 
@@ -753,7 +757,7 @@ def program_for(
     kind: str,
     solver: str,
     margin: float,
-    solver_options: Mapping[str, Any] | None,
+    solver_options: Mapping[str, object] | None,
     program: HinfProgram | None,
 ) -> HinfProgram:
     """``program`` checked against the plant and ``kind``, or else the cached
@@ -783,7 +787,7 @@ def design_hinf(
     kind: str = KIND_PD,
     solver: str = DEFAULT_SOLVER,
     margin: float = DEFAULT_MARGIN,
-    solver_options: Mapping[str, Any] | None = None,
+    solver_options: Mapping[str, object] | None = None,
     program: HinfProgram | None = None,
 ) -> HinfDesign:
     """Design the filter of Theorem 1 (``kind="parameter-dependent"``) or

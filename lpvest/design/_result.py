@@ -52,6 +52,9 @@ from ..core._errors import ArgumentError, DimensionError, ModelFileError, abbrev
 from ..core._linalg import MatrixStack
 from ..core._validation import as_vector, check_simplex
 
+if TYPE_CHECKING:
+    from ..systems._polytopic import PolytopicLPV
+
 __all__ = [
     "HinfDesign",
     "FilterMatrices",
@@ -76,7 +79,7 @@ _FILTER_NAMES = ("H", "Af", "Bf", "Cf", "Df")
 _PLANT_NAMES = ("A", "Bw", "Cz", "Dz", "Cy", "Dy")
 
 
-def model_digest(plant: Any) -> str:
+def model_digest(plant: PolytopicLPV) -> str:
     """SHA-256 of a polytopic plant's vertex matrices (their float64 values,
     shapes and names): a design made for the plant records it, and a filter is
     built from the design only for a plant with the same digest. Model files
@@ -249,7 +252,7 @@ class HinfDesign:
     def nz(self) -> int:
         return int(self.Cf.shape[1])
 
-    def check_model(self, plant: Any, *, source: str = "design", plant_name: str = "") -> None:
+    def check_model(self, plant: PolytopicLPV, *, source: str = "design", plant_name: str = "") -> None:
         """Raise :class:`~lpvest.core.ModelFileError` unless this design fits
         ``plant``: same dimensions, and the same vertex matrices when the
         design recorded them (:func:`model_digest`).

@@ -131,7 +131,7 @@ def epsilon_curve(
     kind: str = KIND_PD,
     solver: str = DEFAULT_SOLVER,
     margin: float = DEFAULT_MARGIN,
-    solver_options: Mapping[str, Any] | None = None,
+    solver_options: Mapping[str, object] | None = None,
     program: HinfProgram | None = None,
 ) -> EpsilonCurve:
     """``gamma(epsilon)`` at the given ``epsilons`` (one compiled program).
@@ -192,7 +192,7 @@ def search_epsilon(
     xatol: float = 1e-3,
     solver: str = DEFAULT_SOLVER,
     margin: float = DEFAULT_MARGIN,
-    solver_options: Mapping[str, Any] | None = None,
+    solver_options: Mapping[str, object] | None = None,
     program: HinfProgram | None = None,
     progress: bool = False,
 ) -> EpsilonSearch:

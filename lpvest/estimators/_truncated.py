@@ -572,7 +572,7 @@ class TruncatedKalmanFilter(Component):
             return truncated_prior(win, self._start, P0=self._P0, t=self._t)
         return truncated_prior(win, self._start, t=self._t)
 
-    def _read(self, inputs: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _read(self, inputs: Mapping[str, object]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self._reader.read(inputs, self._t)
 
     def _evaluate(self, sample: tuple[np.ndarray, np.ndarray, np.ndarray]) -> tuple[
@@ -646,7 +646,7 @@ class TruncatedKalmanFilter(Component):
         """
         return self._evaluate(self._read(self._inputs(p, u, y)))[1][0]
 
-    def get_state(self) -> dict[str, Any]:
+    def get_state(self) -> dict[str, object]:
         """``x``, ``t``, ``log_likelihood`` and the window of the last
         ``window_length <= tau + 1`` scheduling values (``window_p``, padded
         with zeros to ``(tau + 1, n_p)``, oldest first).

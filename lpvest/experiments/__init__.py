@@ -102,7 +102,7 @@ class ExperimentResult:
 
     name: str
     table: str
-    results: Mapping[str, Any]
+    results: Mapping[str, object]
     figures: tuple[Path, ...] = field(default_factory=tuple)
     paper: tuple[tuple[str, str, str], ...] = field(default_factory=tuple)
     fmu: FmuRun | None = None
@@ -181,7 +181,7 @@ class Experiment:
     name: str
     title: str
     run: Callable[..., ExperimentResult]
-    reduced: Mapping[str, Any] = field(default_factory=dict)
+    reduced: Mapping[str, object] = field(default_factory=dict)
     fmus: tuple[str, ...] = ()
     group: str = ""
     split: Callable[..., Split] | None = None
@@ -215,7 +215,7 @@ def registry() -> dict[str, Experiment]:
     return out
 
 
-def _jsonable(value: Any) -> Any:
+def _jsonable(value: object) -> object:
     import numpy as np
 
     if isinstance(value, Mapping):

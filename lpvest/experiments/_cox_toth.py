@@ -55,7 +55,9 @@ from ._fmus import Agreement, CoSimSpec, ExperimentFmus, FmuRun, Timer, as_exper
 from ._studies import ExperimentStudy, StudySpec, select_task
 
 if TYPE_CHECKING:
+    from ..analysis._fading_memory import FilterComparison, TruncationErrors
     from ..parallel._engine import Engine
+    from ..systems._affine import LPVTrajectory
 
 __all__ = [
     "EXPERIMENTS",
@@ -248,7 +250,7 @@ class PredictionErrorSetup:
     """What every Monte Carlo member of the prediction-error check reads: the
     model, ``p``, ``u``, each filter's gains ``K_t`` and exact variance curve."""
 
-    model: Any
+    model: AffineLPV
     p: np.ndarray
     u: np.ndarray
     gains: Mapping[str, np.ndarray]  #: filter name -> gains, shape (T, n_x, n_y)
@@ -260,7 +262,7 @@ class PredictionErrorSetup:
 
 
 def prediction_error_setup(
-    *, steps: int = 300, runs: int = 2000, burn_in: int = 50, seed: int = 7, comparison: Any | None = None,
+    *, steps: int = 300, runs: int = 2000, burn_in: int = 50, seed: int = 7, comparison: FilterComparison | None = None,
 ) -> PredictionErrorSetup:
     """The set-up of :func:`prediction_error_task` on ``cox-toth-truncation``
     with ``p_t = sin(0.25 t)``, ``u_t = sin(0.1 t)``: the exact, truncated
@@ -301,10 +303,10 @@ def prediction_error_task(setup: PredictionErrorSetup, task: Task) -> TaskResult
 #: The metrics of :func:`prediction_error_task`, in column order.
 TRUNCATION_METRICS = ("mean_trace", "monte_carlo_mean_trace", "relative_difference")
 #: The options of the truncation study and their defaults (those of :func:`run_truncation`).
-TRUNCATION_STUDY_OPTIONS: dict[str, Any] = {"steps": 300, "runs": 2000, "burn_in": 50, "seed": 7}
+TRUNCATION_STUDY_OPTIONS: dict[str, int] = {"steps": 300, "runs": 2000, "burn_in": 50, "seed": 7}
 
 
-def prepare_truncation_study(spec: StudySpec, fmus: Any) -> Prepared:
+def prepare_truncation_study(spec: StudySpec, fmus: ExperimentFmus) -> Prepared:
     """The truncation study of a sweep file: one :func:`prediction_error_task`
     per filter, on :func:`prediction_error_setup` with the spec's options.
 
@@ -517,7 +519,8 @@ def truncation_cosim(steps: int = 300, *, seed: int = 7, taus: Sequence[int] = P
 
 
 def _truncation_fmu(
-    fmus: ExperimentFmus, model: Any, p: np.ndarray, u: np.ndarray, data: Any, theorem: Any, seed: int, steps: int
+    fmus: ExperimentFmus, model: AffineLPV, p: np.ndarray, u: np.ndarray, data: LPVTrajectory,
+    theorem: TruncationErrors, seed: int, steps: int,
 ) -> tuple[FmuRun, dict[int, float]]:
     """Co-simulate :func:`truncation_cosim`; compare with the library."""
     from ..core._protocol import run_streaming
@@ -615,7 +618,7 @@ def _truncation_table(r: dict[str, Any]) -> str:
 
 
 def _plot_truncation(
-    out_dir: Path, errs: dict[str, Any], curves: dict[str, np.ndarray], p: np.ndarray
+    out_dir: Path, errs: dict[str, TruncationErrors], curves: dict[str, np.ndarray], p: np.ndarray
 ) -> tuple[Path, ...]:
     import matplotlib
 

@@ -34,13 +34,21 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..core._errors import ArgumentError, LpvestError, abbreviate
 from ..fmi._cache import FmuCache, FmuCacheError, default_cache_dir
 from ..fmi._registry import EstimatorKind, estimator_kinds
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from ..design._result import HinfDesign
+    from ..fmi._build import FmuPlan
+    from ..systems._affine import AffineLPV
+    from ..systems._polytopic import PolytopicLPV
 
 __all__ = [
     "PAPER_EPSILON",
@@ -70,14 +78,14 @@ AGREEMENT_TOLERANCE = 1e-12
 # ---------------------------------------------------------------------------
 # the paper's epsilon = 150 designs, as estimator kinds
 # ---------------------------------------------------------------------------
-def hinf_pd_eps150(model: Any) -> str:
+def hinf_pd_eps150(model: PolytopicLPV | AffineLPV) -> str:
     """Build-time design: Theorem 1 (parameter-dependent) at ``epsilon = 150``, as JSON."""
     from ..design import KIND_PD, design_hinf
 
     return design_hinf(model, epsilon=PAPER_EPSILON, kind=KIND_PD).to_json()
 
 
-def hinf_robust_eps150(model: Any) -> str:
+def hinf_robust_eps150(model: PolytopicLPV | AffineLPV) -> str:
     """Build-time design: Corollary 1 (robust) at ``epsilon = 150``, as JSON."""
     from ..design import KIND_ROBUST, design_hinf
 
@@ -226,7 +234,7 @@ class ExperimentFmus(FmuCache):
                 raise FmuCacheError(f"{path}: {key} = {loaded.parameters.get(key)}; expected {value}")
         return path
 
-    def plan(self, identifier: str) -> Any:
+    def plan(self, identifier: str) -> FmuPlan:
         """The :class:`~lpvest.fmi.FmuPlan` of a catalog FMU.
 
         A variant's model file is written to ``models/`` in the cache folder
@@ -301,7 +309,7 @@ class CoSimSpec:
         ones.
     """
 
-    components: tuple[tuple[str, str, Mapping[str, Any]], ...]
+    components: tuple[tuple[str, str, Mapping[str, object]], ...]
     connections: tuple[str, ...]
     step_size: float
     n_steps: int
@@ -385,7 +393,7 @@ class Agreement:
     tolerance: float = AGREEMENT_TOLERANCE
 
     @classmethod
-    def of(cls, what: str, fmu: Any, library: Any, *, tolerance: float = AGREEMENT_TOLERANCE) -> Agreement:
+    def of(cls, what: str, fmu: ArrayLike, library: ArrayLike, *, tolerance: float = AGREEMENT_TOLERANCE) -> Agreement:
         a = np.asarray(fmu, dtype=float)
         b = np.asarray(library, dtype=float)
         if a.shape != b.shape:
@@ -412,7 +420,7 @@ class Agreement:
                        + ("within" if self.ok else "EXCEEDS") + f" {self.tolerance:g})")
         return f"{self.what}: max |FMU - library| = {verdict}"
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         return {"what": self.what, "max_abs_difference": self.max_abs_difference, "scale": self.scale,
                 "tolerance": self.tolerance, "bit_for_bit": self.bit_for_bit, "ok": self.ok}
 
@@ -457,7 +465,7 @@ class FmuRun:
         out += [f"  note: {n}" for n in self.notes]
         return out
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         return {
             "description": self.description,
             "fmus": list(self.fmus),
@@ -491,7 +499,7 @@ class Timer:
 # ---------------------------------------------------------------------------
 # designs carried by FMUs
 # ---------------------------------------------------------------------------
-def carried_design(path: str | Path) -> Any:
+def carried_design(path: str | Path) -> HinfDesign:
     """The :class:`~lpvest.design.HinfDesign` an H-infinity filter FMU carries (``resources/design.json``)."""
     import zipfile
 
@@ -501,7 +509,7 @@ def carried_design(path: str | Path) -> Any:
         return HinfDesign.from_json(z.read("resources/design.json").decode("utf-8"))
 
 
-def design_difference(a: Any, b: Any) -> float:
+def design_difference(a: HinfDesign, b: HinfDesign) -> float:
     """Largest absolute difference between the filter matrices of two designs."""
     names = ("H", "Af", "Bf", "Cf", "Df")
     if any(np.shape(getattr(a, n)) != np.shape(getattr(b, n)) for n in names):

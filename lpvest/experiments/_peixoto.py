@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -52,6 +52,9 @@ from ._fmus import (
 from ._studies import ExperimentStudy, StudySpec, select_task
 
 if TYPE_CHECKING:
+    from ..design._program import HinfProgram
+    from ..design._result import HinfDesign
+    from ..design._search import EpsilonSearch
     from ..parallel._engine import Engine
 
 __all__ = [
@@ -99,7 +102,7 @@ def _eps_text(value: float) -> str:
     return "inf" if math.isinf(value) else f"{value:.4g}"
 
 
-def _design_summary(design: Any) -> dict[str, Any]:
+def _design_summary(design: HinfDesign) -> dict[str, object]:
     return {
         "gamma": design.gamma,
         "epsilon": _eps(design.epsilon),
@@ -128,7 +131,7 @@ def hinf_cosim(
     from ``k = 10``), the Plant (zero initial state) and the filter FMUs
     ``filters`` (``(component name, FMU identifier)``; a parameter-dependent
     filter gets ``theta``, a robust one only ``y``); ``steps`` samples."""
-    comps: list[tuple[str, str, Any]] = [
+    comps: list[tuple[str, str, Mapping[str, object]]] = [
         ("sched", f"{system}Scheduler", {"kind": "sinusoid", "offset": [0.0], "amplitude": [1.0],
                                          "omega": [0.25]}),
         ("source", f"{system}Source", {"w.kind": "decaying", "w.amplitude": [1.0], "w.omega": [0.5],
@@ -153,7 +156,7 @@ class HinfFmuResult:
     errors: dict[str, np.ndarray]  #: component -> e_k = z_k - zhat_k (FMUs), (T, n_z)
     ratios: dict[str, float]  #: component -> ||e||_2 / ||w||_2 (FMUs)
     agreements: tuple[Agreement, ...]
-    carried: dict[str, Any]  #: component -> the design the FMU carries
+    carried: dict[str, HinfDesign]  #: component -> the design the FMU carries
     design_differences: dict[str, float]  #: component -> max |carried - library design| (filter matrices)
     gamma_differences: dict[str, float]  #: component -> |gamma carried - gamma library| / gamma library
     signals: Fig1Signals
@@ -163,8 +166,8 @@ def _hinf_fmus(
     fmus: ExperimentFmus,
     res: np.ndarray,
     spec: CoSimSpec,
-    plant: Any,
-    designs: dict[str, Any],
+    plant: PolytopicLPV,
+    designs: dict[str, HinfDesign],
     *,
     plant_name: str = "plant",
     label: str = "",
@@ -331,14 +334,14 @@ def run_table1(
     return ExperimentResult("peixoto-table1", "\n".join(lines), results, tuple(figures), paper, fmu)
 
 
-def _gamma_at(search: Any, epsilon: float) -> float:
+def _gamma_at(search: EpsilonSearch, epsilon: float) -> float:
     for e, g in zip(search.curve.epsilon, search.curve.gamma, strict=True):
         if e == epsilon:
             return float(g)
     return math.nan
 
 
-def _plot_curves(path: Path, pd: Any, rob: Any) -> Path:
+def _plot_curves(path: Path, pd: EpsilonSearch, rob: EpsilonSearch) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -376,7 +379,7 @@ class Fig1Signals:
     w: np.ndarray  #: shape (T, 1)
 
 
-def fig1_signals(steps: int = 100, *, plant: Any | None = None) -> Fig1Signals:
+def fig1_signals(steps: int = 100, *, plant: PolytopicLPV | None = None) -> Fig1Signals:
     """``theta_k = sin(0.25 k)``, ``w_k = sin(0.5 k) exp(-0.1 k)`` for ``k >= 10``."""
     from ..systems._modelfile import load_system
     from ._simulate import peixoto_disturbance
@@ -599,7 +602,7 @@ def example2_cosim(rhos: Sequence[float] = EXAMPLE2_FMU_RHOS, *, steps: int = 10
 
 
 @functools.cache
-def _example2_program() -> Any:
+def _example2_program() -> HinfProgram:
     """The LMI program of Theorem 1 for Example 2's dimensions, compiled once
     per process (every rho has the same dimensions: one program serves all)."""
     from ..design import KIND_PD, HinfProgram
@@ -608,7 +611,7 @@ def _example2_program() -> Any:
     return HinfProgram.for_plant(load_system("peixoto-ex2").model(None, PolytopicLPV), kind=KIND_PD)
 
 
-def example2_task(_shared: Any, task: Task) -> TaskResult:
+def example2_task(_shared: object, task: Task) -> TaskResult:
     """Theorem 1 on Example 2 at ``task.point["rho"]``: the best epsilon
     (:func:`~lpvest.design.search_epsilon`), or the design at
     ``task.point["epsilon"]`` when the point gives one. Metrics ``gamma``,
@@ -632,7 +635,7 @@ def example2_task(_shared: Any, task: Task) -> TaskResult:
 EXAMPLE2_METRICS = ("gamma", "design_epsilon", "n_evaluations")
 
 
-def prepare_example2_study(spec: StudySpec, fmus: Any) -> Prepared:
+def prepare_example2_study(spec: StudySpec, fmus: ExperimentFmus) -> Prepared:
     """The Example 2 study of a sweep file: one :func:`example2_task` per
     ``rho`` (and ``epsilon``, when swept).
 
@@ -755,7 +758,7 @@ def _finish_example2(out_dir: Path | None, rhos: tuple[float, ...], fmus: Experi
     res, steps, seconds = outcomes[1].value
     curve = outcomes[2:]
     rows: list[dict[str, Any]] = []
-    designs: dict[float, Any] = {}
+    designs: dict[float, HinfDesign] = {}
     for rho, r in zip(rhos, curve, strict=True):
         design = r.value
         designs[float(rho)] = design

@@ -44,12 +44,15 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..core._errors import ArgumentError, LpvestError, abbreviate
 from ..parallel._tasks import Outcome, SweepError, Task, TaskResult, one_blas_thread
 from . import Experiment, ExperimentResult, Split, write_results
 from ._fmus import ExperimentFmus, as_experiment_fmus
+
+if TYPE_CHECKING:
+    from ..parallel._engine import Engine
 
 __all__ = ["ExperimentRun", "reproduce", "reproduce_all", "default_workers"]
 
@@ -146,7 +149,7 @@ class _Part:
 @dataclass(frozen=True)
 class _Shared:
     jobs: tuple[_Run | _Part, ...]
-    split_data: dict[str, Any] = field(default_factory=dict)  #: split name -> its shared data
+    split_data: dict[str, object] = field(default_factory=dict)  #: split name -> its shared data
 
 
 def _run_experiments(run: _Run) -> list[tuple[str, ExperimentResult, float]]:
@@ -213,7 +216,7 @@ def build_task(cache: ExperimentFmus, task: Task) -> TaskResult:
     return TaskResult(value=cache.build_file(task.point["fmu"]))
 
 
-def _build_on_workers(engine: Any, cache: ExperimentFmus, needed: list[str], say: Callable[[str], None]) -> None:
+def _build_on_workers(engine: Engine, cache: ExperimentFmus, needed: list[str], say: Callable[[str], None]) -> None:
     """Build the missing or stale FMUs of ``needed`` side by side, recorded here one by one."""
     stale = cache.stale(needed)
     if not stale:
@@ -238,12 +241,12 @@ def _on_workers(groups: list[list[Experiment]], cache: ExperimentFmus, rep: _Rep
         _run_on(engine, groups, cache, rep)
 
 
-def _run_on(engine: Any, groups: list[list[Experiment]], cache: ExperimentFmus, rep: _Reporter) -> None:
+def _run_on(engine: Engine, groups: list[list[Experiment]], cache: ExperimentFmus, rep: _Reporter) -> None:
     needed = list(dict.fromkeys(name for group in groups for exp in group for name in exp.fmus))
     _build_on_workers(engine, cache, needed, rep.say)
     view = cache.resolved(needed)  # every one checked or built: the workers only read them
     jobs: list[_Run | _Part] = []
-    split_data: dict[str, Any] = {}
+    split_data: dict[str, object] = {}
     splits: dict[str, tuple[Experiment, Split]] = {}
     for group in groups:
         if group[0].split is None:
@@ -276,7 +279,7 @@ def _run_on(engine: Any, groups: list[list[Experiment]], cache: ExperimentFmus, 
         if len(done) == len(split.tasks):
             t = time.perf_counter()
             with one_blas_thread():
-                result = split.finish([done[task.index].result for task in split.tasks])  # type: ignore[misc]
+                result = split.finish([done[task.index].result for task in split.tasks])  # type: ignore[misc]  # all done: none None
             seconds = sum(o.seconds for o in done.values()) + time.perf_counter() - t
             rep.done(exp, result, seconds, header=True)
 

@@ -416,7 +416,7 @@ def noisy_seed_task(setup: NoisySetup, task: Task) -> TaskResult:
     return TaskResult(metrics, {"a0": fit.values["a0"], "y": fit.y, "dy": fit.dy})
 
 
-def prepare_noisy_study(spec: StudySpec, fmus: Any) -> Prepared:
+def prepare_noisy_study(spec: StudySpec, fmus: ExperimentFmus) -> Prepared:
     """The Section V-B study of a sweep file: one :func:`noisy_seed_task` per
     seed, on the plant FMU's samples (:func:`noisy_setup`).
 

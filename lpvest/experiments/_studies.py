@@ -30,12 +30,17 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 from ..core._errors import InternalError, ModelFileError
 from ..parallel._prepared import Prepared
 from ..parallel._tasks import Task, TaskResult
 from . import registry
+
+if TYPE_CHECKING:
+    from ._fmus import ExperimentFmus
+
+S = TypeVar("S")  #: the type of the data every task of a study shares
 
 __all__ = ["ExperimentStudy", "StudyAxis", "StudySpec", "SelectedTask", "select_task", "experiment_studies",
            "study"]
@@ -118,7 +123,7 @@ class ExperimentStudy:
 
     name: str
     title: str
-    prepare: Callable[[StudySpec, Any], Prepared]
+    prepare: Callable[[StudySpec, ExperimentFmus], Prepared]
     axes: Mapping[str, tuple[Any, ...] | None]
     seeds: int
     options: Mapping[str, Any]
@@ -154,7 +159,7 @@ class SelectedTask:
         return TaskResult({k: r.metrics[k] for k in self.metrics}, {k: r.signals[k] for k in self.signals})
 
 
-def select_task(fn: Callable[[Any, Task], TaskResult], spec: StudySpec, metrics: tuple[str, ...]) -> SelectedTask:
+def select_task(fn: Callable[[S, Task], TaskResult], spec: StudySpec, metrics: tuple[str, ...]) -> SelectedTask:
     """``fn`` returning the metrics and signals that ``spec`` selects.
 
     Parameters

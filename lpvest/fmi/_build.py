@@ -68,7 +68,7 @@ import zipfile
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TypedDict
+from typing import TYPE_CHECKING, TypedDict
 from xml.dom.minidom import parseString
 from xml.etree.ElementTree import Element, SubElement, tostring
 
@@ -78,6 +78,9 @@ from ._bundle import Bundle, SourceRoot, make_bundle
 from ._naming import fmu_name
 from ._parameters import SPEC_FILE, SPEC_FORMAT
 from ._registry import EstimatorKind, estimator_kinds, resolve
+
+if TYPE_CHECKING:
+    from ._slave import LpvestSlave
 
 __all__ = [
     "known_roles",
@@ -193,7 +196,7 @@ class FmuPlan:
     stop_time: float = 100.0
     design: Path | None = None
     #: keyword arguments of the estimator's design function (``epsilon``, ``solver``)
-    design_options: tuple[tuple[str, Any], ...] = ()
+    design_options: tuple[tuple[str, object], ...] = ()
     #: folder of designs made at build time, reused by a rebuild (``None``: none kept)
     design_cache: Path | None = None
 
@@ -764,7 +767,7 @@ def _stage(plan: FmuPlan, staging: Path, progress: Callable[[str], None] | None)
     return bundle, manifest
 
 
-def _instantiate(bundle: Bundle, staging: Path) -> Any:
+def _instantiate(bundle: Bundle, staging: Path) -> LpvestSlave:
     """The slave, instantiated from ``staging`` as pythonfmu would (then unloaded)."""
     import importlib.util
 
@@ -793,7 +796,8 @@ def _model_description(plan: FmuPlan, bundle: Bundle, staging: Path, guid: str) 
 
 
 def model_description_xml(
-    plan: FmuPlan, slave: Any, guid: str, *, native: bool = False, finish: Callable[[Element], None] | None = None
+    plan: FmuPlan, slave: LpvestSlave, guid: str, *, native: bool = False,
+    finish: Callable[[Element], None] | None = None,
 ) -> tuple[bytes, int, int, int]:
     """The model description of ``plan``'s FMU from its instantiated slave
     (pythonfmu's ``to_xml``, completed: declared ranges, dependencies,

@@ -8,12 +8,16 @@ systems); they need cvxpy. The FMU itself never imports this module.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from ..systems._affine import AffineLPV
+    from ..systems._polytopic import PolytopicLPV
 
 __all__ = ["hinf_pd", "hinf_robust"]
 
 
-def _best(model: Any, kind: str, *, epsilon: float | None = None, solver: str = "AUTO",
+def _best(model: PolytopicLPV | AffineLPV, kind: str, *, epsilon: float | None = None, solver: str = "AUTO",
           progress: bool = False) -> str:
     """The design at ``epsilon``, or the best over every epsilon
     (:func:`lpvest.design.search_epsilon`), as JSON. A model with general
@@ -26,14 +30,14 @@ def _best(model: Any, kind: str, *, epsilon: float | None = None, solver: str = 
     return search_epsilon(model, kind=kind, solver=solver, progress=progress).design.to_json()
 
 
-def hinf_pd(model: Any, **options: Any) -> str:
+def hinf_pd(model: PolytopicLPV | AffineLPV, **options: Any) -> str:
     """The parameter-dependent filter (Theorem 1), best epsilon (options: see ``_best``)."""
     from ..design._result import KIND_PD
 
     return _best(model, KIND_PD, **options)
 
 
-def hinf_robust(model: Any, **options: Any) -> str:
+def hinf_robust(model: PolytopicLPV | AffineLPV, **options: Any) -> str:
     """The robust filter (Corollary 1), best epsilon (options: see ``_best``)."""
     from ..design._result import KIND_ROBUST
 

@@ -55,9 +55,9 @@ from __future__ import annotations
 
 import math
 import weakref
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 from pythonfmu.enums import Fmi2Causality, Fmi2Status, Fmi2Variability
@@ -71,6 +71,9 @@ from ..core._protocol import Component, Port, Sampled, Timed, whole_samples
 from ._naming import element_names
 from ._parameters import Parameter, read_spec
 from ._state import copy_state, decode_state, encode_state
+
+if TYPE_CHECKING:
+    from ..systems._modelfile import Model, SystemFile
 
 T = TypeVar("T")
 
@@ -165,7 +168,7 @@ class LpvestSlave(Fmi2Slave):
         return None if getattr(port, "direct", True) else []
 
     # -- helpers for role scripts ------------------------------------------------------
-    def system(self, params: Mapping[str, Any] | None = None) -> Any:
+    def system(self, params: Mapping[str, Any] | None = None) -> SystemFile:
         """The system file carried in ``resources/``, loaded with the model
         parameters among ``params`` (e.g. ``rho``)."""
         from ..systems._modelfile import load_system
@@ -175,7 +178,7 @@ class LpvestSlave(Fmi2Slave):
         values = {n: float(params[n]) for n in names if params is not None and n in params}
         return load_system(path, parameters=values)
 
-    def model(self, params: Mapping[str, Any] | None = None) -> Any:
+    def model(self, params: Mapping[str, Any] | None = None) -> Model:
         """The model this FMU was built for (see :meth:`system`); without
         ``params``, the model at the file's parameter values (loaded once)."""
         if params is None:
@@ -209,7 +212,7 @@ class LpvestSlave(Fmi2Slave):
         return None, None, ""
 
     # -- construction -------------------------------------------------------------
-    def __init__(self, **kwargs: Any) -> None:
+    def __init__(self, **kwargs: object) -> None:
         super().__init__(**kwargs)
         self.spec = read_spec(self.resources)
         self.modelName = self.spec["identifier"]
@@ -228,7 +231,7 @@ class LpvestSlave(Fmi2Slave):
         # the parameter that is the sample time: a step runs a whole number of samples (None: a function of time)
         self._sample_time: str | None = (
             "sample_time" if not self._timed else (self.spec.get("estimator") or {}).get("sample_time"))
-        self._whole: tuple[float, Any, int | None] = (math.nan, math.nan, None)  # (h, sample time, samples)
+        self._whole: tuple[float, object, int | None] = (math.nan, math.nan, None)  # (h, sample time, samples)
         if not self._timed:
             h = float(self.spec.get("sample_time", 1.0))
             self._add_parameter(Parameter("sample_time", h, "time between samples (s): a communication step of "
@@ -269,8 +272,8 @@ class LpvestSlave(Fmi2Slave):
         self._step_inputs: dict[str, np.ndarray] | None = None
         self._held: dict[str, np.ndarray] | None = None  # feedthrough outputs of the sample just consumed
         self._component: Any = None
-        self._advance: Callable[..., Any] | None = None
-        self._prepare: Callable[..., Any] | None = None
+        self._advance: Callable[..., dict[str, np.ndarray] | None] | None = None
+        self._prepare: Callable[..., dict[str, np.ndarray]] | None = None
         self._preview: Any = None
         self._initialized = False
         self._terminated = False
@@ -299,7 +302,7 @@ class LpvestSlave(Fmi2Slave):
         return Path(self.resources)
 
     # -- variables --------------------------------------------------------------------
-    def _register(self, element: _Element, **kwargs: Any) -> None:
+    def _register(self, element: _Element, **kwargs: object) -> None:
         cls = _TYPES[element.fmi_type]
         var = cls(element.name, **kwargs)
         var.getter = lambda e=element: self._get_element(e)
@@ -411,7 +414,7 @@ class LpvestSlave(Fmi2Slave):
         self._invalid[e.name] = message
         self._log(Fmi2Status.error, message)
 
-    def _set_element(self, e: _Element, value: Any) -> None:
+    def _set_element(self, e: _Element, value: float | int | bool | str) -> None:
         if self._terminated:
             self._log(Fmi2Status.error, f"{e.what()} cannot be set after fmi2Terminate (reset the instance)")
             return
@@ -720,7 +723,7 @@ class LpvestSlave(Fmi2Slave):
         return True
 
     def _more_samples(self, t: float, h: float, m: int, inputs: dict[str, np.ndarray],
-                      saved: Any) -> dict[str, Any] | None:
+                      saved: Mapping[str, object]) -> dict[str, np.ndarray] | None:
         """Samples 2..m of a step of m samples, the inputs held (zero-order hold):
         the outputs of the last one, or ``None`` (logged) when one of them fails
         or has an output that is not finite; the component is then put back to
@@ -729,7 +732,7 @@ class LpvestSlave(Fmi2Slave):
         checked = bool(self._inputs_in_range)
         ts = self._sample_length()
         problem = None
-        values: Mapping[str, Any] = {}
+        values: Mapping[str, np.ndarray] = {}
         for i in range(1, m):
             try:
                 if self._timed:  # the sample of t + i ts, ending at the master's point t + h after the last
@@ -806,7 +809,7 @@ class LpvestSlave(Fmi2Slave):
     def get_string(self, vrs: list[int]) -> list[str]:
         return self._guard("fmi2GetString", lambda: self._get(vrs, "String", ""), [""] * len(vrs))
 
-    def _set(self, vrs: list[int], values: list[Any], fmi_type: str) -> None:
+    def _set(self, vrs: list[int], values: Sequence[float | int | bool | str], fmi_type: str) -> None:
         for vr, value in zip(vrs, values, strict=True):
             e = self._elements.get(vr)
             if e is None or e.fmi_type != fmi_type:
@@ -867,7 +870,7 @@ class LpvestSlave(Fmi2Slave):
         fmi2FMUstate and hands it to :meth:`_fmu_state_to_bytes`)."""
         return self._guard("fmi2GetFMUstate", lambda: encode_state(self._snapshot()), b"")
 
-    def _set_fmu_state(self, state: Any) -> None:
+    def _set_fmu_state(self, state: bytes) -> None:
         def run() -> None:
             snap = decode_state(bytes(state))
             if snap.get("identifier") != self.modelName:

@@ -76,7 +76,7 @@ def _decode(obj: Any) -> Any:
     return obj
 
 
-def encode_state(state: dict[str, Any]) -> bytes:
+def encode_state(state: dict[str, object]) -> bytes:
     """``state`` (nested dicts, lists, tuples, numpy arrays, scalars) as bytes."""
     return json.dumps({"format": FORMAT, "state": _encode(state)}, allow_nan=True).encode("utf-8")
 

@@ -41,9 +41,14 @@ import os
 import time
 import uuid
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, TypeVar
 
 from ._tasks import Outcome, SweepError, Task, TaskResult, execute
+
+if TYPE_CHECKING:
+    from ..core._typing import DaskClient, DaskCluster
+
+S = TypeVar("S")  #: the type of the data every task of a run shares
 
 __all__ = ["Engine", "LOCAL_WORKER_CONFIG", "require_sweep_extra"]
 
@@ -79,12 +84,12 @@ def require_sweep_extra(*modules: str) -> None:
                 from exc
 
 
-def _shared(value: Any) -> Any:
+def _shared(value: S) -> S:
     """The shared data of a sweep, as a task's result (Dask keeps and copies it)."""
     return value
 
 
-def _run(task: Task, fn: Callable[[Any, Task], TaskResult], shared: Any) -> Outcome:
+def _run(task: Task, fn: Callable[[S, Task], TaskResult], shared: S) -> Outcome:
     return execute(fn, shared, task)
 
 
@@ -151,12 +156,12 @@ class Engine:
         self.idle_timeout = idle_timeout
         self.start_timeout = start_timeout
         self.quiet = quiet
-        self._client: Any = None
-        self._cluster: Any = None
+        self._client: DaskClient | None = None
+        self._cluster: DaskCluster | None = None
 
     # -- life cycle -----------------------------------------------------------
     @property
-    def client(self) -> Any:
+    def client(self) -> DaskClient:
         """The ``distributed.Client`` (the cluster is started on first use)."""
         if self._client is None:
             self.start()
@@ -247,8 +252,8 @@ class Engine:
     # -- running --------------------------------------------------------------
     def map(
         self,
-        fn: Callable[[Any, Task], TaskResult],
-        shared: Any,
+        fn: Callable[[S, Task], TaskResult],
+        shared: S,
         tasks: Sequence[Task],
         *,
         on_outcome: Callable[[Outcome], None] | None = None,

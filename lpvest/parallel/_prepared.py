@@ -46,6 +46,6 @@ class Prepared:
     shared: Any
     metrics: tuple[str, ...]
     signals: Mapping[str, tuple[tuple[int, ...], tuple[str, ...]]] = field(default_factory=dict)
-    identity: Mapping[str, Any] = field(default_factory=dict)
+    identity: Mapping[str, object] = field(default_factory=dict)
     time: np.ndarray | None = None
     description: str = ""

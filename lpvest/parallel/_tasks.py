@@ -22,20 +22,24 @@ import socket
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
 from ..core._errors import LpvestError
 
 if TYPE_CHECKING:
+    from contextlib import AbstractContextManager
+
     from ._engine import Engine
+
+S = TypeVar("S")  #: the type of the data every task of a run shares
 
 __all__ = ["Task", "TaskResult", "Outcome", "SweepError", "execute", "map_tasks", "one_blas_thread", "task_seeds",
            "digest"]
 
 
-def digest(identity: Mapping[str, Any]) -> str:
+def digest(identity: Mapping[str, object]) -> str:
     """SHA-256 of a JSON-able identity (keys sorted).
 
     Parameters
@@ -178,7 +182,7 @@ def _blas_controller() -> Any:
     return ThreadpoolController()
 
 
-def one_blas_thread() -> Any:
+def one_blas_thread() -> AbstractContextManager[object]:
     """A context manager that runs BLAS on one thread, as on a Dask worker
     (whose nanny sets ``OMP/OPENBLAS/MKL_NUM_THREADS=1``; see :func:`execute`).
 
@@ -190,7 +194,7 @@ def one_blas_thread() -> Any:
     return _blas_controller().limit(limits=1, user_api="blas")
 
 
-def execute(fn: Callable[[Any, Task], TaskResult], shared: Any, task: Task) -> Outcome:
+def execute(fn: Callable[[S, Task], TaskResult], shared: S, task: Task) -> Outcome:
     """Run ``fn(shared, task)``; an exception becomes a failed :class:`Outcome`
     whose ``error`` is ``"ExceptionType: message"`` (one line).
 
@@ -231,9 +235,9 @@ def execute(fn: Callable[[Any, Task], TaskResult], shared: Any, task: Task) -> O
 
 
 def map_tasks(
-    fn: Callable[[Any, Task], TaskResult],
-    shared: Any,
-    points: Sequence[Mapping[str, Any] | Task],
+    fn: Callable[[S, Task], TaskResult],
+    shared: S,
+    points: Sequence[Mapping[str, object] | Task],
     *,
     engine: Engine | None = None,
     progress: bool = False,

@@ -15,12 +15,15 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..core._plotting import save_figure
 from ._sweepfile import Axis, SweepSpec
+
+if TYPE_CHECKING:
+    from ..core._typing import ArrowTable
 
 __all__ = ["plot_metrics", "metric_statistics"]
 
@@ -35,7 +38,7 @@ def _scalar(v: Any) -> float | None:
     return None
 
 
-def _label(v: Any) -> str:
+def _label(v: object) -> str:
     if isinstance(v, tuple):
         return "[" + ", ".join(f"{x:g}" for x in v) + "]"
     if isinstance(v, float):
@@ -43,7 +46,7 @@ def _label(v: Any) -> str:
     return str(v)
 
 
-def metric_statistics(summary: Any, spec: SweepSpec, metric: str) -> list[dict[str, Any]]:
+def metric_statistics(summary: ArrowTable, spec: SweepSpec, metric: str) -> list[dict[str, Any]]:
     """Per parameter point (in task order): the point, the number of finished
     seeds, and mean, std, min, max of ``metric`` over the successful ones."""
     rows = summary.to_pylist()
@@ -68,7 +71,7 @@ def _file_name(metric: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]", "_", metric) + ".png"
 
 
-def plot_metrics(summary: Any, spec: SweepSpec, metrics: Sequence[str], folder: str | Path) -> list[Path]:
+def plot_metrics(summary: ArrowTable, spec: SweepSpec, metrics: Sequence[str], folder: str | Path) -> list[Path]:
     """Write ``folder/<metric>.png`` for each metric; return the paths."""
     import matplotlib
 

@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..core._interrupt import exit_status, hold, holds, interruptible
 from ..parallel._engine import Engine
@@ -24,6 +24,12 @@ from ..parallel._tasks import Outcome, SweepError, digest, execute
 from ._store import FORMAT, SweepStore
 from ._studies import prepare
 from ._sweepfile import SweepSpec, load_sweep
+
+if TYPE_CHECKING:
+    import zarr
+
+    from ..core._typing import ArrowTable
+    from ..experiments._fmus import ExperimentFmus
 
 __all__ = ["run_sweep", "SweepResult", "SweepInterrupted"]
 
@@ -96,7 +102,7 @@ class SweepResult:
 
     out: Path
     spec: SweepSpec
-    summary: Any
+    summary: ArrowTable
     metrics: tuple[str, ...]
     n_tasks: int
     ran: int
@@ -114,7 +120,7 @@ class SweepResult:
         return [(r["task"], r["error"]) for r in self.summary.select(["task", "status", "error"]).to_pylist()
                 if r["status"] != "ok"]
 
-    def trajectories(self) -> Any:
+    def trajectories(self) -> zarr.Group | None:
         """The kept signals (a ``zarr.Group``: one array per signal, first axis the task), or None.
 
         Returns
@@ -193,7 +199,7 @@ class SweepResult:
         return "\n".join(lines)
 
 
-def _fmt(v: Any) -> str:
+def _fmt(v: object) -> str:
     if isinstance(v, tuple):
         return "[" + ", ".join(f"{x:g}" for x in v) + "]"
     return f"{v:g}" if isinstance(v, float) else str(v)
@@ -207,7 +213,7 @@ def run_sweep(
     scheduler: str | None = None,
     workers: int | None = None,
     engine: Engine | None = None,
-    fmus: str | Path | Any | None = None,
+    fmus: str | Path | ExperimentFmus | None = None,
     ship_fmus: bool = True,
     overwrite: bool = False,
     retry_failed: bool = False,

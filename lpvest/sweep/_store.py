@@ -35,13 +35,19 @@ import shutil
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..parallel._prepared import Prepared
 from ..parallel._tasks import Outcome, SweepError, Task
 from ._sweepfile import Axis, SweepSpec
+
+if TYPE_CHECKING:
+    import zarr
+    from numpy.typing import ArrayLike
+
+    from ..core._typing import ArrowObject, ArrowTable
 
 __all__ = ["SweepStore", "FORMAT"]
 
@@ -50,7 +56,7 @@ _FILES = ("sweep.json", "summary.parquet", "timing.parquet")
 _DIRS = ("parts", "trajectories.zarr", "figures")
 
 
-def _arrow_type(axis: Axis) -> Any:
+def _arrow_type(axis: Axis) -> ArrowObject:
     import pyarrow as pa
 
     kinds = {type(v) for v in axis.values}
@@ -65,7 +71,7 @@ def _arrow_type(axis: Axis) -> Any:
     return pa.list_(pa.float64())
 
 
-def _axis_value(axis: Axis, value: Any) -> Any:
+def _axis_value(axis: Axis, value: object) -> object:
     if isinstance(value, tuple):
         return [float(v) for v in value]
     if isinstance(value, int) and not isinstance(value, bool) and any(isinstance(v, float) for v in axis.values):
@@ -256,7 +262,7 @@ class SweepStore:
             for i in damaged:
                 del self.rows[i]
 
-    def _reset_chunk(self, array: Any, start: int, step: int) -> None:
+    def _reset_chunk(self, array: zarr.Array, start: int, step: int) -> None:
         """Delete the stored chunk (it reads as NaN again); the tasks it held are run again."""
         key = "/".join(["c", str(start // step), *(["0"] * (array.ndim - 1))])
         path = self.out / "trajectories.zarr" / array.path / Path(key)
@@ -287,7 +293,7 @@ class SweepStore:
             arr[:] = t
         self.group = group
 
-    def _write_json(self, data: Mapping[str, Any]) -> None:
+    def _write_json(self, data: Mapping[str, object]) -> None:
         path = self.out / "sweep.json"
         tmp = path.with_suffix(f".json.{os.getpid()}.tmp")
         tmp.write_text(json.dumps(data, indent=1, default=str) + "\n", encoding="utf-8")
@@ -339,12 +345,12 @@ class SweepStore:
         if self.group is not None and good:
             idx = np.array([o.index for o in good])
             for name, (shape, _) in self.prepared.signals.items():
-                rows = np.stack([np.asarray(o.result.signals[name], dtype=float).reshape(shape)  # type: ignore[union-attr]
+                rows = np.stack([np.asarray(o.result.signals[name], dtype=float).reshape(shape)  # type: ignore[union-attr]  # good: result not None
                                  for o in good])
                 array = self.group[name]
                 assert isinstance(array, zarr.Array)  # written by this store: one array per kept signal
                 array.oindex[(idx, *(slice(None),) * len(shape))] = rows
-        cols: dict[str, Any] = {
+        cols: dict[str, ArrowObject] = {
             "task": pa.array([o.index for o in batch], pa.int64()),
             "status": pa.array(["ok" if o.ok else "error" for o in batch], pa.string()),
             "error": pa.array([o.error for o in batch], pa.string()),
@@ -375,7 +381,7 @@ class SweepStore:
             self.rows[row["task"]] = row
         self._buffer.clear()
 
-    def summary_table(self) -> Any:
+    def summary_table(self) -> ArrowTable:
         """Every finished task in task order (see the module documentation)."""
         import pyarrow as pa
 
@@ -383,7 +389,7 @@ class SweepStore:
         done = sorted(self.rows)
         by_index = {t.index: t for t in self.tasks}
         tasks = [by_index[i] for i in done]
-        cols: dict[str, Any] = {"task": pa.array(done, pa.int64())}
+        cols: dict[str, ArrowObject] = {"task": pa.array(done, pa.int64())}
         for a in spec.axes:
             cols[a.name] = pa.array([_axis_value(a, t.point[a.name]) for t in tasks], _arrow_type(a))
         if spec.seeds is not None:
@@ -396,20 +402,20 @@ class SweepStore:
         cols["error"] = pa.array([self.rows[i]["error"] for i in done], pa.string())
         return pa.table(cols).replace_schema_metadata({"lpvest_metrics": json.dumps(self.metric_definitions())})
 
-    def metric_definitions(self) -> dict[str, dict[str, Any]]:
+    def metric_definitions(self) -> dict[str, dict[str, object]]:
         """Each metric column's definition, kept in the summary's schema
         metadata (``lpvest_metrics``, JSON): a co-simulation metric's kind, the
         recorded variables it reads (estimate, truth, ...) and its first row;
         an experiment's metric names the experiment that defines it."""
         spec = {m.name: m for m in self.spec.metrics}
-        out: dict[str, dict[str, Any]] = {}
+        out: dict[str, dict[str, object]] = {}
         for name in self.prepared.metrics:
             m = spec.get(name)
             out[name] = ({"kind": m.kind, **dict(m.variables), "start": m.start} if m is not None
                          else {"experiment": str(self.spec.experiment)})
         return out
 
-    def finish(self, *, complete: bool, seconds: float, engine: str) -> Any:
+    def finish(self, *, complete: bool, seconds: float, engine: str) -> ArrowTable:
         """Commit what is buffered; write ``summary.parquet``, ``timing.parquet``
         and ``sweep.json``; return the summary table."""
         import pyarrow as pa
@@ -452,7 +458,9 @@ def _sha256(path: Path) -> str:
         return hashlib.file_digest(f, "sha256").hexdigest()
 
 
-def _rows_sha256(signals: Mapping[str, Any], values: Mapping[str, Any], name: str) -> str:
+def _rows_sha256(
+    signals: Mapping[str, tuple[tuple[int, ...], tuple[str, ...]]], values: Mapping[str, ArrayLike], name: str
+) -> str:
     """SHA-256 of one task's values of the kept signal ``name`` (float64, little-endian, C order)."""
     import hashlib
 

@@ -41,6 +41,8 @@ from ..parallel._tasks import Task, TaskResult, digest
 from ._metrics import Metric, check as check_metric, compute as compute_metric, expand, select
 
 if TYPE_CHECKING:
+    from ..cosim._master import CoSimulation
+    from ..experiments._fmus import ExperimentFmus
     from ._sweepfile import SweepSpec
 
 __all__ = ["prepare", "CosimPayload", "run_cosim_task", "release_simulation"]
@@ -96,7 +98,7 @@ def _fmu_path(payload: CosimPayload, sha: str) -> Path:
     return path
 
 
-def _simulation(payload: CosimPayload) -> Any:
+def _simulation(payload: CosimPayload) -> CoSimulation:
     """This process's simulation of ``payload`` (built on first use)."""
     from ..cosim import Component, CoSimulation
 
@@ -247,7 +249,7 @@ def _prepare_cosim(spec: SweepSpec, *, ship_fmus: bool) -> Prepared:
                     f"{cosim.path.name}: {n} FMUs, {cosim.n_steps} steps of {cosim.step_size:g}")
 
 
-def prepare(spec: SweepSpec, *, fmus: Any = None, ship_fmus: bool = True) -> Prepared:
+def prepare(spec: SweepSpec, *, fmus: ExperimentFmus | str | Path | None = None, ship_fmus: bool = True) -> Prepared:
     """The :class:`~lpvest.parallel.Prepared` sweep of ``spec`` (FMUs read, set-up checked).
 
     ``fmus``: the experiments' FMU cache (an
@@ -257,4 +259,4 @@ def prepare(spec: SweepSpec, *, fmus: Any = None, ship_fmus: bool = True) -> Pre
     """
     if spec.cosim is not None:
         return _prepare_cosim(spec, ship_fmus=ship_fmus)
-    return study(spec.experiment).prepare(spec, fmus)  # type: ignore[arg-type]
+    return study(spec.experiment).prepare(spec, fmus)  # type: ignore[arg-type]  # set: cosim is None

@@ -218,8 +218,8 @@ class SweepSpec:
                 index = p_i * len(keys) + s_i
                 values = {}
                 if key is not None and names:
-                    spawn = key if self.seeds.common else index  # type: ignore[union-attr]
-                    values = task_seeds(self.seeds.root, spawn, names)  # type: ignore[union-attr]
+                    spawn = key if self.seeds.common else index  # type: ignore[union-attr]  # names: seeds set
+                    values = task_seeds(self.seeds.root, spawn, names)  # type: ignore[union-attr]  # names: seeds set
                 out.append(Task(index, point, key, values))
         return out
 
@@ -502,7 +502,7 @@ def sweep_spec(
     else:
         from ..experiments._studies import study
 
-        st = study(experiment)  # type: ignore[arg-type]
+        st = study(experiment)  # type: ignore[arg-type]  # a str: cosim is None here
         if "metrics" in top:
             metric_names = _names(r, top["metrics"], "metrics", dotted=False)
             for i, m in enumerate(metric_names):

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -33,6 +33,9 @@ from ..core._errors import ArgumentError, DimensionError, ExpressionError, Model
 from ..core._expressions import Expression, FormulaMatrix, FormulaVector
 from ..core._validation import as_vector, check_finite
 from ._text import number, time_value
+
+if TYPE_CHECKING:
+    from ..core._typing import ScipyObject
 
 __all__ = ["TimeFunction", "LTVStateSpace", "LTVInputOutput", "LTVTrajectory", "LTVSolution"]
 
@@ -635,9 +638,9 @@ class LTVSolution:
 
     def _restart(self, t0: float, x0: np.ndarray) -> None:
         self._anchor = (t0, x0)
-        self._solver: Any = None  # created at the first step
+        self._solver: ScipyObject = None  # created at the first step
         self._steps = 0
-        self._dense: Any = None  # the dense output of the current step, once asked for
+        self._dense: ScipyObject = None  # the dense output of the current step, once asked for
 
     @property
     def anchor(self) -> tuple[float, np.ndarray]:

@@ -81,7 +81,7 @@ class FactorError(NumericalError):
 class _Pivot(Exception):
     """Internal: pivot ``i`` (0-based) of the recurrence is ``s``, not positive and finite."""
 
-    def __init__(self, i: int, s: Any) -> None:
+    def __init__(self, i: int, s: float | np.ndarray) -> None:
         self.i = i
         self.s = s
 
@@ -96,7 +96,7 @@ def is_small(M: np.ndarray) -> bool:
 # the recurrences, once: entries are Python floats (one matrix) or arrays
 # holding that entry of every matrix of a stack
 # ---------------------------------------------------------------------------
-def _bad(s: Any) -> bool:
+def _bad(s: float | np.ndarray) -> bool:
     if isinstance(s, float):
         return not 0.0 < s < math.inf
     return not bool(np.all((s > 0.0) & (s < math.inf)))

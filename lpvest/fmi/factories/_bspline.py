@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -13,6 +13,9 @@ from ...core._errors import LpvestError, SamplingError
 from ...core._protocol import TimedComponent
 from ...estimators.bspline._model import KernelModel, UnknownConstant, UnknownSpline
 from ...estimators.bspline._observer import BSplineObserver
+
+if TYPE_CHECKING:
+    from ...systems._ltv import LTVInputOutput
 
 __all__ = ["build", "SampledObserver", "coefficient"]
 
@@ -96,9 +99,9 @@ class SampledObserver(TimedComponent):
 
 
 def build(
-    model: Any,
+    model: LTVInputOutput,
     *,
-    design: Any = None,
+    design: object = None,
     dt: float,
     window: float,
     hop: float,

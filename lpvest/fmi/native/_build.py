@@ -40,7 +40,7 @@ import tomllib
 import uuid
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from xml.etree.ElementTree import Element, SubElement
 
 from ..._version import __version__
@@ -58,6 +58,9 @@ from .._build import (
 )
 from .._parameters import SPEC_FILE, SPEC_FORMAT
 from ._export import NativeExportError, model_data_c, native_unsupported, parameter_entries, role_data
+
+if TYPE_CHECKING:
+    from .._slave import LpvestSlave
 
 __all__ = ["build_native_fmu", "RUNTIME_DIR", "runtime_files", "NATIVE_PLATFORMS", "CFLAGS", "LDFLAGS",
            "native_manifest_inputs", "compile_binary"]
@@ -182,7 +185,7 @@ def native_manifest_inputs(plan: FmuPlan, design: str | bytes | None = None) -> 
     }
 
 
-def _load_slave(plan: FmuPlan, resources: Path) -> Any:
+def _load_slave(plan: FmuPlan, resources: Path) -> LpvestSlave:
     """The role script's slave class from the installed lpvest, instantiated on ``resources``."""
     script = scripts_dir() / plan.script
     name = f"lpvest_native_role_{script.stem}"

@@ -674,7 +674,7 @@ def model_data_c(
     port_index: dict[tuple[str, str], int] = {}
     port_offset: dict[tuple[str, str], int] = {}
 
-    def ports(kind: str, items: Sequence[Any]) -> tuple[str, int]:
+    def ports(kind: str, items: Sequence[Port]) -> tuple[str, int]:
         inits, pos = [], 0
         for i, p in enumerate(items):
             port_index[(kind, p.name)] = i
