@@ -464,3 +464,26 @@ def test_sys_path_meta_path_and_modules_do_not_change_over_300_instances(fmus, t
     own = {m for m in added if m in (package, package + "_entry") or m.startswith(package + ".")}
     assert f"{package}._fmus.lpvest_estimator" in own
     assert {m for m in added - own if m.split(".")[0] not in allowed} == set()
+
+
+def test_a_build_in_the_process_of_a_live_fmu_of_the_same_bundle_leaves_it_working(fmus, tmp_path):
+    """Building an FMU instantiates its slave once in the building process and then unloads the
+    bundle's modules. When an FMU of the same bundle (the same sources, so the same package name)
+    was already running in that process, the build unloaded its modules too: its next fmi2Reset
+    (which runs the constructor, with its deferred imports, again) made second copies of lpvest's
+    classes and failed fatally ("AffineLPV is no model a streaming plant runs"). It surfaced as
+    in-process sweeps failing after another test built the same FMUs on the same xdist worker."""
+    result = _run(textwrap.dedent(f"""
+        import json
+        from tests.fmu_driver import Driver
+        from lpvest.fmi._build import build_fmu, plan_system
+
+        d = Driver({str(fmus["CoxTothTruncationPlant"])!r}, "live")
+        first = [d.initialize(), d.step(0.0, d.step_size)]
+        plan = next(p for p in plan_system("cox-toth-truncation")[0] if p.identifier == "CoxTothTruncationPlant")
+        build_fmu(plan, {str(tmp_path / "again")!r})
+        again = [d.status(d.fmu.reset), d.initialize(), d.step(0.0, d.step_size)]
+        print("RESULT" + json.dumps({{"first": first, "again": again, "errors": d.errors()}}))
+        d.free()
+    """), cwd=ROOT)
+    assert result == {"first": [0, 0], "again": [0, 0, 0], "errors": []}

@@ -775,7 +775,7 @@ def _instantiate(bundle: Bundle, staging: Path) -> LpvestSlave:
     spec = importlib.util.spec_from_file_location(bundle.entry, entry)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
-    path_before = list(sys.path)
+    path_before, meta_before, modules_before = list(sys.path), list(sys.meta_path), set(sys.modules)
     sys.path.insert(0, str(staging))
     try:
         spec.loader.exec_module(module)
@@ -784,10 +784,16 @@ def _instantiate(bundle: Bundle, staging: Path) -> LpvestSlave:
             raise BuildError(f"{entry.name} must expose exactly one slave class; found {len(classes)}")
         return classes[0](instance_name="lpvest-build", resources=str(staging))
     finally:
+        # unload what this call loaded, and only that: an FMU of the same bundle (the same package
+        # name: the same sources) loaded in this process before keeps its modules, else its next
+        # deferred import (fmi2Reset runs the constructor again) would load second copies of its
+        # classes beside the objects it holds
         sys.path[:] = path_before
-        sys.meta_path[:] = [f for f in sys.meta_path if getattr(f, "package", None) != bundle.package]
+        sys.meta_path[:] = meta_before
         for name in list(sys.modules):
-            if name in (bundle.package, bundle.entry) or name.startswith(bundle.package + "."):
+            if name not in modules_before and (
+                name in (bundle.package, bundle.entry) or name.startswith(bundle.package + ".")
+            ):
                 del sys.modules[name]
 
 
