@@ -109,12 +109,20 @@ def built_once(factory: pytest.TempPathFactory, name: str, build: Callable[[Path
     ``<the run's temporary folder>/<name>``, by the first worker that gets
     the file lock; the result is recorded next to it as JSON, and every other
     worker waits for the lock and reads the record. A build that raised records
-    nothing: the next worker builds again (and reports its own error)."""
-    if os.environ.get("PYTEST_XDIST_WORKER") is None:
+    nothing: the next worker builds again (and reports its own error).
+
+    ``$LPVEST_TEST_SHARED_DIR`` (set by ``./dev test`` for its two pytest runs,
+    the second under another BLAS kernel, on the same code) takes the place of
+    the run's folder: the second run reuses what the first built. An FMU's
+    build does not depend on the BLAS kernel; running it does, and that is what
+    the second run repeats."""
+    shared = os.environ.get("LPVEST_TEST_SHARED_DIR")
+    if not shared and os.environ.get("PYTEST_XDIST_WORKER") is None:
         return build(factory.mktemp(name))
     from filelock import FileLock
 
-    root = factory.getbasetemp().parent  # shared by the workers of one run
+    # the folder the workers of one run (or the runs of one ./dev test) share
+    root = Path(shared) if shared else factory.getbasetemp().parent
     record = root / f"{name}.json"
     with FileLock(root / f"{name}.lock"):
         if record.is_file():

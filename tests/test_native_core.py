@@ -272,3 +272,47 @@ def test_every_runtime_source_compiles_without_a_warning(target, tmp_path):
             proc = subprocess.run([*cmd, src, "-o", str(tmp_path / "x.o")], capture_output=True, text=True,
                                   cwd=RUNTIME_DIR, check=False)
             assert proc.returncode == 0 and "warning" not in proc.stderr, (cmd, src, proc.stderr)
+
+
+def test_the_runtime_sources_sit_in_one_folder_per_runtime_in_the_users_cache(tmp_path, monkeypatch):
+    """The folder zig compiles the runtime from is named by the runtime's digest
+    in ``$XDG_CACHE_HOME/lpvest/native-runtime`` (so zig's cache, which keys on
+    the sources' paths, serves later builds); it holds exactly the runtime's
+    files, a damaged one is replaced, and without a writable cache a temporary
+    folder of the process serves instead."""
+    from lpvest.fmi.native import _build as nb
+
+    files = nb.runtime_files()
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    digest = nb._runtime_digest()
+    folder = nb._runtime_sources(digest)
+    assert folder == tmp_path / "cache" / "lpvest" / "native-runtime" / digest[:32]
+    assert {f.name: f.read_bytes() for f in folder.iterdir()} == files
+    assert nb._runtime_sources(digest) == folder  # found again, not rewritten
+    assert [p.name for p in folder.parent.iterdir()] == [folder.name]  # nothing half-written left beside it
+
+    damaged = folder / sorted(n for n in files if n.endswith(".c"))[0]
+    damaged.write_bytes(b"int broken;\n")
+    (folder / "lpv.h").unlink()
+    assert nb._runtime_sources(digest) == folder
+    assert {f.name: f.read_bytes() for f in folder.iterdir()} == files
+    assert [p.name for p in folder.parent.iterdir()] == [folder.name]
+
+    blocked = tmp_path / "not-a-folder"
+    blocked.write_text("a file where the cache would go")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(blocked))
+    elsewhere = nb._runtime_sources(digest)
+    assert not elsewhere.is_relative_to(blocked) and {f.name: f.read_bytes() for f in elsewhere.iterdir()} == files
+
+
+def test_zig_is_called_as_the_ziglang_packages_program():
+    """What ``python -m ziglang`` runs, without a Python start per compiler call."""
+    import subprocess
+
+    from lpvest.fmi._build import zig_version
+    from lpvest.fmi.native import _build as nb
+
+    if zig_version() is None:
+        pytest.skip("needs ziglang (pip install 'lpvest[build]')")
+    proc = subprocess.run([nb._zig_program(), "version"], capture_output=True, text=True, check=True)
+    assert proc.stdout.strip() == zig_version()

@@ -1067,7 +1067,7 @@ def build_fmus(
     design_options : mapping of str to object, or None, optional
         Keyword arguments of the design functions of filters designed at
         build time (``epsilon``: design there instead of searching;
-        ``solver``).
+        ``solver``; ``n_grid``: the search's number of grid angles).
     backend : str, default "pythonfmu"
         ``"pythonfmu"`` or ``"native"``: every discrete-time role as C; the
         roles the native backend does not build (the continuous-time LTV

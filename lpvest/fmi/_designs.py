@@ -18,16 +18,19 @@ __all__ = ["hinf_pd", "hinf_robust"]
 
 
 def _best(model: PolytopicLPV | AffineLPV, kind: str, *, epsilon: float | None = None, solver: str = "AUTO",
-          progress: bool = False) -> str:
+          n_grid: int | None = None, progress: bool = False) -> str:
     """The design at ``epsilon``, or the best over every epsilon
-    (:func:`lpvest.design.search_epsilon`), as JSON. A model with general
-    noise is taken in its H-infinity setting."""
+    (:func:`lpvest.design.search_epsilon`, on its default grid or one of
+    ``n_grid`` angles), as JSON. A model with general noise is taken in its
+    H-infinity setting."""
     from ..design._program import design_hinf
     from ..design._search import search_epsilon
 
     if epsilon is not None:
         return design_hinf(model, epsilon=float(epsilon), kind=kind, solver=solver).to_json()
-    return search_epsilon(model, kind=kind, solver=solver, progress=progress).design.to_json()
+    if n_grid is None:
+        return search_epsilon(model, kind=kind, solver=solver, progress=progress).design.to_json()
+    return search_epsilon(model, kind=kind, solver=solver, progress=progress, n_grid=n_grid).design.to_json()
 
 
 def hinf_pd(model: PolytopicLPV | AffineLPV, **options: Any) -> str:

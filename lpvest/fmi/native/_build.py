@@ -12,7 +12,7 @@ What a native FMU holds:
   (C99; compile without floating-point contraction, ``-ffp-contract=off``, for
   random numbers bit for bit the library's);
 - ``binaries/linux64/<id>.so``, ``binaries/win64/<id>.dll``,
-  ``binaries/darwin64/<id>.dylib``: ``python -m ziglang cc`` (the ``build``
+  ``binaries/darwin64/<id>.dylib``: ``zig cc`` of the ``ziglang`` package (the ``build``
   extra, an exact version) at ``-O2``, the exported FMI functions only, linked
   against the C library alone (libc and libm on Linux, the C runtime and
   kernel32 on Windows, libSystem on macOS);
@@ -22,8 +22,10 @@ What a native FMU holds:
 
 The same inputs give a byte-identical ``.fmu``: zip entries as the Python
 builder writes them, the GUID derived from the manifest, zig's output a
-function of its version, the flags and the sources (compiled in a temporary
-folder under fixed relative names, without debug information).
+function of its version, the flags and the sources (compiled under fixed
+relative names, without debug information; the runtime's sources from a folder
+of the user's cache named by their digest, so that zig's own cache serves them
+to every later build).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ import atexit
 import functools
 import importlib.util
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -102,25 +105,85 @@ def _zig() -> str:
     return version
 
 
+@functools.cache
+def _zig_program() -> str:
+    """The ``zig`` program of the ``ziglang`` package (what ``python -m ziglang``
+    runs): called directly, without a Python start per compiler call."""
+    spec = importlib.util.find_spec("ziglang")
+    name = "zig.exe" if sys.platform == "win32" else "zig"
+    program = None if spec is None or spec.origin is None else Path(spec.origin).parent / name
+    if program is None or not program.is_file():
+        raise BuildError("the native backend compiles with zig: pip install 'lpvest[build]' (the ziglang package)")
+    return str(program)
+
+
 def _run_zig(args: list[str], cwd: Path, what: str) -> None:
-    cmd = [sys.executable, "-m", "ziglang", "cc", *args]
-    proc = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, check=False)
+    proc = subprocess.run([_zig_program(), "cc", *args], cwd=cwd, capture_output=True, text=True, check=False)
     if proc.returncode != 0:
         raise BuildError(f"{what} failed (zig cc {' '.join(args)}):\n{proc.stderr}")
+
+
+def _runtime_sources(digest: str) -> Path:
+    """A folder holding the runtime's sources, named by their ``digest``, in the
+    user's cache (``$XDG_CACHE_HOME/lpvest/native-runtime``); a temporary one
+    if that cannot be written.
+
+    zig keeps what it compiled in its own cache, keyed by the sources' contents,
+    the flags and the sources' absolute paths: a path that stays the same for the
+    same runtime lets every later build (another process, another run) reuse the
+    objects instead of compiling the runtime again for each platform (about 17 s
+    of CPU). The folder is written under a temporary name and renamed into place,
+    so that no process reads a half-written one; a damaged one (a file changed or
+    missing) is replaced."""
+    files = runtime_files()
+
+    def holds_runtime(folder: Path) -> bool:
+        return all((folder / n).is_file() and (folder / n).read_bytes() == t for n, t in files.items())
+
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "lpvest" / "native-runtime"
+    folder = base / digest[:32]
+    try:
+        if holds_runtime(folder):
+            return folder
+        base.mkdir(parents=True, exist_ok=True)
+        part = Path(tempfile.mkdtemp(prefix=f".{digest[:32]}-", dir=base))
+        for name, text in files.items():
+            (part / name).write_bytes(text)
+        if folder.exists():  # damaged: set aside, then removed
+            aside = Path(tempfile.mkdtemp(prefix=".damaged-", dir=base))
+            folder.replace(aside / "runtime")
+            shutil.rmtree(aside, ignore_errors=True)
+        try:
+            part.replace(folder)
+        except OSError:  # put in place meanwhile by another process
+            shutil.rmtree(part, ignore_errors=True)
+            if not holds_runtime(folder):
+                raise
+        return folder
+    except OSError:  # no writable cache: this process's own folder
+        folder = Path(tempfile.mkdtemp(prefix="lpvest-runtime-"))
+        atexit.register(shutil.rmtree, folder, True)
+        for name, text in files.items():
+            (folder / name).write_bytes(text)
+        return folder
 
 
 @functools.cache
 def _runtime_objects(platform: str, digest: str) -> Path:
     """The runtime compiled for ``platform`` (object files in a folder kept for
     the process): the same for every FMU, so each build compiles only its model
-    data and links. ``digest`` (the runtime's) keys the cache."""
+    data and links. ``digest`` (the runtime's) keys the cache; the sources are
+    compiled where :func:`_runtime_sources` keeps them (under fixed relative
+    names, as before), so zig's cache serves a runtime it compiled before."""
     target, _, cflags, _ = NATIVE_PLATFORMS[platform]
+    sources = _runtime_sources(digest)
     folder = Path(tempfile.mkdtemp(prefix=f"lpvest-runtime-{platform}-"))
     atexit.register(shutil.rmtree, folder, True)
     for name, text in runtime_files().items():
-        (folder / name).write_bytes(text)
+        if name.endswith(".h"):  # the model data includes them from here (-I)
+            (folder / name).write_bytes(text)
     for name in sorted(n for n in runtime_files() if n.endswith(".c")):
-        _run_zig(["-target", target, *CFLAGS, *cflags, "-c", name, "-o", name[:-2] + ".o"], folder,
+        _run_zig(["-target", target, *CFLAGS, *cflags, "-c", name, "-o", str(folder / (name[:-2] + ".o"))], sources,
                  f"compiling the native runtime ({name}) for {platform}")
     return folder
 
