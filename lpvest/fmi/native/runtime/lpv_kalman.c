@@ -44,12 +44,12 @@ static dims dims_of(const lpv_kalman_data* d) {
 
 /* work space of one covariance step: doubles (work_size) and ints (work_ints) */
 typedef struct {
-    double *EP, *V, *gains, *Ci, *L, *Z, *MV, *PP, *col;
+    double *EP, *EPT, *V, *gains, *Ci, *L, *Z, *MV, *PP, *col;
     int* nnz; /* per row of E = F[:, :n]: k when it is e_k (a row of the identity), else < 0 */
 } work;
 
 static size_t work_size(dims q) {
-    return (size_t)q.R * q.n + (size_t)q.R * q.R + (size_t)q.n2 * q.m + 2 * (size_t)q.m * q.m + (size_t)q.m * (q.n2 + q.m + 1) +
+    return 2 * (size_t)q.R * q.n + (size_t)q.R * q.R + (size_t)q.n2 * q.m + 2 * (size_t)q.m * q.m + (size_t)q.m * (q.n2 + q.m + 1) +
            (size_t)q.n2 * q.R + (size_t)q.n2 * q.n2 + (size_t)q.R + 8;
 }
 
@@ -61,6 +61,7 @@ static size_t work_ints(dims q) { return (size_t)q.R; }
 static work work_at(double* base, int* ibase, dims q) {
     work w;
     w.EP = base, base += (size_t)q.R * q.n;
+    w.EPT = base, base += (size_t)q.R * q.n;
     w.V = base, base += (size_t)q.R * q.R;
     w.gains = base, base += (size_t)q.n2 * q.m;
     w.Ci = base, base += (size_t)q.m * q.m;
@@ -99,34 +100,40 @@ static int covariance_step(dims q, const double* P, const double* F, long t, con
             }
         w->nnz[i] = unit; /* k when row i of E is e_k, else < 0 */
     }
+    /* EP row by row, EP_i = E_i0 P_0 + E_i1 P_1 + ... (rows of P); then V column by column over its
+     * rows at once, V_.j = EP_.0 E_j0 + EP_.1 E_j1 + ... (columns of EP, kept as the rows of EPT): the
+     * same terms in the same order per entry, in loops the compiler vectorises */
     for (int i = 0; i < R; i++) {
         const double* Fi = F + i * q.C;
         double* EPi = w->EP + i * n;
         if (w->nnz[i] >= 0) {
             memcpy(EPi, P + w->nnz[i] * n, sizeof(double) * (size_t)n);
+        } else {
+            for (int j = 0; j < n; j++) EPi[j] = Fi[0] * P[j];
+            for (int k = 1; k < n; k++) {
+                const double e = Fi[k];
+                const double* Pk = P + k * n;
+                for (int j = 0; j < n; j++) EPi[j] = EPi[j] + e * Pk[j];
+            }
+        }
+        for (int j = 0; j < n; j++) w->EPT[j * R + i] = EPi[j];
+    }
+    for (int j = 0; j < R; j++) {
+        const double* Fj = F + j * q.C;
+        const double* W = F + wcol + j; /* W_ij = W[i * C] */
+        double* col = w->col;
+        if (w->nnz[j] >= 0) {
+            const double* EPk = w->EPT + w->nnz[j] * R;
+            for (int i = 0; i < R; i++) w->V[i * R + j] = EPk[i] + W[i * q.C];
             continue;
         }
-        for (int j = 0; j < n; j++) {
-            double acc = Fi[0] * P[j];
-            for (int k = 1; k < n; k++) acc += Fi[k] * P[k * n + j];
-            EPi[j] = acc;
+        for (int i = 0; i < R; i++) col[i] = w->EPT[i] * Fj[0];
+        for (int k = 1; k < n; k++) {
+            const double e = Fj[k];
+            const double* EPk = w->EPT + k * R;
+            for (int i = 0; i < R; i++) col[i] = col[i] + EPk[i] * e;
         }
-    }
-    for (int i = 0; i < R; i++) {
-        const double* EPi = w->EP + i * n;
-        const double* Wi = F + i * q.C + wcol;
-        double* Vi = w->V + i * R;
-        for (int j = 0; j < R; j++) {
-            const double* Fj = F + j * q.C;
-            double acc;
-            if (w->nnz[j] >= 0) {
-                acc = EPi[w->nnz[j]];
-            } else {
-                acc = EPi[0] * Fj[0];
-                for (int k = 1; k < n; k++) acc += EPi[k] * Fj[k];
-            }
-            Vi[j] = acc + Wi[j];
-        }
+        for (int i = 0; i < R; i++) w->V[i * R + j] = col[i] + W[i * q.C];
     }
     const double* V = w->V;
     char a[48];
