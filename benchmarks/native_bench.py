@@ -5,7 +5,8 @@
 - :func:`step_times`: one native FMU stepped in a bare C host
   (``benchmarks/native_step.c``, compiled here with ``cc -O2``; no Python in
   that process): nanoseconds per sample of ``fmi2SetReal`` (every input) +
-  ``fmi2DoStep`` + ``fmi2GetReal`` (every output), and of ``fmi2DoStep`` alone.
+  ``fmi2DoStep`` + ``fmi2GetReal`` (every output), and of ``fmi2DoStep`` alone;
+  :func:`host_run`: the same and the checksum of the outputs.
 """
 
 from __future__ import annotations
@@ -52,6 +53,13 @@ def step_times(fmu: Path, steps: int = 100_000, repeat: int = 5) -> tuple[float,
     doStep alone) for ``fmu`` in the C host, best of ``repeat``. Every input
     follows ``offset + amp sin(omega k)``: inside its declared range when it
     has one (the scheduling), ``sin(0.1 k)`` otherwise."""
+    full, step, _ = host_run(fmu, steps, repeat)
+    return full, step
+
+
+def host_run(fmu: Path, steps: int = 100_000, repeat: int = 5) -> tuple[float, float, str]:
+    """:func:`step_times` and the host's checksum of the outputs (the sum of
+    every output over the set+step+get loop, as printed: 17 digits)."""
     from fmpy import read_model_description
 
     md = read_model_description(str(fmu))
@@ -75,5 +83,5 @@ def step_times(fmu: Path, steps: int = 100_000, repeat: int = 5) -> tuple[float,
                *args]
         out = subprocess.run(cmd, check=True, capture_output=True, text=True, env={}).stdout
     line = next(x for x in out.splitlines() if x.startswith("BENCH "))
-    full, step = (float(x) for x in line.split()[1:3])
-    return full, step
+    full, step, checksum = line.split()[1:4]
+    return float(full), float(step), checksum

@@ -42,28 +42,35 @@ static dims dims_of(const lpv_kalman_data* d) {
     return q;
 }
 
-/* work space of one covariance step */
+/* work space of one covariance step: doubles (work_size) and ints (work_ints) */
 typedef struct {
-    double *EP, *V, *gains, *Ci, *L, *Z, *M, *MV, *PP, *col;
+    double *EP, *EPT, *V, *gains, *Ci, *L, *Z, *MV, *PP, *col;
+    int* nnz; /* per row of E = F[:, :n]: k when it is e_k (a row of the identity), else < 0 */
 } work;
 
 static size_t work_size(dims q) {
-    return (size_t)q.R * q.n + (size_t)q.R * q.R + (size_t)q.n2 * q.m + 2 * (size_t)q.m * q.m + (size_t)q.m * (q.n2 + q.m + 1) +
-           2 * (size_t)q.n2 * q.R + (size_t)q.n2 * q.n2 + (size_t)q.R + 8;
+    return 2 * (size_t)q.R * q.n + (size_t)q.R * q.R + (size_t)q.n2 * q.m + 2 * (size_t)q.m * q.m + (size_t)q.m * (q.n2 + q.m + 1) +
+           (size_t)q.n2 * q.R + (size_t)q.n2 * q.n2 + (size_t)q.R + 8;
 }
 
-static work work_at(double* base, dims q) {
+static size_t work_ints(dims q) { return (size_t)q.R; }
+
+/* the ints before the work space's: the pivots of the steady state's solves */
+#define PIVOTS(q) ((size_t)((q).n + (q).m + 1))
+
+static work work_at(double* base, int* ibase, dims q) {
     work w;
     w.EP = base, base += (size_t)q.R * q.n;
+    w.EPT = base, base += (size_t)q.R * q.n;
     w.V = base, base += (size_t)q.R * q.R;
     w.gains = base, base += (size_t)q.n2 * q.m;
     w.Ci = base, base += (size_t)q.m * q.m;
     w.L = base, base += (size_t)q.m * q.m;
     w.Z = base, base += (size_t)q.m * (q.n2 + q.m + 1);
-    w.M = base, base += (size_t)q.n2 * q.R;
     w.MV = base, base += (size_t)q.n2 * q.R;
     w.PP = base, base += (size_t)q.n2 * q.n2;
     w.col = base;
+    w.nnz = ibase;
     return w;
 }
 
@@ -76,19 +83,58 @@ static void singular(lpv_msg* err, long t, const char* detail) {
 static int covariance_step(dims q, const double* P, const double* F, long t, const double* rhs, double* whitened,
                            double* logdet, work* w, lpv_msg* err) {
     const int n = q.n, m = q.m, R = q.R, n2 = q.n2, wcol = n + q.nu;
-    /* E = F[:, :n] (rows of F, stride C); EP = E @ P; V = EP @ E^T + F[:, wcol:] */
-    for (int i = 0; i < R; i++)
-        for (int j = 0; j < n; j++) {
-            double acc = 0.0;
-            for (int k = 0; k < n; k++) acc = k == 0 ? F[i * q.C] * P[j] : acc + F[i * q.C + k] * P[k * n + j];
-            w->EP[i * n + j] = acc;
+    /* E = F[:, :n] (rows of F, stride C); EP = E @ P; V = EP @ E^T + F[:, wcol:], each entry summed over
+     * k = 0, 1, ... in order. A row of E that is a row of the identity (the rows [I 0] of the layout) is
+     * not multiplied out: its sums are one term, 1 x, and the other terms 0 y add nothing to it (finite
+     * numbers), so E_k P = P_k and (EP)_i E_k^T = (EP)_ik are the same numbers as the full sums. */
+    for (int i = 0; i < R; i++) {
+        const double* Fi = F + i * q.C;
+        int unit = -1;
+        for (int k = 0; k < n; k++)
+            if (Fi[k] != 0.0) {
+                if (Fi[k] != 1.0 || unit >= 0) {
+                    unit = -2;
+                    break;
+                }
+                unit = k;
+            }
+        w->nnz[i] = unit; /* k when row i of E is e_k, else < 0 */
+    }
+    /* EP row by row, EP_i = E_i0 P_0 + E_i1 P_1 + ... (rows of P); then V column by column over its
+     * rows at once, V_.j = EP_.0 E_j0 + EP_.1 E_j1 + ... (columns of EP, kept as the rows of EPT): the
+     * same terms in the same order per entry, in loops the compiler vectorises */
+    for (int i = 0; i < R; i++) {
+        const double* Fi = F + i * q.C;
+        double* EPi = w->EP + i * n;
+        if (w->nnz[i] >= 0) {
+            memcpy(EPi, P + w->nnz[i] * n, sizeof(double) * (size_t)n);
+        } else {
+            for (int j = 0; j < n; j++) EPi[j] = Fi[0] * P[j];
+            for (int k = 1; k < n; k++) {
+                const double e = Fi[k];
+                const double* Pk = P + k * n;
+                for (int j = 0; j < n; j++) EPi[j] = EPi[j] + e * Pk[j];
+            }
         }
-    for (int i = 0; i < R; i++)
-        for (int j = 0; j < R; j++) {
-            double acc = 0.0;
-            for (int k = 0; k < n; k++) acc = k == 0 ? w->EP[i * n] * F[j * q.C] : acc + w->EP[i * n + k] * F[j * q.C + k];
-            w->V[i * R + j] = acc + F[i * q.C + wcol + j];
+        for (int j = 0; j < n; j++) w->EPT[j * R + i] = EPi[j];
+    }
+    for (int j = 0; j < R; j++) {
+        const double* Fj = F + j * q.C;
+        const double* W = F + wcol + j; /* W_ij = W[i * C] */
+        double* col = w->col;
+        if (w->nnz[j] >= 0) {
+            const double* EPk = w->EPT + w->nnz[j] * R;
+            for (int i = 0; i < R; i++) w->V[i * R + j] = EPk[i] + W[i * q.C];
+            continue;
         }
+        for (int i = 0; i < R; i++) col[i] = w->EPT[i] * Fj[0];
+        for (int k = 1; k < n; k++) {
+            const double e = Fj[k];
+            const double* EPk = w->EPT + k * R;
+            for (int i = 0; i < R; i++) col[i] = col[i] + EPk[i] * e;
+        }
+        for (int i = 0; i < R; i++) w->V[i * R + j] = col[i] + W[i * q.C];
+    }
     const double* V = w->V;
     char a[48];
     if (m == 1) {
@@ -130,11 +176,27 @@ static int covariance_step(dims q, const double* P, const double* F, long t, con
             }
         if (rhs) lpv_matvec(m, m, w->Ci, rhs, whitened);
     }
-    /* M = [I_n2, -gains] (n2 x R); PP = (M V) M^T; PP = (PP + PP^T) / 2 */
-    for (int i = 0; i < n2; i++)
-        for (int j = 0; j < R; j++) w->M[i * R + j] = j < n2 ? (i == j ? 1.0 : 0.0) : -w->gains[i * m + (j - n2)];
-    lpv_matmul(n2, R, R, w->M, V, w->MV);
-    lpv_matmul_bt(n2, R, n2, w->MV, w->M, w->PP);
+    /* M = [I_n2, -gains] (n2 x R); PP = (M V) M^T; PP = (PP + PP^T) / 2. With the identity block the
+     * sums over the inner index are V_ij (or (MV)_ij) plus the terms of the gains, in the same order:
+     * MV_ij = V_ij + (-g_i0) V_(n2)j + ..., PP_ij = MV_ij + MV_i(n2) (-g_j0) + ... */
+    for (int i = 0; i < n2; i++) {
+        const double* gi = w->gains + i * m;
+        double* MVi = w->MV + i * R;
+        for (int j = 0; j < R; j++) {
+            double acc = V[i * R + j];
+            for (int k = 0; k < m; k++) acc += -gi[k] * V[(n2 + k) * R + j];
+            MVi[j] = acc;
+        }
+    }
+    for (int i = 0; i < n2; i++) {
+        const double* MVi = w->MV + i * R;
+        for (int j = 0; j < n2; j++) {
+            const double* gj = w->gains + j * m;
+            double acc = MVi[j];
+            for (int k = 0; k < m; k++) acc += MVi[n2 + k] * -gj[k];
+            w->PP[i * n2 + j] = acc;
+        }
+    }
     for (int i = 0; i < n2; i++)
         for (int j = 0; j < i; j++) {
             double s = w->PP[i * n2 + j] + w->PP[j * n2 + i];
@@ -153,10 +215,13 @@ static void step_matrices(const lpv_kalman_data* d, const double* packed, const 
     zbuf[0] = 1.0;
     for (int i = 0; i < k; i++) zbuf[1 + i] = psi[i];
     for (int r = 0; r < d->n_z - 1 - k; r++) zbuf[1 + k + r] = psi[d->pairs[2 * r] - 1] * psi[d->pairs[2 * r + 1] - 1];
-    for (int j = 0; j < fsize; j++) {
-        double acc = zbuf[0] * packed[j];
-        for (int i = 1; i < d->n_z; i++) acc += zbuf[i] * packed[(size_t)i * fsize + j];
-        F[j] = acc;
+    /* F[j] = z_0 packed_0[j] + z_1 packed_1[j] + ... in that order; term by term over the whole
+     * matrix, the loops the compiler vectorises */
+    for (int j = 0; j < fsize; j++) F[j] = zbuf[0] * packed[j];
+    for (int i = 1; i < d->n_z; i++) {
+        const double zi = zbuf[i];
+        const double* row = packed + (size_t)i * fsize;
+        for (int j = 0; j < fsize; j++) F[j] = F[j] + zi * row[j];
     }
 }
 
@@ -336,7 +401,7 @@ static int steady_state(lpv_comp* c, const double* p, double* out, lpv_msg* err)
         return 1;
     }
     /* P_filt = covariance_step(P_inf, F(p)).joint[n:, n:] */
-    work w = work_at(c->tmp + t.w, q);
+    work w = work_at(c->tmp + t.w, c->itmp + PIVOTS(q), q);
     double logdet;
     if (covariance_step(q, X, F, -1, NULL, NULL, &logdet, &w, err)) return 1;
     for (int i = 0; i < n; i++)
@@ -385,7 +450,7 @@ static int sizes(const lpv_model* m, const lpv_values* v, const double* mp, lpv_
     out->n_st = s.window + window;
     out->n_words = 0;
     out->n_tmp = t.w + work_size(q) + 16 * (size_t)(q.n + q.m + 2) * (q.n + q.m + 2);
-    out->n_itmp = (size_t)(q.n + q.m + 1);
+    out->n_itmp = PIVOTS(q) + work_ints(q);
     return 0;
 }
 
@@ -460,7 +525,7 @@ static int truncated_prior(lpv_comp* c, double* P, lpv_msg* err) {
     long now = (long)c->st[s.t];
     int k = (int)c->st[s.count], head = (int)c->st[s.head];
     const double* window = c->st + s.window;
-    work w = work_at(c->tmp + t.w, q);
+    work w = work_at(c->tmp + t.w, c->itmp + PIVOTS(q), q);
     int first;
     if (now <= tau) {
         memcpy(P, c->cfg + l.P0, sizeof(double) * (size_t)n * n);
@@ -566,7 +631,7 @@ static int evaluate(lpv_comp* c, const double* in, double* out, lpv_msg* err) {
     double* xi = c->tmp + t.xi;
     for (int i = 0; i < m; i++) xi[i] = in[d->in_y + i] - h[n2 + i];
     double* white = c->tmp + t.white;
-    work w = work_at(c->tmp + t.w, q);
+    work w = work_at(c->tmp + t.w, c->itmp + PIVOTS(q), q);
     double logdet = 0.0;
     if (covariance_step(q, P, F, (long)c->st[s.t], xi, white, &logdet, &w, err)) return 1;
     double* xs = c->tmp + t.xs;
@@ -606,7 +671,7 @@ static int commit(lpv_comp* c, double t_end, lpv_msg* err) {
     st_layout s = st_of(d, trunc);
     tmp_layout t = tmp_of(d);
     const int n = q.n;
-    work w = work_at(c->tmp + t.w, q);
+    work w = work_at(c->tmp + t.w, c->itmp + PIVOTS(q), q);
     memcpy(c->st + s.x, c->tmp + t.xs, sizeof(double) * (size_t)n);
     if (!trunc) {
         for (int i = 0; i < n; i++)
