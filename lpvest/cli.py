@@ -326,7 +326,8 @@ def cmd_build(args: argparse.Namespace) -> int:
     with warnings.catch_warnings(record=True) as caught:  # what the FMUs lack: printed as notes below
         warnings.simplefilter("always", BuildWarning)
         results, notes = build_fmus(sources, out, roles=roles, designs=designs, design_options=options,
-                                    progress=None if args.quiet else _echo, backend=args.backend)
+                                    progress=None if args.quiet else _echo, backend=args.backend,
+                                    bar=not args.quiet)
     for w in caught:
         if issubclass(w.category, BuildWarning):
             notes.append(str(w.message))
