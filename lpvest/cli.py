@@ -231,7 +231,7 @@ def _backend_argument(p: argparse.ArgumentParser, what: str) -> None:
 def cmd_reproduce(args: argparse.Namespace) -> int:
     from .experiments import registry
     from .experiments._fmus import ExperimentFmus
-    from .experiments._reproduce import reproduce, reproduce_all
+    from .experiments._reproduce import ReproduceInterrupted, reproduce, reproduce_all
 
     experiments = registry()
     if args.name in (None, "list"):
@@ -252,12 +252,16 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         print(text, flush=True)
 
     t = time.perf_counter()
-    if args.name == "all":
-        runs = reproduce_all(out, fmus=fmus, reduced=args.quick, echo=echo, workers=args.workers,
+    try:
+        if args.name == "all":
+            runs = reproduce_all(out, fmus=fmus, reduced=args.quick, echo=echo, workers=args.workers,
+                                 backend=args.backend)
+        else:
+            runs = reproduce([args.name], out, fmus=fmus, reduced=args.quick, echo=echo, workers=args.workers,
                              backend=args.backend)
-    else:
-        runs = reproduce([args.name], out, fmus=fmus, reduced=args.quick, echo=echo, workers=args.workers,
-                         backend=args.backend)
+    except ReproduceInterrupted as exc:  # what finished, what the cache kept, how to go on: one line
+        print(f"lpvest: interrupted ({exc.name}): {exc}", file=sys.stderr)
+        return exit_status(exc)
     seconds = time.perf_counter() - t
     print(fmus.summary())
     if len(runs) > 1:
@@ -723,6 +727,8 @@ _KEPT: dict[str, Callable[[argparse.Namespace], str]] = {
                        "designs)",
     "cosim": lambda a: f"the co-simulation stopped, no result was written to {a.out}; run the same command again",
     "sweep": lambda a: "the tasks finished so far are written; run the same sweep again to resume",
+    "reproduce": lambda a: "the FMUs built so far are kept in the FMU cache; run the same command again: it "
+                           "reuses them and runs the experiments again",
     "simulate": lambda a: "run the same command again",
     "systems": lambda a: "nothing was written",
     "validate": lambda a: "nothing was written",
