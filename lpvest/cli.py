@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import difflib
 import os
 import re
 import sys
@@ -176,7 +177,13 @@ def cmd_systems(args: argparse.Namespace) -> int:
     words = list(args.words)
     if words[0] == "show":  # `lpvest systems show NAME` and `lpvest systems NAME` are the same
         words = words[1:]
-    if len(words) != 1:
+    if len(words) == 2 and difflib.get_close_matches(words[0], ["show"], cutoff=0.6):  # `systems shwo NAME`
+        raise ArgumentError(f"systems: {abbreviate(words[0], 30)} is not a word of `lpvest systems` (did you mean "
+                            f"`lpvest systems show {shorten(words[1], 60)}`?)")
+    if len(words) > 1:
+        raise ArgumentError(f"systems: expected one example name or model file, found {len(words)}: "
+                            f"{shorten(' '.join(words), 60)} (one system at a time)")
+    if not words:
         raise ArgumentError("systems: expected one example name or model file, e.g. `lpvest systems show "
                             "peixoto-ex1` (or nothing, to list the examples)")
     system = load_system(words[0], parameters=_parse_params(args.param))
@@ -243,9 +250,10 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     if args.name != "all" and args.name not in experiments:
         raise ArgumentError(f"no experiment {abbreviate(args.name, 30)} (known: {', '.join(experiments) or 'none'}; "
                             "or all, list)")
+    cache = _out_dir(args.fmus, "--fmus") if args.fmus else None  # a file there: said now, not after a build
     out = _out_dir(args.out)
     default = "fmu-cache" if args.backend == "pythonfmu" else f"fmu-cache-{args.backend}"
-    fmus = ExperimentFmus(Path(args.fmus) if args.fmus else out / default,
+    fmus = ExperimentFmus(cache or out / default,
                           progress=lambda msg: print(msg, file=sys.stderr, flush=True), backend=args.backend)
 
     def echo(text: str) -> None:
@@ -296,6 +304,9 @@ def _design_args(items: Sequence[str] | None) -> dict[str, Path]:
         role, sep, file = item.partition("=")
         if not sep:
             file, role = item, ""
+        if not file.strip():
+            raise ArgumentError(f"--design {abbreviate(item, 40)}: expected [ROLE=]FILE.json, found no file name"
+                                + (f" after {role}=" if role else ""))
         path = Path(file)
         if not role:
             role = "HinfPD" if HinfDesign.from_json(path).kind == KIND_PD else "HinfRobust"
@@ -311,9 +322,9 @@ def cmd_build(args: argparse.Namespace) -> int:
     from .design._program import check_solver
     from .fmi._build import BuildWarning, build_fmus, format_table, known_roles
 
+    designs = _design_args(args.design)  # the arguments first: a mistake there creates no folder
     out = _out_dir(args.out)
     sources = args.model or None
-    designs = _design_args(args.design)
     if designs and (not sources or len(sources) != 1):
         raise LpvestError("--design needs exactly one --model: the model file (or example) the design is for")
     roles = None
@@ -476,9 +487,37 @@ class _Parser(argparse.ArgumentParser):
                        "go after it)")
         return super().parse_known_args(args, namespace)
 
+    def parse_args(self, args: Any = None, namespace: Any = None) -> Any:
+        # what argparse calls "unrecognized arguments: --stpes 10 (see lpvest --help)" is the
+        # command's mistake: said by the command, naming the word, with the nearest option
+        parsed, extras = self.parse_known_args(args, namespace)
+        if extras:
+            command = self._command_parser(parsed)
+            command.error(_unrecognized(command, extras[0]))
+        return parsed
+
+    def _command_parser(self, parsed: argparse.Namespace) -> argparse.ArgumentParser:
+        """The parser of the command ``parsed`` names (this one if none)."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                chosen: argparse.ArgumentParser = action.choices.get(getattr(parsed, action.dest, ""), self)
+                return chosen
+        return self
+
     def error(self, message: str) -> NoReturn:
         text = " ".join(message.split())
         self.exit(2, f"{self.prog}: error: {shorten(text, 240)} (see {self.prog} --help)\n")
+
+
+def _unrecognized(parser: argparse.ArgumentParser, word: str) -> str:
+    """An argument ``parser`` does not take, said as what it is (an option, or
+    a word too many), with the nearest option of the command when one is near."""
+    if not word.startswith("-") or _NEGATIVE_NUMBER.match(word):
+        return f"unexpected argument {abbreviate(word, 30)} ({parser.prog} takes no more)"
+    name = word.split("=", 1)[0]
+    options = {o[2:]: o for o in parser._option_string_actions if o.startswith("--")}
+    near = difflib.get_close_matches(name.lstrip("-"), options, n=1, cutoff=0.75)  # a typo, not any option
+    return f"unrecognized option {abbreviate(name, 30)}" + (f" (did you mean {options[near[0]]}?)" if near else "")
 
 
 #: What argparse should take for a negative number (not an option).
