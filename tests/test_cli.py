@@ -258,3 +258,17 @@ def test_a_mistaken_command_line_is_named_in_the_commands_own_terms(tmp_path, ar
     assert (proc.returncode, proc.stdout, proc.stderr) == (2, "", message + "\n")
     assert not (tmp_path / "out").exists()  # refused before anything was made
 
+
+@pytest.mark.parametrize("folder", [False, True])
+def test_a_sweep_file_naming_a_missing_cosim_file_says_which_file_and_where(tmp_path, folder):
+    """Before: "lpvest: error: nosuch.toml: cannot be read: No such file or directory",
+    neither the sweep file that names it nor where it was looked for."""
+    spec = tmp_path / "specs" / "s.toml"
+    spec.parent.mkdir()
+    spec.write_text('title = "t"\ncosim = "nosuch.toml"\n')
+    if folder:
+        (spec.parent / "nosuch.toml").mkdir()
+    proc = _run("sweep", "specs/s.toml", "--workers", "0", "--out", "out", cwd=tmp_path)
+    expected = ("specs/nosuch.toml is a folder, not a co-simulation file" if folder
+                else "no co-simulation file specs/nosuch.toml (a path relative to this sweep file)")
+    assert (proc.returncode, proc.stdout, proc.stderr) == (2, "", f"lpvest: error: specs/s.toml: cosim: {expected}\n")
