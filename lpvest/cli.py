@@ -5,7 +5,7 @@
     lpvest systems                          the example systems, one line each
     lpvest systems show NAME|FILE.toml      dimensions, matrices, scheduling map
     lpvest simulate NAME|FILE.toml          simulate one model: CSV, plot, summary
-    lpvest reproduce NAME|all --out DIR [--backend native]
+    lpvest reproduce NAME|all --out DIR [--backend native] [--quiet]
                                             reproduce paper examples through FMUs (all: + DIR/report.md)
     lpvest regress [--update]               FMU co-simulations against tests/data/reference
     lpvest build [--out DIR] [--model FILE.toml ...] [--kinds ROLES] [--design [ROLE=]FILE.json]
@@ -253,8 +253,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     cache = _out_dir(args.fmus, "--fmus") if args.fmus else None  # a file there: said now, not after a build
     out = _out_dir(args.out)
     default = "fmu-cache" if args.backend == "pythonfmu" else f"fmu-cache-{args.backend}"
-    fmus = ExperimentFmus(cache or out / default,
-                          progress=lambda msg: print(msg, file=sys.stderr, flush=True), backend=args.backend)
+    fmus = ExperimentFmus(cache or out / default, progress=None if args.quiet else _echo, backend=args.backend)
 
     def echo(text: str) -> None:
         print(text, flush=True)
@@ -263,10 +262,10 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     try:
         if args.name == "all":
             runs = reproduce_all(out, fmus=fmus, reduced=args.quick, echo=echo, workers=args.workers,
-                                 backend=args.backend)
+                                 backend=args.backend, progress=False if args.quiet else None)
         else:
             runs = reproduce([args.name], out, fmus=fmus, reduced=args.quick, echo=echo, workers=args.workers,
-                             backend=args.backend)
+                             backend=args.backend, progress=False if args.quiet else None)
     except ReproduceInterrupted as exc:  # what finished, what the cache kept, how to go on: one line
         print(f"lpvest: interrupted ({exc.name}): {exc}", file=sys.stderr)
         return exit_status(exc)
@@ -632,6 +631,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "processes (default: one per core); 0: one after another in this process. The numbers "
                         "are the same either way")
     _backend_argument(p, "the FMUs' backend; native FMUs go to OUT/fmu-cache-native by default")
+    p.add_argument("--quiet", action="store_true",
+                   help="no FMU build lines or progress bars (tables, results and errors only)")
     p.set_defaults(func=cmd_reproduce)
 
     from .experiments._references import add_arguments as regress_arguments

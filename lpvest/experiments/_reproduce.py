@@ -229,8 +229,8 @@ def reproduce_task(shared: _Shared, task: Task) -> TaskResult:
 class _Reporter:
     """Writes and prints each experiment when it is complete; keeps the runs."""
 
-    def __init__(self, out: Path, reduced: bool, say: Callable[[str], None]) -> None:
-        self.out, self.reduced, self.say = out, reduced, say
+    def __init__(self, out: Path, reduced: bool, say: Callable[[str], None], progress: bool | None = None) -> None:
+        self.out, self.reduced, self.say, self.progress = out, reduced, say, progress
         self.runs: dict[str, ExperimentRun] = {}
 
     def options(self, exp: Experiment) -> dict:
@@ -261,7 +261,7 @@ def _in_process(groups: list[list[Experiment]], cache: ExperimentFmus, rep: _Rep
             folder = rep.out / exp.name
             t = time.perf_counter()
             with one_blas_thread():
-                result = exp.run(folder, fmus=cache, **rep.options(exp))
+                result = exp.run(folder, fmus=cache, progress=rep.progress, **rep.options(exp))
             rep.done(exp, result, time.perf_counter() - t, header=False)
 
 
@@ -352,6 +352,7 @@ def reproduce(
     echo: Callable[[str], None] | None = None,
     backend: str | None = None,
     workers: int | None = None,
+    progress: bool | None = None,
 ) -> list[ExperimentRun]:
     """Run the experiments ``names`` into ``out/<name>/``.
 
@@ -376,6 +377,10 @@ def reproduce(
         Dask worker processes (default: one per core, :func:`default_workers`);
         ``0``: every experiment in this process, one after another. The
         numbers are the same either way.
+    progress : bool or None, default None
+        The progress bars of experiments run in this process
+        (:func:`~lpvest.experiments.show_progress`; None: on a terminal);
+        tasks on workers never show any.
 
     Returns
     -------
@@ -404,7 +409,7 @@ def reproduce(
     if unknown:
         raise LpvestError(f"no experiment {abbreviate(unknown[0], 30)} (known: {', '.join(experiments) or 'none'})")
     cache = as_experiment_fmus(fmus, backend=backend)
-    rep = _Reporter(Path(out), reduced, echo or (lambda _text: None))
+    rep = _Reporter(Path(out), reduced, echo or (lambda _text: None), progress)
     groups = _groups([experiments[n] for n in names])
     parallel = n_workers > 0 and (len(groups) > 1 or any(g[0].split is not None for g in groups))
     try:
@@ -427,6 +432,7 @@ def reproduce_all(
     echo: Callable[[str], None] | None = None,
     backend: str | None = None,
     workers: int | None = None,
+    progress: bool | None = None,
 ) -> list[ExperimentRun]:
     """Every registered experiment (:func:`reproduce`), then ``out/report.md``
     (:func:`lpvest.experiments._report.write_report`).
@@ -448,6 +454,8 @@ def reproduce_all(
         given cache's, else ``"pythonfmu"``).
     workers : int or None, default None
         Dask worker processes, as in :func:`reproduce`.
+    progress : bool or None, default None
+        Progress bars, as in :func:`reproduce`.
 
     Returns
     -------
@@ -474,7 +482,7 @@ def reproduce_all(
     t = time.perf_counter()
     try:
         runs = reproduce(list(registry()), out, fmus=cache, reduced=reduced, echo=echo, backend=backend,
-                         workers=workers)
+                         workers=workers, progress=progress)
     except ReproduceInterrupted as exc:
         raise exc.with_report() from None
     path = write_report(runs, out, fmus=cache, seconds=time.perf_counter() - t, reduced=reduced)
