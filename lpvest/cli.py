@@ -5,7 +5,7 @@
     lpvest systems                          the example systems, one line each
     lpvest systems show NAME|FILE.toml      dimensions, matrices, scheduling map
     lpvest simulate NAME|FILE.toml          simulate one model: CSV, plot, summary
-    lpvest reproduce NAME|all --out DIR [--backend native]
+    lpvest reproduce NAME|all --out DIR [--backend native] [--quiet]
                                             reproduce paper examples through FMUs (all: + DIR/report.md)
     lpvest regress [--update]               FMU co-simulations against tests/data/reference
     lpvest build [--out DIR] [--model FILE.toml ...] [--kinds ROLES] [--design [ROLE=]FILE.json]
@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import difflib
 import os
 import re
 import sys
@@ -176,7 +177,13 @@ def cmd_systems(args: argparse.Namespace) -> int:
     words = list(args.words)
     if words[0] == "show":  # `lpvest systems show NAME` and `lpvest systems NAME` are the same
         words = words[1:]
-    if len(words) != 1:
+    if len(words) == 2 and difflib.get_close_matches(words[0], ["show"], cutoff=0.6):  # `systems shwo NAME`
+        raise ArgumentError(f"systems: {abbreviate(words[0], 30)} is not a word of `lpvest systems` (did you mean "
+                            f"`lpvest systems show {shorten(words[1], 60)}`?)")
+    if len(words) > 1:
+        raise ArgumentError(f"systems: expected one example name or model file, found {len(words)}: "
+                            f"{shorten(' '.join(words), 60)} (one system at a time)")
+    if not words:
         raise ArgumentError("systems: expected one example name or model file, e.g. `lpvest systems show "
                             "peixoto-ex1` (or nothing, to list the examples)")
     system = load_system(words[0], parameters=_parse_params(args.param))
@@ -231,7 +238,7 @@ def _backend_argument(p: argparse.ArgumentParser, what: str) -> None:
 def cmd_reproduce(args: argparse.Namespace) -> int:
     from .experiments import registry
     from .experiments._fmus import ExperimentFmus
-    from .experiments._reproduce import reproduce, reproduce_all
+    from .experiments._reproduce import ReproduceInterrupted, reproduce, reproduce_all
 
     experiments = registry()
     if args.name in (None, "list"):
@@ -243,21 +250,25 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     if args.name != "all" and args.name not in experiments:
         raise ArgumentError(f"no experiment {abbreviate(args.name, 30)} (known: {', '.join(experiments) or 'none'}; "
                             "or all, list)")
+    cache = _out_dir(args.fmus, "--fmus") if args.fmus else None  # a file there: said now, not after a build
     out = _out_dir(args.out)
     default = "fmu-cache" if args.backend == "pythonfmu" else f"fmu-cache-{args.backend}"
-    fmus = ExperimentFmus(Path(args.fmus) if args.fmus else out / default,
-                          progress=lambda msg: print(msg, file=sys.stderr, flush=True), backend=args.backend)
+    fmus = ExperimentFmus(cache or out / default, progress=None if args.quiet else _echo, backend=args.backend)
 
     def echo(text: str) -> None:
         print(text, flush=True)
 
     t = time.perf_counter()
-    if args.name == "all":
-        runs = reproduce_all(out, fmus=fmus, reduced=args.quick, echo=echo, workers=args.workers,
-                             backend=args.backend)
-    else:
-        runs = reproduce([args.name], out, fmus=fmus, reduced=args.quick, echo=echo, workers=args.workers,
-                         backend=args.backend)
+    try:
+        if args.name == "all":
+            runs = reproduce_all(out, fmus=fmus, reduced=args.quick, echo=echo, workers=args.workers,
+                                 backend=args.backend, progress=False if args.quiet else None)
+        else:
+            runs = reproduce([args.name], out, fmus=fmus, reduced=args.quick, echo=echo, workers=args.workers,
+                             backend=args.backend, progress=False if args.quiet else None)
+    except ReproduceInterrupted as exc:  # what finished, what the cache kept, how to go on: one line
+        print(f"lpvest: interrupted ({exc.name}): {exc}", file=sys.stderr)
+        return exit_status(exc)
     seconds = time.perf_counter() - t
     print(fmus.summary())
     if len(runs) > 1:
@@ -292,6 +303,9 @@ def _design_args(items: Sequence[str] | None) -> dict[str, Path]:
         role, sep, file = item.partition("=")
         if not sep:
             file, role = item, ""
+        if not file.strip():
+            raise ArgumentError(f"--design {abbreviate(item, 40)}: expected [ROLE=]FILE.json, found no file name"
+                                + (f" after {role}=" if role else ""))
         path = Path(file)
         if not role:
             role = "HinfPD" if HinfDesign.from_json(path).kind == KIND_PD else "HinfRobust"
@@ -307,9 +321,9 @@ def cmd_build(args: argparse.Namespace) -> int:
     from .design._program import check_solver
     from .fmi._build import BuildWarning, build_fmus, format_table, known_roles
 
+    designs = _design_args(args.design)  # the arguments first: a mistake there creates no folder
     out = _out_dir(args.out)
     sources = args.model or None
-    designs = _design_args(args.design)
     if designs and (not sources or len(sources) != 1):
         raise LpvestError("--design needs exactly one --model: the model file (or example) the design is for")
     roles = None
@@ -326,7 +340,8 @@ def cmd_build(args: argparse.Namespace) -> int:
     with warnings.catch_warnings(record=True) as caught:  # what the FMUs lack: printed as notes below
         warnings.simplefilter("always", BuildWarning)
         results, notes = build_fmus(sources, out, roles=roles, designs=designs, design_options=options,
-                                    progress=None if args.quiet else _echo, backend=args.backend)
+                                    progress=None if args.quiet else _echo, backend=args.backend,
+                                    bar=not args.quiet)
     for w in caught:
         if issubclass(w.category, BuildWarning):
             notes.append(str(w.message))
@@ -471,9 +486,37 @@ class _Parser(argparse.ArgumentParser):
                        "go after it)")
         return super().parse_known_args(args, namespace)
 
+    def parse_args(self, args: Any = None, namespace: Any = None) -> Any:
+        # what argparse calls "unrecognized arguments: --stpes 10 (see lpvest --help)" is the
+        # command's mistake: said by the command, naming the word, with the nearest option
+        parsed, extras = self.parse_known_args(args, namespace)
+        if extras:
+            command = self._command_parser(parsed)
+            command.error(_unrecognized(command, extras[0]))
+        return parsed
+
+    def _command_parser(self, parsed: argparse.Namespace) -> argparse.ArgumentParser:
+        """The parser of the command ``parsed`` names (this one if none)."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                chosen: argparse.ArgumentParser = action.choices.get(getattr(parsed, action.dest, ""), self)
+                return chosen
+        return self
+
     def error(self, message: str) -> NoReturn:
         text = " ".join(message.split())
         self.exit(2, f"{self.prog}: error: {shorten(text, 240)} (see {self.prog} --help)\n")
+
+
+def _unrecognized(parser: argparse.ArgumentParser, word: str) -> str:
+    """An argument ``parser`` does not take, said as what it is (an option, or
+    a word too many), with the nearest option of the command when one is near."""
+    if not word.startswith("-") or _NEGATIVE_NUMBER.match(word):
+        return f"unexpected argument {abbreviate(word, 30)} ({parser.prog} takes no more)"
+    name = word.split("=", 1)[0]
+    options = {o[2:]: o for o in parser._option_string_actions if o.startswith("--")}
+    near = difflib.get_close_matches(name.lstrip("-"), options, n=1, cutoff=0.75)  # a typo, not any option
+    return f"unrecognized option {abbreviate(name, 30)}" + (f" (did you mean {options[near[0]]}?)" if near else "")
 
 
 #: What argparse should take for a negative number (not an option).
@@ -588,6 +631,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "processes (default: one per core); 0: one after another in this process. The numbers "
                         "are the same either way")
     _backend_argument(p, "the FMUs' backend; native FMUs go to OUT/fmu-cache-native by default")
+    p.add_argument("--quiet", action="store_true",
+                   help="no FMU build lines or progress bars (tables, results and errors only)")
     p.set_defaults(func=cmd_reproduce)
 
     from .experiments._references import add_arguments as regress_arguments
@@ -722,6 +767,8 @@ _KEPT: dict[str, Callable[[argparse.Namespace], str]] = {
                        "designs)",
     "cosim": lambda a: f"the co-simulation stopped, no result was written to {a.out}; run the same command again",
     "sweep": lambda a: "the tasks finished so far are written; run the same sweep again to resume",
+    "reproduce": lambda a: "the FMUs built so far are kept in the FMU cache; run the same command again: it "
+                           "reuses them and runs the experiments again",
     "simulate": lambda a: "run the same command again",
     "systems": lambda a: "nothing was written",
     "validate": lambda a: "nothing was written",

@@ -220,3 +220,55 @@ def test_a_design_file_for_another_plant_is_refused_before_any_fmu_is_built(tmp_
     assert proc.stderr.startswith("lpvest: error: models/designs/peixoto-ex1.HinfPD.json: designed for a plant"), \
         proc.stderr
     assert not list(out.glob("*.fmu"))  # refused first: not after the plant, scheduler, source, filters
+
+
+# -- issue 21: four more messages that left a new user guessing (each: before -> after) ----------------
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        # before: "lpvest: error: unrecognized arguments: --stpes 10 (see lpvest --help)", the wrong command's help
+        (["simulate", "peixoto-ex1", "--stpes", "10"],
+         "lpvest simulate: error: unrecognized option '--stpes' (did you mean --steps?) (see lpvest simulate --help)"),
+        (["design", "peixoto-ex1", "--out", "OUT/d.json", "--epsilno", "3"],
+         "lpvest design: error: unrecognized option '--epsilno' (did you mean --epsilon?) (see lpvest design --help)"),
+        (["simulate", "peixoto-ex1", "--bogus=3"],  # nothing near: no guess
+         "lpvest simulate: error: unrecognized option '--bogus' (see lpvest simulate --help)"),
+        (["simulate", "peixoto-ex1", "peixoto-ex2"],
+         "lpvest simulate: error: unexpected argument 'peixoto-ex2' (lpvest simulate takes no more) "
+         "(see lpvest simulate --help)"),
+        # before: "lpvest: error: .: cannot be read: Is a directory"
+        (["build", "--model", "peixoto-ex1", "--design", "HinfPD=", "--out", "OUT"],
+         "lpvest: error: --design 'HinfPD=': expected [ROLE=]FILE.json, found no file name after HinfPD="),
+        # before: "building PeixotoEx1Scheduler into README.md" then "lpvest: error: File exists: README.md"
+        (["reproduce", "peixoto-fig1", "--fmus", "README.md", "--out", "OUT"],
+         "lpvest: error: --fmus README.md: cannot create the output folder (README.md is a file, not a folder)"),
+        # before: "lpvest: error: systems: expected one example name or model file, e.g. `lpvest systems show
+        # peixoto-ex1` (or nothing, to list the examples)": the user had given one, after a misspelt "show"
+        (["systems", "shwo", "peixoto-ex1"],
+         "lpvest: error: systems: 'shwo' is not a word of `lpvest systems` (did you mean "
+         "`lpvest systems show peixoto-ex1`?)"),
+        (["systems", "peixoto-ex1", "peixoto-ex2"],
+         "lpvest: error: systems: expected one example name or model file, found 2: peixoto-ex1 peixoto-ex2 "
+         "(one system at a time)"),
+    ],
+)
+def test_a_mistaken_command_line_is_named_in_the_commands_own_terms(tmp_path, argv, message):
+    root = str(Path(__file__).resolve().parent.parent)
+    proc = _run(*[a.replace("OUT", str(tmp_path / "out")) for a in argv], cwd=root)
+    assert (proc.returncode, proc.stdout, proc.stderr) == (2, "", message + "\n")
+    assert not (tmp_path / "out").exists()  # refused before anything was made
+
+
+@pytest.mark.parametrize("folder", [False, True])
+def test_a_sweep_file_naming_a_missing_cosim_file_says_which_file_and_where(tmp_path, folder):
+    """Before: "lpvest: error: nosuch.toml: cannot be read: No such file or directory",
+    neither the sweep file that names it nor where it was looked for."""
+    spec = tmp_path / "specs" / "s.toml"
+    spec.parent.mkdir()
+    spec.write_text('title = "t"\ncosim = "nosuch.toml"\n')
+    if folder:
+        (spec.parent / "nosuch.toml").mkdir()
+    proc = _run("sweep", "specs/s.toml", "--workers", "0", "--out", "out", cwd=tmp_path)
+    expected = ("specs/nosuch.toml is a folder, not a co-simulation file" if folder
+                else "no co-simulation file specs/nosuch.toml (a path relative to this sweep file)")
+    assert (proc.returncode, proc.stdout, proc.stderr) == (2, "", f"lpvest: error: specs/s.toml: cosim: {expected}\n")

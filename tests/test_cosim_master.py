@@ -6,6 +6,7 @@ the master over real FMUs."""
 from __future__ import annotations
 
 import re
+import sys
 
 import numpy as np
 import pytest
@@ -483,3 +484,18 @@ def test_a_discard_from_a_component_that_does_not_say_why_and_on_discard_error(f
     assert len(res) == 4
     with pytest.raises(CoSimulationError, match=r"^component mute: doStep at t = 0.3 returned discard \("):
         simulate(comps, ["src.y -> mute.u"], step_size=0.1, n_steps=5, on_discard="error")
+
+
+def test_a_long_run_on_a_terminal_of_40_columns_shows_a_bar_that_keeps_its_count(fmus, monkeypatch):
+    """More than 20,000 steps and stderr a terminal: the master's bar, by
+    default; 40 columns wide, each frame keeps n/20001 (tests/test_progress.py)."""
+    from tests.test_progress import _read_all, _terminal, assert_bars_keep_their_count
+
+    controller, terminal = _terminal(40)
+    with open(terminal, "w", encoding="utf-8") as stream:
+        monkeypatch.setattr(sys, "stderr", stream)
+        res = simulate([Component("src", fmus["src"], {"k": 2.0})], [], step_size=1.0, n_steps=20_001)
+        monkeypatch.setattr(sys, "stderr", sys.__stderr__)
+    bars = assert_bars_keep_their_count(_read_all(controller), ("co-simulation",), 40)
+    assert re.search(r"\b0/20001\b", bars[0]) and re.search(r"\b20001/20001\b", bars[-1]), bars
+    assert len(res) == 20_002

@@ -169,3 +169,39 @@ def test_a_sweep_interrupted_while_finishing_is_not_complete_and_a_rerun_draws_t
     assert json.loads((out / "sweep.json").read_text())["complete"] is True
     assert sorted(p.name for p in (out / "figures").iterdir()) == ["loglik.png", "peak.png", "rms.png",
                                                                    "trace_P.png"]
+
+
+# ---------------------------------------------------------------------------
+# reproduce
+# ---------------------------------------------------------------------------
+def _reproduce(experiment_fmus, out, *names):
+    return _lpvest("reproduce", *names, "--quick", "--workers", "0", "--out", str(out), "--fmus",
+                   str(experiment_fmus.directory))
+
+
+def test_reproduce_interrupted_after_an_experiment_keeps_its_results_and_says_a_rerun_redoes_them(
+        experiment_fmus, tmp_path):
+    out = tmp_path / "out"
+    res = interrupt_at(_reproduce(experiment_fmus, out, "all"), "experiment-written", tmp_path)
+    assert res.returncode == 130, res.stderr
+    assert _one_line(res.stderr) == (
+        f"lpvest: interrupted (SIGINT): kept the results of 1 of 8 experiment(s) (cox-toth-example1: "
+        f"{out}/NAME/results.json); report.md was not written; the FMU cache {experiment_fmus.directory} keeps "
+        "every FMU built so far; run the same command again: it reuses those FMUs and runs the experiments "
+        "again (the finished ones too)")
+    assert json.loads((out / "cox-toth-example1" / "results.json").read_text())["fmu_cosimulation"]["ok"] is True
+    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*results.json*")) == [
+        "cox-toth-example1/results.json"]  # no other experiment's, no half-written one
+    assert not (out / "report.md").exists()
+
+
+def test_reproduce_stopped_by_sigterm_inside_an_fmu_keeps_no_results(experiment_fmus, tmp_path):
+    out = tmp_path / "out"
+    res = interrupt_at(_reproduce(experiment_fmus, out, "cox-toth-example1"), "fmu-step", tmp_path,
+                       signum=signal.SIGTERM)
+    assert res.returncode == 143, res.stderr
+    line = _one_line(res.stderr)
+    assert line.startswith("lpvest: interrupted (SIGTERM): none of the 1 experiment(s) finished; the FMU cache "), \
+        line
+    assert "component" not in line and "fatal" not in line, line
+    assert not list(out.rglob("*results.json*"))

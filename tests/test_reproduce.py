@@ -143,7 +143,7 @@ def test_unknown_fmu(tmp_path):
 def test_disagreement_gives_exit_status_1(monkeypatch, tmp_path, capsys):
     import lpvest.experiments as experiments
 
-    def run(out_dir, *, fmus):
+    def run(out_dir, *, fmus, progress=None):
         fmu = FmuRun("fake", ("X",), (Agreement.of("y", [1.0], [1.5]),))
         return ExperimentResult("fake", "table", {"n": 1}, (), (), fmu)
 
@@ -154,6 +154,22 @@ def test_disagreement_gives_exit_status_1(monkeypatch, tmp_path, capsys):
     assert "FMU results disagree with the library in: fake" in captured.err
     assert main(["reproduce", "nothing", "--out", str(tmp_path)]) == 2
     assert "no experiment 'nothing'" in capsys.readouterr().err
+
+
+def test_quiet_reproduce_asks_its_experiments_for_no_progress_bars(monkeypatch, tmp_path, capsys):
+    import lpvest.experiments as experiments
+
+    asked = []
+
+    def run(out_dir, *, fmus, progress=None):
+        asked.append(progress)
+        return ExperimentResult("fake", "table", {"n": 1}, (), (), None)
+
+    monkeypatch.setattr(experiments, "registry", lambda: {"fake": Experiment("fake", "a fake", run)})
+    assert main(["reproduce", "fake", "--out", str(tmp_path), "--workers", "0", "--quiet"]) == 0
+    assert main(["reproduce", "fake", "--out", str(tmp_path), "--workers", "0"]) == 0
+    assert asked == [False, None]  # None: the experiment's own rule, bars on a terminal only
+    assert capsys.readouterr().err == ""
 
 
 def _without_times(value):

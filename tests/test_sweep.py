@@ -553,3 +553,16 @@ def test_the_example_sweep_file_loads(fmus):
     spec = load_sweep(ROOT / "examples" / "sweep_kalman.toml", fmu_dir=fmus.out)
     assert spec.n_tasks == 400 and len(spec.tasks()) == 400
     assert [a.name for a in spec.axes] == ["truncated.tau"] and spec.cosim.n_steps == 200
+
+
+@pytest.mark.parametrize("columns", [80, 40])
+def test_the_sweep_bar_keeps_its_count_in_a_terminal_of_80_or_40_columns(fmus, tmp_path, columns):
+    from tests.test_progress import assert_bars_keep_their_count, run_in_terminal
+
+    spec = _write(tmp_path / "spec", fmus, n=3, name="kalman-seeds.toml")
+    status, shown, stdout = run_in_terminal(["sweep", str(spec), "--out", str(tmp_path / "out"), "--workers", "0",
+                                             "--no-plot"], columns, tmp_path)
+    assert status == 0, shown
+    bars = assert_bars_keep_their_count(shown, ("sweep kalman-seeds",), columns)
+    assert re.search(r"\b0/3\b", bars[0]) and re.search(r"\b3/3\b", bars[-1]), bars
+    assert "ran 3 task(s) in " in stdout, stdout

@@ -165,9 +165,9 @@ def truncation_errors(
         P = restart_covariance(sms.window(0, T - 1).readable(), P_start)
         ks = range(min(tau_max, T - 2) + 1)
         if progress:
-            from tqdm import tqdm
+            from ..core._progress import progress_bar
 
-            ks = tqdm(ks, desc="truncation depth", unit="tau", leave=False)
+            ks = progress_bar(ks, desc="truncation depth", unit="tau", show=True, leave=False)
         for k in ks:
             t0 = 1 + k  # times t0..T-1 are covered
             cs = covariance_step(P, sms.window(t0, T))

@@ -1,7 +1,7 @@
 """The foundation every other package builds on: errors, validation, small
 linear algebra, the one TOML reader, the random generator, the streaming
-protocol, formulas, scheduling spaces, signals, interruption handling and
-figure output.
+protocol, formulas, scheduling spaces, signals, interruption handling,
+progress bars and figure output.
 
 Layer 0 of :doc:`the architecture <../docs/architecture>`: nothing here
 imports another lpvest package. Everything imports only numpy and the

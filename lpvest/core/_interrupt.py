@@ -27,7 +27,9 @@ one). A test starts the command, waits for the line (an event, not a delay),
 sends the signal and checks what the command did. Moments: ``solve`` (an LMI
 solve has started, on its worker thread), ``fmu-step`` (inside an lpvest FMU's
 ``fmi2DoStep``), ``sweep-outcome`` (a sweep has written its first finished
-task), ``sweep-finish`` (every task is written; figures are next).
+task), ``sweep-finish`` (every task is written; figures are next),
+``experiment-written`` (``lpvest reproduce`` has written an experiment's
+``results.json``; the next one, or the report, follows).
 """
 
 from __future__ import annotations

@@ -849,9 +849,9 @@ class CoSimulation:
         show = progress if progress is not None else n_steps > 20_000 and sys.stderr.isatty()
         bar = None
         if show:
-            from tqdm import tqdm
+            from ..core._progress import progress_bar
 
-            bar = tqdm(total=n_steps, unit="step", desc="co-simulation")
+            bar = progress_bar(desc="co-simulation", total=n_steps, unit="step", show=True)
         exchange = self._exchange
         last = n_steps  # the last row: n_steps, or the step a component discarded
         try:

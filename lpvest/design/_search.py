@@ -270,7 +270,7 @@ def search_epsilon(
         raise LMIInfeasibleError(infeasible_message(plant, prog, "every epsilon", unstable), status="infeasible",
                                  detail=unstable)
     points: dict[float, DesignAttempt] = {}
-    bar = _progress_bar(progress, f"epsilon search ({prog.kind}, {prog.solver})", n_grid)
+    bar = _progress_bar(progress, n_grid)
 
     def evaluate(phi: float) -> float:
         key = canonical_phi(phi)
@@ -280,8 +280,8 @@ def search_epsilon(
                 best = min(p.gamma for p in points.values())
                 if bar.n >= bar.total:  # the grid is done: each refinement step adds one
                     bar.total = bar.n + 1
-                    bar.set_description_str(f"epsilon search ({prog.kind}, {prog.solver}), refining", refresh=False)
-                bar.set_postfix_str(f"best gamma {best:.6g}", refresh=False)
+                    bar.set_description_str("epsilon refine", refresh=False)
+                bar.set_postfix_str(f"{prog.solver}, best gamma {best:.6g}", refresh=False)
                 bar.update(1)
         return points[key].gamma
 
@@ -291,17 +291,16 @@ def search_epsilon(
         return _search(plant, prog, evaluate, points, n_grid, n_refine, xatol)
 
 
-def _progress_bar(progress: bool, desc: str, total: int) -> Any:
+def _progress_bar(progress: bool, total: int) -> Any:
     """A bar of the designs solved, out of ``total`` (the grid; a refinement
     raises it by one a step), with its ETA; it stays when done. Only on a
-    terminal: never carriage returns into a redirected log."""
-    import sys
+    terminal: never carriage returns into a redirected log; its count shows
+    at any width (:func:`lpvest.core._progress.progress_bar`)."""
+    from ..core._progress import on_terminal, progress_bar
 
-    if not progress or not sys.stderr.isatty():
+    if not progress or not on_terminal():
         return None
-    from tqdm import tqdm
-
-    return tqdm(desc=desc, total=total, unit="design", leave=True)
+    return progress_bar(desc="epsilon search", total=total, unit="design")
 
 
 def _search(

@@ -50,6 +50,7 @@ __all__ = [
     "CoSimSpec",
     "ExperimentFmus",
     "ExperimentRun",
+    "ReproduceInterrupted",
     "reproduce",
     "reproduce_all",
     "ExperimentStudy",
@@ -253,7 +254,9 @@ def write_results(result: ExperimentResult, out_dir: Path) -> Path:
     data = dict(result.results)
     if result.fmu is not None:
         data["fmu_cosimulation"] = result.fmu.to_json()
-    path.write_text(json.dumps(_jsonable(data), indent=2) + "\n", encoding="utf-8")
+    partial = path.with_name(".results.json.part")  # whole or not at all: an interruption leaves no half file
+    partial.write_text(json.dumps(_jsonable(data), indent=2) + "\n", encoding="utf-8")
+    partial.replace(path)
     return path
 
 # the FMU cache and the runner, defined on top of the classes above
@@ -264,6 +267,7 @@ from ._fmus import (  # noqa: E402 - defined on top of the classes above
 )
 from ._reproduce import (  # noqa: E402 - defined on top of the classes above
     ExperimentRun as ExperimentRun,
+    ReproduceInterrupted as ReproduceInterrupted,
     reproduce as reproduce,
     reproduce_all as reproduce_all,
 )

@@ -47,6 +47,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..core._errors import ArgumentError, LpvestError, abbreviate
+from ..core._interrupt import Interrupted, exit_status, hold
 from ..parallel._tasks import Outcome, SweepError, Task, TaskResult, one_blas_thread
 from . import Experiment, ExperimentResult, Split, write_results
 from ._fmus import ExperimentFmus, as_experiment_fmus
@@ -54,7 +55,7 @@ from ._fmus import ExperimentFmus, as_experiment_fmus
 if TYPE_CHECKING:
     from ..parallel._engine import Engine
 
-__all__ = ["ExperimentRun", "reproduce", "reproduce_all", "default_workers"]
+__all__ = ["ExperimentRun", "ReproduceInterrupted", "reproduce", "reproduce_all", "default_workers"]
 
 
 @dataclass(frozen=True)
@@ -94,6 +95,59 @@ class ExperimentRun:
     def ok(self) -> bool:
         """The FMU results agree with the library (True when there is no FMU part)."""
         return self.result.fmu is None or self.result.fmu.ok
+
+
+class ReproduceInterrupted(Interrupted):
+    """``Ctrl-C`` or SIGTERM stopped :func:`reproduce`: the experiments that
+    finished wrote their ``results.json`` (each written whole, or not at all),
+    the FMU cache keeps every FMU built so far, and a rerun reuses those FMUs
+    and runs every experiment again (the finished ones too: results are not
+    reused).
+
+    Parameters
+    ----------
+    finished : sequence of ExperimentRun
+        The experiments that finished and wrote their results, in order.
+    names : sequence of str
+        Every experiment of the run.
+    out : Path
+        The output folder (``out/<name>/results.json``).
+    cache : Path
+        The FMU cache's folder.
+    signum : int
+        The signal (SIGINT: Ctrl-C; SIGTERM); the command line exits with ``128 + signum``.
+    report : bool
+        The run was to write ``out/report.md`` too (``reproduce_all``); it did not.
+    """
+
+    def __init__(self, finished: Sequence[ExperimentRun], names: Sequence[str], out: Path, cache: Path, *,
+                 signum: int, report: bool = False) -> None:
+        super().__init__(signum)
+        self.finished, self.names, self.out, self.cache = tuple(finished), tuple(names), out, cache
+        self.report = report
+
+    def with_report(self) -> ReproduceInterrupted:
+        """The same interruption, of a run that was to write ``report.md``.
+
+        Returns
+        -------
+        ReproduceInterrupted
+            A copy with ``report`` true.
+        """
+        return ReproduceInterrupted(self.finished, self.names, self.out, self.cache, signum=self.signum,
+                                    report=True)
+
+    def __str__(self) -> str:
+        done = [r.name for r in self.finished]
+        if done:
+            shown = ", ".join(done[:3]) + (f" and {len(done) - 3} more" if len(done) > 3 else "")
+            kept = (f"kept the results of {len(done)} of {len(self.names)} experiment(s) ({shown}: "
+                    f"{self.out}/NAME/results.json)")
+        else:
+            kept = f"none of the {len(self.names)} experiment(s) finished"
+        return (kept + ("; report.md was not written" if self.report else "")
+                + f"; the FMU cache {self.cache} keeps every FMU built so far; run the same command again: it "
+                "reuses those FMUs and runs the experiments again (the finished ones too)")
 
 
 def default_workers() -> int:
@@ -175,8 +229,8 @@ def reproduce_task(shared: _Shared, task: Task) -> TaskResult:
 class _Reporter:
     """Writes and prints each experiment when it is complete; keeps the runs."""
 
-    def __init__(self, out: Path, reduced: bool, say: Callable[[str], None]) -> None:
-        self.out, self.reduced, self.say = out, reduced, say
+    def __init__(self, out: Path, reduced: bool, say: Callable[[str], None], progress: bool | None = None) -> None:
+        self.out, self.reduced, self.say, self.progress = out, reduced, say, progress
         self.runs: dict[str, ExperimentRun] = {}
 
     def options(self, exp: Experiment) -> dict:
@@ -197,6 +251,7 @@ class _Reporter:
         self.say(f"wrote {path}" + "".join(f"\nwrote {f}" for f in result.figures))
         self.say(f"({seconds:.1f} s)")
         self.runs[exp.name] = ExperimentRun(exp.name, exp.title, result, folder, path, seconds, self.options(exp))
+        hold("experiment-written")  # the interruption tests' hook; nothing otherwise
 
 
 def _in_process(groups: list[list[Experiment]], cache: ExperimentFmus, rep: _Reporter) -> None:
@@ -206,7 +261,7 @@ def _in_process(groups: list[list[Experiment]], cache: ExperimentFmus, rep: _Rep
             folder = rep.out / exp.name
             t = time.perf_counter()
             with one_blas_thread():
-                result = exp.run(folder, fmus=cache, **rep.options(exp))
+                result = exp.run(folder, fmus=cache, progress=rep.progress, **rep.options(exp))
             rep.done(exp, result, time.perf_counter() - t, header=False)
 
 
@@ -297,6 +352,7 @@ def reproduce(
     echo: Callable[[str], None] | None = None,
     backend: str | None = None,
     workers: int | None = None,
+    progress: bool | None = None,
 ) -> list[ExperimentRun]:
     """Run the experiments ``names`` into ``out/<name>/``.
 
@@ -321,6 +377,10 @@ def reproduce(
         Dask worker processes (default: one per core, :func:`default_workers`);
         ``0``: every experiment in this process, one after another. The
         numbers are the same either way.
+    progress : bool or None, default None
+        The progress bars of experiments run in this process
+        (:func:`~lpvest.experiments.show_progress`; None: on a terminal);
+        tasks on workers never show any.
 
     Returns
     -------
@@ -336,6 +396,10 @@ def reproduce(
     SweepError
         An experiment failed on a worker (the message names it), or Dask
         (the ``sweep`` extra) is missing.
+    ReproduceInterrupted
+        SIGINT or SIGTERM (within :func:`lpvest.core.handling_signals`, as
+        on the command line; a plain ``KeyboardInterrupt`` too): it names the
+        experiments that finished.
     """
     from . import registry  # looked up at call time
 
@@ -345,13 +409,18 @@ def reproduce(
     if unknown:
         raise LpvestError(f"no experiment {abbreviate(unknown[0], 30)} (known: {', '.join(experiments) or 'none'})")
     cache = as_experiment_fmus(fmus, backend=backend)
-    rep = _Reporter(Path(out), reduced, echo or (lambda _text: None))
+    rep = _Reporter(Path(out), reduced, echo or (lambda _text: None), progress)
     groups = _groups([experiments[n] for n in names])
     parallel = n_workers > 0 and (len(groups) > 1 or any(g[0].split is not None for g in groups))
-    if parallel:
-        _on_workers(groups, cache, rep, n_workers)
-    else:
-        _in_process(groups, cache, rep)
+    try:
+        if parallel:
+            _on_workers(groups, cache, rep, n_workers)
+        else:
+            _in_process(groups, cache, rep)
+    except KeyboardInterrupt as exc:
+        finished = [rep.runs[n] for n in names if n in rep.runs]
+        raise ReproduceInterrupted(finished, names, Path(out), Path(cache.directory),
+                                   signum=exit_status(exc) - 128) from None
     return [rep.runs[n] for n in names]
 
 
@@ -363,6 +432,7 @@ def reproduce_all(
     echo: Callable[[str], None] | None = None,
     backend: str | None = None,
     workers: int | None = None,
+    progress: bool | None = None,
 ) -> list[ExperimentRun]:
     """Every registered experiment (:func:`reproduce`), then ``out/report.md``
     (:func:`lpvest.experiments._report.write_report`).
@@ -384,6 +454,8 @@ def reproduce_all(
         given cache's, else ``"pythonfmu"``).
     workers : int or None, default None
         Dask worker processes, as in :func:`reproduce`.
+    progress : bool or None, default None
+        Progress bars, as in :func:`reproduce`.
 
     Returns
     -------
@@ -398,6 +470,8 @@ def reproduce_all(
     SweepError
         An experiment failed on a worker, or Dask (the ``sweep`` extra) is
         missing.
+    ReproduceInterrupted
+        SIGINT or SIGTERM, as in :func:`reproduce`; ``report.md`` is not written.
     """
     from . import registry
     from ._report import write_report
@@ -406,8 +480,11 @@ def reproduce_all(
     default = out / ("fmu-cache" if backend in (None, "pythonfmu") else f"fmu-cache-{backend}")
     cache = as_experiment_fmus(default if fmus is None else fmus, backend=backend)
     t = time.perf_counter()
-    runs = reproduce(list(registry()), out, fmus=cache, reduced=reduced, echo=echo, backend=backend,
-                     workers=workers)
+    try:
+        runs = reproduce(list(registry()), out, fmus=cache, reduced=reduced, echo=echo, backend=backend,
+                         workers=workers, progress=progress)
+    except ReproduceInterrupted as exc:
+        raise exc.with_report() from None
     path = write_report(runs, out, fmus=cache, seconds=time.perf_counter() - t, reduced=reduced)
     if echo is not None:
         echo(f"wrote {path}")

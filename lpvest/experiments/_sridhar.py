@@ -250,10 +250,10 @@ def sridhar_data(fmus: ExperimentFmus, *, progress: bool = False) -> SridharData
     plant = LTVPlant(io)
     y, x, u = np.empty(n + 1), np.empty((n + 1, 2)), np.empty(n + 1)
     hold = {"u": np.zeros(1)}
-    from tqdm import tqdm
+    from ..core._progress import progress_bar
 
-    for k in tqdm(range(n + 1), desc="library: streaming LTVPlant", disable=not progress, leave=False,
-                  mininterval=0.5):
+    for k in progress_bar(range(n + 1), desc="library plant", unit="step", show=progress, leave=False,
+                          mininterval=0.5):
         out = plant.step(hold, dt=h, t_end=k * h + h) if k < n else plant.outputs(hold)
         y[k], x[k], u[k] = out["y"][0], out["x"], out["u_applied"][0]
     library = _Trajectory(np.arange(n + 1) * h, u, y, x)

@@ -1039,6 +1039,7 @@ def build_fmus(
     progress: Callable[[str], None] | None = None,
     design_options: Mapping[str, object] | None = None,
     backend: str = "pythonfmu",
+    bar: bool = False,
 ) -> tuple[list[BuildResult], list[str]]:
     """Build and validate the FMUs of the given system files (default: every
     example system). Returns the results and the planning notes.
@@ -1072,6 +1073,9 @@ def build_fmus(
         ``"pythonfmu"`` or ``"native"``: every discrete-time role as C; the
         roles the native backend does not build (the continuous-time LTV
         plant, the B-spline observer) are pythonfmu FMUs, with a note.
+    bar : bool, default False
+        A progress bar over the FMUs on stderr, when stderr is a terminal
+        (never into a log); ``progress``'s messages are then written above it.
 
     Returns
     -------
@@ -1093,6 +1097,7 @@ def build_fmus(
         build time (see :func:`plan_system`, :func:`build_fmu`).
     """
     from ..core._errors import LpvestError
+    from ..core._progress import on_terminal, progress_bar
 
     check_backend(backend)
     results: list[BuildResult] = []
@@ -1100,6 +1105,7 @@ def build_fmus(
     wanted = None if roles is None else set(roles)
     options = tuple(sorted((design_options or {}).items()))
     cache = Path(out_dir) / DESIGN_CACHE
+    every: list[list[FmuPlan]] = []  # every system planned (and its design files checked) before any build
     for source in _systems(sources):
         plans, more = plan_system(source, kinds=kinds, designs=designs)
         notes += more
@@ -1108,27 +1114,39 @@ def build_fmus(
         for plan in plans:  # a design file for another plant is refused before anything is built
             if plan.design is not None and plan.estimator is not None:
                 _check_design_file(plan)
-        for n, plan in enumerate(plans, 1):
-            solving = plan.estimator is not None and bool(plan.estimator.design) and plan.design is None
-            if solving:
-                plan = dataclasses.replace(plan, design_options=options, design_cache=cache)
-            used = backend_of(plan, backend)
-            if used != backend:
-                notes.append(f"{plan.identifier}: {resolve(_NATIVE_SUPPORT)(plan.role, plan.script)}")
-            if progress is not None:
-                progress(f"building {plan.identifier} ({n}/{len(plans)})")
-            try:
-                path = build_fmu(plan, out_dir, progress=progress, backend=used)
-            except LpvestError as exc:
-                if not solving:  # a bad input (a design file for another plant, ...): one error, as always
-                    raise
-                # the design failed (no certified solution, ...): the other FMUs are still built
-                text = " ".join(str(exc).split())
-                failed = ValidationResult(Path(out_dir) / f"{plan.identifier}.fmu", 0, 0, 0, 0,
-                                          [f"not built: {type(exc).__name__}: {text}"])
-                results.append(BuildResult(plan, failed))
-                continue
-            results.append(BuildResult(plan, validate_fmus([path])[0]))
+        every.append(plans)
+    meter = progress_bar(desc="build", unit="FMU", total=sum(map(len, every)), show=bar and on_terminal())
+    say = progress
+    if progress is not None and not meter.disable:  # the lines above the bar, which stays at the bottom
+        def say(text: str) -> None:
+            meter.write(text, file=sys.stderr)
+    try:
+        for plans in every:
+            for n, plan in enumerate(plans, 1):
+                solving = plan.estimator is not None and bool(plan.estimator.design) and plan.design is None
+                if solving:
+                    plan = dataclasses.replace(plan, design_options=options, design_cache=cache)
+                used = backend_of(plan, backend)
+                if used != backend:
+                    notes.append(f"{plan.identifier}: {resolve(_NATIVE_SUPPORT)(plan.role, plan.script)}")
+                if say is not None:
+                    say(f"building {plan.identifier} ({n}/{len(plans)})")
+                meter.set_postfix_str(plan.identifier)
+                try:
+                    path = build_fmu(plan, out_dir, progress=say, backend=used)
+                except LpvestError as exc:
+                    if not solving:  # a bad input (a design file for another plant, ...): one error, as always
+                        raise
+                    # the design failed (no certified solution, ...): the other FMUs are still built
+                    text = " ".join(str(exc).split())
+                    failed = ValidationResult(Path(out_dir) / f"{plan.identifier}.fmu", 0, 0, 0, 0,
+                                              [f"not built: {type(exc).__name__}: {text}"])
+                    results.append(BuildResult(plan, failed))
+                else:
+                    results.append(BuildResult(plan, validate_fmus([path])[0]))
+                meter.update(1)
+    finally:
+        meter.close()
     return results, notes
 
 

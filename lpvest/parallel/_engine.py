@@ -295,7 +295,8 @@ class Engine:
             No task finished within ``idle_timeout``.
         """
         from distributed import as_completed
-        from tqdm import tqdm
+
+        from ..core._progress import progress_bar
 
         client = self.client
         if not tasks:
@@ -306,7 +307,7 @@ class Engine:
                              key=[f"lpvest-task-{run_id}-{t.index}" for t in tasks], pure=False)
         index_of = {f.key: t.index for f, t in zip(futures, tasks, strict=True)}
         outcomes: dict[int, Outcome] = {}
-        bar = tqdm(total=len(tasks), desc=desc, unit="task", disable=not progress, smoothing=0.05)
+        bar = progress_bar(desc=desc, total=len(tasks), unit="task", show=progress, smoothing=0.05)
         failed = 0
         ac = as_completed(futures, with_results=True, raise_errors=False)
         last = time.monotonic()

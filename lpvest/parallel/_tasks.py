@@ -278,10 +278,10 @@ def map_tasks(
     """
     tasks = [p if isinstance(p, Task) else Task(i, dict(p)) for i, p in enumerate(points)]
     if engine is None:
-        from tqdm import tqdm
+        from ..core._progress import progress_bar
 
-        outcomes = {t.index: execute(fn, shared, t) for t in tqdm(tasks, desc=desc, disable=not progress,
-                                                                   leave=False, unit="task")}
+        outcomes = {t.index: execute(fn, shared, t) for t in progress_bar(tasks, desc=desc, show=progress,
+                                                                          leave=False, unit="task")}
     else:
         outcomes = engine.map(fn, shared, tasks, desc=desc, progress=progress)
     results = []

@@ -297,7 +297,7 @@ def run_sweep(
     for note in store.notes:  # at once, in case the run is interrupted before its report
         print(f"lpvest: repaired: {note}", file=sys.stderr, flush=True)
     show = sys.stderr.isatty() if progress is None else progress
-    desc = f"sweep {Path(spec.origin).name}"
+    desc = f"sweep {Path(spec.origin).stem}"
 
     def record(outcome: Outcome) -> None:
         store.add(outcome)
@@ -311,9 +311,9 @@ def run_sweep(
     label = "in this process, no Dask"
     try:
         if pending and workers == 0:
-            from tqdm import tqdm
+            from ..core._progress import progress_bar
 
-            for task in tqdm(pending, desc=desc, unit="task", disable=not show):
+            for task in progress_bar(pending, desc=desc, unit="task", show=show):
                 record(execute(prepared.fn, prepared.shared, task))
         elif pending:
             if engine is None:

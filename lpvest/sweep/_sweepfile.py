@@ -52,7 +52,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..core._errors import ModelFileError
+from ..core._errors import ModelFileError, shorten
 from ..core._toml import TomlReader, describe_value, element_path
 from ..parallel._tasks import Task, task_seeds
 from ._metrics import METRIC_KINDS, Metric
@@ -441,6 +441,11 @@ def sweep_spec(
         folder = fmu_dir
         if folder is None and "fmu_dir" in top:
             folder = base / top.string("fmu_dir", what="a folder (a path)")
+        path = base / file
+        if not path.is_file():  # said here: which file names it, and where it was looked for
+            shown = shorten(str(path), 80)
+            raise r.error("cosim", f"{shown} is a folder, not a co-simulation file" if path.is_dir() else
+                          f"no co-simulation file {shown} (a path relative to this sweep file)")
         cosim = load_cosim(base / file, fmu_dir=folder)
         if "steps" in top:
             cosim = replace(cosim, n_steps=top.integer("steps", minimum=1))
