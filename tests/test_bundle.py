@@ -5,6 +5,7 @@ one host (sys.path, sys.modules, sys.meta_path) is tested through built FMUs els
 from __future__ import annotations
 
 import importlib.util
+import re
 import shutil
 import sys
 import textwrap
@@ -309,3 +310,19 @@ def test_a_package_and_a_module_of_the_same_text_are_different_code(tmp_path):
 def test_a_reference_splits_at_the_first_colon(tmp_path):
     b = _bundle(_tree(tmp_path, PKG))
     assert b.reference("pkg.util:h:x") == f"{b.package}.util:h:x"
+
+
+# -- what the whole-module mutation run found untested (docs/mutation.md) ------------------------
+
+
+def test_a_single_file_root_names_its_file_in_errors_and_refuses_relative_imports(tmp_path):
+    root = _tree(tmp_path, {**PKG, "role.py": "import extmod as e\n", "extmod.py": "from pkg.util import *\n"})
+    ext = [SourceRoot("extmod", root / "extmod.py", "_ext.extmod")]
+    where = re.escape(str(root / "extmod.py"))
+    with pytest.raises(BundleError, match=r"^" + where + r":1: 'import \*' cannot be carried"):
+        _bundle(root, extra_roots=ext)
+    # a top-level module has no package to be relative to (Python refuses it too)
+    for text in ("from . import sibling\n", "from .sibling import x\n"):
+        (root / "extmod.py").write_text(text)
+        with pytest.raises(BundleError, match=r"^" + where + r": relative import beyond the top-level package$"):
+            _bundle(root, extra_roots=ext)
