@@ -263,3 +263,24 @@ def test_a_solver_that_cannot_solve_lmis_is_refused_before_compiling(solver):
     with pytest.raises(ArgumentError, match=r"solver .*: expected AUTO or an installed cvxpy solver of "
                                             r"semidefinite programs \(CLARABEL, SCS"):
         HinfProgram(2, 2, 1, 1, 2, solver=solver)
+
+
+def test_the_search_progress_bar_is_shown_only_when_asked_and_on_a_terminal(monkeypatch):
+    """A bar of the designs solved out of the grid, on a terminal; never when not asked, and never
+    into a redirected log (no carriage returns there)."""
+    import io
+    import sys
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    screen = Terminal()
+    monkeypatch.setattr(sys, "stderr", screen)
+    assert search._progress_bar(False, "epsilon search (pd, CLARABEL)", 7) is None
+    bar = search._progress_bar(True, "epsilon search (pd, CLARABEL)", 7)
+    bar.update(2)
+    bar.close()
+    assert bar.total == 7 and "epsilon search (pd, CLARABEL)" in screen.getvalue() and "2/7" in screen.getvalue()
+    monkeypatch.setattr(sys, "stderr", io.StringIO())  # a redirected log
+    assert search._progress_bar(True, "epsilon search (pd, CLARABEL)", 7) is None
