@@ -5,6 +5,7 @@ one host (sys.path, sys.modules, sys.meta_path) is tested through built FMUs els
 from __future__ import annotations
 
 import importlib.util
+import re
 import shutil
 import sys
 import textwrap
@@ -309,3 +310,133 @@ def test_a_package_and_a_module_of_the_same_text_are_different_code(tmp_path):
 def test_a_reference_splits_at_the_first_colon(tmp_path):
     b = _bundle(_tree(tmp_path, PKG))
     assert b.reference("pkg.util:h:x") == f"{b.package}.util:h:x"
+
+
+# -- what the whole-module mutation run found untested (docs/mutation.md) ------------------------
+
+
+def test_a_typing_dot_type_checking_block_is_not_run_and_other_attribute_tests_and_loop_elses_are(tmp_path):
+    util = textwrap.dedent("""\
+        import sys
+        import typing
+
+        if typing.TYPE_CHECKING:
+            import cvxpy
+        if sys.flags.optimize:
+            import scipy
+        for _ in ():
+            pass
+        else:
+            import yaml
+        while False:
+            pass
+        else:
+            import zarr
+
+
+        def h():
+            return 2
+        """)
+    root = _tree(tmp_path, {**PKG, "pkg/util.py": util, "role.py": "from pkg.util import h\n"})
+    # what a loop's else imports runs at import: both are needed, and lpvest cannot declare either
+    with pytest.raises(BundleError, match=r"cannot declare: yaml \(imported by pkg.util\); zarr \(imported by "
+                                          r"pkg.util\)$"):
+        _bundle(root)
+    (root / "pkg" / "util.py").write_text(util.replace("import yaml", "pass").replace("import zarr", "pass"))
+    b = _bundle(root)
+    assert b.requirements == ("scipy>=1.11",)  # `if sys.flags.optimize:` may run: scipy is needed
+    assert b.lazy_imports == {"cvxpy": ("pkg.util",)}  # only for the type checker
+
+
+def test_the_packages_on_the_way_to_a_module_are_carried_and_the_name_has_16_hex_digits(tmp_path):
+    files = {**PKG, "pkg/deep/__init__.py": "import yaml\n", "pkg/deep/er/__init__.py": "import zarr\n",
+             "pkg/deep/er/mod.py": "X = 1\n", "role.py": "from pkg.deep.er.mod import X\n"}
+    b = _bundle(_tree(tmp_path, files))
+    assert b.modules == ("lpvest._fmus.role", "pkg", "pkg.deep", "pkg.deep.er", "pkg.deep.er.mod")
+    p = b.package
+    for name in ("pkg.deep", "pkg.deep.er"):  # carried empty: their imports (yaml, zarr) are not needed
+        rel = f"{p}/{name.removeprefix('pkg.').replace('.', '/')}/__init__.py"
+        assert b.files[rel].decode() == f'"""{name}, as carried by an lpvest FMU (empty: see lpvest.fmi._bundle)."""\n'
+    assert b.requirements == ()
+    assert p == "lpvest_" + b.digest[:16] and all(c in "0123456789abcdef" for c in b.digest)  # docs/fmus.md
+
+
+def test_a_role_that_imports_no_package_module_still_gets_the_private_package(tmp_path):
+    b = _bundle(_tree(tmp_path, {**PKG, "role.py": "import os\n\n\nclass Slave:\n    pass\n"}))
+    assert b.modules == ("lpvest._fmus.role",)
+    p = b.package
+    assert set(b.files) == {f"{p}/__init__.py", f"{p}/_fmus/__init__.py", f"{p}/_fmus/role.py", f"{b.entry}.py"}
+    assert b.files[f"{p}/__init__.py"] == f'"""{p}: part of an lpvest FMU\'s private package."""\n'.encode()
+
+
+def test_a_carried_name_after_a_standard_library_one_on_one_line_is_followed(tmp_path):
+    root = _tree(tmp_path, {**PKG, "role.py": "import os, pkg.util as u\nimport numpy, pkg.core.b as bee\n"})
+    b = _bundle(root)
+    assert b.modules == ("lpvest._fmus.role", "pkg", "pkg.core", "pkg.core.b", "pkg.util")
+    assert b.requirements == ("numpy>=1.26",)
+    assert b.files[f"{b.package}/_fmus/role.py"].decode() == (
+        f"import os, {b.package}.util as u\nimport numpy, {b.package}.core.b as bee\n")
+
+
+def test_a_module_whose_name_starts_with_capital_letters_is_found(tmp_path):
+    root = _tree(tmp_path, {**PKG, "pkg/XYmod.py": "Z = 1\n", "role.py": "from pkg.XYmod import Z\n"})
+    b = _bundle(root)
+    assert "pkg.XYmod" in b.modules and f"{b.package}/XYmod.py" in b.files
+
+
+def test_only_the_module_of_a_from_import_is_renamed_not_a_name_spelt_like_a_root(tmp_path):
+    root = _tree(tmp_path, {**PKG, "pkg/names.py": "extmod = 1\npkg = 2\n", "extmod.py": "X = 1\n",
+                            "role.py": "from pkg.names import extmod, pkg\n"})
+    b = _bundle(root, extra_roots=[SourceRoot("extmod", root / "extmod.py", "_ext.extmod")])
+    assert b.files[f"{b.package}/_fmus/role.py"].decode() == f"from {b.package}.names import extmod, pkg\n"
+
+
+def test_a_dotted_root_renames_a_module_two_levels_under_it(tmp_path):
+    # the roots here are "pkg" and "lpvest._fmus", not "lpvest": only the whole dotted name is a root
+    role = "from lpvest._fmus.helpers.tool import T\nimport lpvest._fmus.helpers.tool as t\n"
+    root = _tree(tmp_path, {**PKG, "helpers/tool.py": "T = 1\n", "role.py": role})
+    b = _bundle(root)
+    assert "lpvest._fmus.helpers.tool" in b.modules
+    p = b.package
+    assert b.files[f"{p}/_fmus/role.py"].decode() == (
+        f"from {p}._fmus.helpers.tool import T\nimport {p}._fmus.helpers.tool as t\n")
+
+
+def test_a_plain_import_of_a_deep_module_is_refused_suggesting_its_package(tmp_path):
+    root = _tree(tmp_path, {**PKG, "role.py": "import pkg.core.b\n"})
+    with pytest.raises(BundleError, match=r"role.py:1: 'import pkg.core.b' binds the name 'pkg', which an FMU "
+                                          r"renames; write 'from pkg.core import ...' or 'import ... as ...'$"):
+        _bundle(root)
+
+
+def test_a_single_file_root_names_its_file_in_errors_and_refuses_relative_imports(tmp_path):
+    root = _tree(tmp_path, {**PKG, "role.py": "import extmod as e\n", "extmod.py": "from pkg.util import *\n"})
+    ext = [SourceRoot("extmod", root / "extmod.py", "_ext.extmod")]
+    where = re.escape(str(root / "extmod.py"))
+    with pytest.raises(BundleError, match=r"^" + where + r":1: 'import \*' cannot be carried"):
+        _bundle(root, extra_roots=ext)
+    # a top-level module has no package to be relative to (Python refuses it too)
+    for text in ("from . import sibling\n", "from .sibling import x\n"):
+        (root / "extmod.py").write_text(text)
+        with pytest.raises(BundleError, match=r"^" + where + r": relative import beyond the top-level package$"):
+            _bundle(root, extra_roots=ext)
+
+
+def test_a_carried_module_that_does_not_parse_is_named_in_the_syntax_error(tmp_path):
+    root = _tree(tmp_path, {**PKG, "pkg/util.py": "def h(:\n    return 2\n"})
+    with pytest.raises(SyntaxError, match=r"invalid syntax|was never closed") as err:
+        _bundle(root)
+    assert err.value.filename == str(root / "pkg" / "util.py") and err.value.lineno == 1
+
+
+def test_a_package_imported_by_several_modules_names_them_all_when_refused(tmp_path):
+    root = _tree(tmp_path, {**PKG, "pkg/util.py": "import yaml\n\n\ndef h():\n    return 2\n",
+                            "pkg/core/b.py": "import yaml\n\n\ndef g():\n    return 1\n"})
+    with pytest.raises(BundleError, match=r"cannot declare: yaml \(imported by pkg.core.b, pkg.util\)$"):
+        _bundle(root)
+
+
+def test_a_reference_to_a_root_itself_keeps_everything_after_the_first_colon(tmp_path):
+    b = _bundle(_tree(tmp_path, PKG))
+    assert b.reference("pkg:main") == f"{b.package}:main"
+    assert b.reference("pkg:main:x") == f"{b.package}:main:x"

@@ -380,6 +380,9 @@ def test_the_log_names_the_last_problem_and_is_cut(fmus):
     assert _log_text(unit) == "no log message"
     unit.log = ["[ERROR] " + "x" * 300]
     assert _log_text(unit) == ("[ERROR] " + "x" * 300)[:197] + "..."
+    for n in (200, 201):  # at most 200 characters: a message of 200 is whole, one of 201 is cut
+        unit.log = ["[ERROR] " + "x" * (n - 8)]
+        assert _log_text(unit) == (unit.log[0] if n == 200 else unit.log[0][:197] + "...")
 
 
 def test_simulate_is_construct_run_close_with_every_option(fmus, capsys):

@@ -94,6 +94,16 @@ def test_formula_matrix_shapes_and_errors():
         FormulaMatrix.parse([[0, 1], [2]], name="A")
     with pytest.raises(ExpressionError, match="A\\[2,1\\]: formula 'x' uses unknown name 'x'"):
         FormulaMatrix.parse([[0, 1], ["x", 1]], name="A", allowed=["t"])
+    with pytest.raises(ExpressionError, match=r"^A must be a list of rows, e.g. \[\[1, 0\], \[0, 'p'\]\]$"):
+        FormulaMatrix.parse(["p", "q"], name="A")  # a list of formulas is not a list of rows
+    # the derivative of a matrix is the matrix of the entries' derivatives
+    d = FormulaMatrix.parse([["p^2", "3*p"], [1, "q*p"]]).derivative("p")
+    np.testing.assert_array_equal(d.evaluate({"p": 2.0, "q": 5.0}), [[4.0, 3.0], [0.0, 5.0]])
+
+
+def test_a_long_constant_that_is_not_a_number_is_shown_cut():
+    with pytest.raises(ExpressionError, match=r"constant 'aaaaaaaaaa\.\.\.aaa' \(60 characters\) is not a number$"):
+        Expression.parse("'" + "a" * 60 + "'")
 
 
 # -- floating point, bounded size and depth (issue 12) ---------------------------------------

@@ -76,6 +76,9 @@ def test_ports():
     f = HinfFilter(pd)
     assert [(p.name, p.shape) for p in f.input_ports] == [("alpha", (2,)), ("y", (1,))]
     assert [(p.name, p.shape) for p in f.output_ports] == [("zhat", (2,)), ("xf", (2,))]
+    # what an FMU's variables are described as
+    assert [p.description for p in f.input_ports] == ["scheduling on the unit simplex", "measured output y_k"]
+    assert [p.description for p in f.output_ports] == ["estimate z_f,k of z_k", "filter state x_f,k"]
     f = HinfFilter(pd, simplex_map=plant.simplex_map)
     assert [(p.name, p.shape) for p in f.input_ports] == [("p", (1,)), ("y", (1,))]
     f = HinfFilter(rob)
@@ -119,6 +122,12 @@ def test_state_round_trip_and_reset():
     np.testing.assert_array_equal(first, again)
     f.reset()
     assert f.get_state()["k"] == 0 and not np.any(f.get_state()["xf"])
+    fresh = f.get_state()
+    f.step({"alpha": alpha[0], "y": traj.y[0]})
+    f.set_state(fresh)  # the state of a filter that has not stepped yet (k = 0) is a state too
+    assert f.get_state()["k"] == 0
+    np.testing.assert_array_equal(f.step({"alpha": alpha[0], "y": traj.y[0]})["zhat"],
+                                  HinfFilter(d).step({"alpha": alpha[0], "y": traj.y[0]})["zhat"])
     with pytest.raises(DimensionError, match="needs 'xf' and 'k'"):
         f.set_state({"xf": np.zeros(2)})
     with pytest.raises(DimensionError, match=r"xf has shape \(3,\); expected \(2,\)"):
@@ -155,7 +164,7 @@ def test_bad_input_raises_before_any_state_change():
 def test_bad_construction():
     plant, pd = setup(KIND_PD)
     _, rob = setup(KIND_ROBUST)
-    with pytest.raises(TypeError, match="a robust filter takes no scheduling input"):
+    with pytest.raises(TypeError, match="^a robust filter takes no scheduling input: do not pass simplex_map$"):
         HinfFilter(rob, simplex_map=plant.simplex_map)
     ex2 = load_system("peixoto-ex2").model()
     three = type(ex2.simplex_map)(ex2.simplex_map.space, ["(1 - theta)/4", "(1 + theta)/4", "1/2"])
@@ -169,6 +178,8 @@ def test_bad_construction():
         hinf_filter_batch(pd, np.zeros((4, 1)))
     with pytest.raises(SchedulingRangeError, match="alpha at k=1"):
         hinf_filter_batch(pd, np.zeros((2, 1)), np.array([[0.5, 0.5], [0.9, 0.9]]))
+    with pytest.raises(DimensionError, match=r"^alpha has shape \(2, 3\); expected \(2, 2\)$"):
+        hinf_filter_batch(pd, np.zeros((2, 1)), np.full((2, 3), 1.0 / 3.0))  # weights of 3 vertices, on a simplex
 
 
 def test_runtime_needs_only_numpy(tmp_path):

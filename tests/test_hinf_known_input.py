@@ -191,6 +191,12 @@ def test_a_robust_filter_of_a_plant_whose_input_path_is_constant_takes_no_schedu
     # as in the scheduled case: the u-driven parts cancel, T steps of sums of <= 7 products
     size = float(np.max(np.abs(with_u.x)) + np.max(np.abs(with_u.y)) + np.max(np.abs(with_u.z)))
     np.testing.assert_allclose(e_u, e_0, rtol=0, atol=roundoff(size, T, n=7))
+    # the batch filter takes no scheduling either, and computes what the streaming one does
+    f.reset()
+    streamed = run_streaming(f, {"u": u, "y": with_u.y})
+    batch = hinf_filter_batch(d, with_u.y, plant=plant, u=u)
+    np.testing.assert_array_equal(batch.zhat, streamed["zhat"])
+    np.testing.assert_array_equal(batch.xf, streamed["xf"])
 
 
 def test_a_polytopic_model_with_a_known_input_streams_and_evaluates_like_its_simulation(rng):

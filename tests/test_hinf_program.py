@@ -121,6 +121,7 @@ def test_an_auto_chosen_scs_point_that_fails_the_check_is_solved_by_clarabel(ex1
     assert prog.solver == "SCS" and prog.auto
     res = prog.attempt(ex1, 150.0)
     assert res.design is not None and res.design.solver == "CLARABEL" and res.status == "optimal"
+    assert res.design.plant == ex1.name == "peixoto-ex1/plant"  # a design names the model it was made for
     tried = res.detail.split("; ")
     assert tried[0].startswith("SCS margin 1.0e-06: ") and tried[1].startswith("SCS margin 3.0e-05: ")
     assert tried[2] == "CLARABEL margin 1.0e-06: optimal"
@@ -169,6 +170,8 @@ def test_programs_refuse_bad_dimensions_kinds_and_margins(ex1):
         HinfProgram(2, 2, 1, 1, True)
     with pytest.raises(ArgumentError, match=r"^kind must be 'parameter-dependent' or 'robust'; found 'pd'$"):
         HinfProgram(2, 2, 1, 1, 1, kind="pd")
+    with pytest.raises(ArgumentError, match=r"found 'parameter-depen\.\.\.-name' \(45 characters\)$"):
+        HinfProgram(2, 2, 1, 1, 1, kind="parameter-dependent-but-with-a-very-long-name")  # cut at 30
     with pytest.raises(ArgumentError, match=r"^margin must be a positive finite number; found 0$"):
         HinfProgram(2, 2, 1, 1, 1, margin=0)
     with pytest.raises(ArgumentError, match=r"^margin must be a positive finite number; found inf$"):
@@ -263,3 +266,24 @@ def test_a_solver_that_cannot_solve_lmis_is_refused_before_compiling(solver):
     with pytest.raises(ArgumentError, match=r"solver .*: expected AUTO or an installed cvxpy solver of "
                                             r"semidefinite programs \(CLARABEL, SCS"):
         HinfProgram(2, 2, 1, 1, 2, solver=solver)
+
+
+def test_the_search_progress_bar_is_shown_only_when_asked_and_on_a_terminal(monkeypatch):
+    """A bar of the designs solved out of the grid, on a terminal; never when not asked, and never
+    into a redirected log (no carriage returns there)."""
+    import io
+    import sys
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    screen = Terminal()
+    monkeypatch.setattr(sys, "stderr", screen)
+    assert search._progress_bar(False, "epsilon search (pd, CLARABEL)", 7) is None
+    bar = search._progress_bar(True, "epsilon search (pd, CLARABEL)", 7)
+    bar.update(2)
+    bar.close()
+    assert bar.total == 7 and "epsilon search (pd, CLARABEL)" in screen.getvalue() and "2/7" in screen.getvalue()
+    monkeypatch.setattr(sys, "stderr", io.StringIO())  # a redirected log
+    assert search._progress_bar(True, "epsilon search (pd, CLARABEL)", 7) is None

@@ -680,6 +680,7 @@ def foreign(resources, fail=None, name: str = "foreign") -> Slave:
     class ForeignPlant(_script("lpvest_plant.py").LpvestPlant):
         def declare(self):
             return [*super().declare(), Parameter("limit", 3, "an Integer with only a maximum", maximum=5),
+                    Parameter("gain", 1.0, "a Real with only a maximum", maximum=2.0),
                     Parameter("extra", False, "one output more (other ports: another FMU)")]
 
         def make_component(self, params):
@@ -727,9 +728,116 @@ def test_parameters_are_checked_against_a_one_sided_range_and_may_not_change_the
     # an FMI Integer is 32 bits: without a declared minimum, the range starts at -2**31
     assert s.errors() == ["[PeixotoEx1Plant] parameter limit = 7 is outside its declared range [-2147483648, 5]; "
                           "value rejected"]
+    s.set("gain", 2.5)  # a Real without a minimum: the range starts at -inf
+    assert s.errors() == ["[PeixotoEx1Plant] parameter gain = 2.5 is outside its declared range [-inf, 2]; "
+                          "value rejected"]
+    s.slave.set_integer([s.vr["limit"]], [math.nan])  # what no FMI Integer can hold: an error, not a crash
+    assert s.errors() == ["[PeixotoEx1Plant] fmi2SetInteger: ValueError: cannot convert float NaN to integer"]
+    s.set("gain", -1e300)
     s.set("limit", 5)
     s.set("extra", True)
     s.slave.exit_initialization_mode()
     assert s.errors() == ["[PeixotoEx1Plant] fmi2ExitInitializationMode: these parameters change the FMU's inputs "
                           "or outputs; rebuild the FMU instead"]
     assert not s.step(0.0, 1.0)
+
+
+# -- what the native exporter and a host read of the variables ------------------------------
+
+
+def test_the_variable_table_lists_every_variable_with_its_range_and_name_in_messages(resources):
+    """What the native backend's exporter declares and checks (lpvest.fmi.native), and the
+    descriptions a host shows: the port's, with the element's label when it has one."""
+    s = plant(resources)
+    table = s.slave.variable_table()
+    rows = [(v["name"], v["kind"], v["owner"], v["index"], v["type"], v["minimum"], v["maximum"], v["tol"], v["what"])
+            for v in table["variables"]]
+    assert rows == [
+        ("x0[1]", "parameter", "x0", 0, "Real", None, None, 0.0, "parameter x0[1]"),
+        ("x0[2]", "parameter", "x0", 1, "Real", None, None, 0.0, "parameter x0[2]"),
+        ("sample_time", "parameter", "sample_time", 0, "Real", 0.0, None, 0.0, "parameter sample_time"),
+        ("p[1]", "input", "p", 0, "Real", -1.0, 1.0, 1e-12, "input p[1] (theta)"),
+        ("w[1]", "input", "w", 0, "Real", None, None, 1e-12, "input w[1]"),
+        ("y[1]", "output", "y", 0, "Real", None, None, 0.0, "output y[1]"),
+        ("z[1]", "output", "z", 0, "Real", None, None, 0.0, "output z[1]"),
+        ("z[2]", "output", "z", 1, "Real", None, None, 0.0, "output z[2]"),
+        ("x[1]", "output", "x", 0, "Real", None, None, 0.0, "output x[1]"),
+        ("x[2]", "output", "x", 1, "Real", None, None, 0.0, "output x[2]")]
+    assert [v["name"] for v in table["variables"]] == [s.slave.vars[vr].name for vr in sorted(s.slave.vars)]
+    assert [p.name for p in table["parameters"]] == ["x0", "sample_time"]
+    assert [p.name for p in table["inputs"]] == ["p", "w"] and [p.name for p in table["outputs"]] == ["y", "z", "x"]
+    assert table["timed"] is False and table["sample_time"] == "sample_time"
+    descriptions = {v.name: v.description for v in s.slave.vars.values()}
+    assert descriptions["p[1]"] == "scheduling (theta)" and descriptions["w[1]"] == "disturbance"
+    assert descriptions["y[1]"] == "measured output" and descriptions["x[2]"] == "state"  # outputs: no range
+
+
+def test_a_model_parameter_carries_its_declared_range_and_description(resources):
+    s = Slave(resources["peixoto-ex2Plant"])
+    [rho] = [v for v in s.slave.variable_table()["variables"] if v["name"] == "rho"]
+    assert (rho["kind"], rho["minimum"], rho["maximum"]) == ("parameter", 1.0, 21.0)
+    assert s.slave.vars[s.vr["rho"]].description == (
+        "model parameter rho of peixoto-ex2: A_1[2,2] = -0.05 rho; the paper's range (unstable beyond 21.4)")
+    s.slave.setup_experiment(0.0)
+    s.set("rho", 22.0)
+    assert s.errors() == ["[PeixotoEx2Plant] parameter rho = 22 is outside its declared range [1, 21]; value rejected"]
+
+
+def test_reading_an_input_and_an_output_in_one_call_gives_the_output_of_the_inputs_just_set(resources):
+    a, b = plant(resources), plant(resources)
+    for s in (a, b):
+        assert s.initialize() == []
+        s.set_reals({"p[1]": 0.5, "w[1]": 0.25})
+        assert s.step(0.0, 1.0), s.errors()
+        s.set_reals({"p[1]": 0.5, "w[1]": 0.75})
+    assert a.slave.get_real([a.vr["w[1]"], a.vr["y[1]"]]) == [0.75, *b.get("y[1]")]
+    assert a.errors() == []
+
+
+def test_a_step_refused_for_several_invalid_inputs_names_each(resources):
+    s = plant(resources)
+    assert s.initialize() == []
+    s.set_reals({"p[1]": 5.0, "w[1]": math.nan})
+    assert len(s.errors()) == 2
+    assert not s.step(0.0, 1.0)
+    assert s.errors() == ["[PeixotoEx1Plant] fmi2DoStep refused at t = 0 (h = 1): invalid input(s) p[1], w[1] (set "
+                          "valid values, restore a state with fmi2SetFMUstate, or reset)"]
+
+
+OUTS = ["y[1]", "z[1]", "z[2]", "x[1]", "x[2]"]
+
+
+def test_a_restored_state_steps_on_with_the_inputs_it_held(resources):
+    """After a step the plant holds its inputs (zero-order hold): a state taken then, restored,
+    and stepped without setting inputs gives the outputs of the original's next step."""
+    s = plant(resources)
+    assert s.initialize() == []
+    for k in range(3):
+        s.set_reals({"p[1]": 0.3 * k, "w[1]": 0.5 + k})
+        assert s.step(float(k), 1.0), s.errors()
+    state, held = s.get_state(), s.get(*OUTS)
+    assert s.step(3.0, 1.0), s.errors()
+    after = s.get(*OUTS)
+    assert after[:3] != held[:3]  # y, z depend on the new state: the test can tell them apart
+    s.set_state(state)
+    assert s.get(*OUTS) == held
+    assert s.step(3.0, 1.0), s.errors()
+    assert s.get(*OUTS) == after
+
+
+def test_inputs_set_again_after_a_rejected_one_are_the_next_samples_inputs(resources):
+    """A rejected input sends later sets through the checked path; once corrected, the
+    outputs and the step are those of an instance that never saw the bad value."""
+    a, b = plant(resources), plant(resources)
+    for s in (a, b):
+        assert s.initialize() == []
+        s.set_reals({"p[1]": 0.5, "w[1]": 0.25})
+        assert s.step(0.0, 1.0), s.errors()
+    a.set_reals({"p[1]": 5.0})
+    assert a.errors() == ["[PeixotoEx1Plant] input p[1] (theta) = 5 is outside its declared range [-1, 1]; "
+                          "value rejected"]
+    for s in (a, b):
+        s.set_reals({"p[1]": -0.5, "w[1]": 0.75})
+    assert a.get(*OUTS) == b.get(*OUTS)
+    assert a.step(1.0, 1.0) and b.step(1.0, 1.0), a.errors()
+    assert a.get(*OUTS) == b.get(*OUTS) and a.errors() == []

@@ -282,6 +282,7 @@ def test_the_local_cluster_is_worker_processes_of_one_thread_each_quiet_and_conf
     monkeypatch.setattr(engine_module.os, "cpu_count", lambda: 7)
     for name in ("distributed", "distributed.nanny", "distributed.worker", "distributed.scheduler"):
         monkeypatch.setattr(logging.getLogger(name), "level", logging.NOTSET)
+    monkeypatch.setattr(logging.getLogger("tornado.application"), "filters", [])  # as in a fresh process
     eng = Engine(workers=workers, quiet=quiet, start_timeout=9.0).start()
     assert made["cluster"] == {"n_workers": workers or 7, "threads_per_worker": 1, "processes": True,
                                "dashboard_address": ":0", "preload": ["lpvest.parallel._worker"],
@@ -291,6 +292,13 @@ def test_the_local_cluster_is_worker_processes_of_one_thread_each_quiet_and_conf
     levels = {logging.getLogger(n).level for n in ("distributed", "distributed.nanny", "distributed.worker",
                                                      "distributed.scheduler")}
     assert levels == ({logging.ERROR} if quiet else {logging.NOTSET})
+    # tornado's log of a gather the closing cluster abandoned is dropped, nothing else tornado logs
+    tornado = logging.getLogger("tornado.application")
+    assert any(not f.filter(logging.LogRecord("tornado.application", logging.ERROR, "", 0,
+                                              "Exception in callback as_completed._track_future()", None, None))
+               for f in tornado.filters)
+    assert all(f.filter(logging.LogRecord("tornado.application", logging.ERROR, "", 0, "Uncaught exception",
+                                          None, None)) for f in tornado.filters)
     eng.close()
     assert made["closed"] == 9.0
 

@@ -165,7 +165,7 @@ def _absolute(node: ast.ImportFrom, module: _Module) -> str:
     if not node.level:
         return node.module or ""
     package = module.name if module.is_package else module.name.rpartition(".")[0]
-    parts = package.split(".")
+    parts = package.split(".") if package else []  # a top-level module has no package to be relative to
     if node.level - 1 > len(parts) - 1:
         raise BundleError(f"{module.path}: relative import beyond the top-level package")
     base = parts[: len(parts) - (node.level - 1)]
@@ -228,7 +228,7 @@ class _Scan:
 def _scan(start: Sequence[str], roots: Sequence[SourceRoot]) -> _Scan:
     scan = _Scan()
     todo = list(start)
-    stdlib = set(sys.stdlib_module_names) | {"__future__"}
+    stdlib = sys.stdlib_module_names  # __future__ included
     while todo:
         name = todo.pop()
         if name in scan.carried:
@@ -278,11 +278,11 @@ def _scan(start: Sequence[str], roots: Sequence[SourceRoot]) -> _Scan:
 
 def _rewrite(module: _Module, roots: Sequence[SourceRoot], package: str) -> str:
     """The source with absolute imports of carried names renamed, on the same lines."""
-    edits: list[tuple[int, int, str]] = []  # (line, column, ...) of each module-name token to replace
+    starts: set[tuple[int, int]] = set()  # (line, column) of each import statement to rewrite
     for node, _ in _imports(module.text, str(module.path)):
         if isinstance(node, ast.ImportFrom) and not node.level and node.module:
             if _root_of(node.module, roots) is not None:
-                edits.append((node.lineno, node.col_offset, "from"))
+                starts.add((node.lineno, node.col_offset))
         elif isinstance(node, ast.Import):
             for alias in node.names:
                 if _root_of(alias.name, roots) is not None:
@@ -292,10 +292,9 @@ def _rewrite(module: _Module, roots: Sequence[SourceRoot], package: str) -> str:
                             f"{alias.name.split('.')[0]!r}, which an FMU renames; write "
                             f"'from {alias.name.rpartition('.')[0] or alias.name} import ...' or 'import ... as ...'"
                         )
-                    edits.append((node.lineno, node.col_offset, "import"))
-    if not edits:
+                    starts.add((node.lineno, node.col_offset))
+    if not starts:
         return module.text
-    starts = {(line, col) for line, col, _ in edits}
     tokens = list(tokenize.generate_tokens(io.StringIO(module.text).readline))
     lines = module.text.splitlines(keepends=True)
     replacements: list[tuple[int, int, int, str]] = []  # line, start col, end col, text
