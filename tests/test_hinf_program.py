@@ -280,10 +280,10 @@ def test_the_search_progress_bar_is_shown_only_when_asked_and_on_a_terminal(monk
 
     screen = Terminal()
     monkeypatch.setattr(sys, "stderr", screen)
-    assert search._progress_bar(False, "epsilon search (pd, CLARABEL)", 7) is None
-    bar = search._progress_bar(True, "epsilon search (pd, CLARABEL)", 7)
+    assert search._progress_bar(False, 7) is None
+    bar = search._progress_bar(True, 7)
     bar.update(2)
     bar.close()
-    assert bar.total == 7 and "epsilon search (pd, CLARABEL)" in screen.getvalue() and "2/7" in screen.getvalue()
+    assert bar.total == 7 and "epsilon search" in screen.getvalue() and "2/7" in screen.getvalue()
     monkeypatch.setattr(sys, "stderr", io.StringIO())  # a redirected log
-    assert search._progress_bar(True, "epsilon search (pd, CLARABEL)", 7) is None
+    assert search._progress_bar(True, 7) is None
