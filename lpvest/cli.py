@@ -7,7 +7,7 @@
     lpvest simulate NAME|FILE.toml          simulate one model: CSV, plot, summary
     lpvest reproduce NAME|all --out DIR [--backend native] [--quiet]
                                             reproduce paper examples through FMUs (all: + DIR/report.md)
-    lpvest regress [--update]               FMU co-simulations against tests/data/reference
+    lpvest regress [--update] [--quiet]     FMU co-simulations against tests/data/reference
     lpvest build [--out DIR] [--model FILE.toml ...] [--kinds ROLES] [--design [ROLE=]FILE.json]
                  [--backend pythonfmu|native]
                                             build and validate the FMUs (native: C, no Python needed)
@@ -288,8 +288,11 @@ def cmd_regress(args: argparse.Namespace) -> int:
     from .experiments._fmus import as_experiment_fmus
     from .experiments._references import regress
 
-    fmus = as_experiment_fmus(args.fmus)
-    fmus.progress = lambda msg: print(msg, file=sys.stderr, flush=True)
+    if args.update and args.dir:  # the folder the references go to, checked before any FMU is built
+        _out_dir(args.dir, "--dir")
+    fmus = as_experiment_fmus(_out_dir(args.fmus, "--fmus") if args.fmus else None)
+    if not args.quiet:
+        fmus.progress = lambda msg: print(msg, file=sys.stderr, flush=True)
     return regress(args.names, update=args.update, directory=args.dir, fmus=fmus)
 
 

@@ -154,6 +154,15 @@ def _run(*argv, cwd=None):
         (["systems", "show", "models"], "lpvest: error: models: is a folder, not a model file"),
         (["build", "--kinds", "Bogus", "--out", "OUT"],
          "lpvest: error: --kinds: no role 'Bogus' (roles: Plant, Scheduler, Source, Kalman, TruncatedKalman, "),
+        # regress: its folders checked before any FMU is built
+        (["regress", "--dir", "OUT/none", "--fmus", "OUT/cache"], "lpvest: error: no reference folder "),
+        (["regress", "--dir", "tests", "--fmus", "OUT/cache"],
+         "lpvest: error: tests: no reference file cox-toth-example1.csv (6 of 6 missing; write them with "
+         "lpvest regress --update)"),
+        (["regress", "--update", "--dir", "README.md/refs"],
+         "lpvest: error: --dir README.md/refs: cannot create the output folder (README.md is a file, not a folder)"),
+        (["regress", "--fmus", "README.md"],
+         "lpvest: error: --fmus README.md: cannot create the output folder (README.md is a file, not a folder)"),
     ],
 )
 def test_expected_failures_are_one_line_with_status_2(tmp_path, argv, message):
@@ -272,3 +281,38 @@ def test_a_sweep_file_naming_a_missing_cosim_file_says_which_file_and_where(tmp_
     expected = ("specs/nosuch.toml is a folder, not a co-simulation file" if folder
                 else "no co-simulation file specs/nosuch.toml (a path relative to this sweep file)")
     assert (proc.returncode, proc.stdout, proc.stderr) == (2, "", f"lpvest: error: specs/s.toml: cosim: {expected}\n")
+
+
+def test_regress_refuses_a_missing_reference_before_building_anything(tmp_path):
+    """A reference folder without the references asked for: one line, status 2,
+    and the FMU cache untouched (no FMU built, no co-simulation run)."""
+    (tmp_path / "refs").mkdir()
+    (tmp_path / "refs" / "cox-toth-example1.csv").write_text("stored\n")
+    proc = _run("regress", "cox-toth-example1", "peixoto-table1", "--dir", str(tmp_path / "refs"),
+                "--fmus", str(tmp_path / "cache"))
+    assert proc.returncode == 2 and proc.stdout == "", proc.stderr
+    assert proc.stderr == (f"lpvest: error: {tmp_path / 'refs'}: no reference file peixoto-table1.csv "
+                           "(1 of 2 missing; write them with lpvest regress --update)\n")
+    assert list((tmp_path / "cache").iterdir()) == []
+
+
+@pytest.mark.parametrize("quiet", [False, True])
+def test_regress_quiet_silences_the_fmu_build_lines(tmp_path, monkeypatch, capsys, quiet):
+    """`lpvest regress --quiet`: the FMU cache reports nothing (the results and
+    errors still do); without it, each build line goes to stderr."""
+    from lpvest.experiments import _references
+
+    seen = {}
+
+    def fake_regress(names, *, update, directory, fmus):
+        seen.update(names=names, progress=fmus.progress)
+        if fmus.progress is not None:
+            fmus.progress("building CoxTothEx1Plant")
+        return 0
+
+    monkeypatch.setattr(_references, "regress", fake_regress)
+    argv = ["regress", "cox-toth-example1", "--fmus", str(tmp_path / "cache")] + (["--quiet"] if quiet else [])
+    assert main(argv) == 0
+    assert seen["names"] == ["cox-toth-example1"]
+    assert (seen["progress"] is None) is quiet
+    assert capsys.readouterr().err == ("" if quiet else "building CoxTothEx1Plant\n")

@@ -78,6 +78,24 @@ def z_read(path, name):
         return z.read(name)
 
 
+def test_each_variable_description_names_its_element_once(fmus):
+    """A variable's description is its port's, then the element's label once:
+    HinfPD's scheduling input reads "physical scheduling (theta)", never with
+    the label repeated (the port's description used to list the names too)."""
+    import re
+
+    for name, path in sorted(fmus.paths.items()):
+        with zipfile.ZipFile(path) as z:
+            root = ET.fromstring(z.read("modelDescription.xml"))
+        for sv in root.iter("ScalarVariable"):
+            text = sv.get("description") or ""
+            assert not re.search(r"(\([^()]*\)) \1", text), (name, sv.get("name"), text)
+    with zipfile.ZipFile(fmus["PeixotoEx1HinfPD"]) as z:
+        root = ET.fromstring(z.read("modelDescription.xml"))
+    described = {sv.get("name"): sv.get("description") for sv in root.iter("ScalarVariable")}
+    assert described["p[1]"] == "physical scheduling (theta)"
+
+
 def test_model_description_declares_ranges_dependencies_and_capabilities(fmus):
     with zipfile.ZipFile(fmus["PeixotoEx1Plant"]) as z:
         root = ET.fromstring(z.read("modelDescription.xml"))

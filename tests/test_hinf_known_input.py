@@ -335,7 +335,7 @@ def test_inputs_of_the_wrong_shape_are_named_and_the_ports_describe_themselves()
         HinfFilter(d, plant=hinf_setting(model(), z=[[1.0, 0.0]]))
     f = HinfFilter(d, simplex_map=plant.simplex_map, plant=plant)
     assert [(q.name, q.shape, q.description) for q in f.input_ports] == [
-        ("p", (1,), "physical scheduling (p)"), ("u", (1,), "known input u_k (compensated)"),
+        ("p", (1,), "physical scheduling"), ("u", (1,), "known input u_k (compensated)"),
         ("y", (2,), "measured output y_k")]
     g = HinfFilter(d, plant=plant)
     assert (g.input_ports[0].name, g.input_ports[0].description) == ("alpha", "scheduling on the unit simplex")

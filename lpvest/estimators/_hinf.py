@@ -396,8 +396,8 @@ class HinfFilter(Component[_Sample, _Pending]):
             if simplex_map is None:
                 ports.append(Port("alpha", (design.n_vertices,), "scheduling on the unit simplex"))
             else:
-                ports.append(Port("p", (simplex_map.space.dim,), "physical scheduling (" +
-                                  ", ".join(simplex_map.space.names) + ")"))
+                # the elements' names are their labels (an FMU's p[1] reads "physical scheduling (theta)")
+                ports.append(Port("p", (simplex_map.space.dim,), "physical scheduling"))
         if plant is not None:
             ports.append(Port("u", (plant.nu,), "known input u_k (compensated)"))
         ports.append(Port("y", (design.ny,), "measured output y_k"))

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core._errors import LpvestError, abbreviate
+from ..core._errors import LpvestError, abbreviate, shorten
 from ._fmus import CoSimSpec, ExperimentFmus, as_experiment_fmus
 
 __all__ = [
@@ -291,8 +291,17 @@ def regress(
     if unknown:
         raise LpvestError(f"no reference {abbreviate(sorted(unknown)[0], 30)} (known: "
                           f"{', '.join(r.name for r in REFERENCES)})")
+    selected = [r for r in REFERENCES if not names or r.name in names]
+    if not update:  # refused before any FMU is built or co-simulated
+        if not folder.is_dir():
+            raise LpvestError(f"no reference folder {shorten(str(folder), 80)} (write one with {UPDATE_COMMAND} "
+                              f"--dir FOLDER)")
+        missing = [r.filename for r in selected if not (folder / r.filename).is_file()]
+        if missing:
+            raise LpvestError(f"{shorten(str(folder), 80)}: no reference file {missing[0]} ({len(missing)} of "
+                              f"{len(selected)} missing; write them with {UPDATE_COMMAND})")
     failed = []
-    for ref in (r for r in REFERENCES if not names or r.name in names):
+    for ref in selected:
         data, designs = simulate_reference(ref, cache)
         if update:
             path = write_reference(ref, data, designs, folder)
@@ -318,6 +327,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dir", help="reference folder (default: tests/data/reference of the source checkout)")
     parser.add_argument("--fmus", metavar="DIR",
                         help="FMU cache folder (default: $LPVEST_FMU_CACHE or ~/.cache/lpvest/fmus)")
+    parser.add_argument("--quiet", action="store_true", help="no FMU build lines (results and errors only)")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -327,7 +337,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     add_arguments(parser)
     args = parser.parse_args(argv)
     cache = as_experiment_fmus(args.fmus)
-    cache.progress = lambda msg: print(msg, file=sys.stderr, flush=True)
+    if not args.quiet:
+        cache.progress = lambda msg: print(msg, file=sys.stderr, flush=True)
     return regress(args.names, update=args.update, directory=args.dir, fmus=cache)
 
 
