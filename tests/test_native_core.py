@@ -308,11 +308,14 @@ def test_the_runtime_sources_sit_in_one_folder_per_runtime_in_the_users_cache(tm
 def test_zig_is_called_as_the_ziglang_packages_program():
     """What ``python -m ziglang`` runs, without a Python start per compiler call."""
     import subprocess
+    import sys
 
-    from lpvest.fmi._build import zig_version
-    from lpvest.fmi.native import _build as nb
+    from lpvest.fmi._build import zig_program, zig_version
 
     if zig_version() is None:
         pytest.skip("needs ziglang (pip install 'lpvest[build]')")
-    proc = subprocess.run([nb._zig_program(), "version"], capture_output=True, text=True, check=True)
-    assert proc.stdout.strip() == zig_version()
+    program = zig_program()
+    assert program is not None
+    proc = subprocess.run([sys.executable, "-m", "ziglang", "version"], capture_output=True, text=True, check=True)
+    assert proc.stdout.strip() == zig_version() and subprocess.run(
+        [program, "version"], capture_output=True, text=True, check=True).stdout == proc.stdout

@@ -421,33 +421,46 @@ def _cc() -> str | None:
 
 
 @functools.cache
+def zig_program() -> str | None:
+    """The ``zig`` program of the ``ziglang`` package (the ``build`` extra; what
+    ``python -m ziglang`` runs, called directly: no Python start per compiler
+    call), or ``None`` when it is not installed."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("ziglang")
+    if spec is None or spec.origin is None:
+        return None
+    program = Path(spec.origin).parent / ("zig.exe" if sys.platform == "win32" else "zig")
+    return str(program) if program.is_file() else None
+
+
+@functools.cache
 def zig_version() -> str | None:
     """The version of the ``ziglang`` package's compiler (the ``build`` extra),
     or ``None`` when it is not installed."""
-    import importlib.util
-
-    if importlib.util.find_spec("ziglang") is None:
+    program = zig_program()
+    if program is None:
         return None
-    proc = subprocess.run([sys.executable, "-m", "ziglang", "version"], capture_output=True, text=True, check=False)
+    proc = subprocess.run([program, "version"], capture_output=True, text=True, check=False)
     return proc.stdout.strip() if proc.returncode == 0 and proc.stdout.strip() else None
 
 
 def _bridge_command(platform: str, src: Path, out: Path) -> tuple[list[str], str] | None:
     """The command that compiles the bridge for ``platform`` and a description
     of its compiler (recorded in the manifest), or ``None``: on Linux the C
-    compiler for linux64, else zig (``python -m ziglang cc``) for any target."""
+    compiler for linux64, else zig (:func:`zig_program`'s ``cc``) for any target."""
     inner = f'-DINNER_LIBRARY="{_inner_library(platform)}"'
     cc = _cc() if platform == "linux64" and sys.platform.startswith("linux") else None
     if cc is not None:
         # -ffile-prefix-map and no -g: nothing of the build folder ends up in the binary
         return ([*cc.split(), "-shared", "-fPIC", "-O2", "-fvisibility=hidden", f"-ffile-prefix-map={src.parent}=.",
                  inner, "-o", str(out), str(src), "-ldl"], _compiler_version())
-    zig = zig_version()
-    if zig is None:
+    zig, program = zig_version(), zig_program()
+    if zig is None or program is None:
         return None
     # zig's output depends on its version, the flags and the source only (checked byte for byte by
     # tests/test_fmu_windows.py); -s: no debug information, no program database
-    cmd = [sys.executable, "-m", "ziglang", "cc", "-target", BRIDGE_PLATFORMS[platform], "-shared", "-O2", "-s",
+    cmd = [program, "cc", "-target", BRIDGE_PLATFORMS[platform], "-shared", "-O2", "-s",
            inner, "-o", str(out), str(src)]
     if platform == "linux64":
         cmd[-4:-4] = ["-fPIC", "-fvisibility=hidden"]

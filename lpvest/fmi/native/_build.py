@@ -57,6 +57,7 @@ from .._build import (
     sha256_hex,
     slave_class_name,
     write_fmu_zip,
+    zig_program,
     zig_version,
 )
 from .._parameters import SPEC_FILE, SPEC_FORMAT
@@ -98,27 +99,21 @@ def _runtime_digest() -> str:
     return sha256_hex(json.dumps({k: sha256_hex(v) for k, v in runtime_files().items()}, sort_keys=True).encode())
 
 
+_NO_ZIG = "the native backend compiles with zig: pip install 'lpvest[build]' (the ziglang package)"
+
+
 def _zig() -> str:
     version = zig_version()
     if version is None:
-        raise BuildError("the native backend compiles with zig: pip install 'lpvest[build]' (the ziglang package)")
+        raise BuildError(_NO_ZIG)
     return version
 
 
-@functools.cache
-def _zig_program() -> str:
-    """The ``zig`` program of the ``ziglang`` package (what ``python -m ziglang``
-    runs): called directly, without a Python start per compiler call."""
-    spec = importlib.util.find_spec("ziglang")
-    name = "zig.exe" if sys.platform == "win32" else "zig"
-    program = None if spec is None or spec.origin is None else Path(spec.origin).parent / name
-    if program is None or not program.is_file():
-        raise BuildError("the native backend compiles with zig: pip install 'lpvest[build]' (the ziglang package)")
-    return str(program)
-
-
 def _run_zig(args: list[str], cwd: Path, what: str) -> None:
-    proc = subprocess.run([_zig_program(), "cc", *args], cwd=cwd, capture_output=True, text=True, check=False)
+    program = zig_program()
+    if program is None:
+        raise BuildError(_NO_ZIG)
+    proc = subprocess.run([program, "cc", *args], cwd=cwd, capture_output=True, text=True, check=False)
     if proc.returncode != 0:
         raise BuildError(f"{what} failed (zig cc {' '.join(args)}):\n{proc.stderr}")
 
