@@ -7,29 +7,38 @@ it sets, reads and steps, and in which order, is what a real FMU would see."""
 from __future__ import annotations
 
 import zipfile
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 #: every FMI call of every stand-in instance: (instance name, function, details)
 CALLS: list[tuple[str, str, Any]] = []
 
-# name: (causality, type, start, dependencies of an output: None = all inputs, "" = none)
+# name: (causality, type, start, dependencies of an output: None = all inputs, "" = none); the type of
+# an Enumeration variable is "Enumeration:<declared type>" (a type of write_fmu's ``enumerations``)
 Variables = list[tuple[str, str, str, Any, Any]]
 
 _TAG = {"Real": "Real", "Integer": "Integer", "Boolean": "Boolean", "String": "String"}
 
 
-def write_fmu(folder: Path, identifier: str, variables: Variables) -> Path:
-    """``<identifier>.fmu`` with a modelDescription.xml only (value references 0, 1, ...)."""
+def write_fmu(folder: Path, identifier: str, variables: Variables,
+              enumerations: Mapping[str, Sequence[tuple[str, int]]] | None = None) -> Path:
+    """``<identifier>.fmu`` with a modelDescription.xml only (value references 0, 1, ...);
+    ``enumerations``: the Enumeration types it declares, by name, as their items (name, value)."""
     rows, outputs = [], []
     for vr, (name, causality, typ, start, _deps) in enumerate(variables):
         variability = {"parameter": "fixed", "input": "discrete", "output": "discrete"}[causality] \
             if typ != "String" else ("fixed" if causality == "parameter" else "discrete")
         initial = ' initial="exact"' if causality == "output" else ""
         value = str(start).lower() if typ == "Boolean" else start
+        tag, _, declared = typ.partition(":")
+        element = f'<{tag} declaredType="{declared}" start="{value}"/>' if declared else \
+            f'<{_TAG[tag]} start="{value}"/>'
         rows.append(f'    <ScalarVariable name="{name}" valueReference="{vr}" causality="{causality}" '
-                    f'variability="{variability}"{initial}><{_TAG[typ]} start="{value}"/></ScalarVariable>')
+                    f'variability="{variability}"{initial}>{element}</ScalarVariable>')
+    types = [f'    <SimpleType name="{n}"><Enumeration>'
+             + "".join(f'<Item name="{i}" value="{v}"/>' for i, v in items) + "</Enumeration></SimpleType>"
+             for n, items in (enumerations or {}).items()]
     index = {v[0]: i + 1 for i, v in enumerate(variables)}
     for name, causality, _typ, _start, deps in variables:
         if causality != "output":
@@ -44,6 +53,7 @@ def write_fmu(folder: Path, identifier: str, variables: Variables) -> Path:
         f'<fmiModelDescription fmiVersion="2.0" modelName="{identifier}" guid="{{{identifier}}}" '
         'variableNamingConvention="structured">',
         f'  <CoSimulation modelIdentifier="{identifier}" canHandleVariableCommunicationStepSize="true"/>',
+        *(["  <TypeDefinitions>", *types, "  </TypeDefinitions>"] if types else []),
         "  <ModelVariables>", *rows, "  </ModelVariables>",
         "  <ModelStructure>", "    <Outputs>", *outputs, "    </Outputs>", "  </ModelStructure>",
         "</fmiModelDescription>", ""])
@@ -88,6 +98,8 @@ class FakeSlave:
     MODELS: dict[str, type[Model]] = {}
     #: (instance name, function) -> status a call returns instead of running (or an exception it raises)
     FAIL: dict[tuple[str, str], Any] = {}
+    #: (instance name, function) -> the bytes a failing call logs (default: "<function> failed in <instance> 100%%")
+    MESSAGES: dict[tuple[str, str], bytes] = {}
 
     def __init__(self, guid: str, unzipDirectory: str, modelIdentifier: str, instanceName: str) -> None:
         self.name, self.identifier = instanceName, modelIdentifier
@@ -110,7 +122,8 @@ class FakeSlave:
         if isinstance(status, BaseException):
             raise status
         if status and self.logger is not None:
-            self.logger(None, None, status, b"logStatusError", f"{what} failed in {self.name} 100%%".encode())
+            message = self.MESSAGES.get((self.name, what), f"{what} failed in {self.name} 100%%".encode())
+            self.logger(None, None, status, b"logStatusError", message)
         return status
 
     def _get(self, component: Any, vrs: Any, n: int, buf: Any) -> int:

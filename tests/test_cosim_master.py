@@ -63,6 +63,7 @@ def fmus(tmp_path, monkeypatch):
     monkeypatch.setattr("fmpy.fmi2.FMU2Slave", FakeSlave)
     monkeypatch.setattr(FakeSlave, "MODELS", {"Src": Src, "Gain": Gain, "Delay": Delay, "Vec": Vec})
     monkeypatch.setattr(FakeSlave, "FAIL", {})
+    monkeypatch.setattr(FakeSlave, "MESSAGES", {})
     CALLS.clear()
     return {m.__name__.lower(): write_fmu(tmp_path, m.__name__, m.variables) for m in (Src, Gain, Delay, Vec)}
 
@@ -262,6 +263,9 @@ def test_start_values_reach_each_variable_as_its_fmi_type(fmus):
     ({"count": 2**31}, r"^component src: count: 2147483648 is outside the range of an FMI Integer "
                        r"\[-2147483648, 2147483647\]$"),
     ({"count": -(2**31) - 1}, r"is outside the range of an FMI Integer"),
+    ({"count": True}, r"^component src: count: expected an integer, found bool True$"),
+    ({"count": "3"}, r"^component src: count: expected an integer, found str '3'$"),
+    ({"k": "x" * 29}, r"^component src: k: expected a number, found str 'x{15}\.\.\.x{5}' \(29 characters\)$"),
     ({"flag": 1}, r"^component src: flag: expected true or false, found int 1$"),
     ({"label": 5}, r"^component src: label: expected a string, found int 5$"),
     ({"label": "a\x00b"}, r"^component src: label: a string may not hold a NUL character$"),
@@ -502,3 +506,118 @@ def test_a_long_run_on_a_terminal_of_40_columns_shows_a_bar_that_keeps_its_count
     bars = assert_bars_keep_their_count(_read_all(controller), ("co-simulation",), 40)
     assert re.search(r"\b0/20001\b", bars[0]) and re.search(r"\b20001/20001\b", bars[-1]), bars
     assert len(res) == 20_002
+
+
+# -- Enumeration variables, recorded parameters and inputs, long names, foreign log text ------------
+
+MODE = [("off", 1), ("on", 2), ("auto", 5)]
+LEVEL = [("low", 1), ("high", 2)]
+
+
+class Switch(Model):
+    """Its state is off until t = 0.5, then the mode it was given."""
+
+    variables = [("mode", "parameter", "Enumeration:Mode", 1, None), ("state", "output", "Enumeration:Mode", 1, ""),
+                 ("level", "output", "Enumeration:Level", 2, "")]
+
+    def outputs(self):
+        self["state"] = self["mode"] if self.time >= 0.5 else 1
+
+
+class Relay(Model):
+    variables = [("cmd", "input", "Enumeration:Mode", 1, None), ("echo", "output", "Enumeration:Mode", 1, ["cmd"])]
+
+    def outputs(self):
+        self["echo"] = self["cmd"]
+
+
+@pytest.fixture
+def enums(fmus, tmp_path, monkeypatch):
+    monkeypatch.setitem(FakeSlave.MODELS, "Switch", Switch)
+    monkeypatch.setitem(FakeSlave.MODELS, "Relay", Relay)
+    return {"switch": write_fmu(tmp_path, "Switch", Switch.variables, {"Mode": MODE, "Level": LEVEL}),
+            "relay": write_fmu(tmp_path, "Relay", Relay.variables, {"Mode": MODE})}
+
+
+@pytest.mark.parametrize("given", ["auto", 5, np.int64(5)])
+def test_an_enumeration_is_set_by_item_name_or_value_exchanged_and_recorded_exactly(enums, given):
+    comps = [Component("sw", enums["switch"], {"mode": given}), Component("relay", enums["relay"])]
+    with CoSimulation(comps, ["sw.state -> relay.cmd"], step_size=0.25) as sim:
+        assert sim.recorded == ["sw.state", "sw.level", "relay.echo"]  # Enumeration outputs are recorded
+        res = sim.run(4)
+    sets = [d for n, w, d in CALLS if n == "sw" and w == "setInteger"]
+    assert sets == [{"mode": 5}] and type(sets[0]["mode"]) is int  # an fmi2Integer, the item's value
+    np.testing.assert_array_equal(res["sw.state"], [1, 1, 5, 5, 5])
+    np.testing.assert_array_equal(res["relay.echo"], res["sw.state"])  # connected in the same step
+    np.testing.assert_array_equal(res["sw.level"], [2] * 5)
+
+
+@pytest.mark.parametrize(("given", "match"), [
+    ("dim", r"^component sw: mode: expected one of off = 1, on = 2, auto = 5 \(a name or its value\), found str "
+            r"'dim'$"),
+    (3, r"^component sw: mode: expected one of off = 1, on = 2, auto = 5 \(a name or its value\), found int 3$"),
+    (True, r"^component sw: mode: expected an integer, found bool True$"),
+    (2.5, r"^component sw: mode: expected an integer, found float 2.5$"),
+])
+def test_an_enumeration_value_that_is_not_one_of_its_items_is_refused_listing_them(enums, given, match):
+    with pytest.raises(CoSimulationError, match=match) as info:
+        CoSimulation.check([Component("sw", enums["switch"], {"mode": given})], [], step_size=1.0)
+    assert info.value.where == "components.sw.parameters.mode"
+
+
+def test_enumerations_of_different_types_are_not_connected(enums):
+    comps = [Component("sw", enums["switch"]), Component("relay", enums["relay"])]
+    with pytest.raises(CoSimulationError, match=r"^connection sw.level -> relay.cmd: Enumeration types 'Level' and "
+                                                r"'Mode'$") as info:
+        CoSimulation.check(comps, ["sw.state -> relay.cmd", "sw.level -> relay.cmd"], step_size=1.0)
+    assert info.value.where == "connections[2]"
+
+
+def test_a_vector_start_value_is_checked_element_by_element_as_given(fmus):
+    with pytest.raises(CoSimulationError, match=r"^component vec: v\[2\]: expected a number, found bool True$") as info:
+        CoSimulation.check([Component("vec", fmus["vec"], {"v": [0.5, True]})], [], step_size=1.0)
+    assert info.value.where == "components.vec.parameters.v"
+    with CoSimulation([Component("vec", fmus["vec"], {"v": np.array([0.5, 2])})], [], step_size=1.0) as sim:
+        res = sim.run(1)
+    np.testing.assert_array_equal(res["vec.w[1]"], [5.0, 5.0])
+    np.testing.assert_array_equal(res["vec.w[2]"], [200.0, 200.0])
+
+
+def test_a_recorded_input_or_parameter_is_read_after_the_sets_of_each_step(fmus):
+    comps = [Component("src", fmus["src"], {"k": 3.0, "count": 2}), Component("gain", fmus["gain"], {"k": 0.5})]
+    with CoSimulation(comps, ["src.y -> gain.u"], step_size=0.5,
+                      record=["gain.u", "gain.y", "gain.k", "src.count", "src.flag"]) as sim:
+        res = sim.run(3)
+    t = np.arange(4) * 0.5
+    np.testing.assert_array_equal(res["gain.u"], 3.0 * t + 2)  # the input as set at t_k, not one step late
+    np.testing.assert_array_equal(res["gain.y"], 0.5 * res["gain.u"])
+    np.testing.assert_array_equal(res["gain.k"], [0.5] * 4)
+    np.testing.assert_array_equal(res["src.count"], [2] * 4)
+    np.testing.assert_array_equal(res["src.flag"], [0.0] * 4)
+    with pytest.raises(CoSimulationError, match=r"^recorded variable 'src.label' is a String; only Real, Integer, "
+                                                r"Boolean and Enumeration variables can be recorded$") as info:
+        CoSimulation.check(comps, [], step_size=1.0, record=["gain.y", "src.label"])
+    assert info.value.where == "record[2]"
+
+
+def test_a_long_component_name_is_cut_in_the_field_an_error_names(fmus):
+    bad = "9" + "x" * 39  # not an identifier; 40 characters
+    cut = "'9xxxxxxxxxxxxxx...xxxxx' (40 characters)"  # about 30 characters
+    with pytest.raises(CoSimulationError, match=rf"^component name {re.escape(cut)} is not an identifier$") as info:
+        CoSimulation.check([Component(bad, fmus["src"])], [], step_size=1.0)
+    assert info.value.where == f"components.{cut}"
+    name = "component_" + "x" * 30
+    cut = "'component_xxxxx...xxxxx' (40 characters)"
+    with pytest.raises(CoSimulationError, match=rf"^component {re.escape(cut)}: parameters: expected a mapping of "
+                                                r"variable names to start values, found list$") as info:
+        Component(name, fmus["src"], [("k", 1.0)])  # type: ignore[arg-type]
+    assert info.value.where == f"components.{cut}"
+
+
+def test_a_log_message_that_is_not_utf_8_reaches_the_error_with_its_bad_bytes_replaced(fmus):
+    FakeSlave.FAIL[("gain", "doStep")] = 3
+    FakeSlave.MESSAGES[("gain", "doStep")] = b"temp\xe9rature 100%% out of range"  # Latin-1, not UTF-8
+    with chain(fmus) as sim:
+        with pytest.raises(CoSimulationError, match=r"^component gain: doStep at t = 0 returned error \(\[ERROR\] "
+                                                    "temp\ufffdrature 100% out of range\\)$"):
+            sim.run(2)

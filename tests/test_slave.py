@@ -644,18 +644,21 @@ class _Duck:
     def __init__(self, inner, extra: bool, fail):
         from lpvest.core._protocol import Port
 
-        self.inner, self.fail, self.steps = inner, fail, 0
+        self.inner, self.fail, self.steps, self.extra = inner, fail, 0, extra
         self.input_ports = tuple(inner.input_ports)
-        self.output_ports = tuple(inner.output_ports) + ((Port("extra", (1,), "one more"),) if extra else ())
+        self.output_ports = tuple(inner.output_ports) + ((Port("extra", (1,), "one more: y again"),) if extra else ())
+
+    def _with_extra(self, out):
+        return {**out, "extra": out["y"].copy()} if self.extra else out
 
     def outputs(self, inputs):
-        return self.inner.outputs(inputs)
+        return self._with_extra(self.inner.outputs(inputs))
 
     def step(self, inputs):
         self.steps += 1
         if self.fail == ("raise", self.steps):
             raise ValueError(f"step {self.steps} went wrong")
-        out = self.inner.step(inputs)
+        out = self._with_extra(self.inner.step(inputs))
         return {k: np.full_like(v, np.nan) for k, v in out.items()} if self.fail == ("nan", self.steps) else out
 
     def reset(self):
@@ -670,9 +673,10 @@ class _Duck:
         self.steps = state[1]
 
 
-def foreign(resources, fail=None, name: str = "foreign") -> Slave:
-    """peixoto-ex1's plant slave whose component is a :class:`_Duck`, with two parameters more:
-    ``limit`` (an Integer with only a maximum) and ``extra`` (one output more: other ports)."""
+def foreign(resources, fail=None, name: str = "foreign", extra: bool = False) -> Slave:
+    """peixoto-ex1's plant slave whose component is a :class:`_Duck`, with parameters more:
+    ``limit`` (an Integer with only a maximum), ``gain`` (a Real with only a maximum) and
+    ``extra`` (one output more: other ports; ``extra``: its start value, the FMU's ports)."""
     from lpvest.fmi._parameters import Parameter
 
     from .slave_harness import _script
@@ -681,7 +685,7 @@ def foreign(resources, fail=None, name: str = "foreign") -> Slave:
         def declare(self):
             return [*super().declare(), Parameter("limit", 3, "an Integer with only a maximum", maximum=5),
                     Parameter("gain", 1.0, "a Real with only a maximum", maximum=2.0),
-                    Parameter("extra", False, "one output more (other ports: another FMU)")]
+                    Parameter("extra", extra, "one output more (other ports: another FMU)")]
 
         def make_component(self, params):
             return _Duck(super().make_component(params), params["extra"], fail)
@@ -719,6 +723,19 @@ def test_a_foreign_components_failing_later_sample_is_named_and_consumes_nothing
     assert s.errors() == [f"[PeixotoEx1Plant] fmi2DoStep refused at t = 0 (h = 3, 3 samples): sample 2 of 3 "
                           f"(at t = 1): {why}; nothing consumed"]
     assert s.slave._time == 0.0 and s.get("x[1]", "x[2]") == ref.get("x[1]", "x[2]")
+
+
+def test_six_outputs_of_a_later_sample_that_are_not_finite_are_named_five_then_an_ellipsis(resources):
+    """The message names at most five outputs and says when there are more: a sixth is not dropped
+    silently (the six outputs of a foreign plant with one output more, all NaN in sample 2)."""
+    s = foreign(resources, ("nan", 2), extra=True)
+    assert [v.name for v in s.slave.vars.values() if s.slave._elements[v.value_reference].kind == "output"] == [
+        "y[1]", "z[1]", "z[2]", "x[1]", "x[2]", "extra[1]"]
+    assert s.initialize() == []
+    s.set_reals({"p[1]": 0.5, "w[1]": 0.25})
+    assert not s.step(0.0, 3.0)
+    assert s.errors() == ["[PeixotoEx1Plant] fmi2DoStep refused at t = 0 (h = 3, 3 samples): sample 2 of 3 (at t = 1): "
+                          "output y[1], z[1], z[2], x[1], x[2] ... is not finite (NaN or inf); nothing consumed"]
 
 
 def test_parameters_are_checked_against_a_one_sided_range_and_may_not_change_the_ports(resources):
@@ -841,3 +858,99 @@ def test_inputs_set_again_after_a_rejected_one_are_the_next_samples_inputs(resou
     assert a.get(*OUTS) == b.get(*OUTS)
     assert a.step(1.0, 1.0) and b.step(1.0, 1.0), a.errors()
     assert a.get(*OUTS) == b.get(*OUTS) and a.errors() == []
+
+
+# -- a timed component with a sample time, a plant for a system's second model, alpha's range ----
+
+
+def sampled_ltv_plant(folder, ts: float) -> Slave:
+    """sridhar-ltv's plant as a timed component with a sample time: its spec names the parameter
+    ``ts`` as the sample time, as the B-spline observer's spec names ``dt``, so that a step of m
+    samples runs m samples (the model's input u = 120 sin t applied inside each)."""
+    import json
+
+    from lpvest.fmi._parameters import SPEC_FILE, Parameter
+
+    from .slave_harness import _script
+
+    folder = write_resources("sridhar-ltv", "Plant", folder)
+    spec = json.loads((folder / SPEC_FILE).read_text())
+    spec["estimator"] = {"sample_time": "ts"}
+    (folder / SPEC_FILE).write_text(json.dumps(spec))
+
+    class SampledLtvPlant(_script("lpvest_ltv_plant.py").LpvestLtvPlant):
+        def declare(self):
+            return [*super().declare(), Parameter("ts", ts, "sample time (s)", minimum=0.0)]
+
+    s = Slave.__new__(Slave)
+    s.slave = SampledLtvPlant(instance_name="sampled", resources=str(folder))
+    s.vr = {v.name: vr for vr, v in s.slave.vars.items()}
+    return s
+
+
+# (sample time, host step, steps, whether ending at t + 3 ts instead moves the state beyond rounding:
+# by one ulp of t, 1e-16 s, it moves the state by about an ulp, which another rounding may not show;
+# by 1e-11 s, by some 2e5 ulps)
+@pytest.mark.parametrize(("ts", "h", "n", "apart"), [(0.1, 0.3, 3, False), (0.03333333333, 0.1, 4, True)])
+def test_a_timed_component_with_a_sample_time_ends_a_step_of_m_samples_at_the_hosts_point(tmp_path, ts, h, n,
+                                                                                          apart):
+    """A step of m = 3 samples: the component takes samples 1 .. m-1 to t + i ts and ends the
+    last at the host's point t + h, where the next step starts, not at t + m ts. The two differ
+    in the last bits when m ts is rounded otherwise than h (ts = 0.1, h = 0.3: 3 * 0.1 =
+    0.30000000000000004), and by 1e-11 s when h is m samples only to the communication-point
+    tolerance (a sample time of 1/30 s written to 11 digits, host steps of 0.1 s); the plant's
+    state is the solution at the end point, computed here as the library's plant does it at the
+    host's points, to the bit. (sridhar-ltv's own plant has no
+    sample time: a step there is one step of a function of time, whatever h, and never runs the
+    samples of a long step; the B-spline observer takes the end point only to check, to 1e-9,
+    that a sample is its next one.)"""
+    from lpvest.systems._streaming import LTVPlant
+
+    s = sampled_ltv_plant(tmp_path / "r", ts)
+    assert s.initialize(0.0) == []
+    model = load_system("sridhar-ltv").model(s.slave.spec["model_key"])
+    ref, summed = LTVPlant(model), LTVPlant(model)
+    for p in (ref, summed):
+        p.reset(0.0)
+    for k in range(n):
+        t = k * h  # the host's points
+        assert s.step(t, h), s.errors()
+        for i in range(1, 4):
+            ref.step({"u": [0.0]}, dt=ts, t_end=t + h if i == 3 else t + i * ts)
+            summed.step({"u": [0.0]}, dt=ts, t_end=t + i * ts)
+    assert t + h != t + 3 * ts  # the last step's two ends differ
+    got = s.get("x[1]", "x[2]", "y[1]")
+    want = ref.outputs({"u": [0.0]})
+    assert got == [*want["x"].tolist(), *want["y"].tolist()]
+    if apart:  # the end of a step is seen in the state
+        assert got[:2] != summed.get_state()["x"].tolist()
+    assert s.slave._time == t + h
+
+
+def test_the_plant_of_a_system_whose_default_model_gets_none_is_the_model_the_builder_chose(tmp_path):
+    """cox-toth-ex1's default model, (21b), has a gain in p_{t+1} and gets no plant: the builder
+    makes the plant of (21c), ``augmented``, and the FMU is that model's plant, also when it is
+    made again from the parameters set (here at initialization)."""
+    from lpvest.systems._streaming import DiscretePlant
+
+    s = Slave(write_resources("cox-toth-ex1", "Plant", tmp_path / "r"))
+    assert s.slave.spec["model_key"] == "augmented" != load_system("cox-toth-ex1").default
+    assert s.initialize(0.0, noise=False, **{"x0[1]": 0.5, "x0[2]": -0.25}) == []  # e is the input e
+    ref = DiscretePlant(load_system("cox-toth-ex1").model("augmented"), x0=[0.5, -0.25])
+    for k in range(5):
+        inputs = {"p": [float(theta(k))], "u": [math.cos(k)], "e": [0.1 * k]}
+        s.set_reals({"p[1]": inputs["p"][0], "u[1]": inputs["u"][0], "e[1]": inputs["e"][0]})
+        out = ref.step(inputs)
+        assert s.get("y[1]") == out["y"].tolist()
+        assert s.step(float(k), 1.0), s.errors()
+    assert s.get("x[1]", "x[2]") == ref.outputs({"p": [0.0], "u": [0.0], "e": [0.0]})["x"].tolist()
+
+
+def test_a_schedulers_vertex_weights_are_declared_in_0_1_with_their_vertex(resources):
+    s = Slave(resources["peixoto-ex1Scheduler"])
+    table = s.slave.variable_table()["variables"]
+    rows = {v["name"]: (v["kind"], v["minimum"], v["maximum"], v["what"]) for v in table}
+    assert rows["alpha[1]"] == ("output", 0.0, 1.0, "output alpha[1] (weight of vertex 1)")
+    assert rows["alpha[2]"] == ("output", 0.0, 1.0, "output alpha[2] (weight of vertex 2)")
+    assert rows["p[1]"] == ("output", -1.0, 1.0, "output p[1] (theta)")
+    assert s.slave.vars[s.vr["alpha[2]"]].description == "vertex weights (weight of vertex 2)"
