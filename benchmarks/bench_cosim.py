@@ -251,17 +251,19 @@ fmus, links, record, config, steps = json.loads(sys.argv[1])
 
 def execution():
     if config == "serial":
-        ssd = Path(tempfile.mkdtemp(prefix="lpvest-bench-ssd-"))
-        elements = "".join(f'<ssd:Component name="{name}" source="{Path(p).as_uri()}"/>' for name, p in fmus.items())
-        (ssd / "SystemStructure.ssd").write_text(
-            '<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" '
-            'xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" '
-            'xmlns:osp="https://opensimulationplatform.com/SSP/OSPAnnotations" name="bench" version="1.0">'
-            f'<ssd:System name="bench"><ssd:Elements>{elements}</ssd:Elements></ssd:System>'
-            '<ssd:DefaultExperiment><ssd:Annotations><ssc:Annotation type="com.opensimulationplatform">'
-            '<osp:Algorithm><osp:FixedStepAlgorithm baseStepSize="1" numWorkerThreads="0"/></osp:Algorithm>'
-            '</ssc:Annotation></ssd:Annotations></ssd:DefaultExperiment></ssd:SystemStructureDescription>')
-        ex = CosimExecution.from_ssp_file(str(ssd))
+        with tempfile.TemporaryDirectory(prefix="lpvest-bench-ssd-") as tmp:  # read when the execution is made
+            ssd = Path(tmp) / "SystemStructure.ssd"
+            elements = "".join(f'<ssd:Component name="{name}" source="{Path(p).as_uri()}"/>'
+                               for name, p in fmus.items())
+            ssd.write_text(
+                '<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" '
+                'xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" '
+                'xmlns:osp="https://opensimulationplatform.com/SSP/OSPAnnotations" name="bench" version="1.0">'
+                f'<ssd:System name="bench"><ssd:Elements>{elements}</ssd:Elements></ssd:System>'
+                '<ssd:DefaultExperiment><ssd:Annotations><ssc:Annotation type="com.opensimulationplatform">'
+                '<osp:Algorithm><osp:FixedStepAlgorithm baseStepSize="1" numWorkerThreads="0"/></osp:Algorithm>'
+                '</ssc:Annotation></ssd:Annotations></ssd:DefaultExperiment></ssd:SystemStructureDescription>')
+            ex = CosimExecution.from_ssp_file(tmp)
         idx = {name: ex.slave_index_from_instance_name(name) for name in fmus}
     else:
         ex = CosimExecution.from_step_size(step_size=int(1e9))
