@@ -23,15 +23,17 @@ every sample:
    unit step (the time of :meth:`~lpvest.cosim.CoSimulation.run` only);
 3. **libcosim**: the same four FMUs connected in a libcosim execution (Jacobi
    stepping, so other numbers: only its time per step is reported), in a
-   subprocess.
+   subprocess, in two configurations: **serial**, the FMUs stepped in the
+   calling thread (``numWorkerThreads="0"`` on the fixed-step algorithm of an
+   SSD, :data:`LIBCOSIM_CONFIGS` says why), the one the target is for; and
+   **pool**, libcosimpy's default (``CosimExecution.from_step_size``: a pool of
+   worker threads), for the record. Both record the same values (checked).
 
-Rows 2 and 3 run twice, side by side: with the pythonfmu FMUs and with the
-native ones (``lpvest build --backend native``: C, no Python in the step).
-libcosim's fixed-step algorithm hands every step to a worker thread; on a
-small virtual machine the cross-core wake-ups dominate, so libcosim also
-runs pinned to one core (``taskset -c 0``), and once more with four copies of
-a trivial foreign C FMU (``tests/data/foreign/all_types.c``): libcosim's own
-cost per step, which no FMU can go below. Each native FMU is also stepped
+Rows 2 and 3 run with the pythonfmu FMUs and with the native ones
+(``lpvest build --backend native``: C, no Python in the step). libcosim also
+runs four copies of a trivial foreign C FMU (``tests/data/foreign/all_types.c``,
+unconnected) in both configurations: libcosim's own cost per step, which no
+FMU can go below. Each native FMU is also stepped
 alone in a bare C host (``benchmarks/native_step.c``): set inputs, doStep,
 get outputs, and doStep alone.
 
@@ -40,7 +42,7 @@ stepped on the Cox & Toth truncation model against a minimal numpy step of
 (4a)-(4e) that computes the same outputs (filtered and predicted moments,
 innovation, gain, innovation covariance, log-likelihood).
 
-Everything runs in this one process, alternately, ``--repeat`` times; the
+Everything runs in this one process (libcosim in subprocesses), alternately, ``--repeat`` times; the
 best time of each is reported per step, with the ratios to the minimal loop
 (issue targets: in-process <= 2, co-simulation <= 4, Kalman step <= 1.5;
 native FMUs: co-simulation <= 1, libcosim <= 0.25, HinfPD doStep in the C
@@ -59,7 +61,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import sys
 import time
 import zipfile
@@ -220,68 +221,104 @@ def kalman_steps(steps: int) -> tuple[float, float, float]:
     return t_lib, t_min, float(np.max(np.abs(np.array(lib) - np.array(mine))))
 
 
-def libcosim_per_step(paths: dict[str, Path], steps: int, *, pin: bool = False) -> float:
-    """Seconds per step of the four FMUs in a libcosim execution (a subprocess;
-    ``pin``: on one core, ``taskset -c 0``)."""
-    import textwrap
+#: The libcosim runs' connections (instance names are the roles) and recorded outputs.
+LIBCOSIM_LINKS = [("Scheduler", "p[1]", "Plant", "p[1]"), ("Scheduler", "p[1]", "HinfPD", "p[1]"),
+                  ("Source", "w[1]", "Plant", "w[1]"), ("Plant", "y[1]", "HinfPD", "y[1]")]
+LIBCOSIM_RECORD = [("Scheduler", "p[1]"), ("Source", "w[1]"), ("Plant", "y[1]"), ("Plant", "z[1]"), ("Plant", "z[2]"),
+                   ("HinfPD", "zhat[1]"), ("HinfPD", "zhat[2]"), ("HinfPD", "xf[1]"), ("HinfPD", "xf[2]")]
 
-    code = textwrap.dedent(f"""
-        import json, time
-        from libcosimpy.CosimExecution import CosimExecution
-        from libcosimpy.CosimSlave import CosimLocalSlave
-        from libcosimpy.CosimLogging import log_output_level, CosimLogLevel
-        log_output_level(CosimLogLevel.ERROR)
-        paths = {json.dumps({r: str(p) for r, p in paths.items()})}
+#: libcosim's fixed-step algorithm as libcosimpy 0.0.6 creates it (``from_step_size``) steps the
+#: FMUs on a pool of ``hardware_concurrency() - 1`` worker threads: every step queues one task per
+#: FMU and waits on a condition variable, about 5 us of wake-ups per FMU and step on a 2-core
+#: virtual machine (four trivial FMUs: 22 us per step) against 0.1 to 0.5 us of work in a native
+#: FMU. libcosimpy has no argument for the pool's size, but an SSD read by
+#: ``CosimExecution.from_ssp_file`` (no step size given) may set the algorithm's
+#: ``numWorkerThreads``, and with 0 libcosim steps every FMU in the calling thread
+#: (``utility::thread_pool::submit`` runs the task directly when the pool has no threads): the
+#: same Jacobi stepping and the same numbers (checked), a twentieth of the time here.
+LIBCOSIM_CONFIGS = ("serial", "pool")
+
+_LIBCOSIM_RUN = """
+import json, sys, tempfile, time
+from pathlib import Path
+from libcosimpy.CosimExecution import CosimExecution
+from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+from libcosimpy.CosimObserver import CosimObserver
+from libcosimpy.CosimSlave import CosimLocalSlave
+log_output_level(CosimLogLevel.ERROR)
+fmus, links, record, config, steps = json.loads(sys.argv[1])
+
+
+def execution():
+    if config == "serial":
+        with tempfile.TemporaryDirectory(prefix="lpvest-bench-ssd-") as tmp:  # read when the execution is made
+            ssd = Path(tmp) / "SystemStructure.ssd"
+            elements = "".join(f'<ssd:Component name="{name}" source="{Path(p).as_uri()}"/>'
+                               for name, p in fmus.items())
+            ssd.write_text(
+                '<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" '
+                'xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" '
+                'xmlns:osp="https://opensimulationplatform.com/SSP/OSPAnnotations" name="bench" version="1.0">'
+                f'<ssd:System name="bench"><ssd:Elements>{elements}</ssd:Elements></ssd:System>'
+                '<ssd:DefaultExperiment><ssd:Annotations><ssc:Annotation type="com.opensimulationplatform">'
+                '<osp:Algorithm><osp:FixedStepAlgorithm baseStepSize="1" numWorkerThreads="0"/></osp:Algorithm>'
+                '</ssc:Annotation></ssd:Annotations></ssd:DefaultExperiment></ssd:SystemStructureDescription>')
+            ex = CosimExecution.from_ssp_file(tmp)
+        idx = {name: ex.slave_index_from_instance_name(name) for name in fmus}
+    else:
         ex = CosimExecution.from_step_size(step_size=int(1e9))
-        idx = {{r: ex.add_local_slave(CosimLocalSlave(fmu_path=p, instance_name=r)) for r, p in paths.items()}}
-        refs = {{r: {{v.name.decode(): v.reference for v in ex.slave_variables(i)}} for r, i in idx.items()}}
-        for src, dst in (("Scheduler", "Plant"), ("Scheduler", "HinfPD")):
-            ex.connect_real_variables(idx[src], refs[src]["p[1]"], idx[dst], refs[dst]["p[1]"])
-        ex.connect_real_variables(idx["Source"], refs["Source"]["w[1]"], idx["Plant"], refs["Plant"]["w[1]"])
-        ex.connect_real_variables(idx["Plant"], refs["Plant"]["y[1]"], idx["HinfPD"], refs["HinfPD"]["y[1]"])
-        ex.step(10)
-        t = time.perf_counter()
-        ex.step({steps})
-        print("RESULT", (time.perf_counter() - t) / {steps})
-    """)
-    return _libcosim_run(code, pin)
+        idx = {name: ex.add_local_slave(CosimLocalSlave(fmu_path=p, instance_name=name)) for name, p in fmus.items()}
+    refs = {name: {v.name.decode(): v.reference for v in ex.slave_variables(i)} for name, i in idx.items()}
+    for src, out, dst, inp in links:
+        ex.connect_real_variables(idx[src], refs[src][out], idx[dst], refs[dst][inp])
+    return ex, idx, refs
 
 
-def _libcosim_run(code: str, pin: bool) -> float:
+# the values: the first 40 steps, with an observer, in an execution of their own
+ex, idx, refs = execution()
+obs = CosimObserver.create_last_value()
+ex.add_observer(obs)
+values = []
+for _ in range(40):
+    ex.step(1)
+    values += [obs.last_real_values(idx[name], [refs[name][v]])[0] for name, v in record]
+print("VALUES", json.dumps(values))
+# the time: no observer
+ex, idx, refs = execution()
+ex.step(10)
+t = time.perf_counter()
+ex.step(steps)
+print("RESULT", (time.perf_counter() - t) / steps)
+"""
+
+
+def libcosim_per_step(fmus: dict[str, Path], steps: int, config: str,
+                      links: list[tuple[str, str, str, str]] = LIBCOSIM_LINKS,
+                      record: list[tuple[str, str]] = LIBCOSIM_RECORD) -> tuple[float, list[float]]:
+    """(seconds per step, the ``record`` values after each of the first 40
+    steps) of the FMUs ``fmus`` (instance name -> file) with the connections
+    ``links`` in a libcosim execution, in a subprocess; ``config``:
+    ``"serial"`` or ``"pool"`` (see :data:`LIBCOSIM_CONFIGS`). The time is of
+    an execution without an observer, after 10 steps to warm up."""
     import subprocess
 
-    cmd = [sys.executable, "-c", code]
-    if pin:
-        cmd = ["taskset", "-c", "0", *cmd]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=1800, check=True)
-    return float(next(x for x in proc.stdout.splitlines() if x.startswith("RESULT")).split()[1])
+    arg = json.dumps([{n: str(p) for n, p in fmus.items()}, links, record, config, steps])
+    out = subprocess.run([sys.executable, "-c", _LIBCOSIM_RUN, arg], capture_output=True, text=True, timeout=1800,
+                         check=True).stdout.splitlines()
+    per_step = float(next(x for x in out if x.startswith("RESULT ")).split()[1])
+    return per_step, json.loads(next(x for x in out if x.startswith("VALUES "))[len("VALUES "):])
 
 
-def libcosim_floor_per_step(steps: int, *, pin: bool = False) -> float:
-    """Seconds per step of four unconnected copies of a trivial foreign C FMU
-    (``AllTypes``, tests/data/foreign) in libcosim: libcosim's own cost."""
+def trivial_fmus() -> dict[str, Path]:
+    """Four copies of a trivial foreign C FMU (``AllTypes``, tests/data/foreign:
+    a step that does nothing), unconnected: libcosim's own cost per step."""
     import tempfile
-    import textwrap
 
     sys.path.insert(0, str(HERE.parent))
     from tests.foreign_fmus import build_foreign_fmu
 
     fmu = build_foreign_fmu("AllTypes", Path(tempfile.mkdtemp(prefix="lpvest-bench-")))
-    code = textwrap.dedent(f"""
-        import time
-        from libcosimpy.CosimExecution import CosimExecution
-        from libcosimpy.CosimSlave import CosimLocalSlave
-        from libcosimpy.CosimLogging import log_output_level, CosimLogLevel
-        log_output_level(CosimLogLevel.ERROR)
-        ex = CosimExecution.from_step_size(step_size=int(1e9))
-        for i in range(4):
-            ex.add_local_slave(CosimLocalSlave(fmu_path={str(fmu)!r}, instance_name=f"c{{i}}"))
-        ex.step(10)
-        t = time.perf_counter()
-        ex.step({steps})
-        print("RESULT", (time.perf_counter() - t) / {steps})
-    """)
-    return _libcosim_run(code, pin)
+    return {f"c{i}": fmu for i in range(4)}
 
 
 def profile(paths: dict[str, Path], steps: int) -> None:
@@ -317,6 +354,12 @@ def main() -> int:
         assert z.read("resources/design.json").decode() == design_json, "the two HinfPD FMUs carry other designs"
 
     co_runs, co_setup, nat_runs, ip_runs, min_runs, kf_lib, kf_min = [], [], [], [], [], [], []
+    # libcosim: the native and the trivial FMUs in both configurations, the pythonfmu ones serial
+    lc_cases = {f"{kind} {config}": (kind, config) for kind in ("native", "floor") for config in LIBCOSIM_CONFIGS}
+    lc_cases["pythonfmu serial"] = ("pythonfmu", "serial")
+    lc_fmus = {"native": native, "pythonfmu": paths, "floor": trivial_fmus()}
+    lc_runs: dict[str, list[float]] = {case: [] for case in lc_cases}
+    lc_values: dict[str, list[float]] = {}
     co_out = nat_out = ip_out = min_out = None
     kf_diff = 0.0
     for _ in range(args.repeat):
@@ -332,12 +375,12 @@ def main() -> int:
         lib, mine, kf_diff = kalman_steps(min(args.steps, 5000))
         kf_lib.append(lib)
         kf_min.append(mine)
-    pin = shutil.which("taskset") is not None
-    lc = {"pythonfmu": libcosim_per_step(paths, args.steps), "native": libcosim_per_step(native, args.steps),
-          "floor": libcosim_floor_per_step(args.steps)}
-    if pin:
-        lc |= {"native pinned": libcosim_per_step(native, args.steps, pin=True),
-               "floor pinned": libcosim_floor_per_step(args.steps, pin=True)}
+        for case, (kind, config) in lc_cases.items():
+            if kind == "floor":
+                run, lc_values[case] = libcosim_per_step(lc_fmus[kind], args.steps, config, links=[], record=[])
+            else:
+                run, lc_values[case] = libcosim_per_step(lc_fmus[kind], args.steps, config)
+            lc_runs[case].append(run)
     c_host = {role: step_times(native[role], steps=max(args.steps * 10, 10_000), repeat=5) for role in ROLES}
     assert co_out is not None and nat_out is not None and ip_out is not None and min_out is not None
     identical = bool(np.array_equal(co_out, ip_out))
@@ -347,7 +390,9 @@ def main() -> int:
     nat_agree = float(np.max(np.abs(nat_out - ip_out)))
     n = args.steps + 1  # samples recorded (the last one without a step)
     co_us, nat_us, ip_us, min_us = (min(r) / n * 1e6 for r in (co_runs, nat_runs, ip_runs, min_runs))
-    lc_us = {k: v * 1e6 for k, v in lc.items()}
+    lc_us = {case: min(r) * 1e6 for case, r in lc_runs.items()}
+    # the thread pool and the calling thread step the same Jacobi co-simulation
+    lc_same = lc_values["native serial"] == lc_values["native pool"]
     kf_n = min(args.steps, 5000)
     kf_lib_us, kf_min_us = min(kf_lib) / kf_n * 1e6, min(kf_min) / kf_n * 1e6
 
@@ -359,12 +404,13 @@ def main() -> int:
     print(f"  in-process (lpvest components):               {ratio(ip_us, '2')}")
     print(f"  co-simulation, lpvest.cosim, pythonfmu FMUs:  {ratio(co_us, '4')} (set-up {min(co_setup):.2f} s)")
     print(f"  co-simulation, lpvest.cosim, native FMUs:     {ratio(nat_us, '1')}")
-    print(f"  libcosim (Jacobi, subprocess), pythonfmu:     {ratio(lc_us['pythonfmu'])}")
-    print(f"  libcosim (Jacobi, subprocess), native:        {ratio(lc_us['native'], '0.25')}")
-    print(f"  libcosim, four trivial C FMUs (its own cost): {ratio(lc_us['floor'])}")
-    if pin:
-        print(f"  libcosim pinned to one core, native:          {ratio(lc_us['native pinned'], '0.25')}")
-        print(f"  libcosim pinned, four trivial C FMUs:         {ratio(lc_us['floor pinned'])}")
+    print("  libcosim (Jacobi, a subprocess each), serial: numWorkerThreads=0; pool: libcosimpy's default")
+    print(f"  libcosim serial, pythonfmu:                   {ratio(lc_us['pythonfmu serial'])}")
+    print(f"  libcosim serial, native:                      {ratio(lc_us['native serial'], '0.25')}")
+    print(f"  libcosim serial, four trivial C FMUs (floor): {ratio(lc_us['floor serial'])}")
+    print(f"  libcosim pool, native:                        {ratio(lc_us['native pool'])}")
+    print(f"  libcosim pool, four trivial C FMUs (floor):   {ratio(lc_us['floor pool'])}")
+    print(f"  libcosim serial and pool record the same values: {lc_same}")
     print(f"  identical results in-process vs co-simulation: {identical}" + ("" if identical else
           f" (largest difference {np.max(np.abs(co_out - ip_out)):.3g})") + f"; minimal loop within {agree:.1e}; "
           f"native FMUs within {nat_agree:.1e}")
@@ -379,19 +425,20 @@ def main() -> int:
     if args.out:
         Path(args.out).write_text(json.dumps({
             "steps": args.steps, "repeat": args.repeat, "minimal_us_per_step": min_us,
-            "cosim_us_per_step": co_us, "inprocess_us_per_step": ip_us, "libcosim_us_per_step": lc_us["pythonfmu"],
+            "cosim_us_per_step": co_us, "inprocess_us_per_step": ip_us,
+            "libcosim_us_per_step": lc_us["pythonfmu serial"],
             "inprocess_ratio": ip_us / min_us, "cosim_ratio": co_us / min_us, "cosim_setup_s": min(co_setup),
             "identical": identical, "minimal_agreement": agree, "kalman_us_per_step": kf_lib_us,
             "kalman_minimal_us_per_step": kf_min_us, "kalman_ratio": kf_lib_us / kf_min_us,
             "native_cosim_us_per_step": nat_us, "native_cosim_ratio": nat_us / min_us,
-            "native_agreement": nat_agree, "libcosim_us": lc_us,
+            "native_agreement": nat_agree, "libcosim_us": lc_us, "libcosim_serial_equals_pool": lc_same,
             "libcosim_ratio": {k: v / min_us for k, v in lc_us.items()},
             "c_host_ns": {role: {"set_step_get": full, "step": step} for role, (full, step) in c_host.items()},
         }, indent=2))
     if args.profile:
         profile(paths, args.steps)
     scale = max(1.0, float(np.max(np.abs(ip_out))))
-    return 0 if identical and agree < 1e-12 and kf_diff < 1e-12 and nat_agree <= 1e-12 * scale else 1
+    return 0 if lc_same and identical and agree < 1e-12 and kf_diff < 1e-12 and nat_agree <= 1e-12 * scale else 1
 
 
 if __name__ == "__main__":

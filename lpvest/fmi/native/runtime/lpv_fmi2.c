@@ -28,6 +28,7 @@
  *   (fmi2ExitInitializationMode, a preview of the outputs before it, fmi2SetFMUstate)
  *   and for FMU states; never in fmi2DoStep, fmi2GetReal or fmi2SetReal.
  */
+#include <float.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -84,6 +85,9 @@ typedef struct {
     double* scratch_out; /* n_outputs: samples 2..m of a step */
     int held_valid;
     int pending; /* comp's tmp holds the evaluation of the current inputs */
+    /* of the model, counted once at instantiation (fmi2DoStep asks every step) */
+    int feedthrough; /* has_feedthrough(m) */
+    int all_direct;  /* every output port has direct feedthrough */
 
     int* invalid; /* value references, in the order they became invalid */
     int n_invalid;
@@ -441,7 +445,7 @@ static int refresh(instance* s, lpv_msg* err) {
         if (comp_evaluate(s, c, s->inputs, s->scratch_out, err)) return 1;
         memcpy(s->outputs, s->scratch_out, sizeof(double) * (size_t)m->n_outputs);
         s->pending = c == &s->comp;
-    } else if (n_direct(m) == m->n_out_ports) {
+    } else if (s->all_direct) {
         memcpy(s->outputs, s->held, sizeof(double) * (size_t)m->n_outputs);
     } else {
         /* outputs with no feedthrough at the new time; the others hold */
@@ -563,6 +567,8 @@ FMI2_Export fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuT
     s->name = dup_string(name);
     s->logging_on = loggingOn != 0;
     s->categories = (1u << N_CATEGORIES) - 1u;
+    s->feedthrough = has_feedthrough(m);
+    s->all_direct = n_direct(m) == m->n_out_ports;
     s->reals = (double*)zalloc((size_t)m->n_real, sizeof(double));
     s->ints = (int*)zalloc((size_t)m->n_int, sizeof(int));
     s->bools = (int*)zalloc((size_t)m->n_bool, sizeof(int));
@@ -854,6 +860,8 @@ FMI2_Export fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference v
 static long samples_in(const instance* s, double h) {
     const lpv_model* m = s->m;
     if (m->sample_time < 0) return 1;
+    /* one sample, the usual step: what the division below gives (a ratio of exactly 1), without it */
+    if (h == s->reals[m->sample_time] && h > 0 && h <= DBL_MAX) return 1;
     double ratio = h / s->reals[m->sample_time];
     if (!isfinite(ratio) || !(ratio > 0.5) || TIME_RTOL * ratio >= 0.5) return 0;
     double r = floor(ratio + 0.5);
@@ -1000,7 +1008,7 @@ FMI2_Export fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2B
         current = s->scratch_out;
     }
     s->time = t + h;
-    if (has_feedthrough(m)) {
+    if (s->feedthrough) {
         memcpy(s->held, current, sizeof(double) * (size_t)m->n_outputs);
         s->held_valid = 1;
     } else {
