@@ -579,9 +579,11 @@ def test_the_search_shows_its_bar_only_when_asked_counting_designs_and_the_best_
     search_epsilon(ex1(), program=CurveProgram(lambda phi: 2.0 + (phi - 0.3) ** 2), n_grid=12)
     assert screen.getvalue() == ""
     s = search_epsilon(ex1(), program=CurveProgram(lambda phi: 2.0 + (phi - 0.3) ** 2), n_grid=12, progress=True)
-    final = screen.getvalue().split("\r")[-1]
+    frames = screen.getvalue().split("\r")[1:]
     n = s.n_evaluations
-    assert n > 12 and f"{n}/{n}" in final and "epsilon refine" in final
+    assert frames[0].startswith("epsilon search: ") and " 0/12 " in frames[0]  # out of the grid first
+    final = frames[-1]
+    assert n > 12 and final.startswith("epsilon refine: ") and f" {n}/{n} " in final
     assert f"MADE-UP, best gamma {min(s.curve.gamma):.6g}" in final
 
 
