@@ -407,7 +407,9 @@ class CurveProgram:
             self.warm = False
 
     def attempt(self, plant, epsilon=None, *, phi=None):
-        assert epsilon is None and self.warm  # the search asks by angle, inside warm starts
+        assert self.warm  # inside warm starts
+        if phi is None:  # (a, b) of epsilon: +-inf is phi = pi/2
+            phi = math.pi / 2 if math.isinf(epsilon) else math.atan(epsilon)
         self.tried.append(phi)
         value = self.curve(phi)
         gamma, lower = value if isinstance(value, tuple) else (value, value - 1e-8)
@@ -421,6 +423,20 @@ def _grid(n_grid):
     """The search's grid: n_grid angles pi / n_grid apart, the last at pi/2 (epsilon = inf)."""
     step = math.pi / n_grid
     return np.array([-math.pi / 2 + step * (k + 1) for k in range(n_grid)])
+
+
+def test_an_epsilon_curve_is_made_by_the_program_given():
+    """epsilon_curve with a program solves with it (its own settings), at each epsilon in the
+    order given; -inf is the one infinite epsilon, at phi = pi/2."""
+    prog = CurveProgram(lambda phi: 2.0 + abs(phi - 0.3))
+    c = epsilon_curve(ex1(), [2, -math.inf, 0.5], program=prog)
+    phi = [math.atan(2.0), math.pi / 2, math.atan(0.5)]
+    assert prog.tried == phi
+    np.testing.assert_array_equal(c.epsilon, [2.0, math.inf, 0.5])
+    np.testing.assert_array_equal(c.phi, phi)
+    np.testing.assert_array_equal(c.gamma, [2.0 + abs(p - 0.3) for p in phi])
+    np.testing.assert_array_equal(c.gamma_lower, c.gamma - 1e-8)
+    assert c.status == ("optimal",) * 3
 
 
 def _beyond(prog, n_grid, refined):
