@@ -377,6 +377,233 @@ def test_a_failed_neighbour_is_no_evidence_but_an_infeasible_one_is(status, refi
 
 
 # ---------------------------------------------------------------------------
+# search_epsilon's logic on made-up curves: a stand-in for the compiled program
+# ---------------------------------------------------------------------------
+class CurveProgram:
+    """Stands in for a compiled :class:`HinfProgram` in :func:`search_epsilon`: each
+    ``attempt`` reads a made-up ``gamma(phi)`` (no LMI is solved) and records the angle.
+
+    ``curve(phi)`` gives ``gamma`` (``inf``: infeasible there), or ``(gamma, gamma_lower)``
+    (by default the interval is 1e-8 wide, Clarabel-like); the "design" returned is the
+    angle and the gamma it was made at."""
+
+    kind = KIND_PD
+    solver = "MADE-UP"
+
+    def __init__(self, curve, status=lambda phi: "infeasible", detail=lambda phi: "made-up: infeasible"):
+        self.curve, self.status, self.detail = curve, status, detail
+        self.tried: list[float] = []
+        self.warm = False
+
+    def _check_dims(self, plant):
+        assert isinstance(plant, PolytopicLPV)
+
+    @contextlib.contextmanager
+    def warm_starts(self):
+        self.warm = True
+        try:
+            yield
+        finally:
+            self.warm = False
+
+    def attempt(self, plant, epsilon=None, *, phi=None):
+        assert self.warm  # inside warm starts
+        if phi is None:  # (a, b) of epsilon: +-inf is phi = pi/2
+            phi = math.pi / 2 if math.isinf(epsilon) else math.atan(epsilon)
+        self.tried.append(phi)
+        value = self.curve(phi)
+        gamma, lower = value if isinstance(value, tuple) else (value, value - 1e-8)
+        if math.isinf(gamma):
+            return DesignAttempt(None, self.status(phi), math.inf, self.detail(phi))
+        design = dataclasses.make_dataclass("MadeUpDesign", ["phi", "gamma"])(phi, gamma)
+        return DesignAttempt(design, "optimal", gamma, "made-up: optimal", gamma_lower=lower)  # type: ignore[arg-type]
+
+
+def _grid(n_grid):
+    """The search's grid: n_grid angles pi / n_grid apart, the last at pi/2 (epsilon = inf)."""
+    step = math.pi / n_grid
+    return np.array([-math.pi / 2 + step * (k + 1) for k in range(n_grid)])
+
+
+def test_an_epsilon_curve_is_made_by_the_program_given():
+    """epsilon_curve with a program solves with it (its own settings), at each epsilon in the
+    order given; -inf is the one infinite epsilon, at phi = pi/2."""
+    prog = CurveProgram(lambda phi: 2.0 + abs(phi - 0.3))
+    c = epsilon_curve(ex1(), [2, -math.inf, 0.5], program=prog)
+    phi = [math.atan(2.0), math.pi / 2, math.atan(0.5)]
+    assert prog.tried == phi
+    np.testing.assert_array_equal(c.epsilon, [2.0, math.inf, 0.5])
+    np.testing.assert_array_equal(c.phi, phi)
+    np.testing.assert_array_equal(c.gamma, [2.0 + abs(p - 0.3) for p in phi])
+    np.testing.assert_array_equal(c.gamma_lower, c.gamma - 1e-8)
+    assert c.status == ("optimal",) * 3
+
+
+def _beyond(prog, n_grid, refined):
+    """The angles tried after the grid that lie outside the Brent brackets (grid[k] - step,
+    grid[k] + step) of the minima ``refined``: none when just those were refined."""
+    grid, step = _grid(n_grid), math.pi / n_grid
+    return [p for p in prog.tried[n_grid:] if not any(grid[k] - step < p < grid[k] + step for k in refined)]
+
+
+def test_the_default_search_tries_24_grid_angles_then_finds_the_minimum_within_xatol():
+    """The defaults (n_grid 24, n_refine 2, xatol 1e-3): the grid first, in order, then the
+    minimum between two grid points found to xatol = 1e-3 in phi; the design returned is the
+    one made at the best angle tried, and every angle tried is on the curve once. (A kink at
+    the minimum: Brent's parabolas do not land on it at once, xatol decides when it stops.)"""
+    prog = CurveProgram(lambda phi: 2.0 + abs(phi - 0.3))
+    s = search_epsilon(ex1(), program=prog)
+    explicit = CurveProgram(prog.curve)
+    search_epsilon(ex1(), program=explicit, n_grid=24, n_refine=2, xatol=1e-3)
+    assert prog.tried == explicit.tried  # the documented defaults
+    np.testing.assert_array_equal(prog.tried[:24], _grid(24))
+    assert len(prog.tried) > 24 and _beyond(prog, 24, [13]) == []  # grid[13] = 0.262, the only minimum
+    best = s.curve.phi[np.argmin(s.curve.gamma)]
+    assert abs(best - 0.3) <= 1e-3  # scipy's bounded Brent stops within xatol of the minimum
+    assert s.design.phi == best and s.design.gamma == min(s.curve.gamma)  # type: ignore[attr-defined]
+    assert s.n_evaluations == len(prog.tried) == len(set(prog.tried)) == len(s.curve.phi)
+    np.testing.assert_array_equal(s.curve.phi, np.sort(prog.tried))
+    np.testing.assert_array_equal(s.curve.gamma_lower, s.curve.gamma - 1e-8)  # each point's own dual bound
+
+
+def test_xatol_sets_how_close_the_refinement_gets_and_what_it_costs():
+    """xatol (radians of phi) is how close the refinement gets, each time within it; a
+    tighter one costs more evaluations (a kink at the minimum, where Brent's parabolas
+    cannot land on it at once)."""
+    found, cost = [], []
+    for xatol in (0.05, 1e-3, 1e-6):
+        prog = CurveProgram(lambda phi: 2.0 + abs(phi - 0.3))
+        s = search_epsilon(ex1(), program=prog, n_grid=12, n_refine=1, xatol=xatol)
+        best = s.curve.phi[np.argmin(s.curve.gamma)]
+        assert abs(best - 0.3) <= xatol
+        found.append(abs(best - 0.3))
+        cost.append(s.n_evaluations - 12)
+    assert cost[0] < cost[1] < cost[2]
+
+
+def _wells(depths):
+    """Three narrow wells in gamma(phi), just right of grid points 3, 5 and 7 of a 12-angle grid,
+    with these depths: the grid's local minima are exactly 3, 5 and 7 (humps at 4 and 6)."""
+    centres = _grid(12)[[3, 5, 7]] + 0.03
+
+    def curve(phi):
+        return min(d + 40.0 * (phi - c) ** 2 for d, c in zip(depths, centres, strict=True))
+
+    return curve, centres
+
+
+@pytest.mark.parametrize(("n_refine", "refined"), [(None, {7, 3}), (1, {7}), (3, {3, 5, 7}), (0, set())])
+def test_the_n_refine_deepest_grid_minima_are_refined_each_between_its_grid_neighbours(n_refine, refined):
+    """Grid minima at 3, 5 and 7, the deepest at 7, then 3 (deeper than 5 although 5 sits
+    between them): the n_refine deepest are refined, by default 2; every grid point no higher
+    than its two grid neighbours is a minimum (5 too, though its neighbours' neighbours are
+    lower); each refinement finds its well's bottom within xatol."""
+    curve, centres = _wells((1.5, 2.0, 1.0))
+    prog = CurveProgram(curve)
+    options = {} if n_refine is None else {"n_refine": n_refine}
+    s = search_epsilon(ex1(), program=prog, n_grid=12, **options)
+    assert _beyond(prog, 12, refined) == []  # the brackets of 3, 5 and 7 do not overlap
+    for k, c in zip((3, 5, 7), centres, strict=True):  # each refined well's bottom found, within xatol
+        assert bool(min(abs(p - c) for p in prog.tried) <= 1e-3) is (k in refined)
+    assert (s.n_evaluations == 12) is (not refined)
+
+
+def _grid_curve(values, lowers):
+    """gamma(phi) through the given values (and dual bounds) at the 12 grid angles, linear
+    between them."""
+    grid = _grid(12)
+
+    def curve(phi):
+        k = int(np.argmin(np.abs(grid - phi)))
+        if abs(grid[k] - phi) < 1e-12:
+            return values[k], lowers[k]
+        g = float(np.interp(phi, grid, values))
+        return g, g - 1e-8
+
+    return curve
+
+
+def test_a_minimum_flat_with_its_two_grid_neighbours_is_not_refined_whatever_lies_beyond():
+    """Grid points 4, 5, 6 are one constant gamma to the solver's accuracy (their intervals
+    [gamma_lower, gamma] share 1.0): not refined, although point 7 beyond rises far above."""
+    values = [1.0 + 0.5 * min(abs(j - 5), 12 - abs(j - 5)) for j in range(12)]
+    values[4:7] = [1.0 + 1e-6, 1.0, 1.0 + 2e-6]
+    lowers = [v - 1e-8 for v in values]
+    lowers[4:7] = [1.0 - 1e-9] * 3
+    prog = CurveProgram(_grid_curve(values, lowers))
+    assert search_epsilon(ex1(), program=prog, n_grid=12).n_evaluations == 12
+
+
+@pytest.mark.parametrize(("gap", "refined"), [(0.0, False), (2.0**-20, True)])
+def test_intervals_that_only_touch_still_share_a_point_so_the_curve_is_flat_there(gap, refined):
+    """The minimum's interval [0.75, 1.0] and its neighbours' [1.0, 1.25] share the point 1.0:
+    flat (not refined); moved 2**-20 apart, they share none: a real dip, refined."""
+    values = [1.25 + 0.5 * min(abs(j - 5), 12 - abs(j - 5)) for j in range(12)]
+    lowers = [v - 1e-8 for v in values]
+    values[5], lowers[5] = 1.0, 0.75
+    lowers[4] = lowers[6] = 1.0 + gap
+    prog = CurveProgram(_grid_curve(values, lowers))
+    s = search_epsilon(ex1(), program=prog, n_grid=12)
+    assert (s.n_evaluations > 12) is refined
+    assert _beyond(prog, 12, [5]) == []
+
+
+def test_a_minimum_beside_an_infeasible_stretch_is_found_and_the_infeasible_points_are_kept():
+    """gamma ~ 20 with its minimum at phi = 0.3, no design above phi = 0.35 (inside the Brent
+    bracket of the grid minimum): the refinement is not drawn into the infeasible stretch
+    (infeasible counts as worse than every design), finds the minimum within xatol, and
+    the curve keeps the infeasible angles tried with gamma inf, their status and no bound."""
+    prog = CurveProgram(lambda phi: 20.0 + 100.0 * (phi - 0.3) ** 2 if phi <= 0.35 else math.inf)
+    s = search_epsilon(ex1(), program=prog, n_grid=12)
+    best = s.curve.phi[np.argmin(s.curve.gamma)]
+    assert abs(best - 0.3) <= 1e-3 and s.design.phi == best  # type: ignore[attr-defined]
+    infeasible = s.curve.phi > 0.35
+    assert np.any(infeasible & ~np.isin(s.curve.phi, _grid(12)))  # Brent tried the stretch too
+    assert np.all(np.isinf(s.curve.gamma[infeasible])) and np.all(np.isnan(s.curve.gamma_lower[infeasible]))
+    assert {s.curve.status[i] for i in np.flatnonzero(infeasible)} == {"infeasible"}
+
+
+def test_a_search_without_any_certified_point_names_every_status_and_reason():
+    """No grid angle gives a design, for two reasons: the error names the number of epsilons
+    tried, both statuses and both reasons (LMIInfeasibleError.status and .detail)."""
+    half = lambda phi: phi < 0  # noqa: E731
+    prog = CurveProgram(lambda phi: math.inf, status=lambda phi: "infeasible" if half(phi) else "solver_error",
+                        detail=lambda phi: "made-up: infeasible" if half(phi) else "made-up: solver failed")
+    with pytest.raises(LMIInfeasibleError) as info:
+        search_epsilon(ex1(), program=prog, n_grid=6)
+    assert str(info.value) == ("parameter-dependent H-infinity LMIs for peixoto-ex1/plant at every epsilon tried "
+                               "(6 values), solver MADE-UP: no certified solution (made-up: infeasible; "
+                               "made-up: solver failed)")
+    assert info.value.status == "infeasible | solver_error"
+    assert info.value.detail == "made-up: infeasible; made-up: solver failed"
+    assert len(prog.tried) == 6  # the grid, nothing more
+
+
+def test_the_search_shows_its_bar_only_when_asked_counting_designs_and_the_best_gamma(monkeypatch):
+    """On a terminal: no bar by default; asked, a bar of the designs solved, out of the grid
+    and then out of one more per refinement step, saying when it refines, the solver and the
+    best gamma so far (what the final frame shows)."""
+    import io
+    import sys
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    screen = Terminal()
+    monkeypatch.setattr(sys, "stderr", screen)
+    search_epsilon(ex1(), program=CurveProgram(lambda phi: 2.0 + (phi - 0.3) ** 2), n_grid=12)
+    assert screen.getvalue() == ""
+    s = search_epsilon(ex1(), program=CurveProgram(lambda phi: 2.0 + (phi - 0.3) ** 2), n_grid=12, progress=True)
+    frames = screen.getvalue().split("\r")[1:]
+    n = s.n_evaluations
+    assert frames[0].startswith("epsilon search: ") and " 0/12 " in frames[0]  # out of the grid first
+    final = frames[-1]
+    assert n > 12 and final.startswith("epsilon refine: ") and f" {n}/{n} " in final
+    assert f"MADE-UP, best gamma {min(s.curve.gamma):.6g}" in final
+
+
+# ---------------------------------------------------------------------------
 # every design: scenario, worst case, dissipation
 # ---------------------------------------------------------------------------
 @pytest.mark.parametrize("name", DESIGNS)

@@ -6,6 +6,7 @@ tests/test_hinf_design.py."""
 from __future__ import annotations
 
 import math
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -287,3 +288,82 @@ def test_the_search_progress_bar_is_shown_only_when_asked_and_on_a_terminal(monk
     assert bar.total == 7 and "epsilon search" in screen.getvalue() and "2/7" in screen.getvalue()
     monkeypatch.setattr(sys, "stderr", io.StringIO())  # a redirected log
     assert search._progress_bar(True, 7) is None
+
+
+# -- what a failed design says, and what reaches the solver -------------------------------------------
+
+
+def test_a_solver_given_as_a_list_is_refused_shown_cut_at_30_characters():
+    """A tuple of solver names (one solver is meant) is refused before compiling, shown cut at 30
+    characters like every culprit in lpvest's messages."""
+    with pytest.raises(ArgumentError, match=r"^solver \('CLARABEL', 'SCS', 'MOSEK'\.\.\.: expected AUTO or an "
+                                            r"installed cvxpy solver of semidefinite programs \(CLARABEL, "):
+        HinfProgram(2, 2, 1, 1, 1, solver=("CLARABEL", "SCS", "MOSEK", "GUROBI"))
+
+
+def test_the_lyapunov_check_certifies_only_beyond_100_eps_of_the_matrix_size(checked):
+    """P(alpha) certified positive definite means its smallest eigenvalue exceeds rounding: 100 eps
+    times its largest eigenvalue's size (at least 1), as the LMIs' side. At exactly that it is not
+    certified; half an eps above it, it is (diagonal P: eigvalsh returns the diagonal exactly)."""
+    assert not checked(_values(100 * EPS, 1.0, 0.0), -np.eye(2))[0]
+    ok, _, lyap_min, _, _ = checked(_values(100.5 * EPS, 1.0, 0.0), -np.eye(2))
+    assert ok and lyap_min == 100.5 * EPS
+    # relative to the size: the same eigenvalue ratio for P = 4 diag(100.5 eps, 1)
+    assert checked(_values(402 * EPS, 4.0, 0.0), -np.eye(2))[0]
+    assert not checked(_values(400 * EPS, 4.0, 0.0), -np.eye(2))[0]
+
+
+def test_solver_options_reach_the_solver_and_a_failed_design_lists_every_solve(ex1):
+    """Clarabel stopped after 2 iterations (its max_iter): no design, the solver's status, and
+    each solve tried (the requested margin, then the larger one) with its status."""
+    prog = HinfProgram.for_plant(ex1, kind=KIND_ROBUST, solver="clarabel", solver_options={"max_iter": 2})
+    res = prog.attempt(ex1, 150.0)
+    assert res.design is None and math.isinf(res.gamma) and math.isnan(res.gamma_lower)
+    assert res.status == "user_limit"
+    assert res.detail == "CLARABEL margin 1.0e-06: user_limit; CLARABEL margin 3.0e-05: user_limit"
+    # a search compiles its program with the same options: every point fails the same way
+    tried = r"at every epsilon tried \(3 values\), solver CLARABEL: no certified solution \(CLARABEL margin 1\.0e-06: "
+    with pytest.raises(LMIInfeasibleError, match=tried + "user_limit; ") as info:
+        search.search_epsilon(ex1, kind=KIND_ROBUST, n_grid=3, solver="clarabel", solver_options={"max_iter": 2})
+    assert info.value.status == "user_limit"
+
+
+def test_a_point_the_check_refuses_keeps_the_solvers_status_and_says_why(ex1):
+    """Clarabel with tolerances of 0.1 says "optimal" at a point that violates the LMIs by far more
+    than rounding: refused at both margins, the status says the solver's word and the check's,
+    the detail each solve with the largest LMI eigenvalue found."""
+    prog = HinfProgram.for_plant(ex1, kind=KIND_ROBUST, solver="CLARABEL",
+                                 solver_options={"tol_gap_abs": 0.1, "tol_gap_rel": 0.1, "tol_feas": 0.1})
+    res = prog.attempt(ex1, 150.0)
+    assert res.design is None and res.status == "optimal; LMI check failed"
+    why = (r"optimal, but the LMI check failed: largest LMI eigenvalue \d\S* \(Phi_\d+\), "
+           r"smallest Lyapunov eigenvalue \S+")
+    assert re.fullmatch(f"CLARABEL margin 1.0e-06: {why}; CLARABEL margin 3.0e-05: {why}", res.detail), res.detail
+
+
+def test_minus_infinity_is_recorded_as_the_one_infinite_epsilon(ex1):
+    """epsilon = -inf and +inf are one multiplier (a, b) = (1, 0): the design records inf."""
+    d = HinfProgram.for_plant(ex1, kind=KIND_ROBUST).attempt(ex1, -math.inf).design
+    assert d is not None and d.epsilon == math.inf and d.multiplier == (1.0, 0.0)
+
+
+def test_an_scs_solve_stopped_by_its_own_sigint_handler_interrupts_the_design(ex1, monkeypatch):
+    """SCS catches SIGINT itself and returns "interrupted" (status -5), which cvxpy would report as
+    a solver error, one more failed point of a search: a program solving with SCS raises
+    Interrupted instead. (SCS's answer made "interrupted" here, tests/test_interrupt.py sends a
+    real signal to the solver on its own.)"""
+    import scs
+
+    from lpvest.core._interrupt import Interrupted
+
+    solve = scs.solve
+
+    def interrupted(*args, **kwargs):
+        out = solve(*args, **{**kwargs, "max_iters": 1})
+        out["info"].update(status="interrupted", status_val=program._SCS_SIGINT)
+        return out
+
+    monkeypatch.setattr(scs, "solve", interrupted)
+    prog = HinfProgram.for_plant(ex1, kind=KIND_ROBUST, solver="SCS")
+    with pytest.raises(Interrupted, match="SIGINT"):
+        prog.attempt(ex1, 150.0)

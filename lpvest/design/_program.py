@@ -7,8 +7,11 @@ multiplier are parameters; :func:`design_hinf` solves them at a given
 ``epsilon`` (through a per-process cache of compiled programs).
 Strict inequalities are ``M << -margin I``. Every returned point is checked:
 the eigenvalues of every assembled LMI and of every ``P_i`` (numpy, float64)
-must be strictly negative / positive. A failed check is retried with tighter
-solver settings, then raises :class:`~lpvest.core.LMIInfeasibleError`.
+must be strictly negative / positive beyond rounding: by more than 100 eps
+times the matrix's largest eigenvalue in magnitude (at least 1). A failed check
+is retried with a margin ``RETRY_MARGIN_FACTOR`` times larger (then, for SCS
+chosen by ``"AUTO"`` outside a search, solved by Clarabel), then raises
+:class:`~lpvest.core.LMIInfeasibleError`.
 
 **Dual bound.** Every solve also gives a lower bound on the best ``gamma``
 at its ``epsilon`` (``gamma_lower`` of :class:`DesignAttempt` and
