@@ -213,15 +213,16 @@ def write_ssp(
         libcosim steps the FMUs one after another in the thread that steps
         the execution; ``n > 0``, on a pool of ``n`` threads (libcosim makes
         at most the machine's cores less one); ``None``: not declared
-        (libcosim's default: that many). Other importers ignore it. The values are the
-        same either way (Jacobi stepping both); only the time differs. A
-        pool costs a hand-off per FMU and step (about 5 us here) and pays
-        off only when the FMUs' steps cost much more and can run at the
-        same time. Neither holds for lpvest's FMUs: a native one takes 0.1
-        to a few us per step, and the pythonfmu ones run Python code, which
-        their process's one interpreter runs one thread at a time (the
-        GIL). Hence ``0`` (the four native Peixoto FMUs: 1.7 instead of 31
-        us per step, docs/fmus.md); give ``None`` or ``n`` for FMUs with
+        (libcosim's default: that many). Other importers ignore it. The
+        values are the same either way (Jacobi stepping both); only the
+        time differs. A pool costs a hand-off per FMU and step (about 5 us
+        here) and pays off only when the FMUs' steps cost much more and can
+        run at the same time. Neither holds for lpvest's FMUs: a native one
+        takes 0.1 to a few us per step, and the pythonfmu ones run Python
+        code, which their process's one interpreter runs one thread at a
+        time (the GIL). Hence ``0`` (the four native Peixoto FMUs: 1.7
+        instead of 31 us per step; the pythonfmu ones about half the time
+        of the pool: docs/fmus.md); give ``None`` or ``n`` for FMUs with
         long steps that can run in parallel.
 
     Returns
@@ -432,14 +433,14 @@ class SspSystem:
         Start time of the default experiment.
     stop_time : float or None, default None
         Stop time of the default experiment; ``None``: not declared.
-    worker_threads : int or None, default None
-        The OSP FixedStepAlgorithm's ``numWorkerThreads`` (0: libcosim steps
-        the FMUs in its calling thread); ``None``: not declared.
     connectors : dict of str to list of tuple of (str, str, str), default {}
         Component -> ``[(name, kind, type)]`` of every connector, ``type``
         as declared (``"Real"``, ..., ``"Enumeration"``; ``""``: not declared).
     sources : dict of str to str, default {}
         Component -> its ``source`` as written (a URI reference).
+    worker_threads : int or None, default None
+        The OSP FixedStepAlgorithm's ``numWorkerThreads`` (0: libcosim steps
+        the FMUs in its calling thread); ``None``: not declared.
     """
 
     name: str
@@ -450,9 +451,9 @@ class SspSystem:
     step_size: float | None = None
     start_time: float = 0.0
     stop_time: float | None = None
-    worker_threads: int | None = None
     connectors: dict[str, list[tuple[str, str, str]]] = field(default_factory=dict)
     sources: dict[str, str] = field(default_factory=dict)
+    worker_threads: int | None = None
 
 
 #: The largest SystemStructure.ssd read (bytes): a description of a few
@@ -646,7 +647,7 @@ def read_ssp(path: str | Path) -> SspSystem:
                 if alg is not None and alg.get("numWorkerThreads") is not None:
                     threads = _worker_threads(path, alg.get("numWorkerThreads", ""))
     return SspSystem(root.get("name", ""), components, connections, parameters, outputs, step, start, stop,
-                     threads, connectors, sources)
+                     connectors, sources, threads)
 
 
 def _worker_threads(path: Path, text: str) -> int:
