@@ -435,7 +435,7 @@ def ssd_seed() -> str:
     from tests.test_ssp import SSD
 
     return SSD.replace("SOURCE", "resources/Plant.fmu").replace("SEED", "3").replace("STOP", "10.0").replace(
-        "STEP", "1.0")
+        'baseStepSize="STEP"', 'baseStepSize="1.0" numWorkerThreads="0"')
 
 
 @st.composite
@@ -485,7 +485,8 @@ options = {
                  "--seed": ["0", "7", "-1", "2**70", "x"],
                  "--param": ["rho=2", "rho=nan", "nonsense=1", "="],
                  "--out": ["/dev/null", "/proc/nope/x", "OUT"]},
-    "cosim": {"--fmus": ["/nonexistent", "OUT"], "--ssp": ["/dev/null/x.ssp"], "--out": ["/dev/null"]},
+    "cosim": {"--fmus": ["/nonexistent", "OUT"], "--ssp": ["/dev/null/x.ssp"], "--out": ["/dev/null"],
+              "--worker-threads": ["0", "2", "none", "-1", "1.5", "x"]},
 }
 
 

@@ -4,6 +4,7 @@ checked against the exact relation (lpvest/cosim/_ssp.py, module documentation).
 
 from __future__ import annotations
 
+import os
 import zipfile
 
 import numpy as np
@@ -270,6 +271,29 @@ def test_command_line_writes_the_ssp_of_a_cosim_file(fmus, tmp_path, capsys):
     assert simulate_ssp(out, importer="fmpy", n_steps=5).shape == (5,)
 
 
+def test_the_command_line_declares_libcosims_worker_threads(fmus, tmp_path, capsys):
+    from pathlib import Path
+
+    example = Path(__file__).resolve().parent.parent / "examples" / "peixoto_ex1_hinf.toml"
+    base = ["cosim", str(example), "--fmus", str(fmus.out)]
+    for given, declared, said in (([], 0, "in libcosim's calling thread"), (["--worker-threads", "2"], 2,
+                                  "on 2 libcosim threads"), (["--worker-threads", "none"], None,
+                                                              "on libcosim's default thread pool")):
+        out = tmp_path / f"{declared}.ssp"
+        assert main([*base, "--ssp", str(out), *given]) == 0
+        assert f", FMUs stepped {said}\n" in capsys.readouterr().out
+        assert read_ssp(out).worker_threads == declared
+    with pytest.raises(SystemExit) as info:
+        main([*base, "--ssp", str(tmp_path / "bad.ssp"), "--worker-threads", "-1"])
+    assert info.value.code == 2
+    assert ("argument --worker-threads: expected 0 (the calling thread), a number of threads, or none; found '-1'"
+            in capsys.readouterr().err)
+    assert main([*base, "--worker-threads", "0", "--out", str(tmp_path / "run")]) == 2
+    assert capsys.readouterr().err == ("lpvest: error: --worker-threads sets the threads libcosim steps the FMUs of "
+                                       "an SSP file on: give it with --ssp\n")
+    assert not (tmp_path / "bad.ssp").exists() and not (tmp_path / "run").exists()
+
+
 def test_the_readme_numbers_for_the_example_file(fmus, tmp_path):
     """README, SSP export: on examples/peixoto_ex1_hinf.toml fmpy and libcosim
     agree; ||z - zhat|| / ||w|| (each estimate against the z of its own sample)
@@ -454,9 +478,11 @@ SSD = """<?xml version="1.0" encoding="UTF-8"?>
 """
 
 
-def _ssp_file(tmp_path, source="resources/Plant.fmu", seed="3", stop="10.0", step="1.0", members=None):
+def _ssp_file(tmp_path, source="resources/Plant.fmu", seed="3", stop="10.0", step="1.0", members=None, threads=None):
     path = tmp_path / "hand.ssp"
     ssd = SSD.replace("SOURCE", source).replace("SEED", seed).replace("STOP", stop).replace("STEP", step)
+    if threads is not None:
+        ssd = ssd.replace(f'baseStepSize="{step}"', f'baseStepSize="{step}" numWorkerThreads="{threads}"')
     with zipfile.ZipFile(path, "w") as z:
         z.writestr("SystemStructure.ssd", ssd)
         for m in members if members is not None else ["resources/Plant.fmu"]:
@@ -469,6 +495,8 @@ def test_a_hand_written_ssp_file_is_read(tmp_path):
     assert system.components == {"plant": "resources/Plant.fmu"}
     assert system.parameters == {"plant": [("seed", "Integer", "3")]}
     assert (system.step_size, system.start_time, system.stop_time) == (1.0, 0.0, 10.0)
+    assert system.worker_threads is None  # not declared: libcosim's default pool
+    assert read_ssp(_ssp_file(tmp_path, threads=" 2 ")).worker_threads == 2
 
 
 @pytest.mark.parametrize(
@@ -512,6 +540,14 @@ def test_a_hand_written_ssp_file_is_read(tmp_path):
         ({"stop": "soon"}, r"DefaultExperiment stopTime: expected a number, found 'soon'"),
         ({"step": "-1"}, r"FixedStepAlgorithm baseStepSize: expected a positive number, found -1\.0"),
         ({"step": "nan"}, r"FixedStepAlgorithm baseStepSize: expected a positive number, found nan"),
+        # libcosim reads an unsigned int and takes what it cannot parse (and -1) as its default pool, silently
+        ({"threads": "-1"}, r"FixedStepAlgorithm numWorkerThreads: expected a whole number, found '-1'"),
+        ({"threads": "1.5"}, r"FixedStepAlgorithm numWorkerThreads: expected a whole number, found '1\.5'"),
+        ({"threads": "+2"}, r"FixedStepAlgorithm numWorkerThreads: expected a whole number, found '\+2'"),
+        ({"threads": "1_000"}, r"FixedStepAlgorithm numWorkerThreads: expected a whole number, found '1_000'"),
+        ({"threads": ""}, r"FixedStepAlgorithm numWorkerThreads: expected a whole number, found ''"),
+        ({"threads": "4294967296"},
+         r"FixedStepAlgorithm numWorkerThreads: expected a number from 0 to 2147483647, found 4294967296"),
     ],
 )
 def test_an_unsafe_or_malformed_ssp_file_is_one_line_naming_it(tmp_path, change, message):
@@ -768,6 +804,84 @@ def test_the_same_system_gives_a_byte_identical_file(foreign_fmus, tmp_path):
     with zipfile.ZipFile(first) as z:
         assert {i.date_time for i in z.infolist()} == {(1980, 1, 1, 0, 0, 0)}  # no clock, no file time
         assert z.namelist() == ["SystemStructure.ssd", "resources/Limited.fmu", "resources/AllTypes.fmu"]
+
+
+# -- libcosim's worker threads (issue 20) --------------------------------------------------------------
+
+
+def _two_limited(foreign_fmus, tmp_path, name, **kwargs):
+    """Two unconnected Limited FMUs (no Enumeration: libcosim reads them)."""
+    comps = [Component("l1", foreign_fmus["Limited"], None), Component("l2", foreign_fmus["Limited"], None)]
+    return write_ssp(tmp_path / name, comps, [], step_size=FH, stop_time=FN * FH, **kwargs)
+
+
+@pytest.mark.parametrize("threads", ["default", 0, 3, None])
+def test_the_worker_threads_are_declared_for_libcosim_and_read_back(foreign_fmus, tmp_path, threads):
+    from fmpy.ssp.ssd import read_ssd
+
+    path = _two_limited(foreign_fmus, tmp_path, "t.ssp", **({} if threads == "default" else
+                                                             {"worker_threads": threads}))
+    with zipfile.ZipFile(path) as z:
+        xml = z.read("SystemStructure.ssd").decode()
+    declared = 0 if threads == "default" else threads  # lpvest's FMUs step fastest in the calling thread
+    if declared is None:
+        assert "numWorkerThreads" not in xml
+    else:
+        assert f'<osp:FixedStepAlgorithm baseStepSize="0.5" numWorkerThreads="{declared}" />' in xml
+    assert read_ssp(path).worker_threads == declared
+    read_ssd(str(path), validate=True)  # still valid SSP 1.0 (fmpy's copy of the schema)
+
+
+@pytest.mark.parametrize("threads", [-1, 1.5, True, "0", 2**31, np.float64(1.0)])
+def test_worker_threads_that_are_not_a_whole_number_are_refused(foreign_fmus, tmp_path, threads):
+    import re
+
+    with pytest.raises(CoSimulationError, match=r"^worker_threads must be None or a whole number from 0 to "
+                                                rf"2147483647; found {re.escape(repr(threads))}$") as info:
+        _two_limited(foreign_fmus, tmp_path, "bad.ssp", worker_threads=threads)
+    assert info.value.where == "worker_threads"
+    assert not (tmp_path / "bad.ssp").exists()
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="counts the process's threads in /proc (Linux)")
+def test_libcosim_makes_the_pool_the_file_declares(foreign_fmus, tmp_path):
+    """libcosim reads the attribute as write_ssp writes it: 0 makes no thread,
+    and the FMI calls run in the thread that steps the execution; n makes
+    min(n, cores - 1) threads, as does no declaration (libcosim's default)."""
+    import subprocess
+    import sys
+
+    script = ("import os, sys, threading\n"
+              "from libcosimpy.CosimExecution import CosimExecution\n"
+              "from libcosimpy.CosimLogging import log_output_level, CosimLogLevel\n"
+              "log_output_level(CosimLogLevel.ERROR)\n"
+              "before = len(os.listdir('/proc/self/task'))\n"
+              "ex = CosimExecution.from_ssp_file(sys.argv[1])\n"
+              "assert ex.step(3)\n"
+              "print('THREADS', len(os.listdir('/proc/self/task')) - before)\n")
+    pool = max((os.cpu_count() or 1) - 1, 0)
+    for threads, made in ((0, 0), (1, min(1, pool)), (None, pool)):
+        path = _two_limited(foreign_fmus, tmp_path, f"{threads}.ssp", worker_threads=threads)
+        proc = subprocess.run([sys.executable, "-c", script, str(path)], capture_output=True, text=True, check=False,
+                              timeout=120)
+        assert proc.returncode == 0, proc.stderr[-500:]
+        assert f"THREADS {made}\n" in proc.stdout, (threads, proc.stdout)
+
+
+def test_the_calling_thread_and_the_pool_give_the_same_values_bit_for_bit(fmus, ssp, tmp_path):
+    """The Peixoto system written with worker_threads=0 (the ``ssp`` fixture,
+    checked against Jacobi stepping in
+    test_each_importer_runs_the_file_as_jacobi_stepping_predicts) and with
+    libcosim's default pool: libcosim steps both the same (Jacobi: no FMU
+    sees another's output of the same step), and fmpy ignores the attribute."""
+    pool = write_ssp(tmp_path / "pool.ssp", _components(fmus), CONNECTIONS, step_size=H, stop_time=N * H,
+                     description="Peixoto et al. Example 1", worker_threads=None)
+    assert (read_ssp(ssp).worker_threads, read_ssp(pool).worker_threads) == (0, None)
+    for importer in ("libcosim", "fmpy"):
+        serial, pooled = simulate_ssp(ssp, importer=importer), simulate_ssp(pool, importer=importer)
+        assert serial.dtype.names == pooled.dtype.names
+        for name in serial.dtype.names:
+            np.testing.assert_array_equal(serial[name], pooled[name], err_msg=f"{importer}: {name}")
 
 
 def test_a_percent_encoded_source_runs_in_libcosim_and_is_refused_by_fmpy(foreign_fmus, tmp_path):

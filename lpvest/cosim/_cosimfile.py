@@ -241,7 +241,7 @@ class CoSimFile:
             elapsed = time.perf_counter() - t0
         return CoSimResult(self, data, elapsed, order, sim.discarded, tuple(sim.not_recorded))
 
-    def to_ssp(self, path: str | Path) -> Path:
+    def to_ssp(self, path: str | Path, *, worker_threads: int | None = 0) -> Path:
         """Write this system as an SSP file (:func:`lpvest.cosim.write_ssp`).
 
         The SSP's name is the file's stem, its description the title, its
@@ -251,6 +251,10 @@ class CoSimFile:
         ----------
         path : os.PathLike or str
             The ``.ssp`` file to write (its folder is created).
+        worker_threads : int or None, default 0
+            libcosim's ``numWorkerThreads`` (0: the FMUs stepped in its
+            calling thread; ``None``: not declared), as in
+            :func:`~lpvest.cosim.write_ssp`.
 
         Returns
         -------
@@ -262,7 +266,7 @@ class CoSimFile:
         try:
             return write_ssp(path, self.components, self.connections, step_size=self.step_size,
                              start_time=self.start_time, stop_time=self.stop_time,
-                             name=self.path.stem, description=self.title or None)
+                             name=self.path.stem, description=self.title or None, worker_threads=worker_threads)
         except CoSimulationError as exc:
             raise self._reword(exc) from exc
 

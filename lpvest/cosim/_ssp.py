@@ -25,8 +25,12 @@ communication step         **no**: a ``step_size``          the ``com.opensimula
                            argument (:func:`simulate_ssp`   annotation of the default
                            reads the SSD's annotation)      experiment (``FixedStepAlgorithm
                                                             baseStepSize``)
+worker threads             not applicable (one thread)      ``FixedStepAlgorithm
+                                                            numWorkerThreads`` (0: the calling
+                                                            thread; absent: a pool)
 start / stop time          arguments                        start time; the caller steps
-stepping                   Jacobi, fixed order              Jacobi, in parallel
+stepping                   Jacobi, fixed order              Jacobi, in parallel or one FMU
+                                                            after another (the same values)
 initial inputs             0.0 for every connector          the outputs at the start time,
                                                             propagated through the connections
                                                             in initialization mode
@@ -154,6 +158,7 @@ def write_ssp(
     name: str = "lpvest-system",
     description: str | None = None,
     jacobi: bool = True,
+    worker_threads: int | None = 0,
 ) -> Path:
     """Write the system as an SSP archive at ``path`` and return the path.
 
@@ -165,7 +170,8 @@ def write_ssp(
     its FMU as a connector (an Enumeration's type in the SSD's
     ``Enumerations``, its parameter values by item name); the communication
     step is declared as libcosim's ``FixedStepAlgorithm`` annotation of the
-    default experiment. The same system gives a byte-identical file (the
+    default experiment, with the number of threads libcosim steps the FMUs
+    on (``worker_threads``). The same system gives a byte-identical file (the
     archive's members in a fixed order, with a fixed time stamp).
 
     **Measurement delay** (``jacobi=True``). The importers step every FMU in
@@ -202,6 +208,22 @@ def write_ssp(
         above. ``False``: bind only the components' parameters (an importer
         that orders its calls by the connections, as
         :class:`~lpvest.cosim.CoSimulation` does).
+    worker_threads : int or None, default 0
+        The ``numWorkerThreads`` of libcosim's fixed-step algorithm: ``0``,
+        libcosim steps the FMUs one after another in the thread that steps
+        the execution; ``n > 0``, on a pool of ``n`` threads (libcosim makes
+        at most the machine's cores less one); ``None``: not declared
+        (libcosim's default: that many). Other importers ignore it. The
+        values are the same either way (Jacobi stepping both); only the
+        time differs. A pool costs a hand-off per FMU and step (about 5 us
+        here) and pays off only when the FMUs' steps cost much more and can
+        run at the same time. Neither holds for lpvest's FMUs: a native one
+        takes 0.1 to a few us per step, and the pythonfmu ones run Python
+        code, which their process's one interpreter runs one thread at a
+        time (the GIL). Hence ``0`` (the four native Peixoto FMUs: 1.7
+        instead of 31 us per step; the pythonfmu ones about half the time
+        of the pool: docs/fmus.md); give ``None`` or ``n`` for FMUs with
+        long steps that can run in parallel.
 
     Returns
     -------
@@ -211,7 +233,8 @@ def write_ssp(
     Raises
     ------
     CoSimulationError
-        An invalid step size or set-up (as :class:`~lpvest.cosim.CoSimulation`
+        An invalid step size, ``worker_threads`` that is not a non-negative
+        integer, or set-up (as :class:`~lpvest.cosim.CoSimulation`
         raises it), or, with ``jacobi``, a filter whose measurement inputs
         would arrive partly late, or with a scheduling or known input that
         arrives late too (no ``measurement_delay`` pairs those; set it in the
@@ -221,6 +244,11 @@ def write_ssp(
 
     if not step_size > 0 or not math.isfinite(step_size):
         raise CoSimulationError(f"step_size must be positive and finite; found {step_size}", where="step_size")
+    if worker_threads is not None and (not isinstance(worker_threads, (int, np.integer))
+                                       or isinstance(worker_threads, (bool, np.bool_))
+                                       or not 0 <= worker_threads <= MAX_WORKER_THREADS):
+        raise CoSimulationError(f"worker_threads must be None or a whole number from 0 to {MAX_WORKER_THREADS}; "
+                                f"found {abbreviate(worker_threads, 30)}", where="worker_threads")
     path = Path(path)
     with CoSimulation(components, connections, step_size=step_size, start_time=start_time) as sim:
         units = sim._units
@@ -306,7 +334,10 @@ def write_ssp(
         annotations = ET.SubElement(default, _q("ssd", "Annotations"))
         annotation = ET.SubElement(annotations, _q("ssc", "Annotation"), {"type": _OSP_TYPE})
         algorithm = ET.SubElement(annotation, _q("osp", "Algorithm"))
-        ET.SubElement(algorithm, _q("osp", "FixedStepAlgorithm"), {"baseStepSize": _fmt(step_size)})
+        fixed = {"baseStepSize": _fmt(step_size)}
+        if worker_threads is not None:
+            fixed["numWorkerThreads"] = str(int(worker_threads))
+        ET.SubElement(algorithm, _q("osp", "FixedStepAlgorithm"), fixed)
         ET.indent(root)
         xml = ET.tostring(root, encoding="unicode", xml_declaration=False)
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -316,6 +347,11 @@ def write_ssp(
             for fmu, arc in sources.items():
                 write_zip_entry(z, arc, fmu.read_bytes())
     return path
+
+
+#: The most worker threads a file may declare: libcosim reads the number as an
+#: ``unsigned int`` and makes a pool of at most the machine's cores less one.
+MAX_WORKER_THREADS = 2**31 - 1
 
 
 #: The filter parameter :func:`write_ssp` binds for a Jacobi importer
@@ -402,6 +438,9 @@ class SspSystem:
         as declared (``"Real"``, ..., ``"Enumeration"``; ``""``: not declared).
     sources : dict of str to str, default {}
         Component -> its ``source`` as written (a URI reference).
+    worker_threads : int or None, default None
+        The OSP FixedStepAlgorithm's ``numWorkerThreads`` (0: libcosim steps
+        the FMUs in its calling thread); ``None``: not declared.
     """
 
     name: str
@@ -414,6 +453,7 @@ class SspSystem:
     stop_time: float | None = None
     connectors: dict[str, list[tuple[str, str, str]]] = field(default_factory=dict)
     sources: dict[str, str] = field(default_factory=dict)
+    worker_threads: int | None = None
 
 
 #: The largest SystemStructure.ssd read (bytes): a description of a few
@@ -592,7 +632,7 @@ def read_ssp(path: str | Path) -> SspSystem:
                 raise _ssp_error(path, f"connection {i + 1}: component {abbreviate(element, 30)} has no connector "
                                        f"{abbreviate(connector, 40)}")
         connections.append((f"{ends[0]}.{ends[1]}", f"{ends[2]}.{ends[3]}"))
-    step = None
+    step, threads = None, None
     start, stop = 0.0, None
     exp = root.find("ssd:DefaultExperiment", NS)
     if exp is not None:
@@ -604,8 +644,25 @@ def read_ssp(path: str | Path) -> SspSystem:
                 alg = a.find("osp:Algorithm/osp:FixedStepAlgorithm", NS)
                 if alg is not None and alg.get("baseStepSize") is not None:
                     step = _number(path, "FixedStepAlgorithm baseStepSize", alg.get("baseStepSize"), positive=True)
+                if alg is not None and alg.get("numWorkerThreads") is not None:
+                    threads = _worker_threads(path, alg.get("numWorkerThreads", ""))
     return SspSystem(root.get("name", ""), components, connections, parameters, outputs, step, start, stop,
-                     connectors, sources)
+                     connectors, sources, threads)
+
+
+def _worker_threads(path: Path, text: str) -> int:
+    """A FixedStepAlgorithm's ``numWorkerThreads``: digits for a number from 0
+    to :data:`MAX_WORKER_THREADS`. libcosim reads it as an ``unsigned int``
+    and takes ``-1`` (4294967295) and text it cannot parse as its default
+    pool, silently: a file that asks for the calling thread and does not get
+    it."""
+    where = "FixedStepAlgorithm numWorkerThreads"
+    if not re.fullmatch(r"[0-9]+", text.strip()):  # what libcosim parses as an unsigned int, and nothing else
+        raise _ssp_error(path, f"{where}: expected a whole number, found {abbreviate(text, 30)}")
+    value = int(text)
+    if not 0 <= value <= MAX_WORKER_THREADS:
+        raise _ssp_error(path, f"{where}: expected a number from 0 to {MAX_WORKER_THREADS}, found {value}")
+    return value
 
 
 def _typed(typ: str, text: str) -> float | int | bool | str:
@@ -651,7 +708,9 @@ def simulate_ssp(
         file's step size and parameter values (it reads neither itself).
         ``"libcosim"``: ``libcosimpy`` (the ``test`` extra) in a subprocess
         (libcosim keeps the FMUs' libraries loaded), configured by the file
-        alone.
+        alone (``CosimExecution.from_ssp_file`` without a step size, so the
+        file's fixed-step algorithm is the one that runs, with its
+        ``numWorkerThreads`` if it declares one).
     n_steps, stop_time : optional
         How far to run (default: the file's stop time).
 
