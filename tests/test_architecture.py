@@ -188,3 +188,20 @@ def test_every_type_ignore_names_its_error_code_and_says_why():
     bare = [f"{path}:{i}" for path, i, line in _library_lines()
             if "type: ignore" in line and not re.search(r"type: ignore\[[-a-z, ]+\] +# \S", line)]
     assert bare == []
+
+
+def test_the_costliest_test_files_run_first_and_each_listed_name_is_a_file():
+    """tests/conftest.py's RUN_FIRST orders the files for xdist's load balance: a renamed file
+    would silently fall back to pytest's order."""
+    from types import SimpleNamespace
+
+    from tests import conftest
+
+    here = Path(__file__).parent
+    assert [n for n in conftest.RUN_FIRST if not (here / n).is_file()] == []
+    assert len(set(conftest.RUN_FIRST)) == len(conftest.RUN_FIRST)
+    names = ["test_a.py", "test_sweep.py", "test_a.py", "test_native_hosts.py", "test_sweep.py"]
+    items = [SimpleNamespace(path=here / n, name=f"{n}::{i}") for i, n in enumerate(names)]
+    conftest.pytest_collection_modifyitems(None, None, items)
+    assert [i.name for i in items] == ["test_native_hosts.py::3", "test_sweep.py::1", "test_sweep.py::4",
+                                       "test_a.py::0", "test_a.py::2"]
