@@ -17,10 +17,12 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 
 import pyarrow.parquet as pq
 import pytest
 
+from lpvest.core._interrupt import Interrupted, abandoned_calls, call_interruptibly, handling_signals
 from tests.interrupting import ROOT, TIMEOUT, _default_sigint, interrupt_at, lpvest_command as _lpvest
 from tests.test_sweep import _write
 
@@ -58,6 +60,32 @@ def test_an_interrupted_build_caches_no_design_and_leaves_no_partial_fmu(tmp_pat
     assert not (out / ".designs").exists() or not any((out / ".designs").iterdir())
     assert sorted(p.name for p in out.glob("*.fmu*")) == ["OwnPlantPlant.fmu"]  # built before the design; no .part
     assert not list(out.glob(".*.part"))
+
+
+def test_a_call_interrupted_while_it_runs_stays_abandoned_until_it_ends():
+    """The call itself signals the main thread (which is then starting it or
+    waiting for it): the interrupted call counts as running until it ends, so
+    the command leaves with ``os._exit`` rather than through the interpreter's
+    shutdown with a native solve still running, which aborted it now and then
+    ("terminate called without an active exception"). On CPython 3.11 a
+    ``Thread.join`` interrupted by the signal marks the thread as stopped."""
+    release = threading.Event()
+
+    def call() -> str:
+        signal.pthread_kill(threading.main_thread().ident or 0, signal.SIGINT)
+        release.wait()
+        return "too late"
+
+    abandoned: list[threading.Event] = []
+    try:
+        with handling_signals(), pytest.raises(Interrupted, match="SIGINT"):
+            call_interruptibly(call, on_abandon=abandoned.append)
+        assert abandoned_calls()
+        assert len(abandoned) == 1 and not abandoned[0].is_set()
+    finally:
+        release.set()
+    abandoned[0].wait()
+    assert not abandoned_calls()
 
 
 def test_scs_stopped_by_its_own_sigint_handler_is_an_interruption_not_a_failed_point(tmp_path):
