@@ -29,7 +29,10 @@ solve has started, on its worker thread), ``fmu-step`` (inside an lpvest FMU's
 ``fmi2DoStep``), ``sweep-outcome`` (a sweep has written its first finished
 task), ``sweep-finish`` (every task is written; figures are next),
 ``experiment-written`` (``lpvest reproduce`` has written an experiment's
-``results.json``; the next one, or the report, follows).
+``results.json`` and resume record; the next one, or the report, follows),
+``reference-part`` (``lpvest regress --update`` has written a reference
+beside its file; renaming it into place follows), ``reference-written``
+(a reference file is in place; the next reference follows).
 """
 
 from __future__ import annotations
