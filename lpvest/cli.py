@@ -775,7 +775,7 @@ _KEPT: dict[str, Callable[[argparse.Namespace], str]] = {
     "cosim": lambda a: f"the co-simulation stopped, no result was written to {a.out}; run the same command again",
     "sweep": lambda a: "the tasks finished so far are written; run the same sweep again to resume",
     "reproduce": lambda a: "the FMUs built so far are kept in the FMU cache; run the same command again: it "
-                           "reuses them and runs the experiments again",
+                           "reuses them and the finished experiments and runs the others",
     "regress": lambda a: "nothing was written; run the same command again",
     "simulate": lambda a: "run the same command again",
     "systems": lambda a: "nothing was written",

@@ -468,27 +468,24 @@ def reproduce(
         raise LpvestError(f"no experiment {abbreviate(unknown[0], 30)} (known: {', '.join(experiments) or 'none'})")
     cache = as_experiment_fmus(fmus, backend=backend)
     rep = _Reporter(Path(out), reduced, echo or (lambda _text: None), progress)
-    groups = []
-    for group in _groups([experiments[n] for n in names]):
-        for exp in group:
-            rep.keys[exp.name] = _resume_key(exp, rep.options(exp), cache)
-        todo = []
-        for exp in group:
-            run = _finished_earlier(exp, rep.out / exp.name, rep.keys[exp.name])
-            if run is None:
-                todo.append(exp)
-            else:
-                rep.runs[run.name] = run
-                rep.say(f"{run.name}: finished earlier, kept ({run.results_path})")
-        if todo:
-            groups.append(todo)
-    parallel = n_workers > 0 and (len(groups) > 1 or any(g[0].split is not None for g in groups))
+    groups: list[list[Experiment]] = []
     try:
-        if not groups:
-            pass
-        elif parallel:
+        for group in _groups([experiments[n] for n in names]):
+            todo = []
+            for exp in group:
+                rep.keys[exp.name] = _resume_key(exp, rep.options(exp), cache)
+                run = _finished_earlier(exp, rep.out / exp.name, rep.keys[exp.name])
+                if run is None:
+                    todo.append(exp)
+                else:
+                    rep.runs[run.name] = run
+                    rep.say(f"{run.name}: finished earlier, kept ({run.results_path})")
+            if todo:  # a group's members not kept run together, as they share a computation
+                groups.append(todo)
+        parallel = n_workers > 0 and (len(groups) > 1 or any(g[0].split is not None for g in groups))
+        if parallel:
             _on_workers(groups, cache, rep, n_workers)
-        else:
+        elif groups:
             _in_process(groups, cache, rep)
     except KeyboardInterrupt as exc:
         finished = [rep.runs[n] for n in names if n in rep.runs]
