@@ -247,11 +247,13 @@ def _interrupted_on_workers(experiment_fmus, out, tmp_path, signum, group):
     assert " task(s) on Dask LocalCluster, " in res.stdout, res.stdout  # it ran side by side
     data = json.loads((out / kept / "results.json").read_text())
     assert "fmu_cosimulation" not in data or data["fmu_cosimulation"]["ok"] is True
-    # the kept experiment's results and resume record, whole; no other experiment's, no half-written file
-    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()
-                  and p.parent.parent == out and not p.parent.name.startswith("fmu-cache")
-                  and (p.name.endswith(".json") or p.name.startswith("."))) == [
-        f"{kept}/.resume.pickle", f"{kept}/results.json"]
+    # the kept experiment's results and resume record, whole; no other experiment's, no half-written
+    # file of them (an experiment running on a worker may have written its figures or designs: a
+    # folder without results.json is not a result, and a rerun writes it anew)
+    assert sorted(p.relative_to(out).as_posix() for p in out.glob("*/*") if p.is_file()
+                  and not p.parent.name.startswith("fmu-cache")
+                  and (p.name == "results.json" or p.name.startswith(".results.json") or p.name.startswith(
+                      ".resume.pickle"))) == [f"{kept}/.resume.pickle", f"{kept}/results.json"]
     assert not (out / "report.md").exists()
     return cmd, kept
 
