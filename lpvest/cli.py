@@ -301,14 +301,18 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
 def cmd_regress(args: argparse.Namespace) -> int:
     from .experiments._fmus import as_experiment_fmus
-    from .experiments._references import regress
+    from .experiments._references import RegressInterrupted, regress
 
     if args.update and args.dir:  # the folder the references go to, checked before any FMU is built
         _out_dir(args.dir, "--dir")
     fmus = as_experiment_fmus(_out_dir(args.fmus, "--fmus") if args.fmus else None)
     if not args.quiet:
         fmus.progress = lambda msg: print(msg, file=sys.stderr, flush=True)
-    return regress(args.names, update=args.update, directory=args.dir, fmus=fmus)
+    try:
+        return regress(args.names, update=args.update, directory=args.dir, fmus=fmus)
+    except RegressInterrupted as exc:  # what was rewritten or compared, how to go on: one line
+        print(f"lpvest: interrupted ({exc.name}): {exc}", file=sys.stderr)
+        return exit_status(exc)
 
 
 def _design_args(items: Sequence[str] | None) -> dict[str, Path]:
@@ -795,7 +799,8 @@ _KEPT: dict[str, Callable[[argparse.Namespace], str]] = {
     "cosim": lambda a: f"the co-simulation stopped, no result was written to {a.out}; run the same command again",
     "sweep": lambda a: "the tasks finished so far are written; run the same sweep again to resume",
     "reproduce": lambda a: "the FMUs built so far are kept in the FMU cache; run the same command again: it "
-                           "reuses them and runs the experiments again",
+                           "reuses them and the finished experiments and runs the others",
+    "regress": lambda a: "nothing was written; run the same command again",
     "simulate": lambda a: "run the same command again",
     "systems": lambda a: "nothing was written",
     "validate": lambda a: "nothing was written",

@@ -13,14 +13,19 @@ without looking at Python's signals.
 from __future__ import annotations
 
 import json
+import re
+import shutil
 import signal
 import subprocess
 import sys
 import textwrap
+import threading
 
 import pyarrow.parquet as pq
 import pytest
 
+from lpvest.core._interrupt import Interrupted, abandoned_calls, call_interruptibly, handling_signals
+from lpvest.experiments._references import REFERENCES, read_reference
 from tests.interrupting import ROOT, TIMEOUT, _default_sigint, interrupt_at, lpvest_command as _lpvest
 from tests.test_sweep import _write
 
@@ -58,6 +63,35 @@ def test_an_interrupted_build_caches_no_design_and_leaves_no_partial_fmu(tmp_pat
     assert not (out / ".designs").exists() or not any((out / ".designs").iterdir())
     assert sorted(p.name for p in out.glob("*.fmu*")) == ["OwnPlantPlant.fmu"]  # built before the design; no .part
     assert not list(out.glob(".*.part"))
+
+
+def test_a_call_interrupted_while_it_runs_stays_abandoned_until_it_ends():
+    """The call itself signals the main thread (which is then starting it or
+    waiting for it): the interrupted call counts as running until it ends, so
+    the command leaves with ``os._exit`` rather than through the interpreter's
+    shutdown with a native solve still running, which aborted it now and then
+    ("terminate called without an active exception"). On CPython 3.11 a
+    ``Thread.join`` interrupted by the signal marks the thread as stopped."""
+    release = threading.Event()
+
+    def call() -> str:
+        signal.pthread_kill(threading.main_thread().ident or 0, signal.SIGINT)
+        release.wait()
+        return "too late"
+
+    abandoned: list[threading.Event] = []
+    # a runner started in the background by a shell without job control ignores SIGINT
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with handling_signals(), pytest.raises(Interrupted, match="SIGINT"):
+            call_interruptibly(call, on_abandon=abandoned.append)
+        assert abandoned_calls()
+        assert len(abandoned) == 1 and not abandoned[0].is_set()
+    finally:
+        release.set()
+        signal.signal(signal.SIGINT, previous)
+    abandoned[0].wait()
+    assert not abandoned_calls()
 
 
 def test_scs_stopped_by_its_own_sigint_handler_is_an_interruption_not_a_failed_point(tmp_path):
@@ -179,7 +213,7 @@ def _reproduce(experiment_fmus, out, *names):
                    str(experiment_fmus.directory))
 
 
-def test_reproduce_interrupted_after_an_experiment_keeps_its_results_and_says_a_rerun_redoes_them(
+def test_reproduce_interrupted_after_an_experiment_keeps_its_results_and_says_a_rerun_keeps_them(
         experiment_fmus, tmp_path):
     out = tmp_path / "out"
     res = interrupt_at(_reproduce(experiment_fmus, out, "all"), "experiment-written", tmp_path)
@@ -187,12 +221,68 @@ def test_reproduce_interrupted_after_an_experiment_keeps_its_results_and_says_a_
     assert _one_line(res.stderr) == (
         f"lpvest: interrupted (SIGINT): kept the results of 1 of 8 experiment(s) (cox-toth-example1: "
         f"{out}/NAME/results.json); report.md was not written; the FMU cache {experiment_fmus.directory} keeps "
-        "every FMU built so far; run the same command again: it reuses those FMUs and runs the experiments "
-        "again (the finished ones too)")
+        "every FMU built so far; run the same command again: it reuses those FMUs and the finished experiments "
+        "and runs the others")
     assert json.loads((out / "cox-toth-example1" / "results.json").read_text())["fmu_cosimulation"]["ok"] is True
     assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*results.json*")) == [
         "cox-toth-example1/results.json"]  # no other experiment's, no half-written one
     assert not (out / "report.md").exists()
+
+
+def _interrupted_on_workers(experiment_fmus, out, tmp_path, signum, group):
+    """``reproduce all --quick`` with the default ``--workers`` (Dask worker processes), stopped once
+    an experiment is written; returns the command, how it ended, and the kept experiment's name."""
+    cmd = _lpvest("reproduce", "all", "--quick", "--out", str(out), "--fmus", str(experiment_fmus.directory))
+    res = interrupt_at(cmd, "experiment-written", tmp_path, signum=signum, group=group)
+    assert res.returncode == 128 + signum, res.stderr
+    name = signal.Signals(signum).name
+    line = _one_line(res.stderr)  # and no traceback: neither from this process nor from its workers
+    m = re.fullmatch(
+        rf"lpvest: interrupted \({name}\): kept the results of 1 of 8 experiment\(s\) \(([a-z0-9-]+): "
+        rf"{re.escape(str(out))}/NAME/results\.json\); report\.md was not written; the FMU cache "
+        rf"{re.escape(str(experiment_fmus.directory))} keeps every FMU built so far; run the same command again: it "
+        "reuses those FMUs and the finished experiments and runs the others", line)
+    assert m, line
+    kept = m.group(1)  # whichever task finished first
+    assert " task(s) on Dask LocalCluster, " in res.stdout, res.stdout  # it ran side by side
+    data = json.loads((out / kept / "results.json").read_text())
+    assert "fmu_cosimulation" not in data or data["fmu_cosimulation"]["ok"] is True
+    # the kept experiment's results and resume record, whole; no other experiment's, no half-written
+    # file of them (an experiment running on a worker may have written its figures or designs: a
+    # folder without results.json is not a result, and a rerun writes it anew)
+    assert sorted(p.relative_to(out).as_posix() for p in out.glob("*/*") if p.is_file()
+                  and not p.parent.name.startswith("fmu-cache")
+                  and (p.name == "results.json" or p.name.startswith(".results.json") or p.name.startswith(
+                      ".resume.pickle"))) == [f"{kept}/.resume.pickle", f"{kept}/results.json"]
+    assert not (out / "report.md").exists()
+    return cmd, kept
+
+
+@pytest.mark.parametrize(("signum", "group"), [(signal.SIGINT, True), (signal.SIGTERM, False)],
+                         ids=["ctrl-c-to-the-process-group", "sigterm-to-the-command"])
+def test_reproduce_on_dask_workers_interrupted_keeps_the_finished_experiment(experiment_fmus, tmp_path, signum,
+                                                                               group):
+    """Ctrl-C in a terminal reaches the command and its Dask workers (its process group); a
+    ``kill`` reaches the command only."""
+    _interrupted_on_workers(experiment_fmus, tmp_path / "out", tmp_path, signum, group)
+
+
+def test_reproduce_on_dask_workers_rerun_after_an_interruption_keeps_the_finished_experiment(experiment_fmus,
+                                                                                             tmp_path):
+    out = tmp_path / "out"
+    cmd, kept = _interrupted_on_workers(experiment_fmus, out, tmp_path, signal.SIGINT, True)
+    results = out / kept / "results.json"
+    before = results.read_bytes(), results.stat().st_mtime_ns
+    rerun = subprocess.run(cmd, capture_output=True, text=True, timeout=TIMEOUT, cwd=ROOT)
+    assert rerun.returncode == 0, rerun.stderr
+    assert f"{kept}: finished earlier, kept ({results})" in rerun.stdout.splitlines()
+    assert "7 experiment(s) as " in rerun.stdout  # the others only
+    assert (results.read_bytes(), results.stat().st_mtime_ns) == before  # not run, not rewritten
+    names = [line.split()[0] for line in subprocess.run(_lpvest("reproduce", "list"), capture_output=True,
+                                                        text=True, timeout=TIMEOUT, cwd=ROOT).stdout.splitlines()]
+    assert len(names) == 8 and all((out / name / "results.json").is_file() for name in names)
+    report = (out / "report.md").read_text()
+    assert all(name in report for name in names)
 
 
 def test_reproduce_stopped_by_sigterm_inside_an_fmu_keeps_no_results(experiment_fmus, tmp_path):
@@ -205,3 +295,61 @@ def test_reproduce_stopped_by_sigterm_inside_an_fmu_keeps_no_results(experiment_
         line
     assert "component" not in line and "fatal" not in line, line
     assert not list(out.rglob("*results.json*"))
+
+
+# ---------------------------------------------------------------------------
+# regress
+# ---------------------------------------------------------------------------
+_REFS = ("cox-toth-example1", "cox-toth-truncation")  # the two quickest references
+
+
+def _regress(experiment_fmus, *args):
+    return _lpvest("regress", *_REFS, "--fmus", str(experiment_fmus.directory), "--quiet", *args)
+
+
+def _reference_copy(tmp_path):
+    """A reference folder holding the stored files of _REFS, and their bytes."""
+    folder = tmp_path / "reference"
+    folder.mkdir()
+    for name in _REFS:
+        shutil.copyfile(ROOT / "tests" / "data" / "reference" / f"{name}.csv", folder / f"{name}.csv")
+    return folder, {p.name: p.read_bytes() for p in folder.iterdir()}
+
+
+def test_regress_update_interrupted_between_references_keeps_each_file_whole(experiment_fmus, tmp_path):
+    folder, before = _reference_copy(tmp_path)
+    (folder / "cox-toth-example1.csv").write_text("# a stale reference\n")  # to be rewritten
+    res = interrupt_at(_regress(experiment_fmus, "--update", "--dir", str(folder)), "reference-written", tmp_path,
+                       signum=signal.SIGTERM)
+    assert res.returncode == 143, res.stderr
+    assert _one_line(res.stderr) == (
+        f"lpvest: interrupted (SIGTERM): rewrote 1 of 2 reference file(s) in {folder} (cox-toth-example1); every "
+        "file is whole, the others keep their earlier contents; run the same command again to rewrite them all")
+    assert sorted(p.name for p in folder.iterdir()) == ["cox-toth-example1.csv", "cox-toth-truncation.csv"]
+    assert (folder / "cox-toth-truncation.csv").read_bytes() == before["cox-toth-truncation.csv"]
+    ref = next(r for r in REFERENCES if r.name == "cox-toth-example1")
+    columns, data, _ = read_reference(folder / ref.filename)  # the new file, whole: every row of the run
+    assert columns == ["time", *ref.columns]
+    assert data.shape == read_reference(ROOT / "tests" / "data" / "reference" / ref.filename)[1].shape
+
+
+@pytest.mark.parametrize(("signum", "status", "name"), [(signal.SIGINT, 130, "SIGINT"),
+                                                         (signal.SIGTERM, 143, "SIGTERM")])
+def test_regress_update_interrupted_while_writing_a_reference_leaves_the_earlier_file(
+        experiment_fmus, tmp_path, signum, status, name):
+    folder, before = _reference_copy(tmp_path)
+    res = interrupt_at(_regress(experiment_fmus, "--update", "--dir", str(folder)), "reference-part", tmp_path,
+                       signum=signum)
+    assert res.returncode == status, res.stderr
+    assert _one_line(res.stderr).startswith(f"lpvest: interrupted ({name}): rewrote 0 of 2 reference file(s) in ")
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before  # no half file, no .part left
+
+
+def test_regress_interrupted_inside_an_fmu_writes_nothing(experiment_fmus, tmp_path):
+    folder, before = _reference_copy(tmp_path)
+    res = interrupt_at(_regress(experiment_fmus, "--dir", str(folder)), "fmu-step", tmp_path)
+    assert res.returncode == 130, res.stderr
+    line = _one_line(res.stderr)
+    assert line == ("lpvest: interrupted (SIGINT): compared 0 of 2 reference(s); nothing was written; run the same "
+                    "command again to compare them all"), line
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before

@@ -166,8 +166,9 @@ def test_quiet_reproduce_asks_its_experiments_for_no_progress_bars(monkeypatch, 
         return ExperimentResult("fake", "table", {"n": 1}, (), (), None)
 
     monkeypatch.setattr(experiments, "registry", lambda: {"fake": Experiment("fake", "a fake", run)})
-    assert main(["reproduce", "fake", "--out", str(tmp_path), "--workers", "0", "--quiet"]) == 0
-    assert main(["reproduce", "fake", "--out", str(tmp_path), "--workers", "0"]) == 0
+    assert main(["reproduce", "fake", "--out", str(tmp_path / "a"), "--workers", "0", "--quiet"]) == 0
+    # another folder: in the same one the rerun would keep the finished experiment, not run it
+    assert main(["reproduce", "fake", "--out", str(tmp_path / "b"), "--workers", "0"]) == 0
     assert asked == [False, None]  # None: the experiment's own rule, bars on a terminal only
     assert capsys.readouterr().err == ""
 
@@ -242,3 +243,34 @@ def test_reproduce_all_reduced_writes_everything(tmp_path, experiment_fmus, capf
     assert len(links) == sum(len(r.result.figures) for r in runs) >= 14
     assert all((tmp_path / link).is_file() for link in links)
     assert report.count("**Through FMUs.**") == 8 and "reduced configuration" in report
+
+
+def test_a_rerun_keeps_a_finished_experiment_unless_its_results_or_options_changed(monkeypatch, tmp_path):
+    """What resumes an interrupted reproduce: the resume record next to results.json."""
+    import lpvest.experiments as experiments
+    from lpvest.experiments._reproduce import reproduce
+
+    calls = []
+
+    def run(out_dir, *, fmus, progress=None, runs=10):
+        calls.append(runs)
+        return ExperimentResult("fake", f"table {runs}", {"runs": runs}, (), (), None)
+
+    fake = Experiment("fake", "a fake", run, reduced={"runs": 2})
+    monkeypatch.setattr(experiments, "registry", lambda: {"fake": fake})
+    cache = tmp_path / "c"
+    (first,) = reproduce(["fake"], tmp_path, fmus=cache, workers=0)
+    lines: list[str] = []
+    (again,) = reproduce(["fake"], tmp_path, fmus=cache, workers=0, echo=lines.append)
+    assert calls == [10]  # kept, not run
+    assert lines == [f"fake: finished earlier, kept ({tmp_path / 'fake' / 'results.json'})"]
+    assert (again.result, again.seconds, again.options) == (first.result, first.seconds, first.options)
+    reproduce(["fake"], tmp_path, fmus=cache, workers=0, reduced=True)  # other options: run
+    assert calls == [10, 2]
+    results = tmp_path / "fake" / "results.json"
+    results.write_text(results.read_text().replace("2", "3"))  # not the file it wrote: run
+    reproduce(["fake"], tmp_path, fmus=cache, workers=0, reduced=True)
+    assert calls == [10, 2, 2] and json.loads(results.read_text()) == {"runs": 2}
+    (tmp_path / "fake" / ".resume.pickle").write_bytes(b"garbage")  # a damaged record: run
+    reproduce(["fake"], tmp_path, fmus=cache, workers=0, reduced=True)
+    assert calls == [10, 2, 2, 2]

@@ -29,7 +29,10 @@ solve has started, on its worker thread), ``fmu-step`` (inside an lpvest FMU's
 ``fmi2DoStep``), ``sweep-outcome`` (a sweep has written its first finished
 task), ``sweep-finish`` (every task is written; figures are next),
 ``experiment-written`` (``lpvest reproduce`` has written an experiment's
-``results.json``; the next one, or the report, follows).
+``results.json`` and resume record; the next one, or the report, follows),
+``reference-part`` (``lpvest regress --update`` has written a reference
+beside its file; renaming it into place follows), ``reference-written``
+(a reference file is in place; the next reference follows).
 """
 
 from __future__ import annotations
@@ -40,7 +43,7 @@ import os
 import signal
 import threading
 from collections.abc import Callable, Iterator
-from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
+from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar, cast
 
 if TYPE_CHECKING:
     from types import FrameType
@@ -90,12 +93,35 @@ def exit_status(exc: BaseException) -> int:
 
 _pending: int | None = None
 _depth = 0
+_deferring = 0  # > 0: the handler records the signal in _deferred instead of raising
+_deferred: int | None = None
 
 
 def _handler(signum: int, frame: FrameType | None) -> None:
-    global _pending
+    global _pending, _deferred
     _pending = signum
+    if _deferring:
+        _deferred = signum
+        return
     raise Interrupted(signum)
+
+
+@contextlib.contextmanager
+def _signals_deferred() -> Iterator[None]:
+    """Within this context :func:`_handler` records a signal and raises its
+    :class:`Interrupted` when the context ends: a few statements that must
+    not be cut in two (a thread started and recorded as started)."""
+    global _deferring, _deferred
+    _deferring += 1
+    signum = None
+    try:
+        yield
+    finally:
+        _deferring -= 1
+        if _deferring == 0:
+            signum, _deferred = _deferred, None
+    if signum is not None:
+        raise Interrupted(signum)
 
 
 def raise_if_pending() -> None:
@@ -158,17 +184,52 @@ def interruptible(fn: Callable[P, R]) -> Callable[P, R]:
     return wrapper
 
 
-def call_interruptibly(fn: Callable[[], T], *, on_abandon: Callable[[threading.Thread], None] | None = None) -> T:
+class _Call:
+    """``fn()`` on a daemon thread; :attr:`finished` is set once it has ended.
+
+    Its end is this event, not the thread's ``join``/``is_alive``: on CPython
+    3.11 a ``join`` that a signal's exception interrupts marks the thread as
+    stopped although it runs on (``Thread._wait_for_tstate_lock``'s clean-up
+    for bpo-45274 releases the lock the running thread holds), so an
+    abandoned solve looked finished: the command then left through the
+    interpreter's shutdown with the solver still running, which now and then
+    aborted it ("terminate called without an active exception", SIGABRT).
+    """
+
+    def __init__(self, fn: Callable[[], Any]) -> None:
+        self._fn = fn
+        self.value: Any = None
+        self.error: BaseException | None = None
+        self.finished = threading.Event()
+        self.thread = threading.Thread(target=self._run, name="lpvest-solve", daemon=True)
+
+    def _run(self) -> None:
+        try:
+            self.value = self._fn()
+        except BaseException as exc:  # noqa: BLE001 - handed to the waiting thread
+            self.error = exc
+        finally:
+            self.finished.set()
+
+    def running(self) -> bool:
+        """Started and not yet ended."""
+        return self.thread.ident is not None and not self.finished.is_set()
+
+
+def call_interruptibly(fn: Callable[[], T], *, on_abandon: Callable[[threading.Event], None] | None = None) -> T:
     """``fn()`` on a worker thread while this (main) thread waits, so that a
     signal's handler runs at once; on another thread, ``fn()`` directly.
+    Runs within :func:`handling_signals`.
 
     Parameters
     ----------
     fn : callable
         The call, without arguments.
     on_abandon : callable or None, optional
-        Called with the worker thread when a signal abandons it (e.g. to drop
-        what the thread still writes to from a cache); None: nothing is called.
+        Called, when a signal abandons the call, with an event that is set
+        once the abandoned call has ended (e.g. to drop what the thread still
+        writes to from a cache, and to wait for it before reusing that);
+        None: nothing is called.
 
     Returns
     -------
@@ -179,32 +240,28 @@ def call_interruptibly(fn: Callable[[], T], *, on_abandon: Callable[[threading.T
     ------
     KeyboardInterrupt
         The signal's exception; the worker thread is abandoned (it runs to
-        its end, its result dropped) and handed to ``on_abandon``.
+        its end, its result dropped), :func:`abandoned_calls` is True until it
+        ends, and ``on_abandon`` is called.
     BaseException
         Whatever ``fn()`` raised, re-raised in the calling thread.
     """
     if threading.current_thread() is not threading.main_thread():
         return fn()
-    box: dict[str, Any] = {}
-
-    def target() -> None:
+    call = _Call(fn)
+    with handling_signals():
         try:
-            box["value"] = fn()
-        except BaseException as exc:  # noqa: BLE001 - handed to the waiting thread
-            box["error"] = exc
-
-    worker = threading.Thread(target=target, name="lpvest-solve", daemon=True)
-    worker.start()
-    try:
-        worker.join()  # interruptible: the handler raises here
-    except BaseException:
-        _abandoned.append(worker)
-        if on_abandon is not None:
-            on_abandon(worker)
-        raise
-    if "error" in box:
-        raise box["error"]
-    return box["value"]
+            with _signals_deferred():  # a signal within start() raises after it, in this try
+                call.thread.start()
+            call.finished.wait()  # interruptible: the handler raises here
+        except BaseException:
+            if call.running():
+                _abandoned.append(call)
+                if on_abandon is not None:
+                    on_abandon(call.finished)
+            raise
+    if call.error is not None:
+        raise call.error
+    return cast(T, call.value)
 
 
 def holds(moment: str) -> bool:
@@ -223,7 +280,7 @@ def holds(moment: str) -> bool:
     return os.environ.get("LPVEST_TEST_HOLD") == moment
 
 
-_abandoned: list[threading.Thread] = []
+_abandoned: list[_Call] = []
 
 
 def abandoned_calls() -> bool:
@@ -238,7 +295,7 @@ def abandoned_calls() -> bool:
     bool
         True when the thread of at least one abandoned call is alive.
     """
-    return any(t.is_alive() for t in _abandoned)
+    return any(not call.finished.is_set() for call in _abandoned)
 
 
 def hold(moment: str) -> None:

@@ -269,7 +269,7 @@ class HinfProgram:
         if self.auto:
             self.solver = choose_solver(n_vertices, nx, nz, nw, kind)
         self._warm = False  # warm starts only inside a search (HinfProgram.warm_starts)
-        self._abandoned: threading.Thread | None = None  # an interrupted solve, still running
+        self._abandoned: threading.Event | None = None  # set when an interrupted solve has ended
         self._returned_point = False  # the last solve returned a point (last_variables)
         self.margin = float(margin)
         self.solver_options = dict(solver_options or {})
@@ -431,7 +431,7 @@ class HinfProgram:
         from ..core._interrupt import call_interruptibly, hold
 
         if self._abandoned is not None:
-            self._abandoned.join()  # an interrupted solve still writes into the problem
+            self._abandoned.wait()  # an interrupted solve still writes into the problem
             self._abandoned = None
         target = _interruptible_scs() if solver == "SCS" else solver
 
@@ -439,8 +439,8 @@ class HinfProgram:
             hold("solve")
             self._problem.solve(solver=target, **options)
 
-        def abandon(thread: threading.Thread) -> None:
-            self._abandoned = thread
+        def abandon(finished: threading.Event) -> None:
+            self._abandoned = finished
             _cached_program.cache_clear()
 
         call_interruptibly(run, on_abandon=abandon)

@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core._errors import LpvestError, abbreviate, shorten
+from ..core._interrupt import Interrupted, exit_status, hold
 from ._fmus import CoSimSpec, ExperimentFmus, as_experiment_fmus
 
 __all__ = [
@@ -47,6 +48,7 @@ __all__ = [
     "reference_dir",
     "simulate_reference",
     "write_reference",
+    "RegressInterrupted",
     "read_reference",
     "check_reference",
     "regress",
@@ -206,7 +208,15 @@ def write_reference(ref: Reference, data: np.ndarray, designs: dict[str, str], d
         _csv_row(("time", *ref.columns)),  # matrix elements hold commas: quoted
     ]
     lines += [",".join(f"{v:.12g}" for v in row) for row in data]
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    # whole or not at all: an interruption (or a full disk) leaves the earlier file as it was
+    partial = path.with_name(f".{path.name}.part")
+    try:
+        partial.write_text("\n".join(lines) + "\n", encoding="utf-8")
+        hold("reference-part")  # the interruption tests' hook; nothing otherwise
+        partial.replace(path)
+    except BaseException:
+        partial.unlink(missing_ok=True)
+        raise
     return path
 
 
@@ -275,6 +285,47 @@ def check_reference(ref: Reference, data: np.ndarray, designs: dict[str, str],
     return checks
 
 
+class RegressInterrupted(Interrupted):
+    """``Ctrl-C`` or SIGTERM stopped :func:`regress`. Every reference file is
+    whole: one being rewritten keeps its earlier contents (it is written
+    beside and renamed into place), and comparing writes nothing.
+
+    Parameters
+    ----------
+    done : sequence of str
+        The references rewritten (``update``) or compared before the signal, in order.
+    names : sequence of str
+        Every reference of the run.
+    folder : Path
+        The reference folder.
+    update : bool
+        The run rewrote the references (``--update``) rather than compared them.
+    failed : sequence of str
+        The compared references that failed.
+    signum : int
+        The signal (SIGINT: Ctrl-C; SIGTERM); the command line exits with ``128 + signum``.
+    """
+
+    def __init__(self, done: Sequence[str], names: Sequence[str], folder: Path, *, update: bool,
+                 failed: Sequence[str] = (), signum: int) -> None:
+        super().__init__(signum)
+        self.done, self.names, self.folder = tuple(done), tuple(names), folder
+        self.update, self.failed = update, tuple(failed)
+
+    def __str__(self) -> str:
+        n, total = len(self.done), len(self.names)
+        shown = ", ".join(self.done[:3]) + (f" and {n - 3} more" if n > 3 else "")
+        if self.update:
+            kept = (f"rewrote {n} of {total} reference file(s) in {shorten(str(self.folder), 80)}"
+                    + (f" ({shown})" if n else "") + "; every file is whole, the others keep their earlier "
+                    "contents; run the same command again to rewrite them all")
+        else:
+            verdict = f", {len(self.failed)} failed ({', '.join(self.failed)})" if self.failed else ""
+            kept = (f"compared {n} of {total} reference(s)" + (f" ({shown}{verdict})" if n else "")
+                    + "; nothing was written; run the same command again to compare them all")
+        return kept
+
+
 def regress(
     names: Sequence[str] = (),
     *,
@@ -284,7 +335,10 @@ def regress(
     echo: Callable[[str], None] = print,
 ) -> int:
     """Compare the references ``names`` (default: all) with fresh co-simulations,
-    or rewrite them (``update``); returns the exit status (1: a comparison failed)."""
+    or rewrite them (``update``); returns the exit status (1: a comparison failed).
+    SIGINT or SIGTERM (within :func:`lpvest.core.handling_signals`, as on the
+    command line; a plain ``KeyboardInterrupt`` too) raises
+    :class:`RegressInterrupted`, which says what was kept."""
     folder = Path(directory) if directory else reference_dir()
     cache = as_experiment_fmus(fmus)
     unknown = set(names) - {r.name for r in REFERENCES}
@@ -300,20 +354,28 @@ def regress(
         if missing:
             raise LpvestError(f"{shorten(str(folder), 80)}: no reference file {missing[0]} ({len(missing)} of "
                               f"{len(selected)} missing; write them with {UPDATE_COMMAND})")
-    failed = []
-    for ref in selected:
-        data, designs = simulate_reference(ref, cache)
-        if update:
-            path = write_reference(ref, data, designs, folder)
-            echo(f"wrote {path} ({data.shape[0]} rows, {path.stat().st_size / 1024:.1f} KiB)")
-            continue
-        checks = check_reference(ref, data, designs, folder)
-        ok = all(c.ok for c in checks)
-        echo(f"{ref.name}: " + ("ok" if ok else "FAIL"))
-        for c in checks:
-            echo(f"  {c.line()}")
-        if not ok:
-            failed.append(ref.name)
+    failed: list[str] = []
+    done: list[str] = []
+    try:
+        for ref in selected:
+            data, designs = simulate_reference(ref, cache)
+            if update:
+                path = write_reference(ref, data, designs, folder)
+                done.append(ref.name)
+                echo(f"wrote {path} ({data.shape[0]} rows, {path.stat().st_size / 1024:.1f} KiB)")
+                hold("reference-written")  # the interruption tests' hook; nothing otherwise
+                continue
+            checks = check_reference(ref, data, designs, folder)
+            ok = all(c.ok for c in checks)
+            done.append(ref.name)
+            echo(f"{ref.name}: " + ("ok" if ok else "FAIL"))
+            for c in checks:
+                echo(f"  {c.line()}")
+            if not ok:
+                failed.append(ref.name)
+    except KeyboardInterrupt as exc:
+        raise RegressInterrupted(done, [r.name for r in selected], folder, update=update, failed=failed,
+                                 signum=exit_status(exc) - 128) from None
     if failed:
         echo(f"regression failures: {', '.join(failed)} (after a deliberate change: {UPDATE_COMMAND})")
         return 1

@@ -39,7 +39,11 @@ Examples
 
 from __future__ import annotations
 
+import functools
+import hashlib
+import json
 import os
+import pickle
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -99,10 +103,10 @@ class ExperimentRun:
 
 class ReproduceInterrupted(Interrupted):
     """``Ctrl-C`` or SIGTERM stopped :func:`reproduce`: the experiments that
-    finished wrote their ``results.json`` (each written whole, or not at all),
-    the FMU cache keeps every FMU built so far, and a rerun reuses those FMUs
-    and runs every experiment again (the finished ones too: results are not
-    reused).
+    finished wrote their ``results.json`` (each written whole, or not at all)
+    and their resume record, the FMU cache keeps every FMU built so far, and a
+    rerun reuses those FMUs and keeps the finished experiments (it runs the
+    others: see :func:`reproduce`).
 
     Parameters
     ----------
@@ -147,7 +151,7 @@ class ReproduceInterrupted(Interrupted):
             kept = f"none of the {len(self.names)} experiment(s) finished"
         return (kept + ("; report.md was not written" if self.report else "")
                 + f"; the FMU cache {self.cache} keeps every FMU built so far; run the same command again: it "
-                "reuses those FMUs and runs the experiments again (the finished ones too)")
+                "reuses those FMUs and the finished experiments and runs the others")
 
 
 def default_workers() -> int:
@@ -225,6 +229,57 @@ def reproduce_task(shared: _Shared, task: Task) -> TaskResult:
     return TaskResult(value=_run_experiments(job))
 
 
+# -- resuming --------------------------------------------------------------------------------------------
+#: Next to an experiment's results.json: what a rerun needs to keep it instead of running it again.
+RESUME_RECORD = ".resume.pickle"
+
+
+@functools.cache
+def _source_digest() -> str:
+    """SHA-256 of the lpvest package's Python sources (what an experiment's numbers are computed by)."""
+    root = Path(__file__).resolve().parent.parent
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def _resume_key(exp: Experiment, options: dict, cache: ExperimentFmus) -> str:
+    """What an experiment's result depends on: the lpvest sources, its name and
+    options, and what each of its FMUs is made of (:func:`lpvest.fmi.fingerprint`)."""
+    from ..fmi._cache import fingerprint
+
+    what = {"lpvest": _source_digest(), "experiment": exp.name, "options": options, "backend": cache.backend,
+            "fmus": {ident: fingerprint(cache.plan(ident), cache.backend) for ident in exp.fmus}}
+    return hashlib.sha256(json.dumps(what, sort_keys=True, default=repr).encode()).hexdigest()
+
+
+def _write_resume_record(run: ExperimentRun, key: str) -> None:
+    """Whole or not at all, after ``results.json``: an experiment without one is run again."""
+    path = run.folder / RESUME_RECORD
+    partial = path.with_name(path.name + ".part")
+    digest = hashlib.sha256(run.results_path.read_bytes()).hexdigest()
+    partial.write_bytes(pickle.dumps({"key": key, "results_sha256": digest, "run": run}))
+    partial.replace(path)
+
+
+def _finished_earlier(exp: Experiment, folder: Path, key: str) -> ExperimentRun | None:
+    """The run an earlier command recorded in ``folder``, if it is the same
+    computation (``key``) and its ``results.json`` and figures are the ones it
+    wrote; else None (the experiment runs again and rewrites them)."""
+    try:
+        record = pickle.loads((folder / RESUME_RECORD).read_bytes())
+        run = record["run"]
+        if (record["key"] != key or not isinstance(run, ExperimentRun) or run.name != exp.name
+                or hashlib.sha256(run.results_path.read_bytes()).hexdigest() != record["results_sha256"]
+                or run.results_path != folder / "results.json" or not all(f.is_file() for f in run.result.figures)):
+            return None
+        return run
+    except (OSError, EOFError, KeyError, TypeError, AttributeError, ImportError, IndexError,
+            pickle.UnpicklingError, ValueError):
+        return None
+
+
 # -- the driver ----------------------------------------------------------------------------------------
 class _Reporter:
     """Writes and prints each experiment when it is complete; keeps the runs."""
@@ -232,6 +287,7 @@ class _Reporter:
     def __init__(self, out: Path, reduced: bool, say: Callable[[str], None], progress: bool | None = None) -> None:
         self.out, self.reduced, self.say, self.progress = out, reduced, say, progress
         self.runs: dict[str, ExperimentRun] = {}
+        self.keys: dict[str, str] = {}  #: experiment name -> its resume key
 
     def options(self, exp: Experiment) -> dict:
         return dict(exp.reduced) if self.reduced else {}
@@ -250,7 +306,9 @@ class _Reporter:
         path = write_results(result, folder)
         self.say(f"wrote {path}" + "".join(f"\nwrote {f}" for f in result.figures))
         self.say(f"({seconds:.1f} s)")
-        self.runs[exp.name] = ExperimentRun(exp.name, exp.title, result, folder, path, seconds, self.options(exp))
+        run = ExperimentRun(exp.name, exp.title, result, folder, path, seconds, self.options(exp))
+        _write_resume_record(run, self.keys[exp.name])
+        self.runs[exp.name] = run
         hold("experiment-written")  # the interruption tests' hook; nothing otherwise
 
 
@@ -410,12 +468,24 @@ def reproduce(
         raise LpvestError(f"no experiment {abbreviate(unknown[0], 30)} (known: {', '.join(experiments) or 'none'})")
     cache = as_experiment_fmus(fmus, backend=backend)
     rep = _Reporter(Path(out), reduced, echo or (lambda _text: None), progress)
-    groups = _groups([experiments[n] for n in names])
-    parallel = n_workers > 0 and (len(groups) > 1 or any(g[0].split is not None for g in groups))
+    groups: list[list[Experiment]] = []
     try:
+        for group in _groups([experiments[n] for n in names]):
+            todo = []
+            for exp in group:
+                rep.keys[exp.name] = _resume_key(exp, rep.options(exp), cache)
+                run = _finished_earlier(exp, rep.out / exp.name, rep.keys[exp.name])
+                if run is None:
+                    todo.append(exp)
+                else:
+                    rep.runs[run.name] = run
+                    rep.say(f"{run.name}: finished earlier, kept ({run.results_path})")
+            if todo:  # a group's members not kept run together, as they share a computation
+                groups.append(todo)
+        parallel = n_workers > 0 and (len(groups) > 1 or any(g[0].split is not None for g in groups))
         if parallel:
             _on_workers(groups, cache, rep, n_workers)
-        else:
+        elif groups:
             _in_process(groups, cache, rep)
     except KeyboardInterrupt as exc:
         finished = [rep.runs[n] for n in names if n in rep.runs]
