@@ -351,3 +351,11 @@ def test_a_singular_scheduled_filter_names_the_scheduling_point():
     bad = dataclasses.replace(d, H=np.zeros_like(np.asarray(d.H)))
     with pytest.raises(NumericalError, match=r"^H\(alpha\) is singular at alpha = \[0\.25 0\.75\]: "):
         hinf_step(bad, np.zeros(d.nx), np.array([0.25, 0.75]), np.ones(d.ny))
+    # the stepping filter names the point too, and a refused step leaves its state as it was
+    f = HinfFilter(bad)
+    f.set_state({"xf": np.ones(d.nx), "k": 3})
+    with pytest.raises(NumericalError, match=r"^H\(alpha\) is singular at alpha = \[0\.25 0\.75\]: "):
+        f.step({"alpha": np.array([0.25, 0.75]), "y": np.ones(d.ny)})
+    state = f.get_state()
+    np.testing.assert_array_equal(state["xf"], np.ones(d.nx))
+    assert state["k"] == 3

@@ -167,6 +167,12 @@ def test_no_finished_task_within_the_idle_timeout_is_an_error_saying_how_far_it_
         run([[(0, ok(0))]] + [[]] * 200, idle_timeout=1.5)
 
 
+def test_no_task_finished_from_the_start_within_the_idle_timeout_is_an_error_too(run):
+    # no worker ever takes a task: the idle time counts from the call, before any result
+    with pytest.raises(SweepError, match=r"^no task finished in 1.5 s \(0 of 3 done\)$"):
+        run([[]] * 200, idle_timeout=1.5)
+
+
 def test_waiting_longer_than_the_idle_timeout_in_total_is_not_idle(run):
     # 60 polls of 20 ms between each result: 1.2 s apart, each wait under the 1.5 s timeout
     script = [[(0, ok(0))]] + [[]] * 60 + [[(1, ok(1))]] + [[]] * 60 + [[(2, ok(2))]]
