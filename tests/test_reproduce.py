@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import hmac
 import json
+import pickle
 import re
 import shutil
 
@@ -245,8 +247,19 @@ def test_reproduce_all_reduced_writes_everything(tmp_path, experiment_fmus, capf
     assert report.count("**Through FMUs.**") == 8 and "reduced configuration" in report
 
 
+class _Plant:
+    """A pickle that creates a file when it is loaded."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+
+    def __reduce__(self):
+        return (open, (self.path, "w"))
+
+
 def test_a_rerun_keeps_a_finished_experiment_unless_its_results_or_options_changed(monkeypatch, tmp_path):
     """What resumes an interrupted reproduce: the resume record next to results.json."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))  # the key that signs the records
     import lpvest.experiments as experiments
     from lpvest.experiments._reproduce import reproduce
 
@@ -274,3 +287,16 @@ def test_a_rerun_keeps_a_finished_experiment_unless_its_results_or_options_chang
     (tmp_path / "fake" / ".resume.pickle").write_bytes(b"garbage")  # a damaged record: run
     reproduce(["fake"], tmp_path, fmus=cache, workers=0, reduced=True)
     assert calls == [10, 2, 2, 2]
+    # a record signed with another key (someone else's folder) is never unpickled: a pickle
+    # runs code when loaded; the experiment runs again instead
+    record = tmp_path / "fake" / ".resume.pickle"
+    signed = record.read_bytes()
+    assert oct((tmp_path / "xdg" / "lpvest" / "resume.key").stat().st_mode & 0o777) == "0o600"
+    planted = tmp_path / "planted"
+    payload = pickle.dumps(_Plant(str(planted)))
+    record.write_bytes(hmac.new(b"k" * 32, payload, "sha256").digest() + payload)
+    reproduce(["fake"], tmp_path, fmus=cache, workers=0, reduced=True)
+    assert calls == [10, 2, 2, 2, 2] and not planted.exists()
+    assert len(record.read_bytes()) == len(signed)  # rewritten, signed with this user's key
+    reproduce(["fake"], tmp_path, fmus=cache, workers=0, reduced=True)
+    assert calls == [10, 2, 2, 2, 2]  # kept again

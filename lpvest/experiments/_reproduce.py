@@ -41,9 +41,12 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import hmac
 import json
 import os
 import pickle
+import secrets
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -234,6 +237,35 @@ def reproduce_task(shared: _Shared, task: Task) -> TaskResult:
 RESUME_RECORD = ".resume.pickle"
 
 
+_TAG = 32  #: bytes of the HMAC-SHA256 tag in front of a resume record
+
+
+def _resume_secret() -> bytes | None:
+    """The key that signs resume records: 32 random bytes in
+    ``$XDG_CACHE_HOME/lpvest/resume.key`` (``~/.cache/...``), made on first use,
+    readable by its owner only. A record is unpickled only when its tag is this
+    key's: a record copied from someone else's output folder (a pickle runs code
+    when loaded) or damaged is never loaded, and the experiment runs again.
+    None when no such file can be made or read."""
+    path = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "lpvest" / "resume.key"
+    try:
+        if not path.is_file():
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".resume.key.")  # mode 0600
+            try:
+                with os.fdopen(fd, "wb") as f:
+                    f.write(secrets.token_bytes(_TAG))
+                os.link(tmp, path)  # whole or not at all; the first of two processes wins
+            except FileExistsError:
+                pass
+            finally:
+                os.unlink(tmp)
+        secret = path.read_bytes()
+        return secret if len(secret) == _TAG else None
+    except OSError:
+        return None
+
+
 @functools.cache
 def _source_digest() -> str:
     """SHA-256 of the lpvest package's Python sources (what an experiment's numbers are computed by)."""
@@ -258,8 +290,12 @@ def _write_resume_record(run: ExperimentRun, key: str) -> None:
     """Whole or not at all, after ``results.json``: an experiment without one is run again."""
     path = run.folder / RESUME_RECORD
     partial = path.with_name(path.name + ".part")
+    secret = _resume_secret()
+    if secret is None:  # no private place for the key: nothing is kept, a rerun runs it again
+        return
     digest = hashlib.sha256(run.results_path.read_bytes()).hexdigest()
-    partial.write_bytes(pickle.dumps({"key": key, "results_sha256": digest, "run": run}))
+    data = pickle.dumps({"key": key, "results_sha256": digest, "run": run})
+    partial.write_bytes(hmac.new(secret, data, "sha256").digest() + data)
     partial.replace(path)
 
 
@@ -268,7 +304,12 @@ def _finished_earlier(exp: Experiment, folder: Path, key: str) -> ExperimentRun 
     computation (``key``) and its ``results.json`` and figures are the ones it
     wrote; else None (the experiment runs again and rewrites them)."""
     try:
-        record = pickle.loads((folder / RESUME_RECORD).read_bytes())
+        secret = _resume_secret()
+        signed = (folder / RESUME_RECORD).read_bytes()
+        tag, data = signed[:_TAG], signed[_TAG:]
+        if secret is None or not hmac.compare_digest(tag, hmac.new(secret, data, "sha256").digest()):
+            return None  # not written by this user's lpvest (or damaged): never unpickled
+        record = pickle.loads(data)
         run = record["run"]
         if (record["key"] != key or not isinstance(run, ExperimentRun) or run.name != exp.name
                 or hashlib.sha256(run.results_path.read_bytes()).hexdigest() != record["results_sha256"]
