@@ -42,7 +42,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from .core._errors import ArgumentError, LpvestError, OutputError, abbreviate, shorten
+from .core._errors import ArgumentError, LpvestError, OutputError, abbreviate, one_line, shorten
 from .core._interrupt import abandoned_calls, exit_status, handling_signals
 
 __all__ = ["main", "describe_model"]
@@ -780,7 +780,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             import traceback
 
             traceback.print_exc()
-        print(f"lpvest: error: {_one_line(exc)}", file=sys.stderr)
+        print(f"lpvest: error: {one_line(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:
         name = getattr(exc, "name", "SIGINT")
@@ -805,15 +805,6 @@ _KEPT: dict[str, Callable[[argparse.Namespace], str]] = {
     "systems": lambda a: "nothing was written",
     "validate": lambda a: "nothing was written",
 }
-
-
-def _one_line(exc: BaseException) -> str:
-    """The error as one line: an lpvest error's own message; for a system
-    error, its reason and the file."""
-    if isinstance(exc, OSError) and not isinstance(exc, LpvestError):
-        where = f": {shorten(str(exc.filename), 80)}" if exc.filename else ""
-        return f"{exc.strerror or type(exc).__name__}{where}"
-    return " ".join(str(exc).split())
 
 
 if __name__ == "__main__":  # pragma: no cover

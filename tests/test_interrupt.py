@@ -349,6 +349,31 @@ def test_regress_update_interrupted_while_writing_a_reference_leaves_the_earlier
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before  # no half file, no .part left
 
 
+def test_the_reference_module_interrupted_says_in_one_line_what_it_kept(experiment_fmus, tmp_path):
+    """``python -m lpvest.experiments._references`` (regress without the command line):
+    the same handling, under its own name: exit 143, every file whole, one line."""
+    folder, before = _reference_copy(tmp_path)
+    cmd = [sys.executable, "-m", "lpvest.experiments._references", *_REFS, "--update", "--dir", str(folder),
+           "--fmus", str(experiment_fmus.directory), "--quiet"]
+    res = interrupt_at(cmd, "reference-written", tmp_path, signum=signal.SIGTERM)
+    assert res.returncode == 143, res.stderr
+    assert "Traceback" not in res.stderr, res.stderr
+    assert res.stderr.strip().splitlines() == [
+        f"python -m lpvest.experiments._references: interrupted (SIGTERM): rewrote 1 of 2 reference file(s) in "
+        f"{shorten(str(folder), 80)} (cox-toth-example1); every file is whole, the others keep their earlier "
+        "contents; run the same command again to rewrite them all"], res.stderr
+    assert (folder / "cox-toth-truncation.csv").read_bytes() == before["cox-toth-truncation.csv"]
+
+
+def test_the_reference_module_refuses_a_missing_folder_in_one_line(tmp_path):
+    res = subprocess.run([sys.executable, "-m", "lpvest.experiments._references", "--dir", str(tmp_path / "nosuch")],
+                         capture_output=True, text=True, timeout=TIMEOUT, cwd=ROOT)
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.strip().splitlines() == [
+        f"python -m lpvest.experiments._references: error: no reference folder {shorten(str(tmp_path / 'nosuch'), 80)}"
+        " (write one with lpvest regress --update --dir FOLDER)"], res.stderr
+
+
 def test_regress_interrupted_inside_an_fmu_writes_nothing(experiment_fmus, tmp_path):
     folder, before = _reference_copy(tmp_path)
     res = interrupt_at(_regress(experiment_fmus, "--dir", str(folder)), "fmu-step", tmp_path)

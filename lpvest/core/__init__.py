@@ -43,6 +43,7 @@ from ._errors import (
     SamplingError as SamplingError,
     SchedulingRangeError as SchedulingRangeError,
     abbreviate as abbreviate,
+    one_line as one_line,
     shorten as shorten,
 )
 
@@ -183,6 +184,7 @@ __all__ = [
     "InternalError",
     "abbreviate",
     "shorten",
+    "one_line",
     "MESSAGE_LIMIT",
     "Interrupted",
     "handling_signals",

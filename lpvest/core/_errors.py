@@ -27,6 +27,7 @@ __all__ = [
     "InternalError",
     "abbreviate",
     "shorten",
+    "one_line",
     "MESSAGE_LIMIT",
 ]
 
@@ -190,3 +191,13 @@ def shorten(text: str, limit: int = 80) -> str:
         return flat
     keep = max(limit - 10, 8)
     return f"{flat[: keep * 3 // 4]}...{flat[-(keep // 4):]} ({len(flat):,} characters)"
+
+
+def one_line(exc: BaseException) -> str:
+    """The error as one line for a command's ``error:`` message: an lpvest
+    error's own message with its line breaks folded; for a system error
+    (``OSError``), its reason and the file, shortened to about 80 characters."""
+    if isinstance(exc, OSError) and not isinstance(exc, LpvestError):
+        where = f": {shorten(str(exc.filename), 80)}" if exc.filename else ""
+        return f"{exc.strerror or type(exc).__name__}{where}"
+    return " ".join(str(exc).split())

@@ -37,8 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core._errors import LpvestError, abbreviate, shorten
-from ..core._interrupt import Interrupted, exit_status, hold
+from ..core._errors import LpvestError, abbreviate, one_line, shorten
+from ..core._interrupt import Interrupted, exit_status, handling_signals, hold
 from ._fmus import CoSimSpec, ExperimentFmus, as_experiment_fmus
 
 __all__ = [
@@ -392,21 +392,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no FMU build lines (results and errors only)")
 
 
+#: The program name of :func:`main`'s messages.
+PROG = "python -m lpvest.experiments._references"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m lpvest.experiments [--update] [--dir DIR] [--fmus DIR] [NAME...]``."""
-    parser = argparse.ArgumentParser(prog="python -m lpvest.experiments",
-                                     description="Compare (or --update) the stored regression references.")
+    """``python -m lpvest.experiments._references [--update] [--dir DIR] [--fmus DIR] [NAME...]``:
+    :func:`regress` as ``lpvest regress`` runs it, for a checkout without the command.
+    Its exit status: 0, 1 (a comparison failed), 2 (a one-line error), 130/143
+    (SIGINT/SIGTERM: one line says what was kept, as the command line does)."""
+    parser = argparse.ArgumentParser(prog=PROG, description="Compare (or --update) the stored regression "
+                                                            "references.")
     add_arguments(parser)
     args = parser.parse_args(argv)
-    cache = as_experiment_fmus(args.fmus)
-    if not args.quiet:
-        cache.progress = lambda msg: print(msg, file=sys.stderr, flush=True)
-    return regress(args.names, update=args.update, directory=args.dir, fmus=cache)
+    try:
+        with handling_signals():  # Ctrl-C and SIGTERM raise Interrupted (exit 130, 143)
+            cache = as_experiment_fmus(args.fmus)
+            if not args.quiet:
+                cache.progress = lambda msg: print(msg, file=sys.stderr, flush=True)
+            return regress(args.names, update=args.update, directory=args.dir, fmus=cache)
+    except (LpvestError, OSError) as exc:  # the user's input, or a file the system refuses
+        print(f"{PROG}: error: {one_line(exc)}", file=sys.stderr)
+        return 2
+    except RegressInterrupted as exc:  # what was rewritten or compared, how to go on: one line
+        print(f"{PROG}: interrupted ({exc.name}): {exc}", file=sys.stderr)
+        return exit_status(exc)
 
 
 if __name__ == "__main__":  # pragma: no cover
-    try:
-        sys.exit(main())
-    except LpvestError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        sys.exit(2)
+    sys.exit(main())
