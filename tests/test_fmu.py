@@ -834,3 +834,22 @@ def test_affine_plant_draws_its_initial_state_from_its_x0_and_P0_parameters(fmus
     # same draws; one row at a time instead of one batch (BLAS rounding): round-off only
     np.testing.assert_allclose(got["x"], ref.x, rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(got["y"], ref.y, rtol=1e-12, atol=1e-14)
+
+
+def test_every_user_cache_folder_follows_xdg_cache_home(monkeypatch, tmp_path):
+    """The FMU cache, the native runtime's sources and reproduce's resume key all
+    live under ``$XDG_CACHE_HOME/lpvest`` (one rule, lpvest.core._paths), and
+    under ``~/.cache/lpvest`` when that variable is empty."""
+    from lpvest.core._paths import user_cache_dir
+    from lpvest.experiments._reproduce import _resume_secret
+    from lpvest.fmi._cache import default_cache_dir
+    from lpvest.fmi.native._build import _runtime_digest, _runtime_sources
+
+    monkeypatch.delenv("LPVEST_FMU_CACHE", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert default_cache_dir() == tmp_path / "xdg" / "lpvest" / "fmus"
+    assert _runtime_sources(_runtime_digest()).parent == tmp_path / "xdg" / "lpvest" / "native-runtime"
+    assert _resume_secret() == (tmp_path / "xdg" / "lpvest" / "resume.key").read_bytes()
+    monkeypatch.setenv("XDG_CACHE_HOME", "")
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert user_cache_dir("fmus") == default_cache_dir() == tmp_path / "home" / ".cache" / "lpvest" / "fmus"

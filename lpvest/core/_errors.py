@@ -196,7 +196,25 @@ def shorten(text: str, limit: int = 80) -> str:
 def one_line(exc: BaseException) -> str:
     """The error as one line for a command's ``error:`` message: an lpvest
     error's own message with its line breaks folded; for a system error
-    (``OSError``), its reason and the file, shortened to about 80 characters."""
+    (``OSError``), its reason and the file, shortened to about 80 characters.
+
+    Parameters
+    ----------
+    exc : BaseException
+        The error to show.
+
+    Returns
+    -------
+    str
+        One line, without a trailing newline.
+
+    Examples
+    --------
+    >>> one_line(FileNotFoundError(2, "No such file or directory", "/data/run.toml"))
+    'No such file or directory: /data/run.toml'
+    >>> one_line(LpvestError("bad value\\n  in line 3"))
+    'bad value in line 3'
+    """
     if isinstance(exc, OSError) and not isinstance(exc, LpvestError):
         where = f": {shorten(str(exc.filename), 80)}" if exc.filename else ""
         return f"{exc.strerror or type(exc).__name__}{where}"

@@ -55,6 +55,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..core._errors import ArgumentError, LpvestError, abbreviate
 from ..core._interrupt import Interrupted, exit_status, hold
+from ..core._paths import user_cache_dir
 from ..parallel._tasks import Outcome, SweepError, Task, TaskResult, one_blas_thread
 from . import Experiment, ExperimentResult, Split, write_results
 from ._fmus import ExperimentFmus, as_experiment_fmus
@@ -247,7 +248,7 @@ def _resume_secret() -> bytes | None:
     key's: a record copied from someone else's output folder (a pickle runs code
     when loaded) or damaged is never loaded, and the experiment runs again.
     None when no such file can be made or read."""
-    path = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "lpvest" / "resume.key"
+    path = user_cache_dir("resume.key")
     try:
         if not path.is_file():
             path.parent.mkdir(parents=True, exist_ok=True)

@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Self
 
 from ..core._errors import LpvestError
+from ..core._paths import user_cache_dir
 
 if TYPE_CHECKING:
     from ._build import FmuPlan
@@ -96,8 +97,7 @@ def default_cache_dir() -> Path:
     env = os.environ.get("LPVEST_FMU_CACHE")
     if env:
         return Path(env)
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "lpvest" / "fmus"
+    return user_cache_dir("fmus")
 
 
 # ---------------------------------------------------------------------------

@@ -34,7 +34,6 @@ import atexit
 import functools
 import importlib.util
 import json
-import os
 import shutil
 import subprocess
 import sys
@@ -47,6 +46,7 @@ from typing import TYPE_CHECKING, Any
 from xml.etree.ElementTree import Element, SubElement
 
 from ..._version import __version__
+from ...core._paths import user_cache_dir
 from .._build import (
     BuildError,
     FmuPlan,
@@ -135,7 +135,7 @@ def _runtime_sources(digest: str) -> Path:
     def holds_runtime(folder: Path) -> bool:
         return all((folder / n).is_file() and (folder / n).read_bytes() == t for n, t in files.items())
 
-    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "lpvest" / "native-runtime"
+    base = user_cache_dir("native-runtime")
     folder = base / digest[:32]
     try:
         if holds_runtime(folder):
