@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 from fmpy import read_model_description
 
+from lpvest.fmi._build import zig_environment
 from tests.native_helpers import c_compiler
 
 HOST_SOURCE = Path(__file__).resolve().parent / "data" / "native_host.c"
@@ -37,7 +38,7 @@ def host_exe(kind: str = "plain") -> Path:
         flags = SANITIZERS if kind == "sanitized" else ()
         cmd = [*c_compiler(), "-std=c99", "-O1", "-g", "-Wall", "-Wextra", "-Werror", *flags, "-o", str(exe),
                str(HOST_SOURCE), "-ldl"]
-    subprocess.run(cmd, check=True, capture_output=True)
+    subprocess.run(cmd, check=True, capture_output=True, env=zig_environment() if kind == "windows" else None)
     return exe
 
 

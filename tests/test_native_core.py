@@ -258,6 +258,7 @@ def test_every_runtime_source_compiles_without_a_warning(target, tmp_path):
     import subprocess
     import sys
 
+    from lpvest.fmi._build import zig_environment
     from tests.native_helpers import RUNTIME_DIR, c_compiler
 
     sources = sorted(str(f) for f in RUNTIME_DIR.glob("*.c"))
@@ -270,7 +271,7 @@ def test_every_runtime_source_compiles_without_a_warning(target, tmp_path):
     for cmd in commands:
         for src in sources:
             proc = subprocess.run([*cmd, src, "-o", str(tmp_path / "x.o")], capture_output=True, text=True,
-                                  cwd=RUNTIME_DIR, check=False)
+                                  cwd=RUNTIME_DIR, check=False, env=None if target == "host" else zig_environment())
             assert proc.returncode == 0 and "warning" not in proc.stderr, (cmd, src, proc.stderr)
 
 
@@ -319,3 +320,50 @@ def test_zig_is_called_as_the_ziglang_packages_program():
     proc = subprocess.run([sys.executable, "-m", "ziglang", "version"], capture_output=True, text=True, check=True)
     assert proc.stdout.strip() == zig_version() and subprocess.run(
         [program, "version"], capture_output=True, text=True, check=True).stdout == proc.stdout
+
+
+def test_zig_runs_with_its_lib_folder_at_a_path_that_stays_the_same(tmp_path, monkeypatch):
+    """zig keys the C runtimes it builds from its ``lib`` folder (Windows' alone is
+    ~75 s of CPU) by that folder's path: each virtual environment would build them
+    again. lpvest runs zig with ``ZIG_LIB_DIR`` at one folder per zig in the user's
+    cache, named by zig's version and the package's RECORD, holding the same files;
+    a user's own ``ZIG_LIB_DIR`` is kept; where the cache cannot be written, zig
+    runs as installed."""
+    import functools
+    import hashlib
+    import importlib.metadata
+    import subprocess
+    from pathlib import Path
+
+    from lpvest.fmi import _build
+
+    if _build.zig_version() is None:
+        pytest.skip("needs ziglang (pip install 'lpvest[build]')")
+    monkeypatch.delenv("ZIG_LIB_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    # a fresh cache of the folder for this test: the process's own stays as it was
+    monkeypatch.setattr(_build, "_zig_lib_dir", functools.cache(_build._zig_lib_dir.__wrapped__))
+    env = _build.zig_environment()
+    lib = Path(env["ZIG_LIB_DIR"])
+    record = importlib.metadata.distribution("ziglang").read_text("RECORD")
+    assert record
+    digest = hashlib.sha256(record.encode()).hexdigest()[:16]
+    assert lib == tmp_path / "xdg" / "lpvest" / "zig-lib" / f"{_build.zig_version()}-{digest}"
+    installed = Path(_build.zig_program()).parent / "lib"
+    names = sorted(p.relative_to(installed) for p in installed.rglob("*") if p.is_file())
+    assert names == sorted(p.relative_to(lib) for p in lib.rglob("*") if p.is_file())
+    for name in names[:: max(1, len(names) // 50)]:  # ~50 files spread over the folder, byte for byte
+        assert (lib / name).read_bytes() == (installed / name).read_bytes(), name
+    assert [p.name for p in lib.parent.iterdir()] == [lib.name]  # no temporary folder left
+    assert _build.zig_environment()["ZIG_LIB_DIR"] == str(lib)  # the same folder again
+    proc = subprocess.run([_build.zig_program(), "env"], capture_output=True, text=True, check=True, env=env)
+    assert str(lib) in proc.stdout  # zig takes it
+
+    monkeypatch.setenv("ZIG_LIB_DIR", "/opt/my-zig-lib")
+    assert _build.zig_environment()["ZIG_LIB_DIR"] == "/opt/my-zig-lib"
+    monkeypatch.delenv("ZIG_LIB_DIR")
+    blocked = tmp_path / "not-a-folder"
+    blocked.write_text("a file where the cache would go")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(blocked))
+    _build._zig_lib_dir.cache_clear()
+    assert "ZIG_LIB_DIR" not in _build.zig_environment()

@@ -132,7 +132,8 @@ def test_the_bridge_compiles_without_warnings_for_linux(tmp_path):
 def test_the_bridge_compiles_without_warnings_with_zig(tmp_path, target):
     out = tmp_path / ("b.dll" if "windows" in target else "b.so")
     subprocess.run([sys.executable, "-m", "ziglang", "cc", "-target", target, "-shared", "-O2", "-Wall", "-Wextra",
-                    "-Werror", "-o", str(out), str(SOURCE)], check=True, cwd=tmp_path)
+                    "-Werror", "-o", str(out), str(SOURCE)], check=True, cwd=tmp_path,
+                   env=build.zig_environment())
 
 
 # -- the win64 binaries of the built FMUs ---------------------------------------------------------

@@ -74,6 +74,7 @@ from xml.etree.ElementTree import Element, SubElement, tostring
 
 from .._version import __version__
 from ..core._errors import ArgumentError, LpvestError
+from ..core._paths import user_cache_dir
 from ._bundle import Bundle, SourceRoot, make_bundle
 from ._naming import fmu_name
 from ._parameters import SPEC_FILE, SPEC_FORMAT
@@ -434,6 +435,77 @@ def zig_program() -> str | None:
     return str(program) if program.is_file() else None
 
 
+def _zig_identity(lib: Path) -> str:
+    """What the ``lib`` folder holds: the ``ziglang`` package's RECORD (a hash of
+    every installed file), or, without one, every file's path and size."""
+    import importlib.metadata
+
+    try:
+        record = importlib.metadata.distribution("ziglang").read_text("RECORD")
+    except importlib.metadata.PackageNotFoundError:
+        record = None
+    if record:
+        return record
+    return json.dumps(sorted((p.relative_to(lib).as_posix(), p.stat().st_size) for p in lib.rglob("*")
+                             if p.is_file()))
+
+
+@functools.cache
+def _zig_lib_dir() -> Path | None:
+    """A copy of the ``ziglang`` package's ``lib`` folder at a path that stays the
+    same for the same zig: ``$XDG_CACHE_HOME/lpvest/zig-lib/<version>-<digest>``
+    (hard links where the file system allows, else a copy; made once, under a
+    temporary name renamed into place, so no process sees half of it), or
+    ``None`` when it cannot be made.
+
+    zig keys what it compiled from its own ``lib`` folder (the C runtimes of
+    Windows, macOS and Linux it builds on first use) by that folder's absolute
+    path: each new virtual environment would build them again, about 75 s of
+    CPU and 40 MB of zig's cache for the Windows one alone. Pointed at this
+    folder (``ZIG_LIB_DIR``, see :func:`zig_environment`), every environment
+    with the same zig reuses them. The digest covers every file's content (the
+    package's RECORD of hashes), so a changed ``lib`` folder gets a folder of its own."""
+    program = zig_program()
+    version = zig_version()
+    if program is None or version is None:
+        return None
+    lib = Path(program).parent / "lib"
+    try:
+        digest = hashlib.sha256(_zig_identity(lib).encode()).hexdigest()[:16]
+        target = user_cache_dir("zig-lib", f"{version}-{digest}")
+        if target.is_dir():
+            return target
+        target.parent.mkdir(parents=True, exist_ok=True)
+        part = Path(tempfile.mkdtemp(prefix=f".{target.name}-", dir=target.parent))
+        try:
+            try:
+                shutil.copytree(lib, part, dirs_exist_ok=True, copy_function=os.link)
+            except OSError:  # another file system: a copy (about 240 MB, once per zig)
+                shutil.copytree(lib, part, dirs_exist_ok=True)
+            try:
+                part.rename(target)
+            except OSError:  # another process was first: its copy serves
+                if not target.is_dir():
+                    raise
+        finally:
+            shutil.rmtree(part, ignore_errors=True)
+        return target
+    except OSError:
+        return None
+
+
+def zig_environment() -> dict[str, str]:
+    """The environment to run :func:`zig_program` in: this process's, with
+    ``ZIG_LIB_DIR`` set to :func:`_zig_lib_dir`'s folder (unless the user set
+    it), so that zig's cache serves every virtual environment."""
+    env = dict(os.environ)
+    if "ZIG_LIB_DIR" not in env:
+        lib = _zig_lib_dir()
+        if lib is not None:
+            env["ZIG_LIB_DIR"] = str(lib)
+    return env
+
+
 @functools.cache
 def zig_version() -> str | None:
     """The version of the ``ziglang`` package's compiler (the ``build`` extra),
@@ -459,7 +531,8 @@ def _bridge_command(platform: str, src: Path, out: Path) -> tuple[list[str], str
     if zig is None or program is None:
         return None
     # zig's output depends on its version, the flags and the source only (checked byte for byte by
-    # tests/test_fmu_windows.py); -s: no debug information, no program database
+    # tests/test_fmu_isolation.py, test_the_same_inputs_give_a_byte_identical_fmu); -s: no debug
+    # information, no program database
     cmd = [program, "cc", "-target", BRIDGE_PLATFORMS[platform], "-shared", "-O2", "-s",
            inner, "-o", str(out), str(src)]
     if platform == "linux64":
@@ -478,7 +551,8 @@ def _compile_bridge(platform: str) -> tuple[Path, str] | None:
     if found is None:
         return None
     cmd, compiler = found
-    proc = subprocess.run(cmd, capture_output=True, text=True, check=False, cwd=out_dir)
+    proc = subprocess.run(cmd, capture_output=True, text=True, check=False, cwd=out_dir,
+                          env=zig_environment() if cmd[0] == zig_program() else None)
     if proc.returncode != 0 or not out.is_file():
         raise BuildError(f"compiling the status bridge for {platform} failed ({' '.join(cmd)}):\n{proc.stderr}")
     return out, compiler

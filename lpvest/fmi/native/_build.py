@@ -57,6 +57,7 @@ from .._build import (
     sha256_hex,
     slave_class_name,
     write_fmu_zip,
+    zig_environment,
     zig_program,
     zig_version,
 )
@@ -113,7 +114,8 @@ def _run_zig(args: list[str], cwd: Path, what: str) -> None:
     program = zig_program()
     if program is None:
         raise BuildError(_NO_ZIG)
-    proc = subprocess.run([program, "cc", *args], cwd=cwd, capture_output=True, text=True, check=False)
+    proc = subprocess.run([program, "cc", *args], cwd=cwd, capture_output=True, text=True, check=False,
+                          env=zig_environment())
     if proc.returncode != 0:
         raise BuildError(f"{what} failed (zig cc {' '.join(args)}):\n{proc.stderr}")
 
