@@ -51,34 +51,38 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):  # noqa: ARG0
             terminalreporter.write_line(line)
 
 
-#: The test files that cost the most CPU, the costliest first (per-file CPU seconds of a whole
-#: run on two xdist workers, measured with a getrusage hook around each test, 27 November:
-#: 60-145 s each for the first eight, 15-45 s for the rest; together about three quarters
-#: of the suite's CPU). pytest-xdist's ``--dist loadfile`` hands whole files to the workers
-#: in collection order, so starting with the longest files keeps both workers busy to the end
-#: (longest processing time first) instead of leaving one worker alone on a late long file.
-#: The first two need no common FMU set: one worker builds the native set while the other
-#: solves LMIs. An order only: every test still runs, and a name missing here runs after
-#: these, in pytest's order (tests/test_architecture.py checks that each name is a file).
+#: The test files that cost the most CPU, the costliest first (per-file CPU seconds, the test
+#: process and the children it waited for, of a whole run on two xdist workers, measured with a
+#: getrusage hook around each test, 27 November, zig's C runtimes already built: 55-150 s each
+#: for the first ten, 15-50 s for the rest; together about three quarters of the suite's CPU).
+#: ``./dev test`` passes ``--no-loadscope-reorder``, so pytest-xdist's ``--dist loadfile`` hands
+#: whole files to the workers in this order (longest processing time first) instead of leaving
+#: one worker alone on a late long file; xdist's default would order them by their number of
+#: tests. The first two need no common FMU set between them: one worker builds the FMU sets
+#: (the native set needs the Python one's designs) while the other solves LMIs. An order only:
+#: every test still runs, and a name missing here runs after these, in pytest's order
+#: (tests/test_architecture.py checks that each name is a file).
 RUN_FIRST = (
     "test_native_hosts.py",
     "test_hinf_design.py",
+    "test_interrupt.py",
     "test_sweep.py",
-    "test_fmu_hosts.py",
     "test_reproduce.py",
     "test_properties.py",
     "test_peixoto_experiments.py",
     "test_native_fmus.py",
-    "test_interrupt.py",
-    "test_fmu_isolation.py",
+    "test_fmu_hosts.py",
     "test_cli.py",
+    "test_fmu_isolation.py",
     "test_fmu_lifecycle.py",
-    "test_hinf_known_input.py",
-    "test_walkthrough.py",
-    "test_ssp.py",
-    "test_cosimfile.py",
     "test_native_core.py",
+    "test_fmu.py",
+    "test_ssp.py",
     "test_progress.py",
+    "test_hinf_known_input.py",
+    "test_kalman.py",
+    "test_kalman_scan.py",
+    "test_walkthrough.py",
 )
 
 

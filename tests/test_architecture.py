@@ -205,3 +205,31 @@ def test_the_costliest_test_files_run_first_and_each_listed_name_is_a_file():
     conftest.pytest_collection_modifyitems(None, None, items)
     assert [i.name for i in items] == ["test_native_hosts.py::3", "test_sweep.py::1", "test_sweep.py::4",
                                        "test_a.py::0", "test_a.py::2"]
+
+
+def test_xdist_hands_out_the_files_in_collection_order_with_the_dev_scripts_options(tmp_path):
+    """RUN_FIRST only orders the collection: pytest-xdist's ``--dist loadfile`` would
+    reorder the files by their number of tests unless told not to. Run with the
+    options ``./dev test`` gives xdist (read from the script), a file of one test
+    placed first runs before a file of five."""
+    import re
+    import shlex
+    import subprocess
+    import sys
+
+    dev = (Path(__file__).parent.parent / "dev").read_text(encoding="utf-8")
+    xdist = shlex.split(re.search(r'XDIST=\((-n [^)]*)\)', dev).group(1))
+    assert "--no-loadscope-reorder" in xdist
+    (tmp_path / "test_many.py").write_text("".join(f"def test_{i}():\n    pass\n" for i in range(5)))
+    (tmp_path / "test_one.py").write_text("def test_first():\n    pass\n")
+    (tmp_path / "conftest.py").write_text(
+        "def pytest_collection_modifyitems(session, config, items):\n"
+        "    items.sort(key=lambda item: item.path.name != 'test_one.py')\n")
+    xdist[xdist.index("-n") + 1] = "1"  # one worker: it runs the files in the order they are handed out
+    proc = subprocess.run([sys.executable, "-m", "pytest", *xdist, "-v", "-p", "no:cacheprovider", "-p",
+                           "no:randomly", "--rootdir", str(tmp_path), "-c", "/dev/null", str(tmp_path)],
+                          capture_output=True, text=True, timeout=120, cwd=tmp_path, check=False)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    ran = re.findall(r"PASSED (?:\S+::)?(test_\w+)|(?:::)(test_\w+) PASSED", proc.stdout)
+    order = [a or b for a, b in ran]
+    assert order[0] == "test_first" and len(order) == 6, proc.stdout
