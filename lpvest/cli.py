@@ -256,14 +256,19 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     from .experiments._reproduce import ReproduceInterrupted, reproduce, reproduce_all
 
     experiments = registry()
-    if args.name in (None, "list"):
+    names = list(dict.fromkeys(args.names))  # in the order given, each once
+    if not names or names == ["list"]:
         if not experiments:
             print("no experiments are registered")
         for exp in experiments.values():
             print(f"{exp.name:<28} {exp.title}")
         return 0
-    if args.name != "all" and args.name not in experiments:
-        raise ArgumentError(f"no experiment {abbreviate(args.name, 30)} (known: {', '.join(experiments) or 'none'}; "
+    for word in ("all", "list"):
+        if word in names and len(names) > 1:
+            raise ArgumentError(f"'{word}' stands alone (lpvest reproduce {word}), not among experiment names")
+    unknown = [n for n in names if n != "all" and n not in experiments]
+    if unknown:
+        raise ArgumentError(f"no experiment {abbreviate(unknown[0], 30)} (known: {', '.join(experiments) or 'none'}; "
                             "or all, list)")
     cache = _out_dir(args.fmus, "--fmus") if args.fmus else None  # a file there: said now, not after a build
     out = _out_dir(args.out)
@@ -275,11 +280,11 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
     t = time.perf_counter()
     try:
-        if args.name == "all":
+        if names == ["all"]:
             runs = reproduce_all(out, fmus=fmus, reduced=args.quick, echo=echo, workers=args.workers,
                                  backend=args.backend, progress=False if args.quiet else None)
         else:
-            runs = reproduce([args.name], out, fmus=fmus, reduced=args.quick, echo=echo, workers=args.workers,
+            runs = reproduce(names, out, fmus=fmus, reduced=args.quick, echo=echo, workers=args.workers,
                              backend=args.backend, progress=False if args.quiet else None)
     except ReproduceInterrupted as exc:  # what finished, what the cache kept, how to go on: one line
         print(f"lpvest: interrupted ({exc.name}): {exc}", file=sys.stderr)
@@ -648,7 +653,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("reproduce", help="reproduce a paper example through FMUs (list them with 'list')")
-    p.add_argument("name", nargs="?", help="experiment name, 'all' (also writes OUT/report.md), or 'list'")
+    p.add_argument("names", nargs="*", metavar="NAME",
+                   help="experiment names (run in this order, side by side with --workers), 'all' (every one; "
+                        "also writes OUT/report.md), or 'list' (the default)")
     p.add_argument("--out", default="out", help="output folder (default out); each experiment gets a subfolder")
     p.add_argument("--fmus", metavar="DIR",
                    help="FMU cache folder (default OUT/fmu-cache): built when missing or out of date, else reused")

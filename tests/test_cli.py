@@ -129,6 +129,9 @@ def _run(*argv, cwd=None):
          "lpvest: error: ROOT/models/peixoto_ex2.toml: parameters.rho (override): expected a finite number, "
          "found a number (nan)"),
         (["reproduce", "nothing"], "lpvest: error: no experiment 'nothing' (known: "),
+        (["reproduce", "cox-toth-example1", "nothing"], "lpvest: error: no experiment 'nothing' (known: "),
+        (["reproduce", "cox-toth-example1", "all"],
+         "lpvest: error: 'all' stands alone (lpvest reproduce all), not among experiment names"),
         (["bogus"], "lpvest: error: argument COMMAND: invalid choice: 'bogus' (choose from "),
         # issue 21: refused before any slow work, one line naming the culprit
         (["design", "peixoto-ex1", "--out", "README.md/d.json"],

@@ -175,6 +175,26 @@ def test_quiet_reproduce_asks_its_experiments_for_no_progress_bars(monkeypatch, 
     assert capsys.readouterr().err == ""
 
 
+def test_reproduce_runs_the_experiments_named_in_their_order_each_once(monkeypatch, tmp_path, capsys):
+    import lpvest.experiments as experiments
+
+    ran = []
+
+    def runner(name):
+        def run(out_dir, *, fmus, progress=None):
+            ran.append(name)
+            return ExperimentResult(name, "table", {"n": 1}, (), (), None)
+        return run
+
+    monkeypatch.setattr(experiments, "registry", lambda: {n: Experiment(n, f"fake {n}", runner(n))
+                                                          for n in ("a", "b", "c")})
+    assert main(["reproduce", "c", "a", "c", "--out", str(tmp_path), "--workers", "0", "--quiet"]) == 0
+    assert ran == ["c", "a"]
+    assert sorted(p.name for p in tmp_path.iterdir() if (p / "results.json").is_file()) == ["a", "c"]
+    assert not (tmp_path / "report.md").exists()  # all only
+    assert "2 experiment(s) in " in capsys.readouterr().out
+
+
 def _without_times(value):
     """results.json or report.md without what depends on the machine's speed and the run's
     folder: timing keys, durations ("18.7 s"), the date, the FMU cache's built/reused counts."""
