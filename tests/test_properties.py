@@ -39,7 +39,7 @@ from lpvest.cosim._cosimfile import load_cosim
 from lpvest.cosim._ssp import read_ssp
 from lpvest.systems._modelfile import load_system
 
-from .contract import check_message, within_contract
+from .contract import TALLIES, check_message, within_contract
 
 ROOT = Path(__file__).resolve().parent.parent
 # hypothesis warns when it prints the 100,000-character formulas among the examples
@@ -642,3 +642,49 @@ def test_public_api_arguments_are_accepted_or_refused_by_a_typed_error(warm_api,
     args = data.draw(arguments, label="arguments")
     with np.errstate(all="ignore"):
         within_contract("API arguments", lambda: call(args), prefix="", given=repr(args))
+
+
+# -- the contract's CPU limit itself ---------------------------------------------------------------
+
+
+def test_the_cpu_limit_counts_the_inputs_own_thread_not_the_others_of_the_process():
+    """Another thread of the test process (a Dask client's, an FMU's, left by an
+    earlier test file) burning CPU while an input is checked does not count
+    against the input: here a thread burns 1.5 s of its own CPU, and the input
+    waits for it (an event, not a delay) without using any."""
+    import threading
+    import time
+
+    burnt = threading.Event()
+
+    def burn() -> None:
+        start = time.thread_time()
+        while time.thread_time() - start < 1.5:
+            pass
+        burnt.set()
+
+    thread = threading.Thread(target=burn)
+    thread.start()
+    try:
+        assert within_contract("the contract's own check", lambda: burnt.wait(60), prefix="") is None
+    finally:
+        thread.join()
+        TALLIES.pop("the contract's own check")  # not an input of the tally printed at the end
+    assert burnt.is_set()
+
+
+def test_an_input_over_the_cpu_limit_fails_and_one_that_never_returns_is_stopped():
+    import time
+
+    def burn(seconds: float) -> None:
+        start = time.thread_time()
+        while time.thread_time() - start < seconds:
+            pass
+
+    # 0.05 s of CPU over a limit of 0.02: it returned, and it is still a timeout
+    with pytest.raises(AssertionError, match=r"the contract's own check: the input took more than 0\.02 s of CPU"):
+        within_contract("the contract's own check", lambda: burn(0.05), prefix="", limit=0.02)
+    # never returns: the process-wide backstop (10 x the limit) stops it
+    with pytest.raises(AssertionError, match=r"the contract's own check: the input took more than 0\.02 s of CPU"):
+        within_contract("the contract's own check", lambda: burn(math.inf), prefix="", limit=0.02)
+    assert TALLIES.pop("the contract's own check").timeouts == 2
