@@ -72,8 +72,9 @@ def _out_dir(path: str | Path, option: str = "--out") -> Path:
         if isinstance(exc, FileExistsError | NotADirectoryError):
             blocker = next((p for p in (out, *out.parents) if p.exists() and not p.is_dir()), out)
             reason = f"{shorten(str(blocker), 60)} is a file, not a folder"
-        else:
+        else:  # e.g. "permission denied", as the check below says it
             reason = str(exc.strerror or exc)
+            reason = reason[:1].lower() + reason[1:]
         raise OutputError(f"{option} {shorten(str(out), 60)}: cannot create the output folder ({reason})"
                           ) from None
     if not os.access(out, os.W_OK | os.X_OK):

@@ -1,6 +1,7 @@
 """The lpvest command line."""
 
 import argparse
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -8,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from lpvest.cli import main
+from lpvest.core._errors import shorten
 
 
 def test_systems_lists_the_examples(capsys):
@@ -319,3 +321,48 @@ def test_regress_quiet_silences_the_fmu_build_lines(tmp_path, monkeypatch, capsy
     assert seen["names"] == ["cox-toth-example1"]
     assert (seen["progress"] is None) is quiet
     assert capsys.readouterr().err == ("" if quiet else "building CoxTothEx1Plant\n")
+
+
+def _without_file_permission_override():
+    """For a child process run as root: drop the capabilities that let root write
+    where the folder's mode forbids it (CAP_DAC_OVERRIDE, CAP_DAC_READ_SEARCH), so
+    that a read-only folder refuses it as it refuses any user."""
+    import ctypes
+
+    if os.geteuid() != 0:
+        return
+    libc = ctypes.CDLL(None, use_errno=True)
+    for cap in (1, 2):
+        if libc.prctl(24, cap, 0, 0, 0) != 0:  # PR_CAPBSET_DROP
+            raise OSError(ctypes.get_errno(), "prctl(PR_CAPBSET_DROP)")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="folder modes and capabilities as on Linux")
+@pytest.mark.parametrize("argv", [
+    ["design", "peixoto-ex1", "--epsilon", "1", "--out", "OUT/d.json"],
+    ["build", "--model", "peixoto-ex1", "--out", "OUT"],
+    ["simulate", "peixoto-ex1", "--out", "OUT"],
+    ["reproduce", "peixoto-fig1", "--out", "OUT"],
+    ["regress", "--update", "--dir", "OUT"],
+], ids=["design", "build", "simulate", "reproduce", "regress"])
+@pytest.mark.parametrize("where", ["the-folder", "a-folder-in-it"])
+def test_a_folder_without_write_permission_is_refused_before_any_work(tmp_path, argv, where):
+    """Issue 21: an unwritable output place is said at once, in one line, by every
+    command that writes (root included: the child runs without root's override)."""
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o555)
+    out = locked if where == "the-folder" else locked / "sub"
+    try:
+        proc = subprocess.run([sys.executable, "-m", "lpvest.cli", *[a.replace("OUT", str(out)) for a in argv]],
+                              capture_output=True, text=True, check=False, timeout=120,
+                              preexec_fn=_without_file_permission_override)
+    finally:
+        locked.chmod(0o755)
+    assert proc.returncode == 2, proc.stderr
+    what = "cannot write in" if where == "the-folder" else "cannot create"
+    option = "--dir" if argv[0] == "regress" else "--out"
+    folder = locked if where == "the-folder" else out
+    assert proc.stderr == (f"lpvest: error: {option} {shorten(str(folder), 60)}: {what} the output folder "
+                           "(permission denied)\n"), proc.stderr
+    assert list(locked.iterdir()) == []  # nothing was written
