@@ -52,9 +52,10 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):  # noqa: ARG0
 
 
 #: The test files that cost the most CPU, the costliest first (per-file CPU seconds, the test
-#: process and the children it waited for, of a whole run on two xdist workers, measured with a
-#: getrusage hook around each test, 27 November, zig's C runtimes already built: 55-150 s each
-#: for the first ten, 15-50 s for the rest; together about three quarters of the suite's CPU).
+#: process and the children it waited for, of a whole run on two xdist workers, 27 November,
+#: zig's C runtimes already built: 55-150 s each for the first ten, 15-50 s for the rest; together
+#: about three quarters of the suite's CPU; measured with tests/cpu_timeline.py:
+#: ``LPVEST_CPU_TIMELINE=DIR ./dev test -p tests.cpu_timeline``, ``python -m tests.cpu_timeline DIR``).
 #: ``./dev test`` passes ``--no-loadscope-reorder``, so pytest-xdist's ``--dist loadfile`` hands
 #: whole files to the workers in this order (longest processing time first) instead of leaving
 #: one worker alone on a late long file; xdist's default would order them by their number of

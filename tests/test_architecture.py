@@ -233,3 +233,35 @@ def test_xdist_hands_out_the_files_in_collection_order_with_the_dev_scripts_opti
     ran = re.findall(r"PASSED (?:\S+::)?(test_\w+)|(?:::)(test_\w+) PASSED", proc.stdout)
     order = [a or b for a, b in ran]
     assert order[0] == "test_first" and len(order) == 6, proc.stdout
+
+
+def test_the_cpu_timeline_plugin_records_each_test_and_reports_per_file(tmp_path):
+    """tests/cpu_timeline.py (what RUN_FIRST is ranked by): a test that waits for a
+    child burning CPU is charged with the child's CPU, and the report ranks its file first."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    from tests.cpu_timeline import report
+
+    (tmp_path / "test_busy.py").write_text(
+        "import subprocess, sys\n"
+        "def test_child():\n"
+        "    subprocess.run([sys.executable, '-c', 'import time\\nt = time.process_time()\\n"
+        "while time.process_time() - t < 0.3: pass'], check=True)\n")
+    (tmp_path / "test_idle.py").write_text("def test_nothing():\n    pass\n")
+    root = Path(__file__).parent.parent
+    env = {**os.environ, "LPVEST_CPU_TIMELINE": str(tmp_path / "tl"),
+           "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "tests.cpu_timeline", "-p", "no:cacheprovider",
+                           "-c", "/dev/null", "--rootdir", str(tmp_path), str(tmp_path)],
+                          capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path, check=False)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    records = {json.loads(line)["id"].split("::")[-1]: json.loads(line)
+               for path in (tmp_path / "tl").glob("*.jsonl") for line in path.read_text().splitlines()}
+    assert set(records) == {"test_child", "test_nothing"}
+    assert records["test_child"]["child"] >= 0.3 and records["test_nothing"]["child"] < 0.3
+    lines = report(tmp_path / "tl")
+    files = lines[lines.index("per file, costliest first:") + 1:][:2]
+    assert files[0].endswith("test_busy.py") and files[1].endswith("test_idle.py"), lines
