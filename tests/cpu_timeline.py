@@ -55,6 +55,13 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):  #
                             "start": start, "end": end, "self": me2 - me, "child": children2 - children}) + "\n")
 
 
+def pytest_unconfigure(config: pytest.Config) -> None:  # noqa: ARG001 - hook signature
+    global _FILE
+    if _FILE is not None:
+        _FILE.close()
+        _FILE = None
+
+
 def report(folder: Path, most: int = 25) -> list[str]:
     """The CPU per worker, per file and the costliest tests of the records in ``folder``."""
     rows: list[dict[str, Any]] = [json.loads(line) for path in sorted(folder.glob("*.jsonl"))
