@@ -489,7 +489,8 @@ for holder in gc.get_referrers(namespace):
     else:
         held += 1
 print("RESULT" + json.dumps({{"refcount": sys.getrefcount(namespace) - 1, "held": held}}), flush=True)
-# the entry module stays alive to the interpreter's end, which then clears its namespace
+# the entry module stays alive to the interpreter's end (in the test suite's processes
+# hypothesis's cache of the local modules' constants keeps it), which then clears its namespace
 namespace["_alive_at_exit"] = entry
 """
 
@@ -501,10 +502,12 @@ def test_a_host_that_ends_with_the_entry_module_alive_after_many_instances_exits
     every instantiation that it never took; the entry used to keep one per execution in a
     list inside that namespace, which the clearing released all at once, freeing the
     namespace while the module still used it: heap corruption at exit ("corrupted
-    double-linked list", status 134, in a pytest worker after all its tests passed).
-    Under Python's debug allocator (freed memory overwritten) that use after free crashes
-    the process every time; the namespace's reference count covered fewer references than
-    it had (one fewer per instance after the first)."""
+    double-linked list", status 134, in a pytest worker after all its tests passed, when
+    hypothesis, whose cache of the local modules' constants holds every module loaded
+    from outside site-packages, ran after FMU tests). Under Python's debug allocator
+    (freed memory overwritten) that use after free crashes the process every time; the
+    namespace's reference count covered fewer references than it had (one fewer per
+    instance after the first)."""
     name = "PeixotoEx1Plant"
     from fmpy import extract
 
