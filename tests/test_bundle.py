@@ -4,6 +4,8 @@ one host (sys.path, sys.modules, sys.meta_path) is tested through built FMUs els
 
 from __future__ import annotations
 
+import ctypes
+import gc
 import importlib.util
 import re
 import shutil
@@ -136,7 +138,7 @@ def test_the_digest_names_the_code_and_where_it_goes(tmp_path):
     assert _bundle(root, identifier="Y").package == a.package  # the FMU's name is not part of the code
     (root / "pkg" / "util.py").write_text("def h():\n    return 3\n")
     assert _bundle(root).package != a.package
-    assert BUNDLE_FORMAT == "lpvest-bundle-1"
+    assert BUNDLE_FORMAT == "lpvest-bundle-2"
 
 
 @pytest.mark.parametrize(("files", "match"), [
@@ -230,6 +232,20 @@ class Slave:
 """
 
 
+def _references_to(obj: object) -> int:
+    """A lower bound of the references to ``obj``: those the garbage collector's containers hold
+    (each found by ``gc.get_referrers``; a list's, tuple's or dict's counted one by one)."""
+    count = 0
+    for holder in gc.get_referrers(obj):
+        if isinstance(holder, (list, tuple)):
+            count += sum(1 for item in holder if item is obj)
+        elif isinstance(holder, dict):
+            count += sum(1 for item in holder.values() if item is obj)
+        else:
+            count += 1
+    return count
+
+
 def test_the_entry_module_loads_the_package_from_memory_and_restores_sys_path(tmp_path):
     root = _tree(tmp_path, {**PKG, "role.py": ROLE})
     b = _bundle(root)
@@ -258,10 +274,22 @@ def test_the_entry_module_loads_the_package_from_memory_and_restores_sys_path(tm
         util = sys.modules[f"{b.package}.util"]
         assert util.__file__ == str(res / b.package / "util.py") and util.__spec__.loader is finder
         assert "pkg" not in sys.modules and "pkg.util" not in sys.modules  # nothing under the plain names
-        # pythonfmu executes the entry again for each instance: the package is loaded once
-        exec(compile(b.files[f"{b.entry}.py"], module.__file__, "exec"), module.__dict__)
+        # pythonfmu's findClass executes the entry again for each instance, with the module's
+        # namespace as globals and fresh locals: the package is loaded once
+        code = compile(b.files[f"{b.entry}.py"], module.__file__, "exec")
+        namespace = module.__dict__
+        before = sys.getrefcount(namespace)
+        exec(code, namespace, {})
         assert [f for f in sys.meta_path if getattr(f, "package", None) == b.package] == [finder]
-        assert len(module.__dict__["_references"]) == 2
+        # findClass then releases a reference to the namespace it never took (pythonfmu 0.7):
+        # the entry took exactly that one, owned by nothing (a container would release it
+        # when the interpreter clears the module at exit: a double free)
+        assert sys.getrefcount(namespace) == before + 1
+        ctypes.pythonapi.Py_DecRef(ctypes.py_object(namespace))  # findClass's release
+        assert sys.getrefcount(namespace) == before
+        assert sys.getrefcount(namespace) - 1 >= _references_to(namespace)
+        exec(code, namespace)  # an import (locals are the globals) releases nothing: takes nothing
+        assert sys.getrefcount(namespace) == before
     finally:
         sys.path[:] = path_before
         sys.meta_path[:] = meta_before

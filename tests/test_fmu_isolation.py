@@ -466,6 +466,63 @@ def test_sys_path_meta_path_and_modules_do_not_change_over_300_instances(fmus, t
     assert {m for m in added - own if m.split(".")[0] not in allowed} == set()
 
 
+_ALIVE_AT_EXIT = """
+import gc, json, os, sys
+from tests.fmu_driver import Driver
+
+path, unzip, n = {path!r}, {unzip!r}, {n}
+for k in range(n):
+    d = Driver(path, f"i{{k}}", unzip=unzip)
+    d.initialize()
+    d.step(0.0, d.step_size)
+    d.free()
+with open(os.path.join(unzip, "resources", "slavemodule.txt")) as f:
+    entry = sys.modules[f.read().strip()]
+namespace = entry.__dict__
+gc.collect()
+held = 0  # the references the garbage collector's containers hold to the namespace (a lower bound)
+for holder in gc.get_referrers(namespace):
+    if isinstance(holder, (list, tuple)):
+        held += sum(1 for item in holder if item is namespace)
+    elif isinstance(holder, dict):
+        held += sum(1 for item in holder.values() if item is namespace)
+    else:
+        held += 1
+print("RESULT" + json.dumps({{"refcount": sys.getrefcount(namespace) - 1, "held": held}}), flush=True)
+# the entry module stays alive to the interpreter's end (in the test suite's processes
+# hypothesis's cache of the local modules' constants keeps it), which then clears its namespace
+namespace["_alive_at_exit"] = entry
+"""
+
+
+def test_a_host_that_ends_with_the_entry_module_alive_after_many_instances_exits_cleanly(fmus, tmp_path):
+    """Twelve instances of one FMU, then the host ends with the FMU's entry module still
+    alive: the interpreter clears that module's namespace at its end, and the process exits
+    0. pythonfmu 0.7's findClass releases a reference to the entry module's namespace at
+    every instantiation that it never took; the entry used to keep one per execution in a
+    list inside that namespace, which the clearing released all at once, freeing the
+    namespace while the module still used it: heap corruption at exit ("corrupted
+    double-linked list", status 134, in a pytest worker after all its tests passed, when
+    hypothesis, whose cache of the local modules' constants holds every module loaded
+    from outside site-packages, ran after FMU tests). Under Python's debug allocator
+    (freed memory overwritten) that use after free crashes the process every time; the
+    namespace's reference count covered fewer references than it had (one fewer per
+    instance after the first)."""
+    name = "PeixotoEx1Plant"
+    from fmpy import extract
+
+    unzip = str(extract(str(fmus[name]), unzipdir=str(tmp_path / "unz")))
+    code = _ALIVE_AT_EXIT.format(path=str(fmus[name]), unzip=unzip, n=12)
+    env = {**os.environ, "PYTHONMALLOC": "debug"}
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, check=False,
+                          cwd=ROOT, env=env)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-4000:]
+    assert "Fatal Python error" not in proc.stderr and "corrupted" not in proc.stderr, proc.stderr[-4000:]
+    line = next(x for x in proc.stdout.splitlines() if x.startswith("RESULT"))
+    counts = json.loads(line[len("RESULT"):])
+    assert counts["refcount"] >= counts["held"], counts
+
+
 def test_a_build_in_the_process_of_a_live_fmu_of_the_same_bundle_leaves_it_working(fmus, tmp_path):
     """Building an FMU instantiates its slave once in the building process and then unloads the
     bundle's modules. When an FMU of the same bundle (the same sources, so the same package name)

@@ -56,7 +56,7 @@ from ..core._errors import LpvestError
 __all__ = ["Bundle", "BundleError", "SourceRoot", "make_bundle", "KNOWN_REQUIREMENTS", "BUNDLE_FORMAT"]
 
 #: Version of the bundle layout (part of every digest).
-BUNDLE_FORMAT = "lpvest-bundle-1"
+BUNDLE_FORMAT = "lpvest-bundle-2"
 
 #: The requirement line written for each third-party package an FMU may import.
 KNOWN_REQUIREMENTS: dict[str, str] = {"numpy": "numpy>=1.26", "scipy": "scipy>=1.11"}
@@ -347,12 +347,24 @@ replaced, and resources/ is taken back off sys.path.
 
 import sys
 
-# pythonfmu's binary (findClass) executes this file again in this module's
-# namespace at every instantiation and then releases a reference to that
-# namespace which it never took (PyModule_GetDict's reference is borrowed):
-# without one reference kept per execution, the namespace is freed after a
-# few instances and the host crashes (seen with libcosim). Harmless elsewhere.
-globals().setdefault("_references", []).append(globals())
+# pythonfmu's binary (findClass) executes this file again at every
+# instantiation, with this module's namespace as globals and a fresh dict as
+# locals, and then releases a reference to that namespace which it never took
+# (PyModule_GetDict's reference is borrowed): without one taken for it, the
+# namespace is freed after a few instances and the host crashes (seen with
+# libcosim). So each such execution takes one bare reference (Py_IncRef),
+# owned by no object, which findClass's release then gives back. A reference
+# held by an object instead (a list in this namespace, until bundle format 2)
+# is released a second time when the interpreter, at its end, clears the
+# modules still alive: the namespace was freed while this module still used
+# it (heap corruption at the exit of a host that had instantiated an FMU a
+# few times). An import (locals are the globals) releases nothing: nothing
+# is taken then.
+if locals() is not globals():
+    import ctypes
+
+    ctypes.pythonapi.Py_IncRef(ctypes.py_object(globals()))
+    del ctypes
 
 
 def _unlist(entry):

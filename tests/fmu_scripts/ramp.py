@@ -2,6 +2,14 @@
 
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 
+# pythonfmu 0.7's findClass executes this file again at every instantiation (with fresh
+# locals) and then releases a reference to this namespace that it never took: take it for
+# it, as lpvest's FMUs do (lpvest.fmi._bundle), or the namespace is freed while in use.
+if locals() is not globals():
+    import ctypes
+
+    ctypes.pythonapi.Py_IncRef(ctypes.py_object(globals()))
+
 
 class Ramp(Fmi2Slave):
     def __init__(self, **kwargs):
