@@ -141,6 +141,17 @@ def test_the_digest_names_the_code_and_where_it_goes(tmp_path):
     assert BUNDLE_FORMAT == "lpvest-bundle-2"
 
 
+def test_a_changed_entry_module_template_gives_new_package_names(tmp_path, monkeypatch):
+    """The entry module (what pythonfmu runs) is part of the digest: a fix to it alone
+    gives every FMU a new package name, so no cache keeps serving the old entry."""
+    import lpvest.fmi._bundle as bundle
+
+    root = _tree(tmp_path, PKG)
+    before = _bundle(root).package
+    monkeypatch.setattr(bundle, "_ENTRY", bundle._ENTRY + "# changed\n")
+    assert _bundle(root).package != before
+
+
 @pytest.mark.parametrize(("files", "match"), [
     ({"role.py": "from ...pkg import f\n"}, r"role.py: relative import beyond the top-level package"),
     ({"role.py": "from pkg.core import b, nothere\n"},

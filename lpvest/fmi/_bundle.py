@@ -434,7 +434,11 @@ from {package}._fmus.{script} import {cls} as {cls}  # noqa: E402
 
 
 def _digest(modules: Mapping[str, _Module], roots: Sequence[SourceRoot]) -> str:
+    """The bundle's identity: its format, its roots, every module's text, and the entry
+    module's template (a change to it alone gives new package names, and the FMU cache,
+    which keys on this digest, builds again)."""
     h = hashlib.sha256(BUNDLE_FORMAT.encode() + b"\0")
+    h.update(hashlib.sha256(_ENTRY.encode()).digest())
     for root in sorted(roots, key=lambda r: r.name):
         h.update(f"{root.name}->{root.target}\0".encode())
     for name in sorted(modules):
