@@ -2,12 +2,40 @@
 
 from __future__ import annotations
 
+import atexit
 import ctypes
+import functools
+import gc
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+
+_UNZIPPED: dict[tuple[str, int, int], str] = {}
+
+
+@functools.cache
+def _unzip_root() -> str:
+    root = tempfile.mkdtemp(prefix="lpvest-test-unzipped-")
+    atexit.register(shutil.rmtree, root, True)
+    return root
+
+
+def unzipped(path: str | Path) -> str:
+    """The folder ``path`` is extracted to, once per process and per version of the file
+    (its path, size and modification time), removed when the process ends. Instances made
+    from one folder share the FMU's loaded library, as a host's instances do; a test that
+    needs a private copy passes ``unzip`` to :class:`Driver`. (Extracting for every Driver
+    left one folder per instance behind, 28 GB of them in /tmp after a day of runs.)"""
+    st = os.stat(path)
+    key = (os.path.abspath(path), st.st_mtime_ns, st.st_size)
+    if key not in _UNZIPPED:
+        _UNZIPPED[key] = extract(str(path), unzipdir=os.path.join(_unzip_root(), str(len(_UNZIPPED))))
+    return _UNZIPPED[key]
 
 
 class Driver:
@@ -18,7 +46,7 @@ class Driver:
                  logging_on: bool = False) -> None:
         self.path = str(path)
         self.md = read_model_description(self.path)
-        self.unzip = unzip or extract(self.path)
+        self.unzip = unzip or unzipped(self.path)
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
         self.types = {v.name: v.type for v in self.md.modelVariables}
         self.messages: list[tuple[int, str, str]] = []
@@ -103,3 +131,25 @@ class Driver:
 
     def free(self) -> None:
         self.fmu.freeInstance()
+
+
+def references_held(obj: object) -> int:
+    """A lower bound of the references to ``obj``: those the garbage collector's containers
+    hold (each found by ``gc.get_referrers``; a list's, tuple's or dict's counted one by one).
+
+    Plain loops on purpose: a generator expression here would close over ``obj``, and its
+    cell is one more referrer that ``gc.get_referrers`` finds, a reference counted that the
+    caller's ``sys.getrefcount`` does not see (an upper bound by one, not a lower bound)."""
+    count = 0
+    for holder in gc.get_referrers(obj):
+        if isinstance(holder, (list, tuple)):
+            for item in holder:
+                if item is obj:
+                    count += 1
+        elif isinstance(holder, dict):
+            for item in holder.values():
+                if item is obj:
+                    count += 1
+        else:
+            count += 1
+    return count

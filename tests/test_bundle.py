@@ -5,7 +5,6 @@ one host (sys.path, sys.modules, sys.meta_path) is tested through built FMUs els
 from __future__ import annotations
 
 import ctypes
-import gc
 import importlib.util
 import re
 import shutil
@@ -16,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from lpvest.fmi._bundle import BUNDLE_FORMAT, Bundle, BundleError, SourceRoot, make_bundle
+from tests.fmu_driver import references_held
 
 
 def _tree(base: Path, files: dict[str, str]) -> Path:
@@ -243,20 +243,6 @@ class Slave:
 """
 
 
-def _references_to(obj: object) -> int:
-    """A lower bound of the references to ``obj``: those the garbage collector's containers hold
-    (each found by ``gc.get_referrers``; a list's, tuple's or dict's counted one by one)."""
-    count = 0
-    for holder in gc.get_referrers(obj):
-        if isinstance(holder, (list, tuple)):
-            count += sum(1 for item in holder if item is obj)
-        elif isinstance(holder, dict):
-            count += sum(1 for item in holder.values() if item is obj)
-        else:
-            count += 1
-    return count
-
-
 def test_the_entry_module_loads_the_package_from_memory_and_restores_sys_path(tmp_path):
     root = _tree(tmp_path, {**PKG, "role.py": ROLE})
     b = _bundle(root)
@@ -298,7 +284,7 @@ def test_the_entry_module_loads_the_package_from_memory_and_restores_sys_path(tm
         assert sys.getrefcount(namespace) == before + 1
         ctypes.pythonapi.Py_DecRef(ctypes.py_object(namespace))  # findClass's release
         assert sys.getrefcount(namespace) == before
-        assert sys.getrefcount(namespace) - 1 >= _references_to(namespace)
+        assert sys.getrefcount(namespace) - 1 >= references_held(namespace)
         exec(code, namespace)  # an import (locals are the globals) releases nothing: takes nothing
         assert sys.getrefcount(namespace) == before
     finally:

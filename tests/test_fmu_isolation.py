@@ -468,7 +468,7 @@ def test_sys_path_meta_path_and_modules_do_not_change_over_300_instances(fmus, t
 
 _ALIVE_AT_EXIT = """
 import gc, json, os, sys
-from tests.fmu_driver import Driver
+from tests.fmu_driver import Driver, references_held
 
 path, unzip, n = {path!r}, {unzip!r}, {n}
 for k in range(n):
@@ -480,14 +480,7 @@ with open(os.path.join(unzip, "resources", "slavemodule.txt")) as f:
     entry = sys.modules[f.read().strip()]
 namespace = entry.__dict__
 gc.collect()
-held = 0  # the references the garbage collector's containers hold to the namespace (a lower bound)
-for holder in gc.get_referrers(namespace):
-    if isinstance(holder, (list, tuple)):
-        held += sum(1 for item in holder if item is namespace)
-    elif isinstance(holder, dict):
-        held += sum(1 for item in holder.values() if item is namespace)
-    else:
-        held += 1
+held = references_held(namespace)  # a lower bound of the references to the namespace
 print("RESULT" + json.dumps({{"refcount": sys.getrefcount(namespace) - 1, "held": held}}), flush=True)
 # the entry module stays alive to the interpreter's end (in the test suite's processes
 # hypothesis's cache of the local modules' constants keeps it), which then clears its namespace
