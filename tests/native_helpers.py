@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import atexit
 import ctypes
 import functools
 import shutil
@@ -36,7 +37,9 @@ def c_compiler() -> list[str]:
 @functools.cache
 def core_library() -> ctypes.CDLL:
     """The runtime's numerical core as a shared library (compiled once per session)."""
-    out = Path(tempfile.mkdtemp(prefix="lpvest-core-")) / "lpvcore.so"
+    folder = Path(tempfile.mkdtemp(prefix="lpvest-core-"))
+    atexit.register(shutil.rmtree, folder, True)
+    out = folder / "lpvcore.so"
     cmd = [*c_compiler(), *TEST_FLAGS, "-o", str(out), *(str(RUNTIME_DIR / f) for f in CORE), "-lm"]
     subprocess.run(cmd, check=True, capture_output=True)
     lib = ctypes.CDLL(str(out))

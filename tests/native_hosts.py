@@ -5,6 +5,7 @@ through a pipe with the interface of tests/fmu_driver.Driver."""
 
 from __future__ import annotations
 
+import atexit
 import functools
 import os
 import shutil
@@ -29,6 +30,7 @@ def host_exe(kind: str = "plain") -> Path:
     """The C host compiled once per session: ``plain`` (cc), ``sanitized``
     (cc with ASan and UBSan) or ``windows`` (zig, x86_64-windows-gnu)."""
     out = Path(tempfile.mkdtemp(prefix="lpvest-host-"))
+    atexit.register(shutil.rmtree, out, True)
     if kind == "windows":
         exe = out / "native_host.exe"
         cmd = [sys.executable, "-m", "ziglang", "cc", "-target", "x86_64-windows-gnu", "-std=c99", "-O2", "-Wall",

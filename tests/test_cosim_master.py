@@ -5,8 +5,11 @@ the master over real FMUs."""
 
 from __future__ import annotations
 
+import gc
 import re
+import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -316,6 +319,35 @@ def test_close_terminates_and_frees_every_instance_once(fmus):
         ("src", "terminate"), ("src", "freeInstance"), ("gain", "terminate"), ("gain", "freeInstance"),
         ("delay", "terminate"), ("delay", "freeInstance")]
     assert not tmp.exists()
+
+
+_ALIVE_AT_EXIT = """
+import pathlib, sys
+import fmpy.fmi2
+from tests.fake_fmu import FakeSlave, write_fmu
+from tests.test_cosim_master import Src
+fmpy.fmi2.FMU2Slave = FakeSlave
+FakeSlave.MODELS = {"Src": Src}
+from lpvest.cosim import Component, CoSimulation
+KEPT = CoSimulation([Component("src", write_fmu(pathlib.Path(sys.argv[1]), "Src", Src.variables))], step_size=0.1)
+print(KEPT._tmp, flush=True)
+"""
+
+
+def test_a_simulation_never_closed_removes_its_unpacked_fmus_when_collected_and_at_exit(fmus, tmp_path):
+    """The unpacked FMUs go with the simulation even without close(): when it is collected,
+    and at the interpreter's exit for one still alive then (a sweep worker's cached one)."""
+    sim = chain(fmus)
+    tmp = sim._tmp
+    del sim
+    gc.collect()
+    assert not tmp.exists()
+    assert sum(1 for _, w, _ in CALLS if w == "freeInstance") == 3
+    proc = subprocess.run([sys.executable, "-c", _ALIVE_AT_EXIT, str(tmp_path)], capture_output=True, text=True,
+                          timeout=120, check=False, cwd=Path(__file__).parents[1])
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    kept = Path(proc.stdout.strip())
+    assert kept.name.startswith("lpvest-cosim-") and not kept.exists()
 
 
 def test_a_failure_while_instantiating_frees_what_was_made(fmus):

@@ -145,7 +145,7 @@ def test_100000_steps_do_not_grow_memory(fmus, name):
 
 
 _FRESH_HOST = """
-import json, sys
+import json, os, sys
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
@@ -163,7 +163,8 @@ for name, path in job["fmus"].items():
     ins = [v for v in md.modelVariables if v.causality == "input"]
     outs = [v for v in md.modelVariables if v.causality == "output"]
     given = job["inputs"].get(name, {})
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.coSimulation.modelIdentifier,
+    unzip = extract(path, unzipdir=os.path.join(os.path.dirname(sys.argv[1]), "unzipped", name))  # the test's folder
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier,
                     instanceName=name)
     fmu.instantiate()
     fmu.setupExperiment(startTime=0.0)

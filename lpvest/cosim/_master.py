@@ -39,6 +39,7 @@ import shutil
 import sys
 import tempfile
 import warnings
+import weakref
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -437,6 +438,9 @@ class CoSimulation:
         self.step_size = float(step_size)
         self.start_time = float(start_time)
         self._tmp = Path(tempfile.mkdtemp(prefix="lpvest-cosim-"))
+        # the unpacked FMUs go with the simulation: on close(), when it is collected, or at the
+        # interpreter's exit for one still alive (a worker's cached simulation)
+        self._remove_tmp = weakref.finalize(self, shutil.rmtree, self._tmp, True)
         self._units: list[_Unit] = []
         self._closed = False
         self._ran = False  # run() consumed the instances; reset() before running again
@@ -1097,7 +1101,7 @@ class CoSimulation:
                     unit.fmu.freeInstance()
                 except Exception:  # noqa: BLE001
                     pass
-        shutil.rmtree(self._tmp, ignore_errors=True)
+        self._remove_tmp()
 
     def __enter__(self) -> CoSimulation:
         return self

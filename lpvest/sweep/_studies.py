@@ -25,8 +25,10 @@ paper reproduction with the same task functions the experiment runs.
 
 from __future__ import annotations
 
+import atexit
 import hashlib
 import os
+import shutil
 import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
@@ -82,6 +84,7 @@ def _fmu_folder() -> Path:
             base = Path(get_worker().local_directory)
         except (ImportError, ValueError):
             base = Path(tempfile.mkdtemp(prefix="lpvest-sweep-"))
+            atexit.register(shutil.rmtree, base, True)
         _WORKER["folder"] = base / "lpvest-fmus"
         _WORKER["folder"].mkdir(parents=True, exist_ok=True)
     return _WORKER["folder"]
