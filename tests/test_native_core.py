@@ -322,6 +322,23 @@ def test_zig_is_called_as_the_ziglang_packages_program():
         [program, "version"], capture_output=True, text=True, check=True).stdout == proc.stdout
 
 
+def test_the_zig_lib_folders_name_is_the_same_in_every_environment_with_the_same_zig():
+    """Two environments' RECORDs of one ziglang wheel differ in the launcher script (its
+    hash covers the environment's interpreter path) and in the bytecode pip compiled (listed
+    without a hash): the lib folder's identity ignores both, and sees a changed lib file."""
+    from lpvest.fmi._build import lib_record
+
+    lib = ["ziglang/lib/libc/mingw/crt/crtdll.c,sha256=AAAA,120", "ziglang/lib/std/std.zig,sha256=BBBB,80"]
+    one = "\n".join(["../../../bin/python-zig,sha256=EcBz7ezG,176", "ziglang/__init__.py,sha256=CCCC,10", *lib,
+                     "ziglang/__pycache__/__init__.cpython-311.pyc,,"])
+    other = "\n".join(["../../../bin/python-zig,sha256=z1LMy05I,237", *reversed(lib),
+                       "ziglang/lib/lldb/__pycache__/pretty_printers.cpython-311.pyc,,",
+                       "ziglang/__init__.py,sha256=CCCC,10", ""])
+    assert lib_record(one) == lib_record(other) == "\n".join(lib)
+    changed = other.replace("sha256=BBBB,80", "sha256=DDDD,81")
+    assert lib_record(changed) != lib_record(one)
+
+
 def test_zig_runs_with_its_lib_folder_at_a_path_that_stays_the_same(tmp_path, monkeypatch):
     """zig keys the C runtimes it builds from its ``lib`` folder (Windows' alone is
     ~75 s of CPU) by that folder's path: each virtual environment would build them
@@ -347,7 +364,10 @@ def test_zig_runs_with_its_lib_folder_at_a_path_that_stays_the_same(tmp_path, mo
     lib = Path(env["ZIG_LIB_DIR"])
     record = importlib.metadata.distribution("ziglang").read_text("RECORD")
     assert record
-    digest = hashlib.sha256(record.encode()).hexdigest()[:16]
+    # named by the hashes of the lib folder's files alone: the same in every environment
+    files = sorted(line for line in record.splitlines() if line.startswith("ziglang/lib/") and ",sha256=" in line)
+    assert len(files) > 1000
+    digest = hashlib.sha256("\n".join(files).encode()).hexdigest()[:16]
     assert lib == tmp_path / "xdg" / "lpvest" / "zig-lib" / f"{_build.zig_version()}-{digest}"
     installed = Path(_build.zig_program()).parent / "lib"
     names = sorted(p.relative_to(installed) for p in installed.rglob("*") if p.is_file())

@@ -436,18 +436,30 @@ def zig_program() -> str | None:
 
 
 def _zig_identity(lib: Path) -> str:
-    """What the ``lib`` folder holds: the ``ziglang`` package's RECORD (a hash of
-    every installed file), or, without one, every file's path and size."""
+    """What the ``lib`` folder holds: the lines of the ``ziglang`` package's RECORD
+    for the files under ``ziglang/lib/`` (each one's hash; see :func:`lib_record`),
+    or, without a RECORD, every file's path and size."""
     import importlib.metadata
 
     try:
         record = importlib.metadata.distribution("ziglang").read_text("RECORD")
     except importlib.metadata.PackageNotFoundError:
         record = None
-    if record:
-        return record
+    if record and lib_record(record):
+        return lib_record(record)
     return json.dumps(sorted((p.relative_to(lib).as_posix(), p.stat().st_size) for p in lib.rglob("*")
                              if p.is_file()))
+
+
+def lib_record(record: str) -> str:
+    """The lines of a ``ziglang`` RECORD that name a file of ``ziglang/lib/`` with
+    its hash, sorted: the same in every environment with the same zig. The whole
+    RECORD is not: it holds the ``python-zig`` launcher, whose hash covers the
+    environment's own interpreter path, and bytecode files listed without a hash
+    when pip compiled them."""
+    lines = (line.strip() for line in record.splitlines())
+    return "\n".join(sorted(line for line in lines
+                            if line.startswith("ziglang/lib/") and line.split(",")[1:2] not in ([], [""])))
 
 
 @functools.cache
