@@ -274,12 +274,14 @@ def test_start_values_reach_each_variable_as_its_fmi_type(fmus):
     ({"label": "a\x00b"}, r"^component src: label: a string may not hold a NUL character$"),
     ({"y": 1.0}, r"^component src: y is an output; it cannot be set$"),
     ({"nothere": 1.0}, r"^component src: no variable 'nothere' to set$"),
+    ({"\r": 1.0}, r"^component src: no variable '\\r' to set$"),  # any key: its field path quoted too
     ({"k": [1.0, 2.0]}, r"^component src: k has 1 element\(s\); 2 value\(s\) given$"),
 ])
 def test_a_bad_start_value_is_refused_at_set_up_naming_its_field(fmus, params, match):
     with pytest.raises(CoSimulationError, match=match) as info:
         CoSimulation.check([Component("src", fmus["src"], params)], [], step_size=1.0)
-    assert info.value.where == f"components.src.parameters.{next(iter(params))}"
+    key = next(iter(params))
+    assert info.value.where == f"components.src.parameters.{key if key.isprintable() else repr(key)}"
     assert CALLS == []  # nothing instantiated
 
 

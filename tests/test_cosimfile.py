@@ -195,6 +195,8 @@ ERRORS = [
      "connections[2]: connection target src.w[1] is not an input (output)"),
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Plant"', 'fmu = "PeixotoEx1Plant"\nparameters = { gain = 2.0 }'),
      "components.plant.parameters.gain: no variable 'gain' to set"),
+    (lambda t: _edit(t, 'fmu = "PeixotoEx1Plant"', 'fmu = "PeixotoEx1Plant"\nparameters = { "\\r" = 2.0 }'),
+     "components.plant.parameters.'\\r': no variable '\\r' to set"),  # one line, whatever the key
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Plant"', 'fmu = "PeixotoEx1Plant"\nparameters = { x0 = [1.0] }'),
      "components.plant.parameters.x0: x0 has 2 element(s); 1 value(s) given"),
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Scheduler"',

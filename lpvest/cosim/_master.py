@@ -365,6 +365,15 @@ def whole_steps(start_time: float, stop_time: float, step_size: float) -> int:
     return n
 
 
+def _parameter_field(component: str, name: str) -> str:
+    """The field of a start value, ``components.C.parameters.NAME``: a variable's
+    name as written (``y[1]``, ``der(x)``) when it is printable without spaces,
+    else quoted and shortened, so that a message naming the field stays one line."""
+    shown = name if name.isprintable() and not any(c.isspace() for c in name) and len(name) <= 60 \
+        else abbreviate(name, 30)
+    return f"components.{component}.parameters.{shown}"
+
+
 def step_count(start_time: float, stop_time: float, step_size: float) -> tuple[int | None, float]:
     """``(n, ratio)``: ``ratio = (stop_time - start_time) / step_size`` and
     ``n`` the whole number it is (to 1e-9 relative), or ``None`` when it is
@@ -679,7 +688,7 @@ class CoSimulation:
         name = unit.spec.name
         values: list[tuple[_Var, FmiValue, str]] = []
         for par, value in unit.spec.parameters.items():
-            where = f"components.{name}.parameters.{par}"
+            where = _parameter_field(name, par)
             elems = _expand(unit.variables, par)
             if not elems:
                 raise CoSimulationError(f"component {name}: no variable {abbreviate(par, 30)} to set", where=where)
@@ -753,7 +762,7 @@ class CoSimulation:
         for v, x, par in unit.start_values:
             self._call(unit, f"setting {v.name} = {abbreviate(x, 30)}",
                        lambda s=setters[_CALL[v.type]], r=v.vr, x=x: s([r], [x]),
-                       where=f"components.{unit.spec.name}.parameters.{par}")
+                       where=_parameter_field(unit.spec.name, par))
 
     @interruptible
     def run(
