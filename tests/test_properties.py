@@ -688,3 +688,30 @@ def test_an_input_over_the_cpu_limit_fails_and_one_that_never_returns_is_stopped
     with pytest.raises(AssertionError, match=r"the contract's own check: the input took more than 0\.02 s of CPU"):
         within_contract("the contract's own check", lambda: burn(math.inf), prefix="", limit=0.02)
     assert TALLIES.pop("the contract's own check").timeouts == 2
+
+
+def test_under_a_trace_function_an_input_is_judged_by_its_outcome_not_its_cpu_time():
+    """hypothesis traces the examples it replays after a failure; there a CPU limit would
+    report the tracer's cost as timeouts and bury the failure it explains."""
+    import sys
+    import time
+
+    def burn(seconds: float) -> None:
+        start = time.thread_time()
+        while time.thread_time() - start < seconds:
+            pass
+
+    def tracer(frame, event, arg):  # noqa: ANN001, ANN202, ARG001 - sys.settrace's signature
+        return None
+
+    before = sys.gettrace()
+    sys.settrace(tracer)
+    try:
+        assert within_contract("the contract's own check", lambda: burn(0.05), prefix="", limit=0.02) is None
+        with pytest.raises(ValueError, match="invalid literal"):  # what it raises still counts
+            within_contract("the contract's own check", lambda: int("x"), prefix="", limit=0.02,
+                            error=ModelFileError)
+    finally:
+        sys.settrace(before)
+    tally = TALLIES.pop("the contract's own check")
+    assert (tally.accepted, tally.timeouts, tally.other) == (1, 0, 1)
