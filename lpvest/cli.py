@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import difflib
+import json
 import os
 import re
 import sys
@@ -82,13 +83,40 @@ def _out_dir(path: str | Path, option: str = "--out") -> Path:
     return out
 
 
-def _out_file(path: str, option: str = "--out") -> Path:
-    """An output file: its folder as :func:`_out_dir`, and not a folder itself."""
+def _out_file(path: str, option: str, kind: str, is_kind: Callable[[Path], bool]) -> Path:
+    """An output file: its folder as :func:`_out_dir`, not a folder itself, and
+    either new or a file of the ``kind`` the command writes (``is_kind``): a
+    command replaces its own earlier output, never another file given by mistake."""
     out = Path(path)
     if out.is_dir():
         raise OutputError(f"{option} {shorten(str(out), 60)}: is a folder; expected a file name")
+    if out.exists() and not is_kind(out):
+        raise OutputError(f"{option} {shorten(str(out), 60)}: exists and is not {kind} (only one is replaced); "
+                          "remove it or choose another name")
     _out_dir(out.parent if str(out.parent) else ".", option)
     return out
+
+
+def _is_design_file(path: Path) -> bool:
+    """A design as ``lpvest design`` writes it (JSON with the design format's name)."""
+    from .design._result import DESIGN_FORMAT
+
+    try:
+        if path.stat().st_size > 2**26:  # 64 MiB: far beyond any design
+            return False
+        data = json.loads(path.read_bytes())
+    except (OSError, ValueError):
+        return False
+    return isinstance(data, dict) and data.get("format") == DESIGN_FORMAT
+
+
+def _is_ssp_file(path: Path) -> bool:
+    """An SSP archive (a zip holding SystemStructure.ssd)."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            return "SystemStructure.ssd" in z.namelist()
+    except (OSError, zipfile.BadZipFile):
+        return False
 
 
 def _number(text: str) -> float:
@@ -400,7 +428,8 @@ def cmd_design(args: argparse.Namespace) -> int:
                           "an H-infinity design needs a polytopic plant or an affine model with general noise")
     kind = {"pd": KIND_PD, "robust": KIND_ROBUST}[args.kind]
     check_solver(args.solver)
-    out = _out_file(args.out)  # before the solve: an unwritable place fails now, not after it
+    # before the solve: an unwritable place, or another file in the way, fails now, not after it
+    out = _out_file(args.out, "--out", "an lpvest design (JSON)", _is_design_file)
     t = time.perf_counter()
     if args.epsilon is not None:
         design = design_hinf(model, epsilon=args.epsilon, kind=kind, solver=args.solver)
@@ -429,7 +458,7 @@ def cmd_cosim(args: argparse.Namespace) -> int:
                                 "give it with --ssp")
     spec = load_cosim(args.file, fmu_dir=args.fmus)
     if args.ssp:
-        path = spec.to_ssp(_out_file(args.ssp, "--ssp"), worker_threads=threads)
+        path = spec.to_ssp(_out_file(args.ssp, "--ssp", "an SSP file", _is_ssp_file), worker_threads=threads)
         how = ("on libcosim's default thread pool" if threads is None
                else "in libcosim's calling thread" if threads == 0 else f"on {threads} libcosim threads")
         print(f"wrote {path}: {len(spec.components)} components, {len(spec.connections)} connections, "

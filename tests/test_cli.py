@@ -10,6 +10,7 @@ import pytest
 
 from lpvest.cli import main
 from lpvest.core._errors import shorten
+from lpvest.design import HinfDesign
 
 
 def test_systems_lists_the_examples(capsys):
@@ -178,6 +179,29 @@ def test_expected_failures_are_one_line_with_status_2(tmp_path, argv, message):
     assert proc.stderr.count("\n") == 1, proc.stderr
     assert proc.stderr.startswith(message.replace("ROOT", root)), proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+def test_design_replaces_an_earlier_design_but_no_other_file(tmp_path, capsys):
+    """`lpvest design --out FILE` wrote its JSON over any file, README.md included: a file
+    that is not a design is now refused before the solve, left as it was; a design is
+    replaced (the same command run again)."""
+    notes = tmp_path / "notes.md"
+    notes.write_text("my notes\n")
+    proc = _run("design", "peixoto-ex1", "--epsilon", "1", "--out", "notes.md", cwd=tmp_path)
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert proc.stderr == ("lpvest: error: --out notes.md: exists and is not an lpvest design (JSON) (only one is "
+                           "replaced); remove it or choose another name\n")
+    assert notes.read_text() == "my notes\n"
+    for text in ("{not json", '["lpvest.hinf-design"]', '{"format": "another"}'):  # JSON or not, not a design
+        notes.write_text(text)
+        assert main(["design", "peixoto-ex1", "--epsilon", "1", "--out", str(notes)]) == 2
+        assert notes.read_text() == text
+    capsys.readouterr()
+    earlier = tmp_path / "pd.json"
+    earlier.write_text('{"format": "lpvest.hinf-design", "version": 1}')  # an earlier design (its format's name)
+    assert main(["design", "peixoto-ex1", "--epsilon", "1", "--out", str(earlier), "--quiet"]) == 0
+    assert f"wrote {earlier}" in capsys.readouterr().out
+    assert HinfDesign.from_json(earlier).gamma > 0
 
 
 def test_debug_shows_the_traceback():

@@ -267,6 +267,16 @@ def test_command_line_writes_the_ssp_of_a_cosim_file(fmus, tmp_path, capsys):
     assert f"wrote {out}: 4 components, 4 connections, step 1, t = 0 .. 100" in capsys.readouterr().out
     system = read_ssp(out)
     assert system.stop_time == 100.0 and system.step_size == 1.0
+    assert main(["cosim", str(example), "--fmus", str(fmus.out), "--ssp", str(out)]) == 0  # its own: replaced
+    other = tmp_path / "ex.toml"
+    other.write_text("a file given by mistake\n")
+    assert main(["cosim", str(example), "--fmus", str(fmus.out), "--ssp", str(other)]) == 2
+    from lpvest.core._errors import shorten
+
+    assert capsys.readouterr().err.endswith(f"--ssp {shorten(str(other), 60)}: exists and is not an SSP file (only "
+                                            "one is replaced); "
+                                            "remove it or choose another name\n")
+    assert other.read_text() == "a file given by mistake\n"
     assert ("omega[1]", "Real", "0.25") in system.parameters["sched"]
     assert simulate_ssp(out, importer="fmpy", n_steps=5).shape == (5,)
 
