@@ -12,7 +12,7 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(20261121)
 
 
-from hypothesis import HealthCheck, settings  # noqa: E402
+from hypothesis import HealthCheck, Phase, settings  # noqa: E402
 
 # the FMU sets, built once per session (tests/conftest_fmu.py)
 from .conftest_fmu import (  # noqa: E402
@@ -34,6 +34,12 @@ settings.register_profile(
     deadline=None,  # the CPU-time limit of tests/contract.py applies instead (not the machine's load)
     print_blob=True,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.filter_too_much],
+    # no explain phase: to explain a failure, hypothesis traces (sys.settrace; sys.monitoring
+    # from Python 3.12) every example it runs after the first failure, shrinking included. Under
+    # its tracer every Python line costs a call (tomllib's parse of a 200,001-character string:
+    # 13 ms untraced, 137 ms traced), so the contract's CPU limit turned the shrinking of a real
+    # failure (a two-line message) into ten "timeouts" that hid it (stop 31)
+    phases=[phase for phase in Phase if phase is not Phase.explain],
 )
 settings.register_profile("explore", parent=settings.get_profile("lpvest"), derandomize=False)
 settings.load_profile(__import__("os").environ.get("HYPOTHESIS_PROFILE", "lpvest"))

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import faulthandler
 import gc
-import math
 import signal
 import sys
 import time
@@ -33,13 +32,6 @@ CPU_LIMIT = 1.0
 #: limit stops an example that would never return; one that returns is judged by
 #: its own thread's CPU time against the limit.
 BACKSTOP = 10
-#: Under a trace function every line of Python costs a call into it: hypothesis traces
-#: the examples it replays after a failure (to explain it), and coverage tools and
-#: debuggers trace too. A CPU limit means nothing then (the parse of a 200,001-character
-#: TOML string: 13 ms untraced, 137 ms under hypothesis's tracer), and the timeouts it
-#: would report bury the failure being explained: a traced example is judged by its
-#: outcome and its message alone, with only :data:`HANG_LIMIT` against a hang.
-#:
 #: Wall-clock seconds after which a hang inside C code (where the CPU timer's
 #: signal cannot interrupt) ends the test process with a traceback.
 HANG_LIMIT = 120
@@ -125,13 +117,10 @@ def within_contract(
     # no garbage collection inside the timed call: a collection of the test
     # runner's garbage would count against the input (and the timer's
     # exception, raised inside a gc callback, would be ignored)
-    if sys.gettrace() is not None:  # see HANG_LIMIT: no CPU limit under a tracer
-        limit = math.inf
     gc_was_enabled = gc.isenabled()
     gc.disable()
     previous = signal.signal(signal.SIGPROF, _on_timer)
-    if math.isfinite(limit):
-        signal.setitimer(signal.ITIMER_PROF, BACKSTOP * limit)
+    signal.setitimer(signal.ITIMER_PROF, BACKSTOP * limit)
     faulthandler.dump_traceback_later(HANG_LIMIT, exit=True)
     start = time.thread_time()
 
