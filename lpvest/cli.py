@@ -105,7 +105,7 @@ def _is_design_file(path: Path) -> bool:
         if path.stat().st_size > 2**26:  # 64 MiB: far beyond any design
             return False
         data = json.loads(path.read_bytes())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return False
     return isinstance(data, dict) and data.get("format") == DESIGN_FORMAT
 

@@ -15,7 +15,7 @@ import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
 
-_UNZIPPED: dict[tuple[str, int, int], str] = {}
+_UNZIPPED: dict[tuple[str, int, int, int, int], str] = {}
 
 
 @functools.cache
@@ -27,12 +27,12 @@ def _unzip_root() -> str:
 
 def unzipped(path: str | Path) -> str:
     """The folder ``path`` is extracted to, once per process and per version of the file
-    (its path, size and modification time), removed when the process ends. Instances made
+    (its path, inode, size and change times), removed when the process ends. Instances made
     from one folder share the FMU's loaded library, as a host's instances do; a test that
     needs a private copy passes ``unzip`` to :class:`Driver`. (Extracting for every Driver
     left one folder per instance behind, 28 GB of them in /tmp after a day of runs.)"""
     st = os.stat(path)
-    key = (os.path.abspath(path), st.st_mtime_ns, st.st_size)
+    key = (os.path.abspath(path), st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
     if key not in _UNZIPPED:
         _UNZIPPED[key] = extract(str(path), unzipdir=os.path.join(_unzip_root(), str(len(_UNZIPPED))))
     return _UNZIPPED[key]
