@@ -331,14 +331,20 @@ from tests.test_cosim_master import Src
 fmpy.fmi2.FMU2Slave = FakeSlave
 FakeSlave.MODELS = {"Src": Src}
 from lpvest.cosim import Component, CoSimulation
-KEPT = CoSimulation([Component("src", write_fmu(pathlib.Path(sys.argv[1]), "Src", Src.variables))], step_size=0.1)
-print(KEPT._tmp, flush=True)
+import threading
+sim = CoSimulation([Component("src", write_fmu(pathlib.Path(sys.argv[1]), "Src", Src.variables))], step_size=0.1)
+print(sim._tmp, flush=True)
+# held to the end by a daemon thread's frame, which the interpreter never releases: the
+# simulation is never collected and __del__ never runs; only an exit hook removes its folder
+threading.Thread(target=lambda kept=sim: threading.Event().wait(3600), daemon=True).start()
+del sim
 """
 
 
 def test_a_simulation_never_closed_removes_its_unpacked_fmus_when_collected_and_at_exit(fmus, tmp_path):
     """The unpacked FMUs go with the simulation even without close(): when it is collected,
-    and at the interpreter's exit for one still alive then (a sweep worker's cached one)."""
+    and at the interpreter's exit for one still alive then (a sweep worker's cached one), even
+    one that is never collected (held by a daemon thread: __del__ alone left its folder)."""
     sim = chain(fmus)
     tmp = sim._tmp
     del sim
