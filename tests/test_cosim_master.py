@@ -281,7 +281,7 @@ def test_a_bad_start_value_is_refused_at_set_up_naming_its_field(fmus, params, m
     with pytest.raises(CoSimulationError, match=match) as info:
         CoSimulation.check([Component("src", fmus["src"], params)], [], step_size=1.0)
     key = next(iter(params))
-    assert info.value.where == f"components.src.parameters.{key if key.isprintable() else repr(key)}"
+    assert info.value.where == f"components.src.parameters.{key if key.isidentifier() else repr(key)}"
     assert CALLS == []  # nothing instantiated
 
 

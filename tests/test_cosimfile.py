@@ -205,7 +205,7 @@ ERRORS = [
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Scheduler"', 'fmu = "PeixotoEx1Scheduler"\nparameters = { seed = 1.5 }'),
      "components.sched.parameters.seed: seed: expected an integer, found float 1.5"),
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Plant"', 'fmu = "PeixotoEx1Plant"\nparameters = { "y[1]" = 1.0 }'),
-     "components.plant.parameters.y[1]: y[1] is an output; it cannot be set"),
+     "components.plant.parameters.'y[1]': y[1] is an output; it cannot be set"),  # the key as TOML quotes it
     (lambda t: _edit(t, "steps = 10", 'steps = 10\nrecord = ["plant.y"]\nplots = [["plant.x"]]'),
      "plots[1]: 'plant.x' is not recorded (see record)"),
     # found while running: the component's own message

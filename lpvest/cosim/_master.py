@@ -49,6 +49,7 @@ import numpy as np
 
 from ..core._errors import LpvestError, abbreviate, shorten
 from ..core._interrupt import interruptible, raise_if_pending
+from ..core._toml import field_path
 from ._errors import CoSimulationError
 from ._graph import Block, batches, evaluation_order
 
@@ -366,12 +367,10 @@ def whole_steps(start_time: float, stop_time: float, step_size: float) -> int:
 
 
 def _parameter_field(component: str, name: str) -> str:
-    """The field of a start value, ``components.C.parameters.NAME``: a variable's
-    name as written (``y[1]``, ``der(x)``) when it is printable without spaces,
-    else quoted and shortened, so that a message naming the field stays one line."""
-    shown = name if name.isprintable() and not any(c.isspace() for c in name) and len(name) <= 60 \
-        else abbreviate(name, 30)
-    return f"components.{component}.parameters.{shown}"
+    """The field of a start value, ``components.C.parameters.NAME``, with the key
+    written as the TOML files' messages write it (:func:`~lpvest.core._toml.key_text`:
+    bare when plain, else quoted and shortened, so a message stays one line)."""
+    return field_path(f"components.{component}.parameters", name)
 
 
 def step_count(start_time: float, stop_time: float, step_size: float) -> tuple[int | None, float]:
