@@ -273,8 +273,10 @@ def test_start_values_reach_each_variable_as_its_fmi_type(fmus):
     ({"label": 5}, r"^component src: label: expected a string, found int 5$"),
     ({"label": "a\x00b"}, r"^component src: label: a string may not hold a NUL character$"),
     ({"y": 1.0}, r"^component src: y is an output; it cannot be set$"),
-    ({"nothere": 1.0}, r"^component src: no variable 'nothere' to set$"),
-    ({"\r": 1.0}, r"^component src: no variable '\\r' to set$"),  # any key: its field path quoted too
+    ({"nothere": 1.0}, r"^component src: no variable 'nothere' to set \(settable: count, flag, k, label\)$"),
+    ({"kk": 1.0}, r"^component src: no variable 'kk' to set; did you mean 'k'\?$"),
+    # any key, its field path quoted too:
+    ({"\r": 1.0}, r"^component src: no variable '\\r' to set \(settable: count, flag, k, label\)$"),
     ({"k": [1.0, 2.0]}, r"^component src: k has 1 element\(s\); 2 value\(s\) given$"),
 ])
 def test_a_bad_start_value_is_refused_at_set_up_naming_its_field(fmus, params, match):
@@ -371,7 +373,10 @@ def test_set_up_errors_name_the_connection_or_component(fmus, tmp_path):
     comps = [Component("src", fmus["src"]), Component("gain", fmus["gain"])]
     cases = [
         (["src.y"], r"^connection 'src.y': expected 'comp.output -> comp.input'$", "connections[1]"),
-        (["src.y -> gain.nope"], r"^connection target 'gain.nope': gain has no variable 'nope'$", "connections[1]"),
+        (["src.y -> gain.nope"], r"^connection target 'gain.nope': gain has no variable 'nope' \(inputs: i, u\)$",
+         "connections[1]"),
+        (["src.yy -> gain.u"], r"^connection source 'src.yy': src has no variable 'yy'; did you mean 'y'\?$",
+         "connections[1]"),
         (["src.y -> other.u"], r"^connection target 'other.u': no component 'other' \(components: src, gain, vec\)$",
          "connections[1]"),
         (["gain.y -> gain.u", "src.y -> gain.u"], r"^gain.u is driven twice \(by gain.y and src.y\)$",

@@ -190,13 +190,14 @@ ERRORS = [
      "plots[1]: expected a non-empty list of variable names, found a list"),
     # found by the master, named by field
     (lambda t: _edit(t, '"src.w -> plant.w"', '"src.v -> plant.w"'),
-     "connections[2]: connection source 'src.v': src has no variable 'v'"),
+     "connections[2]: connection source 'src.v': src has no variable 'v' (outputs: w)"),
     (lambda t: _edit(t, '"src.w -> plant.w"', '"plant.y -> src.w"'),
      "connections[2]: connection target src.w[1] is not an input (output)"),
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Plant"', 'fmu = "PeixotoEx1Plant"\nparameters = { gain = 2.0 }'),
-     "components.plant.parameters.gain: no variable 'gain' to set"),
+     "components.plant.parameters.gain: no variable 'gain' to set (settable: p, sample_time, w, x0)"),
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Plant"', 'fmu = "PeixotoEx1Plant"\nparameters = { "\\r" = 2.0 }'),
-     "components.plant.parameters.'\\r': no variable '\\r' to set"),  # one line, whatever the key
+     # one line, whatever the key
+     "components.plant.parameters.'\\r': no variable '\\r' to set (settable: p, sample_time, w, x0)"),
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Plant"', 'fmu = "PeixotoEx1Plant"\nparameters = { x0 = [1.0] }'),
      "components.plant.parameters.x0: x0 has 2 element(s); 1 value(s) given"),
     (lambda t: _edit(t, 'fmu = "PeixotoEx1Scheduler"',

@@ -33,6 +33,7 @@ Examples
 
 from __future__ import annotations
 
+import difflib
 import math
 import re
 import shutil
@@ -366,6 +367,30 @@ def whole_steps(start_time: float, stop_time: float, step_size: float) -> int:
     return n
 
 
+#: The variables a message lists when a name is not found, by what was asked for.
+_HINT_CAUSALITIES: dict[str, tuple[str, ...]] = {"connection source": ("output",), "connection target": ("input",),
+                     "to set": ("parameter", "input")}
+
+
+def _variable_hint(name: str, variables: Mapping[str, _Var], asked: str) -> str:
+    """What follows "has no variable NAME" in a message: the closest of the FMU's
+    variables (a vector by its base name, ``w`` for ``w[1]``) when one is close
+    (``; did you mean 'y'?``), else those of the causality ``asked`` for (a
+    connection's source: the outputs; its target: the inputs; a start value: the
+    parameters and inputs; a recorded variable: any): `` (outputs: w, y)``."""
+    def base(n: str) -> str:
+        return re.sub(r"\[\d+\]$", "", n)
+
+    close = difflib.get_close_matches(name, sorted({base(n) for n in variables}), n=1) if len(name) <= 100 else []
+    if close:
+        return f"; did you mean {abbreviate(close[0], 30)}?"
+    causalities = _HINT_CAUSALITIES.get(asked)
+    names = sorted({base(n) for n, v in variables.items() if causalities is None or v.causality in causalities})
+    label = ("variables" if causalities is None else "outputs" if causalities == ("output",)
+             else "inputs" if causalities == ("input",) else "settable")
+    return f" ({label}: {shorten(', '.join(names), 60)})" if names else f" (it has no {label})"
+
+
 def _parameter_field(component: str, name: str) -> str:
     """The field of a start value, ``components.C.parameters.NAME``, with the key
     written as the TOML files' messages write it (:func:`~lpvest.core._toml.key_text`:
@@ -594,8 +619,8 @@ class CoSimulation:
                                     f"(components: {shorten(known, 60)})", where=where)
         elems = _expand(unit.variables, name)
         if not elems:
-            raise CoSimulationError(f"{what} {abbreviate(qualified)}: {comp} has no variable {abbreviate(name, 24)}",
-                                    where=where)
+            raise CoSimulationError(f"{what} {abbreviate(qualified)}: {comp} has no variable {abbreviate(name, 24)}"
+                                    f"{_variable_hint(name, unit.variables, what)}", where=where)
         if len(elems) == 1 and elems[0] == name and unit.variables[name].type not in _TYPES:
             # a String variable and a vector of the same base name (the observer's
             # parameter a0 and its output a0[1]): the numeric vector is meant
@@ -690,7 +715,8 @@ class CoSimulation:
             where = _parameter_field(name, par)
             elems = _expand(unit.variables, par)
             if not elems:
-                raise CoSimulationError(f"component {name}: no variable {abbreviate(par, 30)} to set", where=where)
+                raise CoSimulationError(f"component {name}: no variable {abbreviate(par, 30)} to set"
+                                        f"{_variable_hint(par, unit.variables, 'to set')}", where=where)
             items = value if isinstance(value, list | tuple | np.ndarray) else [value]
             flat = np.asarray(items, dtype=object).ravel().tolist()
             if len(flat) != len(elems):
