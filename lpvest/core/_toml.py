@@ -38,7 +38,7 @@ from typing import Any
 from ._errors import LpvestError, ModelFileError, abbreviate, shorten
 
 __all__ = ["parse_toml", "read_toml", "describe_value", "TomlReader", "TomlTable", "REQUIRED", "key_text",
-           "field_path", "element_path"]
+           "field_path", "element_path", "close_match"]
 
 
 def parse_toml(text: str, origin: str) -> dict[str, Any]:
@@ -179,11 +179,21 @@ def _names(names: Iterable[object]) -> str:
     return shorten(", ".join(sorted(map(str, names))), 160) or "none"
 
 
-def _did_you_mean(given: object, choices: Iterable[object]) -> str:
+def close_match(given: object, choices: Iterable[object]) -> str | None:
+    """The choice ``given`` is most likely a typo of (difflib's closest), or ``None``.
+
+    >>> close_match("stepz", ["steps", "step_size"]), close_match("x" * 101, ["x"])
+    ('steps', None)
+    """
     if len(str(given)) > 100:  # junk, not a typo (and no time spent comparing it)
-        return ""
+        return None
     close = difflib.get_close_matches(str(given), [str(c) for c in choices], n=1)
-    return f", did you mean {abbreviate(close[0], 30)}?" if close else ""
+    return close[0] if close else None
+
+
+def _did_you_mean(given: object, choices: Iterable[object]) -> str:
+    close = close_match(given, choices)
+    return f", did you mean {abbreviate(close, 30)}?" if close is not None else ""
 
 
 class TomlReader:

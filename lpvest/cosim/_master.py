@@ -33,7 +33,6 @@ Examples
 
 from __future__ import annotations
 
-import difflib
 import math
 import re
 import shutil
@@ -50,7 +49,7 @@ import numpy as np
 
 from ..core._errors import LpvestError, abbreviate, shorten
 from ..core._interrupt import interruptible, raise_if_pending
-from ..core._toml import field_path
+from ..core._toml import close_match, field_path
 from ._errors import CoSimulationError
 from ._graph import Block, batches, evaluation_order
 
@@ -367,27 +366,29 @@ def whole_steps(start_time: float, stop_time: float, step_size: float) -> int:
     return n
 
 
-#: The variables a message lists when a name is not found, by what was asked for.
-_HINT_CAUSALITIES: dict[str, tuple[str, ...]] = {"connection source": ("output",), "connection target": ("input",),
-                     "to set": ("parameter", "input")}
+#: The variables a message lists when a name is not found, by what was asked for: the
+#: list's label and the causalities it holds (any, for what is not here: a recorded variable).
+_HINT_LISTS: dict[str, tuple[str, tuple[str, ...]]] = {
+    "connection source": ("outputs", ("output",)),
+    "connection target": ("inputs", ("input",)),
+    "to set": ("settable", ("parameter", "input")),
+}
 
 
 def _variable_hint(name: str, variables: Mapping[str, _Var], asked: str) -> str:
     """What follows "has no variable NAME" in a message: the closest of the FMU's
     variables (a vector by its base name, ``w`` for ``w[1]``) when one is close
-    (``; did you mean 'y'?``), else those of the causality ``asked`` for (a
+    (``; did you mean 'y'?``), else those of the kind ``asked`` for (a
     connection's source: the outputs; its target: the inputs; a start value: the
     parameters and inputs; a recorded variable: any): `` (outputs: w, y)``."""
     def base(n: str) -> str:
         return re.sub(r"\[\d+\]$", "", n)
 
-    close = difflib.get_close_matches(name, sorted({base(n) for n in variables}), n=1) if len(name) <= 100 else []
-    if close:
-        return f"; did you mean {abbreviate(close[0], 30)}?"
-    causalities = _HINT_CAUSALITIES.get(asked)
-    names = sorted({base(n) for n, v in variables.items() if causalities is None or v.causality in causalities})
-    label = ("variables" if causalities is None else "outputs" if causalities == ("output",)
-             else "inputs" if causalities == ("input",) else "settable")
+    close = close_match(name, sorted({base(n) for n in variables}))
+    if close is not None:
+        return f"; did you mean {abbreviate(close, 30)}?"
+    label, causalities = _HINT_LISTS.get(asked, ("variables", ()))
+    names = sorted({base(n) for n, v in variables.items() if not causalities or v.causality in causalities})
     return f" ({label}: {shorten(', '.join(names), 60)})" if names else f" (it has no {label})"
 
 

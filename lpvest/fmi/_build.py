@@ -445,8 +445,9 @@ def _zig_identity(lib: Path) -> str:
         record = importlib.metadata.distribution("ziglang").read_text("RECORD")
     except importlib.metadata.PackageNotFoundError:
         record = None
-    if record and lib_record(record):
-        return lib_record(record)
+    lines = lib_record(record) if record else ""
+    if lines:
+        return lines
     return json.dumps(sorted((p.relative_to(lib).as_posix(), p.stat().st_size) for p in lib.rglob("*")
                              if p.is_file()))
 
@@ -457,9 +458,12 @@ def lib_record(record: str) -> str:
     RECORD is not: it holds the ``python-zig`` launcher, whose hash covers the
     environment's own interpreter path, and bytecode files listed without a hash
     when pip compiled them."""
-    lines = (line.strip() for line in record.splitlines())
-    return "\n".join(sorted(line for line in lines
-                            if line.startswith("ziglang/lib/") and line.split(",")[1:2] not in ([], [""])))
+    kept = []
+    for line in record.splitlines():
+        path, _, rest = line.strip().partition(",")
+        if path.startswith("ziglang/lib/") and rest.partition(",")[0]:  # a file with its hash
+            kept.append(line.strip())
+    return "\n".join(sorted(kept))
 
 
 @functools.cache
