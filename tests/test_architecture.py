@@ -8,6 +8,7 @@ inside functions too; imports under ``TYPE_CHECKING`` never run.)"""
 from __future__ import annotations
 
 import ast
+import functools
 import re
 from pathlib import Path
 
@@ -54,9 +55,16 @@ def _package(name: str) -> str:
     return parts[1] if len(parts) > 1 else ""
 
 
+def _modules() -> dict[str, Path]:
+    """module name -> file, for every module of lpvest/ (not the role scripts, not the models)."""
+    return {_module_name(p): p for p in ROOT.rglob("*.py") if "_fmus" not in p.parts and "_models" not in p.parts}
+
+
+@functools.cache
 def _imports() -> dict[str, list[tuple[str, int, list[str]]]]:
-    """module -> [(imported lpvest module, line, names taken from it)]."""
-    modules = {_module_name(p): p for p in ROOT.rglob("*.py") if "_fmus" not in p.parts and "_models" not in p.parts}
+    """module -> [(imported lpvest module, line, names taken from it)]. Parsed when a
+    test first asks, not at collection (every pytest process collects this file)."""
+    modules = _modules()
     out: dict[str, list[tuple[str, int, list[str]]]] = {}
     for name, path in modules.items():
         package = name if path.name == "__init__.py" else name.rpartition(".")[0]
@@ -86,8 +94,6 @@ def _imports() -> dict[str, list[tuple[str, int, list[str]]]]:
     return out
 
 
-IMPORTS = _imports()
-
 
 def test_the_floors_are_the_folders():
     # every folder (and top-level module) of lpvest/ has a floor in docs/architecture.md, and the
@@ -99,19 +105,19 @@ def test_the_floors_are_the_folders():
 
 
 def test_every_module_has_a_layer():
-    assert [m for m in IMPORTS if _layer(m) < 0] == []
+    assert [m for m in _imports() if _layer(m) < 0] == []
 
 
 def test_imports_run_downwards():
     upward = [f"{m} (floor {_layer(m)}) imports {t} (floor {_layer(t)}) at line {line}"
-              for m, found in IMPORTS.items() if m != "lpvest" for t, line, _ in found
+              for m, found in _imports().items() if m != "lpvest" for t, line, _ in found
               if _layer(t) > _layer(m)]
     assert upward == []
 
 
 def test_no_cycle_between_packages():
     graph: dict[str, set[str]] = {}
-    for m, found in IMPORTS.items():
+    for m, found in _imports().items():
         for t, _, _ in found:
             if _package(m) and _package(t) and _package(m) != _package(t):
                 graph.setdefault(_package(m), set()).add(_package(t))
@@ -127,8 +133,8 @@ def test_implementation_modules_are_private():
 
 
 def test_no_import_cycle():
-    graph = {m: {t for t, _, _ in found if t in IMPORTS and t != m and not m.startswith(t + ".")}
-             for m, found in IMPORTS.items() if m != "lpvest"}
+    graph = {m: {t for t, _, _ in found if t in _imports() and t != m and not m.startswith(t + ".")}
+             for m, found in _imports().items() if m != "lpvest"}
     # a package's __init__ re-exports its modules: an edge to the package is to what it holds
     state: dict[str, int] = {}
     cycles: list[list[str]] = []
@@ -150,12 +156,12 @@ def test_no_import_cycle():
 
 def test_no_private_name_crosses_a_module_boundary():
     crossing = [f"{m} takes {', '.join(n for n in names if n.startswith('_'))} from {t} (line {line})"
-                for m, found in IMPORTS.items() for t, line, names in found
+                for m, found in _imports().items() for t, line, names in found
                 if any(n.startswith("_") and not n.startswith("__") for n in names)]
     assert crossing == []
 
 
-@pytest.mark.parametrize("module", sorted(m for m in IMPORTS if m != "lpvest"))
+@pytest.mark.parametrize("module", sorted(m for m in _modules() if m != "lpvest"))
 def test_every_module_declares_its_public_names(module):
     path = ROOT.parent.joinpath(*module.split("."))
     path = path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
@@ -205,6 +211,21 @@ def test_the_costliest_test_files_run_first_and_each_listed_name_is_a_file():
     conftest.pytest_collection_modifyitems(None, None, items)
     assert [i.name for i in items] == ["test_native_hosts.py::3", "test_sweep.py::1", "test_sweep.py::4",
                                        "test_a.py::0", "test_a.py::2"]
+
+
+def test_every_blas_sensitive_test_is_in_a_file_the_second_kernel_run_collects(request):
+    """``./dev test`` reruns the blas_sensitive tests of the files that name the marker
+    (``grep -lw blas_sensitive tests/test_*.py``): a test marked another way (a hook, a
+    shared mark from another module) would silently miss the second kernel. Every
+    pytest process collects every test, so the session's items are all of them."""
+    marked = {item.path for item in request.session.items if item.get_closest_marker("blas_sensitive")}
+    if not marked:
+        pytest.skip("no blas_sensitive test collected with this one (run it with the suite)")
+    missed = [p.name for p in marked if p.parent != Path(__file__).parent or not p.name.startswith("test_")
+              or not re.search(r"\bblas_sensitive\b", p.read_text(encoding="utf-8"))]
+    assert missed == []
+    dev = (Path(__file__).parent.parent / "dev").read_text(encoding="utf-8")
+    assert "grep -lw blas_sensitive tests/test_*.py" in dev
 
 
 def test_xdist_hands_out_the_files_in_collection_order_with_the_dev_scripts_options(tmp_path):
