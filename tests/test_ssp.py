@@ -145,12 +145,17 @@ def test_components_sharing_an_fmu_carry_it_once_and_bad_systems_are_not_written
     assert not (tmp_path / "bad.ssp").exists()
 
 
-def test_fmpy_ignores_the_bindings_and_the_step_unless_told(fmus, ssp):
+def test_fmpy_ignores_the_bindings_and_the_step_unless_told(fmus, ssp, tmp_path, monkeypatch):
     """fmpy.ssp.simulate_ssp as is: the SSD's parameter values are not applied
     (the scheduler runs with its default omega = 0.25, phase = 0; the plant and
-    filter keep their sample time 1), and the step is whatever the caller passes."""
+    filter keep their sample time 1), and the step is whatever the caller passes.
+    (Its failing run leaves its extractions: into this test's folder.)"""
+    import tempfile
+
     from fmpy.fmi1 import FMICallException
     from fmpy.ssp.simulation import simulate_ssp as fmpy_simulate_ssp
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
 
     res = fmpy_simulate_ssp(str(ssp), stop_time=4.0 - 0.25, step_size=1.0)
     t_after = np.arange(4) + 1.0  # fmpy reads the outputs after each step
@@ -720,6 +725,39 @@ def test_enumerations_in_the_file_and_what_each_importer_makes_of_them(foreign_f
     with pytest.raises(CoSimulationError, match=rf"^{path}: fmpy's simulate_ssp failed: FMICallException: "
                                                 r"fmi2SetInteger failed with status 3 \(error\)\.$"):
         simulate_ssp(path, importer="fmpy")
+
+
+def test_a_failing_fmpy_run_leaves_no_extracted_file_or_fmu(foreign_fmus, tmp_path, monkeypatch):
+    """fmpy's simulate_ssp removes its extractions of the file and of each FMU only when the
+    run succeeds: the failing run of the test above left three folders in the temporary
+    folder every time (two FMUs and the file). lpvest removes what a failed run left;
+    a run on another thread is not touched."""
+    import tempfile
+    import threading
+
+    comps = [Component("a", foreign_fmus["AllTypes"], {"floor_level": "high"}),
+             Component("b", foreign_fmus["AllTypes"])]
+    path = write_ssp(tmp_path / "enum.ssp", comps, ["a.enum_out -> b.enum_in"], step_size=FH, stop_time=FN * FH)
+    _rewrite_ssd(path, _keep_connectors({"a": ["enum_out"], "b": ["enum_in", "enum_out"]}))
+    ok = write_ssp(tmp_path / "ok.ssp", comps[:1], [], step_size=FH, stop_time=FN * FH)
+    _rewrite_ssd(ok, _keep_connectors({"a": ["enum_out"]}))
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
+    for _ in range(2):
+        with pytest.raises(CoSimulationError, match="fmpy's simulate_ssp failed: FMICallException"):
+            simulate_ssp(path, importer="fmpy")
+        assert sorted(os.listdir(scratch)) == []
+    assert simulate_ssp(ok, importer="fmpy").shape == (FN,)
+    assert sorted(os.listdir(scratch)) == []
+    # fmpy's extract outside lpvest's call (another thread, plain fmpy) keeps what it made
+    import fmpy.ssp.simulation
+
+    made = []
+    thread = threading.Thread(target=lambda: made.append(fmpy.ssp.simulation.extract(ok)))
+    thread.start()
+    thread.join()
+    assert [os.path.basename(str(made[0]))] == os.listdir(scratch)
 
 
 def _add_connector(component, name, kind, typ):

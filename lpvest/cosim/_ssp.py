@@ -93,17 +93,21 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
 import textwrap
+import threading
 import urllib.parse
 import xml.etree.ElementTree as ET
 import zipfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import ModuleType
 from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
@@ -705,7 +709,9 @@ def simulate_ssp(
         An SSP file (e.g. from :func:`write_ssp`).
     importer : {"fmpy", "libcosim"}
         ``"fmpy"``: ``fmpy.ssp.simulate_ssp`` in this process, given the
-        file's step size and parameter values (it reads neither itself).
+        file's step size and parameter values (it reads neither itself);
+        the folders it extracts the file and the FMUs into are removed when
+        the run fails too (fmpy removes them only after a run that succeeds).
         ``"libcosim"``: ``libcosimpy`` (the ``test`` extra) in a subprocess
         (libcosim keeps the FMUs' libraries loaded), configured by the file
         alone (``CosimExecution.from_ssp_file`` without a step size, so the
@@ -849,10 +855,44 @@ def _item_value(path: Path, comp: str, variable: FmpyModelDescription, text: str
     return items[text]
 
 
+#: The folders fmpy's ``extract`` made for the calling thread inside :func:`_run_fmpy` (see :func:`_fmpy_ssp`).
+_FMPY_EXTRACTIONS = threading.local()
+_FMPY_WRAP_LOCK = threading.Lock()
+_fmpy_recording_extract: Callable[..., object] | None = None  # the wrapper _fmpy_ssp installed
+
+
+def _fmpy_ssp() -> ModuleType:
+    """``fmpy.ssp.simulation``, its ``extract`` wrapped once per process to record the
+    temporary folders it makes while :func:`_run_fmpy` runs on the calling thread.
+    fmpy's ``simulate_ssp`` removes the SSP's and the FMUs' extractions only when a
+    run succeeds: a failing run (an FMU's error status, a bad value) left them in
+    the temporary folder, one per FMU and one for the file, every time. The wrapper
+    changes nothing else: same arguments, same folder, same result; another
+    thread's calls, or calls outside :func:`_run_fmpy`, are not recorded."""
+    global _fmpy_recording_extract
+    import fmpy.ssp.simulation as simulation
+
+    with _FMPY_WRAP_LOCK:
+        if simulation.extract is not _fmpy_recording_extract:
+            original = simulation.extract
+
+            def extract(filename: str | os.PathLike[str], unzipdir: str | os.PathLike[str] | None = None,
+                        include: Callable[[str], bool] | None = None) -> object:
+                folder = original(filename, unzipdir, include)
+                made = getattr(_FMPY_EXTRACTIONS, "made", None)
+                if made is not None and unzipdir is None:
+                    made.append(folder)
+                return folder
+
+            simulation.extract = _fmpy_recording_extract = extract
+    return simulation
+
+
 def _run_fmpy(path: Path, system: SspSystem, variables: dict[str, dict[str, FmpyModelDescription]],
               n_steps: int) -> dict[str, np.ndarray]:
-    from fmpy.ssp.simulation import simulate_ssp as fmpy_simulate
     from fmpy.ssp.ssd import Parameter, ParameterSet
+
+    fmpy_simulate = _fmpy_ssp().simulate_ssp
 
     params = []
     for comp, values in system.parameters.items():
@@ -873,12 +913,18 @@ def _run_fmpy(path: Path, system: SspSystem, variables: dict[str, dict[str, Fmpy
     assert h is not None
     # fmpy steps while time < stop_time with time += h: stop half a step early
     # so that exactly n_steps are taken whatever the round-off
+    made: list[object] = []  # fmpy's folders (a Path in fmpy 0.3.2x)
+    _FMPY_EXTRACTIONS.made = made
     try:
         res = fmpy_simulate(str(path), start_time=t0, stop_time=t0 + (n_steps - 0.5) * h, step_size=h,
                             parameter_set=ParameterSet(parameters=params) if params else None)
     except Exception as exc:  # fmpy raises plain exceptions (an FMU's error status, a file it cannot read)
         text = shorten(" ".join(str(exc).split()), 120)
         raise CoSimulationError(f"{path}: fmpy's simulate_ssp failed: {type(exc).__name__}: {text}") from exc
+    finally:
+        _FMPY_EXTRACTIONS.made = None
+        for folder in made:  # what a failed run left (a finished one removed its own)
+            shutil.rmtree(str(folder), ignore_errors=True)
     if res.shape[0] != n_steps:
         raise CoSimulationError(f"fmpy took {res.shape[0]} steps; expected {n_steps}")
     return {n: np.asarray(res[n], dtype=float) for n in res.dtype.names if n != "time"}
