@@ -286,3 +286,39 @@ def test_the_cpu_timeline_plugin_records_each_test_and_reports_per_file(tmp_path
     lines = report(tmp_path / "tl")
     files = lines[lines.index("per file, costliest first:") + 1:][:2]
     assert files[0].endswith("test_busy.py") and files[1].endswith("test_idle.py"), lines
+
+
+# -- the lazy contracts of lpvest/__init__.py and core/__init__.py (core/_lazy.py) --
+@pytest.mark.parametrize("package", ["lpvest", "lpvest.core"])
+def test_a_lazy_init_exports_exactly_its_type_checking_block(package):
+    import importlib
+
+    from lpvest.core._lazy import exported_names
+
+    module = importlib.import_module(package)
+    table = exported_names(package, Path(module.__file__).read_text(encoding="utf-8"))
+    # one list: the block is __all__ (but the version, imported at once)
+    assert sorted(table) == sorted(n for n in module.__all__ if n != "__version__")
+    for name, (home, attr) in table.items():
+        assert getattr(module, name) is getattr(importlib.import_module(home), attr), name
+    assert set(module.__all__) <= set(dir(module))
+    with pytest.raises(AttributeError, match=f"module '{package}' has no attribute 'not_a_name'"):
+        module.not_a_name  # noqa: B018 - the attribute access is the test
+
+
+def test_importing_the_command_line_imports_no_other_lpvest_package():
+    """``import lpvest.cli`` (every ``lpvest`` command starts with it) loads the package's
+    lazy ``__init__`` files and the two modules the command line needs before it parses its
+    arguments: no model, co-simulation or design code. A subpackage is still an attribute."""
+    import subprocess
+    import sys
+
+    code = ("import sys, lpvest.cli\n"
+            "print(sorted(m for m in sys.modules if m.startswith('lpvest')))\n"
+            "import lpvest\n"
+            "print(lpvest.cosim.__name__, 'lpvest.cosim' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         timeout=60).stdout.splitlines()
+    assert out[0] == str(["lpvest", "lpvest._version", "lpvest.cli", "lpvest.core", "lpvest.core._errors",
+                          "lpvest.core._interrupt", "lpvest.core._lazy"]), out[0]
+    assert out[1] == "lpvest.cosim True"

@@ -23,148 +23,154 @@ Examples
 
 from __future__ import annotations
 
-# the exception family: every deliberate error derives from LpvestError; message helpers
-# isort: split
-from ._errors import (
-    MESSAGE_LIMIT as MESSAGE_LIMIT,
-    ArgumentError as ArgumentError,
-    ArgumentTypeError as ArgumentTypeError,
-    DimensionError as DimensionError,
-    ExpressionError as ExpressionError,
-    IdentifiabilityError as IdentifiabilityError,
-    InternalError as InternalError,
-    LMIInfeasibleError as LMIInfeasibleError,
-    LpvestError as LpvestError,
-    ModelFileError as ModelFileError,
-    NonFiniteError as NonFiniteError,
-    NotPositiveDefiniteError as NotPositiveDefiniteError,
-    NumericalError as NumericalError,
-    OutputError as OutputError,
-    SamplingError as SamplingError,
-    SchedulingRangeError as SchedulingRangeError,
-    abbreviate as abbreviate,
-    one_line as one_line,
-    shorten as shorten,
-)
+from typing import TYPE_CHECKING
 
-# SIGINT/SIGTERM handling: interruptible regions, holds, exit statuses
-# isort: split
-from ._interrupt import (
-    Interrupted as Interrupted,
-    abandoned_calls as abandoned_calls,
-    call_interruptibly as call_interruptibly,
-    exit_status as exit_status,
-    handling_signals as handling_signals,
-    hold as hold,
-    holds as holds,
-    interruptible as interruptible,
-    raise_if_pending as raise_if_pending,
-)
+from ._lazy import lazy_exports
 
-# small dense helpers: matrix stacks evaluated at weights, batched transposes
-# isort: split
-from ._linalg import (
-    MatrixStack as MatrixStack,
-    mT as mT,
-    sym as sym,
-)
+# the public names: imported on first use (lazy_exports reads this block), seen by type checkers
+if TYPE_CHECKING:
+    # the exception family: every deliberate error derives from LpvestError; message helpers
+    # isort: split
+    from ._errors import (
+        MESSAGE_LIMIT as MESSAGE_LIMIT,
+        ArgumentError as ArgumentError,
+        ArgumentTypeError as ArgumentTypeError,
+        DimensionError as DimensionError,
+        ExpressionError as ExpressionError,
+        IdentifiabilityError as IdentifiabilityError,
+        InternalError as InternalError,
+        LMIInfeasibleError as LMIInfeasibleError,
+        LpvestError as LpvestError,
+        ModelFileError as ModelFileError,
+        NonFiniteError as NonFiniteError,
+        NotPositiveDefiniteError as NotPositiveDefiniteError,
+        NumericalError as NumericalError,
+        OutputError as OutputError,
+        SamplingError as SamplingError,
+        SchedulingRangeError as SchedulingRangeError,
+        abbreviate as abbreviate,
+        one_line as one_line,
+        shorten as shorten,
+    )
 
-# the one validation module of every public entry point
-# isort: split
-from ._validation import (
-    SIMPLEX_ATOL as SIMPLEX_ATOL,
-    SYMMETRY_RTOL as SYMMETRY_RTOL,
-    as_float_array as as_float_array,
-    as_matrix as as_matrix,
-    as_rng as as_rng,
-    as_signal as as_signal,
-    as_vector as as_vector,
-    check_box as check_box,
-    check_finite as check_finite,
-    check_positive_definite as check_positive_definite,
-    check_simplex as check_simplex,
-    check_symmetric as check_symmetric,
-)
+    # SIGINT/SIGTERM handling: interruptible regions, holds, exit statuses
+    # isort: split
+    from ._interrupt import (
+        Interrupted as Interrupted,
+        abandoned_calls as abandoned_calls,
+        call_interruptibly as call_interruptibly,
+        exit_status as exit_status,
+        handling_signals as handling_signals,
+        hold as hold,
+        holds as holds,
+        interruptible as interruptible,
+        raise_if_pending as raise_if_pending,
+    )
 
-# the TOML reader of model, co-simulation and sweep files
-# isort: split
-from ._toml import (
-    describe_value as describe_value,
-    parse_toml as parse_toml,
-    read_toml as read_toml,
-)
+    # small dense helpers: matrix stacks evaluated at weights, batched transposes
+    # isort: split
+    from ._linalg import (
+        MatrixStack as MatrixStack,
+        mT as mT,
+        sym as sym,
+    )
 
-# the random generator both backends implement bit for bit
-# isort: split
-from ._rng import (
-    Stream as Stream,
-    as_stream as as_stream,
-    log as log,
-    lower_times as lower_times,
-    normal_quantile as normal_quantile,
-    normals_from_raw as normals_from_raw,
-    psd_cholesky as psd_cholesky,
-    uniforms_from_raw as uniforms_from_raw,
-)
+    # the one validation module of every public entry point
+    # isort: split
+    from ._validation import (
+        SIMPLEX_ATOL as SIMPLEX_ATOL,
+        SYMMETRY_RTOL as SYMMETRY_RTOL,
+        as_float_array as as_float_array,
+        as_matrix as as_matrix,
+        as_rng as as_rng,
+        as_signal as as_signal,
+        as_vector as as_vector,
+        check_box as check_box,
+        check_finite as check_finite,
+        check_positive_definite as check_positive_definite,
+        check_simplex as check_simplex,
+        check_symmetric as check_symmetric,
+    )
 
-# the streaming protocol: ports, sampled and timed components
-# isort: split
-from ._protocol import (
-    Component as Component,
-    MeasurementDelay as MeasurementDelay,
-    Port as Port,
-    Sampled as Sampled,
-    Timed as Timed,
-    TimedComponent as TimedComponent,
-    input_key as input_key,
-    run_streaming as run_streaming,
-    whole_samples as whole_samples,
-)
+    # the TOML reader of model, co-simulation and sweep files
+    # isort: split
+    from ._toml import (
+        describe_value as describe_value,
+        parse_toml as parse_toml,
+        read_toml as read_toml,
+    )
 
-# formulas in model files: parsed, checked, evaluated, differentiated
-# isort: split
-from ._expressions import (
-    CONSTANTS as CONSTANTS,
-    FUNCTIONS as FUNCTIONS,
-    MAX_DERIVATIVE_SIZE as MAX_DERIVATIVE_SIZE,
-    MAX_FORMULA_DEPTH as MAX_FORMULA_DEPTH,
-    MAX_FORMULA_LENGTH as MAX_FORMULA_LENGTH,
-    Expression as Expression,
-    FormulaMatrix as FormulaMatrix,
-    FormulaVector as FormulaVector,
-    shift_name as shift_name,
-)
+    # the random generator both backends implement bit for bit
+    # isort: split
+    from ._rng import (
+        Stream as Stream,
+        as_stream as as_stream,
+        log as log,
+        lower_times as lower_times,
+        normal_quantile as normal_quantile,
+        normals_from_raw as normals_from_raw,
+        psd_cholesky as psd_cholesky,
+        uniforms_from_raw as uniforms_from_raw,
+    )
 
-# scheduling spaces and basis functions
-# isort: split
-from ._scheduling import (
-    BasisFunction as BasisFunction,
-    CallableBasis as CallableBasis,
-    FormulaBasis as FormulaBasis,
-    Monomial as Monomial,
-    SchedulingSpace as SchedulingSpace,
-    box_vertices as box_vertices,
-    parse_basis as parse_basis,
-)
+    # the streaming protocol: ports, sampled and timed components
+    # isort: split
+    from ._protocol import (
+        Component as Component,
+        MeasurementDelay as MeasurementDelay,
+        Port as Port,
+        Sampled as Sampled,
+        Timed as Timed,
+        TimedComponent as TimedComponent,
+        input_key as input_key,
+        run_streaming as run_streaming,
+        whole_samples as whole_samples,
+    )
 
-# signal generators: the scheduler and source components
-# isort: split
-from ._signals import (
-    SIGNAL_KINDS as SIGNAL_KINDS,
-    SchedulerComponent as SchedulerComponent,
-    SignalError as SignalError,
-    SignalGenerator as SignalGenerator,
-    SignalSpec as SignalSpec,
-    SourceComponent as SourceComponent,
-    parse_table as parse_table,
-    sample_signal as sample_signal,
-)
+    # formulas in model files: parsed, checked, evaluated, differentiated
+    # isort: split
+    from ._expressions import (
+        CONSTANTS as CONSTANTS,
+        FUNCTIONS as FUNCTIONS,
+        MAX_DERIVATIVE_SIZE as MAX_DERIVATIVE_SIZE,
+        MAX_FORMULA_DEPTH as MAX_FORMULA_DEPTH,
+        MAX_FORMULA_LENGTH as MAX_FORMULA_LENGTH,
+        Expression as Expression,
+        FormulaMatrix as FormulaMatrix,
+        FormulaVector as FormulaVector,
+        shift_name as shift_name,
+    )
 
-# how every lpvest figure is finished (matplotlib imported inside)
-# isort: split
-from ._plotting import (
-    save_figure as save_figure,
-)
+    # scheduling spaces and basis functions
+    # isort: split
+    from ._scheduling import (
+        BasisFunction as BasisFunction,
+        CallableBasis as CallableBasis,
+        FormulaBasis as FormulaBasis,
+        Monomial as Monomial,
+        SchedulingSpace as SchedulingSpace,
+        box_vertices as box_vertices,
+        parse_basis as parse_basis,
+    )
+
+    # signal generators: the scheduler and source components
+    # isort: split
+    from ._signals import (
+        SIGNAL_KINDS as SIGNAL_KINDS,
+        SchedulerComponent as SchedulerComponent,
+        SignalError as SignalError,
+        SignalGenerator as SignalGenerator,
+        SignalSpec as SignalSpec,
+        SourceComponent as SourceComponent,
+        parse_table as parse_table,
+        sample_signal as sample_signal,
+    )
+
+    # how every lpvest figure is finished (matplotlib imported inside)
+    # isort: split
+    from ._plotting import (
+        save_figure as save_figure,
+    )
 
 __all__ = [
     "LpvestError",
@@ -256,3 +262,5 @@ __all__ = [
     "parse_table",
     "save_figure",
 ]
+
+__getattr__, __dir__ = lazy_exports(__name__)
