@@ -22,10 +22,10 @@ is :mod:`lpvest.core`, FMUs are built by :mod:`lpvest.fmi`.
 from typing import TYPE_CHECKING
 
 from ._version import __version__ as __version__
-from .core._lazy import lazy_exports
+from .core._lazy import LOAD_EXPORTS, lazy_exports
 
-# the public names: imported on first use (lazy_exports reads this block), seen by type checkers
-if TYPE_CHECKING:
+# the public names: seen by type checkers; run on first use (core/_lazy.py)
+if TYPE_CHECKING or globals().get(LOAD_EXPORTS, False):
     # -- errors (every deliberate error derives from LpvestError) ------------------------
     from .core import (
         ArgumentError as ArgumentError,
@@ -150,6 +150,9 @@ if TYPE_CHECKING:
     # isort: split
     from .cosim._cosimfile import CoSimFile as CoSimFile, CoSimResult as CoSimResult, load_cosim as load_cosim
     from .cosim._ssp import read_ssp as read_ssp, simulate_ssp as simulate_ssp, write_ssp as write_ssp
+else:
+    __getattr__, __dir__ = lazy_exports(__name__)
+
 
 __all__ = [
     "__version__",
@@ -181,5 +184,3 @@ __all__ = [
     # co-simulation files and SSP
     "load_cosim", "CoSimFile", "CoSimResult", "read_ssp", "write_ssp", "simulate_ssp",
 ]
-
-__getattr__, __dir__ = lazy_exports(__name__)

@@ -25,10 +25,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from ._lazy import lazy_exports
+from ._lazy import LOAD_EXPORTS, lazy_exports
 
-# the public names: imported on first use (lazy_exports reads this block), seen by type checkers
-if TYPE_CHECKING:
+# the public names: seen by type checkers; run on first use (core/_lazy.py)
+if TYPE_CHECKING or globals().get(LOAD_EXPORTS, False):
     # the exception family: every deliberate error derives from LpvestError; message helpers
     # isort: split
     from ._errors import (
@@ -171,6 +171,9 @@ if TYPE_CHECKING:
     from ._plotting import (
         save_figure as save_figure,
     )
+else:
+    __getattr__, __dir__ = lazy_exports(__name__)
+
 
 __all__ = [
     "LpvestError",
@@ -262,5 +265,3 @@ __all__ = [
     "parse_table",
     "save_figure",
 ]
-
-__getattr__, __dir__ = lazy_exports(__name__)
