@@ -12,6 +12,21 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(20261121)
 
 
+@pytest.fixture(autouse=True)
+def _fresh_bundle_caches_for_mutants() -> None:
+    """Under mutation testing (``./dev mutate``: mutmut sets ``MUTANT_UNDER_TEST``), the
+    bundler's per-process caches start empty for each test: mutmut forks each mutant's tests
+    from a process that already ran them, whose caches hold what the unmutated functions
+    computed, and would hide a mutant of ``_find_imports`` or ``_find_import_spans``."""
+    import os
+
+    if os.environ.get("MUTANT_UNDER_TEST"):
+        from lpvest.fmi import _bundle
+
+        _bundle._imports.cache_clear()
+        _bundle._import_spans.cache_clear()
+
+
 from hypothesis import HealthCheck, Phase, settings  # noqa: E402
 
 # the FMU sets, built once per session (tests/conftest_fmu.py)

@@ -206,16 +206,20 @@ def _module_level_nodes(tree: ast.Module) -> set[int]:
     return found
 
 
-@functools.cache
-def _imports(text: str, filename: str) -> tuple[tuple[ast.Import | ast.ImportFrom, bool], ...]:
+def _find_imports(text: str, filename: str) -> tuple[tuple[ast.Import | ast.ImportFrom, bool], ...]:
     """The import statements of a module's source, in ``ast.walk`` order, each
-    with whether it runs when the module is imported. Kept per source text for
-    the process: every FMU of a build or of a cache check carries most of the
-    same modules, and parsing them again for each was most of the time of
-    fingerprinting the experiments' 23 FMUs (6 s of CPU)."""
+    with whether it runs when the module is imported (kept per source text by
+    :func:`_imports`)."""
     tree = ast.parse(text, filename)
     eager = _module_level_nodes(tree)
     return tuple((node, id(node) in eager) for node in ast.walk(tree) if isinstance(node, ast.Import | ast.ImportFrom))
+
+
+#: :func:`_find_imports` kept per source text for the process: every FMU of a build or of a
+#: cache check carries most of the same modules, and parsing them again for each was most of
+#: the time of fingerprinting the experiments' 23 FMUs (6 s of CPU). Wrapped by assignment,
+#: not decorated: mutation testing (mutmut) leaves decorated functions out.
+_imports = functools.cache(_find_imports)
 
 
 @dataclass
@@ -290,14 +294,11 @@ def _rewrite(module: _Module, roots: Sequence[SourceRoot], package: str) -> str:
     return "".join(lines)
 
 
-@functools.lru_cache(maxsize=1024)
-def _import_spans(text: str, filename: str, roots: tuple[SourceRoot, ...]) -> tuple[tuple[int, int, int, str], ...]:
+def _find_import_spans(text: str, filename: str,
+                       roots: tuple[SourceRoot, ...]) -> tuple[tuple[int, int, int, str], ...]:
     """Where a module's source names a carried module in an absolute import:
-    ``(line, start column, end column, dotted name)``, in source order. Kept per
-    source text for the process, as :func:`_imports` is: the spans do not depend
-    on the FMU's private package name, and tokenizing every carried module again
-    for each FMU was half the time of bundling one (every fingerprint of the FMU
-    cache bundles)."""
+    ``(line, start column, end column, dotted name)``, in source order (kept per
+    source text by :func:`_import_spans`)."""
     starts: set[tuple[int, int]] = set()  # (line, column) of each import statement to rewrite
     for node, _ in _imports(text, filename):
         if isinstance(node, ast.ImportFrom) and not node.level and node.module:
@@ -347,6 +348,13 @@ def _import_spans(text: str, filename: str, roots: tuple[SourceRoot, ...]) -> tu
             continue
         i += 1
     return tuple(sorted(spans))
+
+
+#: :func:`_find_import_spans` kept per source text for the process, as :func:`_imports` is: the
+#: spans do not depend on the FMU's private package name, and tokenizing every carried module
+#: again for each FMU was half the time of bundling one (every fingerprint of the FMU cache
+#: bundles). Wrapped by assignment for mutation testing, as :func:`_imports` is.
+_import_spans = functools.lru_cache(maxsize=1024)(_find_import_spans)
 
 
 # -- the entry module ------------------------------------------------------------------
