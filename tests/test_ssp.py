@@ -750,6 +750,19 @@ def test_a_failing_fmpy_run_leaves_no_extracted_file_or_fmu(foreign_fmus, tmp_pa
         assert sorted(os.listdir(scratch)) == []
     assert simulate_ssp(ok, importer="fmpy").shape == (FN,)
     assert sorted(os.listdir(scratch)) == []
+    # a run inside another on this thread (an FMU whose step runs an SSP file) hands the
+    # recording back to the outer run, with the outer run's folders untouched
+    from lpvest.cosim import _ssp
+
+    outer = ["the outer run's folder"]
+    _ssp._FMPY_EXTRACTIONS.made = outer
+    try:
+        with pytest.raises(CoSimulationError, match="fmpy's simulate_ssp failed"):
+            simulate_ssp(path, importer="fmpy")
+        assert _ssp._FMPY_EXTRACTIONS.made is outer and outer == ["the outer run's folder"]
+    finally:
+        _ssp._FMPY_EXTRACTIONS.made = None
+    assert sorted(os.listdir(scratch)) == []
     # fmpy's extract outside lpvest's call (another thread, plain fmpy) keeps what it made
     import fmpy.ssp.simulation
 

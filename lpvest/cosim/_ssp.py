@@ -93,7 +93,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import re
 import shutil
 import subprocess
@@ -873,14 +872,13 @@ def _fmpy_ssp() -> ModuleType:
     import fmpy.ssp.simulation as simulation
 
     with _FMPY_WRAP_LOCK:
-        if simulation.extract is not _fmpy_recording_extract:
-            original = simulation.extract
-
-            def extract(filename: str | os.PathLike[str], unzipdir: str | os.PathLike[str] | None = None,
-                        include: Callable[[str], bool] | None = None) -> object:
-                folder = original(filename, unzipdir, include)
+        original = getattr(simulation, "extract", None)
+        if original is not None and original is not _fmpy_recording_extract:
+            # any signature: a folder of its own is one fmpy asked for without unzipdir
+            def extract(*args: object, **kwargs: object) -> object:
+                folder = original(*args, **kwargs)
                 made = getattr(_FMPY_EXTRACTIONS, "made", None)
-                if made is not None and unzipdir is None:
+                if made is not None and len(args) < 2 and kwargs.get("unzipdir") is None:
                     made.append(folder)
                 return folder
 
@@ -914,6 +912,7 @@ def _run_fmpy(path: Path, system: SspSystem, variables: dict[str, dict[str, Fmpy
     # fmpy steps while time < stop_time with time += h: stop half a step early
     # so that exactly n_steps are taken whatever the round-off
     made: list[object] = []  # fmpy's folders (a Path in fmpy 0.3.2x)
+    outer = getattr(_FMPY_EXTRACTIONS, "made", None)  # a run on this thread around this one (an FMU's step)
     _FMPY_EXTRACTIONS.made = made
     try:
         res = fmpy_simulate(str(path), start_time=t0, stop_time=t0 + (n_steps - 0.5) * h, step_size=h,
@@ -922,7 +921,7 @@ def _run_fmpy(path: Path, system: SspSystem, variables: dict[str, dict[str, Fmpy
         text = shorten(" ".join(str(exc).split()), 120)
         raise CoSimulationError(f"{path}: fmpy's simulate_ssp failed: {type(exc).__name__}: {text}") from exc
     finally:
-        _FMPY_EXTRACTIONS.made = None
+        _FMPY_EXTRACTIONS.made = outer
         for folder in made:  # what a failed run left (a finished one removed its own)
             shutil.rmtree(str(folder), ignore_errors=True)
     if res.shape[0] != n_steps:
