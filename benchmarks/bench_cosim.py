@@ -83,6 +83,8 @@ RECORD = ["sched.p", "src.w", "plant.y", "plant.z", "filter.zhat", "filter.xf"]
 
 
 def fmu_paths(folder: Path, backend: str = "pythonfmu") -> dict[str, Path]:
+    # absolute: libcosim's run names each FMU by a file URI, which a relative path cannot be
+    folder = folder.resolve()
     paths = {role: folder / f"PeixotoEx1{role}.fmu" for role in ROLES}
     if not all(p.is_file() for p in paths.values()):
         from lpvest.fmi._build import build_fmus
