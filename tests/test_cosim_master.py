@@ -369,6 +369,18 @@ def test_a_failure_while_instantiating_frees_what_was_made(fmus):
         ("src", "terminate"), ("src", "freeInstance")]
 
 
+def test_the_hint_names_a_matrix_by_its_base_name_as_a_vector():
+    """The hint of a name not found reads elements as the master reads them (_expand):
+    ``P[1,2]`` is an element of ``P`` as ``xhat[1]`` is one of ``xhat``."""
+    from lpvest.cosim._master import _Var, _variable_hint
+
+    names = ["xhat[1]", "xhat[2]", "P[1,1]", "P[1,2]", "P[2,1]", "P[2,2]", "loglik"]
+    outputs = {n: _Var(0, n, vr, "Real", "output") for vr, n in enumerate(names)}
+    assert _variable_hint("qqqqq", outputs, "connection source") == " (outputs: P, loglik, xhat)"
+    assert _variable_hint("PP", outputs, "connection source") == "; did you mean 'P'?"
+    assert _variable_hint("xhatt", outputs, "connection source") == "; did you mean 'xhat'?"
+
+
 def test_set_up_errors_name_the_connection_or_component(fmus, tmp_path):
     comps = [Component("src", fmus["src"]), Component("gain", fmus["gain"])]
     cases = [

@@ -316,11 +316,15 @@ def _model_description(path: Path, component: str, where: str) -> FmpyModelDescr
     return _DESCRIPTIONS[key]
 
 
+#: The index of an element of a vector or matrix variable, ``[2]`` or ``[1,2]``, at the end of its name.
+_ELEMENT_INDEX = r"\[(\d+(?:,\d+)*)\]$"
+
+
 def _expand(names: Iterable[str], base: str) -> list[str]:
     """Elements of a vector/matrix variable ``base`` in index order, or ``[base]``."""
     if base in names:
         return [base]
-    pat = re.compile(re.escape(base) + r"\[(\d+(?:,\d+)*)\]$")
+    pat = re.compile(re.escape(base) + _ELEMENT_INDEX)
     found = []
     for n in names:
         m = pat.match(n)
@@ -377,12 +381,13 @@ _HINT_LISTS: dict[str, tuple[str, tuple[str, ...]]] = {
 
 def _variable_hint(name: str, variables: Mapping[str, _Var], asked: str) -> str:
     """What follows "has no variable NAME" in a message: the closest of the FMU's
-    variables (a vector by its base name, ``w`` for ``w[1]``) when one is close
-    (``; did you mean 'y'?``), else those of the kind ``asked`` for (a
-    connection's source: the outputs; its target: the inputs; a start value: the
-    parameters and inputs; a recorded variable: any): `` (outputs: w, y)``."""
+    variables (a vector or matrix by its base name, ``w`` for ``w[1]``, ``P`` for
+    ``P[1,2]``, as :func:`_expand` reads them) when one is close (``; did you mean
+    'y'?``), else those of the kind ``asked`` for (a connection's source: the
+    outputs; its target: the inputs; a start value: the parameters and inputs; a
+    recorded variable: any): `` (outputs: w, y)``."""
     def base(n: str) -> str:
-        return re.sub(r"\[\d+\]$", "", n)
+        return re.sub(_ELEMENT_INDEX, "", n)
 
     close = close_match(name, sorted({base(n) for n in variables}))
     if close is not None:
