@@ -309,8 +309,8 @@ _LAZY_CHECK = """
 import importlib, json, sys
 package = importlib.import_module(sys.argv[1])
 before = sorted(m for m in sys.modules if m.startswith("lpvest"))
-names = {name: getattr(package, name).__module__ if hasattr(getattr(package, name), "__module__") else None
-         for name in package.__all__}
+for name in package.__all__:  # every public name used: the first use runs the block
+    getattr(package, name)
 heavy = sorted(m for m in ("scipy", "cvxpy", "matplotlib", "fmpy", "dask", "pythonfmu") if m in sys.modules)
 print(json.dumps({"before": before, "dir": dir(package), "heavy": heavy,
                   "cosim": vars(sys.modules["lpvest"]).get("cosim") is not None}))
