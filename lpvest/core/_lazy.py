@@ -60,11 +60,12 @@ def lazy_exports(package: str) -> tuple[Callable[[str], object], Callable[[], li
     """
     module = sys.modules[package]
     lock = threading.RLock()
-    done: list[bool] = []
+    loaded = False
 
     def load() -> None:
+        nonlocal loaded
         with lock:
-            if done:
+            if loaded:
                 return
             spec = module.__spec__
             get_code = getattr(spec.loader, "get_code", None) if spec is not None else None
@@ -77,7 +78,7 @@ def lazy_exports(package: str) -> tuple[Callable[[str], object], Callable[[], li
             for name, value in namespace.items():
                 if not name.startswith("__") and name != LOAD_EXPORTS and name not in vars(module):
                     setattr(module, name, value)
-            done.append(True)
+            loaded = True
 
     def __getattr__(name: str) -> object:
         if not name.startswith("__"):  # dunder probes (__path__, copy and pickle hooks) are not names
