@@ -568,6 +568,40 @@ def test_a_model_parameter_is_an_fmu_parameter_that_changes_the_plant(resources)
     assert not np.array_equal(default.simulate(default.alpha_batch(p[:, None]), paper_w(k + 10)[:, None]).y, ref.y)
 
 
+def test_the_instances_of_an_fmu_share_its_loaded_model_file_until_it_or_rho_changes(tmp_path, monkeypatch):
+    """fmi2Reset runs the slave's constructor again (a sweep resets the same instances for each
+    task): the model file is read and parsed once per process for the same bytes and model
+    parameter values, the model built once from it; another rho, or an edited file, loads again."""
+    import lpvest.fmi._slave as slave_module
+    import lpvest.systems._modelfile as modelfile
+
+    folder = write_resources("peixoto-ex2", "Plant", tmp_path / "res")
+    loads: list[dict[str, float]] = []
+    real_load = modelfile.load_system
+
+    def counted(path, parameters=None):
+        loads.append(dict(parameters or {}))
+        return real_load(path, parameters=parameters)
+
+    monkeypatch.setattr(modelfile, "load_system", counted)
+    first = Slave(folder)  # the declarations: the file's values; the initialization: the parameters'
+    assert first.initialize() == [] and loads == [{}, {"rho": 1.0}]
+    again = Slave(folder)  # what fmi2Reset does: the constructor once more
+    assert again.initialize() == [] and loads == [{}, {"rho": 1.0}]
+    assert again.slave.model({"rho": 1.0}) is first.slave.model({"rho": 1.0, "seed": 3})
+    assert again.slave.model() is first.slave.model({"seed": 3})
+    rho = Slave(folder)
+    assert rho.initialize(rho=13.0) == [] and loads == [{}, {"rho": 1.0}, {"rho": 13.0}]
+    assert rho.slave.model({"rho": 13.0}) is not first.slave.model({"rho": 1.0})
+    assert rho.slave.system({"rho": 13.0}).parameters["rho"] == 13.0
+    model_file = folder / "model.toml"
+    model_file.write_text(model_file.read_text() + "\n# edited\n")
+    assert Slave(folder).initialize() == [] and loads == [{}, {"rho": 1.0}, {"rho": 13.0}, {}, {"rho": 1.0}]
+    for value in range(1, 12):  # a host with instances at many values keeps the last few
+        assert Slave(folder).initialize(rho=float(value)) == []
+    assert len(slave_module._LOADED) == slave_module._LOADED_MAX
+
+
 def test_a_restored_state_tells_the_status_bridge_its_time(resources):
     """fmi2GetRealStatus(fmi2LastSuccessfulTime) after fmi2SetFMUstate is the restored time: the
     slave states it in a message of the category the status bridge consumes (status_bridge.c)."""

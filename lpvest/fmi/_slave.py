@@ -53,8 +53,11 @@ their submodules so that the FMU can carry them too.
 
 from __future__ import annotations
 
+import hashlib
 import math
+import threading
 import weakref
+from collections import OrderedDict
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
@@ -99,6 +102,39 @@ except ImportError:  # pragma: no cover - numpy 1.x: np.errstate
 #: of time): far from 0 the fraction of ``|t|`` would exceed a sample, and a step of
 #: several samples must not hide a skipped one.
 _TIME_RTOL = 1e-9
+
+
+#: The model files this FMU's instances loaded in this process, the last few: (the file, the
+#: digest of its bytes, the model parameter values) -> (the loaded system, {model key: model}).
+#: fmi2Reset runs the slave's constructor again (a sweep resets the same instances for each
+#: task), and each construction and each parameter set asked for the system and its model:
+#: parsing the file and building the model again took half of a 20-step task. A loaded system
+#: and its models are immutable (frozen, their arrays read-only), so the instances of one FMU
+#: can share them; the key holds the file's bytes, so an edited file is read anew.
+_LOADED: OrderedDict[tuple[str, bytes, tuple[tuple[str, float], ...]], tuple[SystemFile, dict[str, Model]]] = \
+    OrderedDict()
+_LOADED_LOCK = threading.Lock()  # hosts step the instances of a co-simulation on threads of their own
+#: How many loaded files are kept (a host with instances at several values of ``rho`` keeps them all).
+_LOADED_MAX = 8
+
+
+def _loaded(path: Path, values: tuple[tuple[str, float], ...]) -> tuple[SystemFile, dict[str, Model]]:
+    """The system file at ``path`` loaded with the model parameters ``values``, and the
+    models built from it so far: from :data:`_LOADED` when it holds the same file's bytes."""
+    from ..systems._modelfile import load_system
+
+    key = (str(path), hashlib.sha256(path.read_bytes()).digest(), values)
+    with _LOADED_LOCK:
+        found = _LOADED.get(key)
+        if found is not None:
+            _LOADED.move_to_end(key)
+            return found
+    found = (load_system(path, parameters=dict(values)), {})
+    with _LOADED_LOCK:
+        _LOADED[key] = found
+        while len(_LOADED) > _LOADED_MAX:
+            _LOADED.popitem(last=False)
+    return found
 
 
 def _num(value: float) -> str:
@@ -170,22 +206,22 @@ class LpvestSlave(Fmi2Slave):
     # -- helpers for role scripts ------------------------------------------------------
     def system(self, params: Mapping[str, Any] | None = None) -> SystemFile:
         """The system file carried in ``resources/``, loaded with the model
-        parameters among ``params`` (e.g. ``rho``)."""
-        from ..systems._modelfile import load_system
-
-        path = Path(self.resources) / self.spec["model_file"]
-        names = self.spec.get("model_parameters", [])
-        values = {n: float(params[n]) for n in names if params is not None and n in params}
-        return load_system(path, parameters=values)
+        parameters among ``params`` (e.g. ``rho``; without them, at the file's values)."""
+        return self._loaded(params)[0]
 
     def model(self, params: Mapping[str, Any] | None = None) -> Model:
-        """The model this FMU was built for (see :meth:`system`); without
-        ``params``, the model at the file's parameter values (loaded once)."""
-        if params is None:
-            if getattr(self, "_default_model", None) is None:
-                self._default_model = self.system().model(self.spec["model_key"])
-            return self._default_model
-        return self.system(params).model(self.spec["model_key"])
+        """The model this FMU was built for (see :meth:`system`), built once per
+        loaded system."""
+        system, models = self._loaded(params)
+        key = self.spec["model_key"]
+        if key not in models:
+            models[key] = system.model(key)
+        return models[key]
+
+    def _loaded(self, params: Mapping[str, Any] | None) -> tuple[SystemFile, dict[str, Model]]:
+        names = self.spec.get("model_parameters", [])
+        values = tuple((n, float(params[n])) for n in names if params is not None and n in params)
+        return _loaded(Path(self.resources) / self.spec["model_file"], values)
 
     def model_parameters(self) -> list[Parameter]:
         """The model file's ``[parameters]`` as FMU parameters."""
