@@ -990,7 +990,8 @@ def write_zip_entry(z: zipfile.ZipFile, name: str, data: bytes, executable: bool
     """Write ``data`` as the member ``name`` of ``z`` so that the archive
     depends on nothing but the members and their order: a fixed time stamp
     (1980-01-01), Unix permissions 0644 (0755 when ``executable``), deflate at
-    level 9. The FMU builder and the SSP writer
+    level 6, zlib's default (level 9 made an FMU 0.4 % smaller for two and a half
+    times the time: 0.1 s of each FMU build, most of it in the binaries). The FMU builder and the SSP writer
     (:func:`lpvest.cosim.write_ssp`) write every member so.
 
     Parameters
@@ -1008,7 +1009,7 @@ def write_zip_entry(z: zipfile.ZipFile, name: str, data: bytes, executable: bool
     info.compress_type = zipfile.ZIP_DEFLATED
     info.create_system = 3  # Unix: the permissions below are honoured
     info.external_attr = (0o755 if executable else 0o644) << 16
-    z.writestr(info, data, compresslevel=9)
+    z.writestr(info, data, compresslevel=6)
 
 
 #: The FMU backends, by the function that builds one FMU (``"module:function"``, as the
