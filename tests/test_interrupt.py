@@ -235,12 +235,15 @@ def test_reproduce_interrupted_after_an_experiment_keeps_its_results_and_says_a_
 _ON_WORKERS = ("cox-toth-example1", "cox-toth-truncation", "peixoto-fig1")
 
 
-def _interrupted_on_workers(experiment_fmus, out, tmp_path, signum, group):
+def _on_workers(experiment_fmus, out):
     """``reproduce`` of three experiments, ``--quick``, with the default ``--workers`` (Dask worker
-    processes), stopped once an experiment is written; returns the command and the kept
-    experiment's name."""
-    cmd = _lpvest("reproduce", *_ON_WORKERS, "--quick", "--out", str(out), "--fmus", str(experiment_fmus.directory))
-    res = interrupt_at(cmd, "experiment-written", tmp_path, signum=signum, group=group)
+    processes)."""
+    return _lpvest("reproduce", *_ON_WORKERS, "--quick", "--out", str(out), "--fmus", str(experiment_fmus.directory))
+
+
+def _interrupted_on_workers(experiment_fmus, out, tmp_path, signum, group):
+    """:func:`_on_workers` stopped once an experiment is written; returns the kept experiment's name."""
+    res = interrupt_at(_on_workers(experiment_fmus, out), "experiment-written", tmp_path, signum=signum, group=group)
     assert res.returncode == 128 + signum, res.stderr
     name = signal.Signals(signum).name
     line = _one_line(res.stderr)  # and no traceback: neither from this process nor from its workers
@@ -262,22 +265,39 @@ def _interrupted_on_workers(experiment_fmus, out, tmp_path, signum, group):
                   and (p.name == "results.json" or p.name.startswith(".results.json") or p.name.startswith(
                       ".resume.pickle"))) == [f"{kept}/.resume.pickle", f"{kept}/results.json"]
     assert not (out / "report.md").exists()
-    return cmd, kept
+    return kept
+
+
+@pytest.fixture(scope="module")
+def interrupted_on_workers(experiment_fmus, tmp_path_factory):
+    """:func:`_interrupted_on_workers` for a signal and its target, run once for the module (its
+    checks included): ``(out, kept)``. The rerun test continues the Ctrl-C run's folder instead of
+    interrupting a third run the same way (10 CPU-s); nothing checks the folder after that (a
+    copy would not do: a resume record holds the paths of the run it kept)."""
+    runs = {}
+
+    def interrupted(signum, group):
+        if (signum, group) not in runs:
+            folder = tmp_path_factory.mktemp("on-workers")
+            runs[signum, group] = (folder / "out", _interrupted_on_workers(experiment_fmus, folder / "out", folder,
+                                                                           signum, group))
+        return runs[signum, group]
+
+    return interrupted
 
 
 @pytest.mark.parametrize(("signum", "group"), [(signal.SIGINT, True), (signal.SIGTERM, False)],
                          ids=["ctrl-c-to-the-process-group", "sigterm-to-the-command"])
-def test_reproduce_on_dask_workers_interrupted_keeps_the_finished_experiment(experiment_fmus, tmp_path, signum,
-                                                                               group):
+def test_reproduce_on_dask_workers_interrupted_keeps_the_finished_experiment(interrupted_on_workers, signum, group):
     """Ctrl-C in a terminal reaches the command and its Dask workers (its process group); a
     ``kill`` reaches the command only."""
-    _interrupted_on_workers(experiment_fmus, tmp_path / "out", tmp_path, signum, group)
+    interrupted_on_workers(signum, group)
 
 
-def test_reproduce_on_dask_workers_rerun_after_an_interruption_keeps_the_finished_experiment(experiment_fmus,
-                                                                                             tmp_path):
-    out = tmp_path / "out"
-    cmd, kept = _interrupted_on_workers(experiment_fmus, out, tmp_path, signal.SIGINT, True)
+def test_reproduce_on_dask_workers_rerun_after_an_interruption_keeps_the_finished_experiment(
+        interrupted_on_workers, experiment_fmus):
+    out, kept = interrupted_on_workers(signal.SIGINT, True)
+    cmd = _on_workers(experiment_fmus, out)
     results = out / kept / "results.json"
     before = results.read_bytes(), results.stat().st_mtime_ns
     rerun = subprocess.run(cmd, capture_output=True, text=True, timeout=TIMEOUT, cwd=ROOT)
