@@ -8,6 +8,7 @@ through built FMUs and real FMI calls.
 from __future__ import annotations
 
 import math
+import shutil
 
 import numpy as np
 import pytest
@@ -571,10 +572,15 @@ def test_a_model_parameter_is_an_fmu_parameter_that_changes_the_plant(resources)
 def test_the_instances_of_an_fmu_share_its_loaded_model_file_until_it_or_rho_changes(tmp_path, monkeypatch):
     """fmi2Reset runs the slave's constructor again (a sweep resets the same instances for each
     task): the model file is read and parsed once per process for the same bytes and model
-    parameter values, the model built once from it; another rho, or an edited file, loads again."""
+    parameter values, the model built once from it, wherever the FMU was unpacked; another rho,
+    or an edited file, loads again."""
+    from collections import OrderedDict
+
     import lpvest.fmi._slave as slave_module
     import lpvest.systems._modelfile as modelfile
+    from lpvest.core._errors import ModelFileError
 
+    monkeypatch.setattr(slave_module, "_LOADED", OrderedDict())  # not what other tests loaded
     folder = write_resources("peixoto-ex2", "Plant", tmp_path / "res")
     loads: list[dict[str, float]] = []
     real_load = modelfile.load_system
@@ -590,6 +596,8 @@ def test_the_instances_of_an_fmu_share_its_loaded_model_file_until_it_or_rho_cha
     assert again.initialize() == [] and loads == [{}, {"rho": 1.0}]
     assert again.slave.model({"rho": 1.0}) is first.slave.model({"rho": 1.0, "seed": 3})
     assert again.slave.model() is first.slave.model({"seed": 3})
+    elsewhere = shutil.copytree(folder, tmp_path / "unpacked-elsewhere")  # another unpacked copy of the FMU
+    assert Slave(elsewhere).initialize() == [] and loads == [{}, {"rho": 1.0}]
     rho = Slave(folder)
     assert rho.initialize(rho=13.0) == [] and loads == [{}, {"rho": 1.0}, {"rho": 13.0}]
     assert rho.slave.model({"rho": 13.0}) is not first.slave.model({"rho": 1.0})
@@ -600,6 +608,10 @@ def test_the_instances_of_an_fmu_share_its_loaded_model_file_until_it_or_rho_cha
     for value in range(1, 12):  # a host with instances at many values keeps the last few
         assert Slave(folder).initialize(rho=float(value)) == []
     assert len(slave_module._LOADED) == slave_module._LOADED_MAX
+    gone = Slave(folder)
+    model_file.unlink()  # a folder removed under a live instance: a typed error naming the file
+    with pytest.raises(ModelFileError, match=r"res/model\.toml: no such model file"):
+        gone.slave.system({"rho": 2.5})
 
 
 def test_a_restored_state_tells_the_status_bridge_its_time(resources):

@@ -104,36 +104,49 @@ except ImportError:  # pragma: no cover - numpy 1.x: np.errstate
 _TIME_RTOL = 1e-9
 
 
-#: The model files this FMU's instances loaded in this process, the last few: (the file, the
-#: digest of its bytes, the model parameter values) -> (the loaded system, {model key: model}).
+#: The model files this FMU's instances loaded in this process, the last few: (the digest of the
+#: file's bytes, the model parameter values) -> (the loaded system, {model key: model}).
 #: fmi2Reset runs the slave's constructor again (a sweep resets the same instances for each
 #: task), and each construction and each parameter set asked for the system and its model:
 #: parsing the file and building the model again took half of a 20-step task. A loaded system
-#: and its models are immutable (frozen, their arrays read-only), so the instances of one FMU
-#: can share them; the key holds the file's bytes, so an edited file is read anew.
-_LOADED: OrderedDict[tuple[str, bytes, tuple[tuple[str, float], ...]], tuple[SystemFile, dict[str, Model]]] = \
+#: and its models are not changed once built (frozen; nothing in lpvest writes into their
+#: arrays: the components copy what they keep, such as x0 and P0), so the instances of one FMU,
+#: wherever each was unpacked, share them; an edited file has another digest and is read anew.
+_LOADED: OrderedDict[tuple[bytes, tuple[tuple[str, float], ...]], tuple[SystemFile, dict[str, Model]]] = \
     OrderedDict()
 _LOADED_LOCK = threading.Lock()  # hosts step the instances of a co-simulation on threads of their own
 #: How many loaded files are kept (a host with instances at several values of ``rho`` keeps them all).
 _LOADED_MAX = 8
 
 
+def _digest(path: Path) -> bytes | None:
+    """The SHA-256 of the file's bytes; None when it cannot be read (then
+    :func:`~lpvest.systems._modelfile.load_system` says why, naming the file)."""
+    try:
+        return hashlib.sha256(path.read_bytes()).digest()
+    except OSError:
+        return None
+
+
 def _loaded(path: Path, values: tuple[tuple[str, float], ...]) -> tuple[SystemFile, dict[str, Model]]:
     """The system file at ``path`` loaded with the model parameters ``values``, and the
-    models built from it so far: from :data:`_LOADED` when it holds the same file's bytes."""
+    models built from it so far: from :data:`_LOADED` when it holds the same bytes. A load
+    is kept only when the file had the same bytes before and after it."""
     from ..systems._modelfile import load_system
 
-    key = (str(path), hashlib.sha256(path.read_bytes()).digest(), values)
-    with _LOADED_LOCK:
-        found = _LOADED.get(key)
-        if found is not None:
-            _LOADED.move_to_end(key)
-            return found
+    digest = _digest(path)
+    if digest is not None:
+        with _LOADED_LOCK:
+            found = _LOADED.get((digest, values))
+            if found is not None:
+                _LOADED.move_to_end((digest, values))
+                return found
     found = (load_system(path, parameters=dict(values)), {})
-    with _LOADED_LOCK:
-        _LOADED[key] = found
-        while len(_LOADED) > _LOADED_MAX:
-            _LOADED.popitem(last=False)
+    if digest is not None and _digest(path) == digest:
+        with _LOADED_LOCK:
+            _LOADED[digest, values] = found
+            while len(_LOADED) > _LOADED_MAX:
+                _LOADED.popitem(last=False)
     return found
 
 
