@@ -105,15 +105,14 @@ _TIME_RTOL = 1e-9
 
 
 #: The model files this FMU's instances loaded in this process, the last few: (the digest of the
-#: file's bytes, the model parameter values) -> (the loaded system, {model key: model}).
+#: file's bytes, the model parameter values) -> the loaded system (its models built with it).
 #: fmi2Reset runs the slave's constructor again (a sweep resets the same instances for each
 #: task), and each construction and each parameter set asked for the system and its model:
 #: parsing the file and building the model again took half of a 20-step task. A loaded system
 #: and its models are not changed once built (frozen; nothing in lpvest writes into their
 #: arrays: the components copy what they keep, such as x0 and P0), so the instances of one FMU,
 #: wherever each was unpacked, share them; an edited file has another digest and is read anew.
-_LOADED: OrderedDict[tuple[bytes, tuple[tuple[str, float], ...]], tuple[SystemFile, dict[str, Model]]] = \
-    OrderedDict()
+_LOADED: OrderedDict[tuple[bytes, tuple[tuple[str, float], ...]], SystemFile] = OrderedDict()
 _LOADED_LOCK = threading.Lock()  # hosts step the instances of a co-simulation on threads of their own
 #: How many loaded files are kept (a host with instances at several values of ``rho`` keeps them all).
 _LOADED_MAX = 8
@@ -128,20 +127,19 @@ def _digest(path: Path) -> bytes | None:
         return None
 
 
-def _loaded(path: Path, values: tuple[tuple[str, float], ...]) -> tuple[SystemFile, dict[str, Model]]:
-    """The system file at ``path`` loaded with the model parameters ``values``, and the
-    models built from it so far: from :data:`_LOADED` when it holds the same bytes. A load
-    is kept only when the file had the same bytes before and after it."""
+def _loaded(path: Path, digest: bytes | None, values: tuple[tuple[str, float], ...]) -> SystemFile:
+    """The system file at ``path`` (whose bytes have the SHA-256 ``digest``) loaded with the
+    model parameters ``values``: from :data:`_LOADED` when it holds the same bytes. A load is
+    kept only when the file still has those bytes after it."""
     from ..systems._modelfile import load_system
 
-    digest = _digest(path)
     if digest is not None:
         with _LOADED_LOCK:
             found = _LOADED.get((digest, values))
             if found is not None:
                 _LOADED.move_to_end((digest, values))
                 return found
-    found = (load_system(path, parameters=dict(values)), {})
+    found = load_system(path, parameters=dict(values))
     if digest is not None and _digest(path) == digest:
         with _LOADED_LOCK:
             _LOADED[digest, values] = found
@@ -219,22 +217,19 @@ class LpvestSlave(Fmi2Slave):
     # -- helpers for role scripts ------------------------------------------------------
     def system(self, params: Mapping[str, Any] | None = None) -> SystemFile:
         """The system file carried in ``resources/``, loaded with the model
-        parameters among ``params`` (e.g. ``rho``; without them, at the file's values)."""
-        return self._loaded(params)[0]
-
-    def model(self, params: Mapping[str, Any] | None = None) -> Model:
-        """The model this FMU was built for (see :meth:`system`), built once per
-        loaded system."""
-        system, models = self._loaded(params)
-        key = self.spec["model_key"]
-        if key not in models:
-            models[key] = system.model(key)
-        return models[key]
-
-    def _loaded(self, params: Mapping[str, Any] | None) -> tuple[SystemFile, dict[str, Model]]:
+        parameters among ``params`` (e.g. ``rho``; without them, at the file's values).
+        The file is read once per construction of the instance (to know its bytes: an
+        instance's resources do not change while it lives; a reset constructs it again)."""
+        path = Path(self.resources) / self.spec["model_file"]
+        if "_model_digest" not in self.__dict__:
+            self._model_digest = _digest(path)
         names = self.spec.get("model_parameters", [])
         values = tuple((n, float(params[n])) for n in names if params is not None and n in params)
-        return _loaded(Path(self.resources) / self.spec["model_file"], values)
+        return _loaded(path, self._model_digest, values)
+
+    def model(self, params: Mapping[str, Any] | None = None) -> Model:
+        """The model this FMU was built for (see :meth:`system`)."""
+        return self.system(params).model(self.spec["model_key"])
 
     def model_parameters(self) -> list[Parameter]:
         """The model file's ``[parameters]`` as FMU parameters."""
