@@ -288,6 +288,31 @@ def test_the_cpu_timeline_plugin_records_each_test_and_reports_per_file(tmp_path
     assert files[0].endswith("test_busy.py") and files[1].endswith("test_idle.py"), lines
 
 
+def test_pytest_keeps_its_rewritten_test_modules_where_python_may_write_no_bytecode(tmp_path):
+    """tests/conftest.py's collection hook: under ``PYTHONDONTWRITEBYTECODE=1`` (our CI
+    machine's setting) pytest still keeps each collected test module's rewritten code, which
+    every later pytest process reads instead of rewriting it (12 -> 4 CPU-s a collection). The
+    hook, loaded from tests/conftest.py as a plugin, in a pytest run of a folder of its own; its
+    cache goes under ``PYTHONPYCACHEPREFIX`` (pytest honours it). Without the hook that run
+    writes no file there (checked by hand: the test fails without it)."""
+    import os
+    import subprocess
+    import sys
+
+    (tmp_path / "tests_here").mkdir()
+    (tmp_path / "tests_here" / "test_kept.py").write_text("def test_one():\n    assert 1 + 1 == 2\n")
+    root = Path(__file__).parent.parent
+    env = {**os.environ, "PYTHONDONTWRITEBYTECODE": "1", "PYTHONPYCACHEPREFIX": str(tmp_path / "pyc"),
+           "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "tests.conftest", "-p", "no:cacheprovider",
+                           "-c", "/dev/null", "--rootdir", str(tmp_path), str(tmp_path / "tests_here")],
+                          capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path, check=False)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    written = [p.name for p in (tmp_path / "pyc").rglob("*.pyc")] if (tmp_path / "pyc").is_dir() else []
+    assert [n for n in written if n.startswith("test_kept.")] == [
+        f"test_kept.{sys.implementation.cache_tag}-pytest-{pytest.__version__}.pyc"], written
+
+
 # -- the lazy contracts of lpvest/__init__.py and core/__init__.py (core/_lazy.py) --
 def _block_names(package: str) -> dict[str, tuple[str, str]]:
     """The names the ``if TYPE_CHECKING or ...:`` block of a package ``__init__`` imports:
