@@ -78,8 +78,8 @@ def pytest_collection(session):  # noqa: ARG001 - pytest hook signature
     ``PYTHONDONTWRITEBYTECODE=1`` (as on our CI machine). pytest rewrites the
     assertions of every test module it imports and, by default, keeps the result
     next to the module (``tests/__pycache__/*-pytest-*.pyc``), but not where Python
-    may write no bytecode: then every pytest process rewrote all 59 modules again,
-    8 of the 12 CPU seconds of a collection (``./dev test`` starts four collecting
+    may write no bytecode: then every pytest process rewrote each test module it
+    collected (59 in all) again, 8 of the 12 CPU seconds of a whole collection (``./dev test`` starts four collecting
     workers). It reads the cache in any case. Only for the collection: what the
     tests import and run later is left to the environment's rule (``./dev``
     compiles lpvest/ and tests/ itself)."""
