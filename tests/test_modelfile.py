@@ -78,6 +78,39 @@ def test_toml_round_trip(name, rng):
     assert dump_system(second) == text
 
 
+def test_a_models_arrays_are_read_only_copies():
+    """A loaded model is shared: the instances of an FMU share its loaded model file
+    (lpvest/fmi/_slave.py), so no user of a model may change what another sees. Every array
+    field of every example model is read-only, and a model made from a caller's arrays holds
+    copies: the caller's arrays stay theirs (writeable, unchanged)."""
+    import dataclasses
+
+    for e in example_systems():
+        system = load_system(e.name)
+        for key in system.models:
+            model = system.model(key)
+            for field in dataclasses.fields(model):
+                value = getattr(model, field.name)
+                if isinstance(value, np.ndarray):
+                    assert not value.flags.writeable, (e.name, key, field.name)
+                    with pytest.raises(ValueError, match="read-only"):
+                        value[...] = 0.0
+    from lpvest.core._scheduling import Monomial, SchedulingSpace
+
+    space = SchedulingSpace(["p"], [0.0], [1.0])
+    x0, P0, Cz = np.array([1.0]), np.array([[2.0]]), np.array([[1.0]])
+    model = AffineLPV.from_matrices(space, [Monomial.component(0, space)], A={"1": [[0.5]], "p": [[0.2]]},
+                                    C=[[1.0]], Q=[[0.1]], R=[[0.01]], x0=x0, P0=P0, Cz=Cz)
+    assert all(not getattr(model, n).flags.writeable for n in ("x0", "P0", "Cz"))
+    assert x0.flags.writeable and P0.flags.writeable and Cz.flags.writeable
+    assert not np.shares_memory(model.x0, x0) and not np.shares_memory(model.P0, P0)
+    inno = load_system("cox-toth-ex1").model("minimal")
+    again = InnovationLPV(inno.dependence, inno.K, inno.innovation_covariance, x0=x0)
+    assert not again.x0.flags.writeable and x0.flags.writeable and not np.shares_memory(again.x0, x0)
+    ltv = LTVInputOutput(["1", "2"], ["1"], x0=x0.repeat(2))
+    assert not ltv.x0.flags.writeable
+
+
 def test_parameter_override():
     base = load_system("peixoto-ex2")
     assert base.parameters == {"rho": 1.0}

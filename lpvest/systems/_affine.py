@@ -598,8 +598,9 @@ class AffineLPV:
         if P0 is not None:
             P0m = check_positive_definite(P0m, "P0", semidefinite=True)
         Czm = None if Cz is None else as_matrix(Cz, "Cz", (None, nx))
-        if Czm is not None:
-            Czm.setflags(write=False)
+        for m in (x0v, P0m, Czm):  # fresh copies, shared by whoever uses the model: read-only
+            if m is not None:
+                m.setflags(write=False)
         return cls(dep, noise, x0v, P0m, name, Czm)
 
     # -- dimensions -----------------------------------------------------------

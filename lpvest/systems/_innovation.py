@@ -210,6 +210,8 @@ class InnovationLPV:
             "innovation covariance",
         )
         x0v = np.zeros(nx) if x0 is None else as_vector(x0, "x0", nx)
+        for m in (omega, x0v):  # fresh copies, shared by whoever uses the model: read-only
+            m.setflags(write=False)
         object.__setattr__(self, "dependence", dependence)
         object.__setattr__(self, "K", K)
         object.__setattr__(self, "innovation_covariance", omega)

@@ -193,6 +193,12 @@ class TimeFunction:
         return f"TimeFunction({self.text!r})"
 
 
+def _read_only(a: np.ndarray) -> np.ndarray:
+    """``a`` (a fresh copy) made read-only: a model's arrays are shared by whoever uses the model."""
+    a.setflags(write=False)
+    return a
+
+
 def _input_and_x0_table(u: TimeFunction | None, x0: np.ndarray | None) -> dict[str, object]:
     """The optional ``input`` and ``x0`` entries of an LTV model's table."""
     out: dict[str, object] = {}
@@ -369,7 +375,7 @@ class LTVStateSpace:
         object.__setattr__(self, "n", n)
         object.__setattr__(self, "formulas", {"A": ma, "B": mb, "C": mc})
         object.__setattr__(self, "input", None if input is None else TimeFunction.of(input))
-        object.__setattr__(self, "x0", None if x0 is None else as_vector(x0, "x0", n))
+        object.__setattr__(self, "x0", None if x0 is None else _read_only(as_vector(x0, "x0", n)))
         object.__setattr__(self, "name", name)
         plan = _Coefficients.of_matrices(ma, mb) if ma is not None and mb is not None else None
         object.__setattr__(self, "_coefficients", plan)
@@ -756,7 +762,7 @@ class LTVInputOutput:
         object.__setattr__(self, "a", a_f)
         object.__setattr__(self, "b", b_f)
         object.__setattr__(self, "input", None if input is None else TimeFunction.of(input))
-        object.__setattr__(self, "x0", None if x0 is None else as_vector(x0, "x0", len(a_f)))
+        object.__setattr__(self, "x0", None if x0 is None else _read_only(as_vector(x0, "x0", len(a_f))))
         object.__setattr__(self, "name", name)
 
     @property
