@@ -109,9 +109,9 @@ _TIME_RTOL = 1e-9
 #: fmi2Reset runs the slave's constructor again (a sweep resets the same instances for each
 #: task), and each construction and each parameter set asked for the system and its model:
 #: parsing the file and building the model again took half of a 20-step task. A loaded system
-#: and its models are not changed once built (frozen; nothing in lpvest writes into their
-#: arrays: the components copy what they keep, such as x0 and P0), so the instances of one FMU,
-#: wherever each was unpacked, share them; an edited file has another digest and is read anew.
+#: and its models cannot be changed once built (frozen dataclasses whose arrays are read-only),
+#: so the instances of one FMU, wherever each was unpacked, share them; an edited file has
+#: another digest and is read anew.
 _LOADED: OrderedDict[tuple[bytes, tuple[tuple[str, float], ...]], SystemFile] = OrderedDict()
 _LOADED_LOCK = threading.Lock()  # hosts step the instances of a co-simulation on threads of their own
 #: How many loaded files are kept (a host with instances at several values of ``rho`` keeps them all).
