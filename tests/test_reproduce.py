@@ -7,6 +7,7 @@ import json
 import pickle
 import re
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -320,3 +321,43 @@ def test_a_rerun_keeps_a_finished_experiment_unless_its_results_or_options_chang
     assert len(record.read_bytes()) == len(signed)  # rewritten, signed with this user's key
     reproduce(["fake"], tmp_path, fmus=cache, workers=0, reduced=True)
     assert calls == [10, 2, 2, 2, 2]  # kept again
+
+
+def test_a_rerun_keeps_a_finished_experiment_whose_folder_was_moved_or_is_named_another_way(monkeypatch,
+                                                                                              tmp_path):
+    """The resume record names the folder as the first command had it (``--out`` relative, say);
+    a rerun that names it otherwise (absolute), or after the folder was moved, keeps the
+    experiment, its paths now in the folder named; a figure missing there still runs it again."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    import lpvest.experiments as experiments
+    from lpvest.experiments._reproduce import reproduce
+
+    calls = []
+
+    def run(out_dir, *, fmus, progress=None):
+        calls.append(out_dir)
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+        figure = Path(out_dir) / "fig.png"
+        figure.write_bytes(b"png")
+        return ExperimentResult("fake", "table", {"runs": 1}, (figure,), (), None)
+
+    monkeypatch.setattr(experiments, "registry", lambda: {"fake": Experiment("fake", "a fake", run)})
+    monkeypatch.chdir(tmp_path)
+    cache = tmp_path / "c"
+    (first,) = reproduce(["fake"], "out", fmus=cache, workers=0)
+    assert first.results_path == Path("out/fake/results.json") and len(calls) == 1
+    lines: list[str] = []
+    (again,) = reproduce(["fake"], tmp_path / "out", fmus=cache, workers=0, echo=lines.append)
+    assert len(calls) == 1, "the same folder, named absolutely: kept"
+    assert lines == [f"fake: finished earlier, kept ({tmp_path / 'out' / 'fake' / 'results.json'})"]
+    assert again.folder == tmp_path / "out" / "fake"
+    assert again.result.figures == (tmp_path / "out" / "fake" / "fig.png",)
+    (tmp_path / "out").rename(tmp_path / "moved")
+    (moved,) = reproduce(["fake"], tmp_path / "moved", fmus=cache, workers=0)
+    assert len(calls) == 1, "a moved folder: kept"
+    assert moved.results_path == tmp_path / "moved" / "fake" / "results.json"
+    assert moved.result.figures == (tmp_path / "moved" / "fake" / "fig.png",)
+    assert (moved.result.results, moved.seconds) == (first.result.results, first.seconds)
+    (tmp_path / "moved" / "fake" / "fig.png").unlink()  # not what it wrote any more: run again
+    reproduce(["fake"], tmp_path / "moved", fmus=cache, workers=0)
+    assert len(calls) == 2 and (tmp_path / "moved" / "fake" / "fig.png").is_file()

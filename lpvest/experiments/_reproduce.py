@@ -49,7 +49,7 @@ import secrets
 import tempfile
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -300,6 +300,22 @@ def _write_resume_record(run: ExperimentRun, key: str) -> None:
     partial.replace(path)
 
 
+def _moved_to(run: ExperimentRun, folder: Path) -> ExperimentRun | None:
+    """``run`` with its paths in ``folder``. The record names the folder as the
+    command that wrote it had it (``--out out``, relative to where it ran); a
+    rerun may name the same folder another way (absolute), or the folder may
+    have been moved since: what the run wrote is looked for where it is now.
+    None if the run names a file outside its folder (nothing to look for)."""
+    try:
+        results = folder / run.results_path.relative_to(run.folder)
+        figures = tuple(folder / f.relative_to(run.folder) for f in run.result.figures)
+    except ValueError:
+        return None
+    if results != folder / "results.json":
+        return None
+    return replace(run, folder=folder, results_path=results, result=replace(run.result, figures=figures))
+
+
 def _finished_earlier(exp: Experiment, folder: Path, key: str) -> ExperimentRun | None:
     """The run an earlier command recorded in ``folder``, if it is the same
     computation (``key``) and its ``results.json`` and figures are the ones it
@@ -312,9 +328,11 @@ def _finished_earlier(exp: Experiment, folder: Path, key: str) -> ExperimentRun 
             return None  # not written by this user's lpvest (or damaged): never unpickled
         record = pickle.loads(data)
         run = record["run"]
-        if (record["key"] != key or not isinstance(run, ExperimentRun) or run.name != exp.name
-                or hashlib.sha256(run.results_path.read_bytes()).hexdigest() != record["results_sha256"]
-                or run.results_path != folder / "results.json" or not all(f.is_file() for f in run.result.figures)):
+        if record["key"] != key or not isinstance(run, ExperimentRun) or run.name != exp.name:
+            return None
+        run = _moved_to(run, folder)
+        if (run is None or hashlib.sha256(run.results_path.read_bytes()).hexdigest() != record["results_sha256"]
+                or not all(f.is_file() for f in run.result.figures)):
             return None
         return run
     except (OSError, EOFError, KeyError, TypeError, AttributeError, ImportError, IndexError,
