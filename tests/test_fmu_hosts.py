@@ -431,3 +431,57 @@ def test_a_c_host_runs_the_fmu_with_libpython_preloaded(fmus, tmp_path):
     assert np.array_equal(ys, ref.y[:, 0])
     assert "BADSTATUS 3" in proc.stdout and "p[1] (theta) = 1.5 is outside" in proc.stdout
     assert "FREED" in proc.stdout
+
+
+def test_fmus_refuse_what_pythonfmu_would_crash_on_and_keep_fmu_states_in_bounds(fmus, tmp_path):
+    """Through fmpy, in a process of its own (the defects crashed the host): an FMU extracted
+    where pythonfmu cannot import the slave from (a non-ASCII letter and a '%' in the folder's
+    name: it decodes only %20) runs; a wrong GUID, the model-exchange type and resources without
+    slavemodule.txt are refused with a message; a state serialized into a larger buffer is
+    itself followed by zeros (not the host's heap), into a smaller one refused; a freed state's
+    pointer is NULL (docs/fmus.md, 6.)."""
+    code = textwrap.dedent(f"""
+        import ctypes, json, os, pathlib, sys
+        sys.path.insert(0, {str(ROOT)!r})
+        from fmpy import extract
+        from tests.fmu_driver import Driver
+        path, root = {str(fmus["PeixotoEx1Plant"])!r}, {str(tmp_path)!r}
+        out = {{}}
+        folder = extract(path, unzipdir=os.path.join(root, "Jürgen's 100% FMUs", "plant"))
+        d = Driver(path, unzip=folder)
+        out["odd folder"] = [d.initialize(), d.step(0.0, 1.0)]
+        fmu, state = d.fmu, ctypes.c_void_p()
+        out["get state"] = d.raw("fmi2GetFMUstate", ctypes.byref(state))
+        size = ctypes.c_size_t()
+        d.raw("fmi2SerializedFMUstateSize", state, ctypes.byref(size))
+        n = size.value
+        big = ctypes.create_string_buffer(b"\\xff" * (n + 4096), n + 4096)
+        out["larger buffer"] = [d.raw("fmi2SerializeFMUstate", state, big, n + 4096), big.raw[n:] == bytes(4096)]
+        small = ctypes.create_string_buffer(n - 1)
+        out["smaller buffer"] = [d.raw("fmi2SerializeFMUstate", state, small, n - 1), d.messages[-1][2]]
+        out["free state"] = [d.raw("fmi2FreeFMUstate", ctypes.byref(state)), state.value]
+        d.free()
+        probe = Driver(path, unzip=folder)
+        uri = pathlib.Path(folder, "resources").as_uri().encode()
+        for what, guid, kind in (("guid", "{{00000000-0000-0000-0000-000000000000}}", 1), ("type", probe.md.guid, 0)):
+            got = probe.fmu.fmi2Instantiate(b"x", kind, guid.encode(), uri, ctypes.byref(probe.fmu.callbacks), 0, 0)
+            out[what] = [got, probe.messages[-1][2]]
+        probe.free()
+        os.remove(os.path.join(folder, "resources", "slavemodule.txt"))
+        try:
+            Driver(path, unzip=folder)
+            out["damaged"] = "instantiated"
+        except Exception as exc:
+            out["damaged"] = str(exc)
+        print(json.dumps(out))
+    """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=False)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = json.loads(proc.stdout.splitlines()[-1])
+    assert out["odd folder"] == [0, 0] and out["get state"] == 0
+    assert out["larger buffer"] == [0, True]
+    assert out["smaller buffer"][0] == 3 and "the buffer holds" in out["smaller buffer"][1]
+    assert out["free state"] == [0, None]
+    assert out["guid"][0] is None and "does not match this FMU's" in out["guid"][1]
+    assert out["type"][0] is None and "co-simulation only" in out["type"][1]
+    assert out["damaged"] == "Failed to instantiate model"

@@ -46,6 +46,15 @@ class _Callbacks(ctypes.Structure):
                 ("stepFinished", ctypes.c_void_p), ("componentEnvironment", ctypes.c_void_p)]
 
 
+def _resources(folder: Path, guid: str = "guid") -> Path:
+    """A resources folder as the bridge checks it: slavemodule.txt, the module it names, the GUID."""
+    folder.mkdir(parents=True)
+    (folder / "slavemodule.txt").write_text("entry\n")
+    (folder / "entry.py").write_text("# the slave\n")
+    (folder / build.GUID_FILE).write_text(guid + "\n")
+    return folder
+
+
 @pytest.fixture
 def bridge(tmp_path):
     """The bridge compiled as the build does, with the stand-in as its inner library."""
@@ -64,6 +73,18 @@ def bridge(tmp_path):
     logger = LOGGER(lambda env, name, status, category, text: messages.append((status, text.decode())))
     callbacks = _Callbacks(logger, None, None, None, None)
     lib.fmi2Instantiate.restype = ctypes.c_void_p
+    lib.fmi2Instantiate.argtypes = [ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_char_p, ctypes.c_void_p,
+                                    ctypes.c_int, ctypes.c_int]
+    inner.fake_last_uri.restype = ctypes.c_char_p
+    inner.fake_serialize_size.restype = ctypes.c_size_t
+    state_p = ctypes.POINTER(ctypes.c_void_p)
+    for fn, args in (("fmi2GetFMUstate", [state_p]), ("fmi2FreeFMUstate", [state_p]),
+                     ("fmi2SetFMUstate", [ctypes.c_void_p]),
+                     ("fmi2SerializedFMUstateSize", [ctypes.c_void_p, ctypes.POINTER(ctypes.c_size_t)]),
+                     ("fmi2SerializeFMUstate", [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_size_t]),
+                     ("fmi2DeSerializeFMUstate", [ctypes.c_char_p, ctypes.c_size_t, state_p])):
+        getattr(lib, fn).restype = ctypes.c_int
+        getattr(lib, fn).argtypes = [ctypes.c_void_p, *args]
     for fn in ("fmi2DoStep", "fmi2SetReal", "fmi2Reset", "fmi2Terminate", "fmi2SetupExperiment"):
         getattr(lib, fn).restype = ctypes.c_int
     lib.fmi2FreeInstance.argtypes = [ctypes.c_void_p]
@@ -72,8 +93,11 @@ def bridge(tmp_path):
     lib.fmi2SetReal.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint), ctypes.c_size_t,
                                 ctypes.POINTER(ctypes.c_double)]
 
+    resources = _resources(tmp_path / "resources")
+
     def instantiate(logging_on: bool = True) -> int:
-        return lib.fmi2Instantiate(b"i", 1, b"guid", b"file:///nowhere", ctypes.byref(callbacks), 0, int(logging_on))
+        return lib.fmi2Instantiate(b"i", 1, b"guid", resources.as_uri().encode(), ctypes.byref(callbacks), 0,
+                                   int(logging_on))
 
     return lib, inner, messages, instantiate, callbacks
 
@@ -116,6 +140,77 @@ def test_after_fmi2fatal_no_call_reaches_the_inner_library_and_free_is_safe(brid
     assert messages[-1][0] == 4 and "an earlier call failed with fmi2Fatal" in messages[-1][1]
     lib.fmi2FreeInstance(c)
     assert inner.fake_frees() == frees
+
+
+@pytest.mark.parametrize(("kind", "damage", "says"), [
+    (0, None, "this FMU supports co-simulation only"),  # fmi2ModelExchange
+    (1, "null", "no resource location (NULL)"),
+    (1, "http", "is not a file URI"),
+    (1, "slavemodule.txt", "slavemodule.txt: is the FMU extracted whole?"),
+    (1, "entry.py", "entry.py: is the FMU extracted whole?"),
+    (1, build.GUID_FILE, f"{build.GUID_FILE}: is the FMU extracted whole?"),
+    (1, "guid", "GUID guid does not match this FMU's {another}"),
+])
+def test_an_instance_pythonfmu_would_crash_on_is_refused_with_a_message(bridge, tmp_path, kind, damage, says):
+    """pythonfmu's library crashes the host (a null Python callable) when it cannot import
+    the slave from the resource location; the bridge checks the location first, and the
+    type and GUID as the native FMUs do: NULL and one message at fmi2Error."""
+    lib, inner, messages, _, callbacks = bridge
+    folder = _resources(tmp_path / "r", guid="{another}" if damage == "guid" else "guid")
+    if damage in ("slavemodule.txt", "entry.py", build.GUID_FILE):
+        (folder / damage).unlink()
+    uri = {"null": None, "http": b"http://example.com/r"}.get(damage, folder.as_uri().encode())
+    before = inner.fake_last_uri()
+    assert lib.fmi2Instantiate(b"i", kind, b"guid", uri, ctypes.byref(callbacks), 0, 0) is None
+    assert len(messages) == 1 and messages[0][0] == 3, messages
+    assert says.replace("%", "%%") in messages[0][1], messages
+    assert inner.fake_last_uri() == before  # pythonfmu's library was not called
+
+
+def test_the_resource_location_reaches_pythonfmu_decoded(bridge, tmp_path):
+    """pythonfmu decodes only %20: a folder with a non-ASCII letter or a '%' in its name
+    (percent-encoded by the host, as fmpy does) reaches it as the path itself."""
+    lib, inner, messages, _, callbacks = bridge
+    folder = _resources(tmp_path / "Jürgen's 100% FMUs" / "resources")
+    for uri in (folder.as_uri(), "file:" + folder.as_posix(), "file://localhost" + folder.as_posix(),
+                folder.as_uri() + "/"):
+        c = lib.fmi2Instantiate(b"i", 1, b"guid", uri.encode(), ctypes.byref(callbacks), 0, 0)
+        assert c, (uri, messages)
+        assert inner.fake_last_uri().decode() == "file://" + folder.as_posix(), uri
+        lib.fmi2FreeInstance(c)
+    odd = _resources(tmp_path / "a%20b")  # pythonfmu would read a space: refused, named
+    assert lib.fmi2Instantiate(b"i", 1, b"guid", odd.as_uri().encode(), ctypes.byref(callbacks), 0, 0) is None
+    assert "which pythonfmu reads as a space" in messages[-1][1]
+
+
+def test_fmu_states_are_serialized_into_the_buffer_the_host_gives_and_freed_to_null(bridge):
+    """pythonfmu copies as many bytes as the buffer has out of a state (past its end for a
+    larger buffer) and leaves a freed state's pointer set."""
+    lib, inner, messages, instantiate, _ = bridge
+    c = instantiate(logging_on=False)
+    state = ctypes.c_void_p()
+    assert lib.fmi2GetFMUstate(c, ctypes.byref(state)) == 0 and state.value
+    size = ctypes.c_size_t()
+    assert lib.fmi2SerializedFMUstateSize(c, state, ctypes.byref(size)) == 0 and size.value == 8
+    buffer = ctypes.create_string_buffer(b"\xff" * 64, 64)
+    assert lib.fmi2SerializeFMUstate(c, state, buffer, 64) == 0
+    assert inner.fake_serialize_size() == 8 and buffer.raw == b"STATE-01" + b"\0" * 56
+    assert lib.fmi2SerializeFMUstate(c, state, buffer, 7) == 3
+    assert messages[-1] == (3, "fmi2SerializeFMUstate: the buffer holds 7 bytes, the state needs 8 "
+                               "(fmi2SerializedFMUstateSize)")
+    assert lib.fmi2GetFMUstate(c, ctypes.byref(state)) == 0  # an earlier state: freed, a new one made
+    assert inner.fake_live_states() == 1
+    assert lib.fmi2FreeFMUstate(c, ctypes.byref(state)) == 0 and state.value is None
+    assert inner.fake_live_states() == 0
+    assert lib.fmi2FreeFMUstate(c, ctypes.byref(state)) == 0  # a NULL state: nothing to free
+    assert lib.fmi2FreeFMUstate(c, None) == 0 and inner.fake_live_states() == 0
+    for call in (lambda: lib.fmi2SetFMUstate(c, None), lambda: lib.fmi2GetFMUstate(c, None),
+                 lambda: lib.fmi2SerializedFMUstateSize(c, None, ctypes.byref(size)),
+                 lambda: lib.fmi2SerializeFMUstate(c, None, buffer, 64),
+                 lambda: lib.fmi2DeSerializeFMUstate(c, None, 8, ctypes.byref(state))):
+        n = len(messages)
+        assert call() == 3 and len(messages) == n + 1 and "a NULL argument" in messages[-1][1]
+    lib.fmi2FreeInstance(c)
 
 
 # -- compiling it ---------------------------------------------------------------------------------

@@ -104,6 +104,7 @@ __all__ = [
     "write_zip_entry",
     "DEFAULT_OUT",
     "MANIFEST_FILE",
+    "GUID_FILE",
 ]
 
 #: Default output folder of ``build_fmus.py`` / ``lpvest build`` (ignored by git).
@@ -111,6 +112,8 @@ DEFAULT_OUT = "fmu-build"
 
 #: The manifest in an FMU's resources folder: every input of the build and its SHA-256.
 MANIFEST_FILE = "manifest.json"
+#: The GUID of a pythonfmu-backend FMU, in its resources/ (read by the status bridge: ``RESOURCE_GUID_FILE``).
+GUID_FILE = "lpvest_guid.txt"
 
 #: The lpvest package an FMU carries modules of (this one).
 _PACKAGE_DIR = Path(__file__).resolve().parent.parent
@@ -1091,6 +1094,8 @@ def build_fmu(
         guid = "{" + str(uuid.UUID(hex=sha256_hex(manifest_text.encode())[:32])) + "}"
         xml, *_ = _model_description(plan, bundle, staging, guid)
         (staging / MANIFEST_FILE).write_text(manifest_text, encoding="utf-8")
+        # what the status bridge compares the host's GUID with (it has no SHA-256 to derive it)
+        (staging / GUID_FILE).write_text(guid + "\n", encoding="ascii")
         entries: dict[str, tuple[bytes, bool]] = {"modelDescription.xml": (xml, False)}
         for f in staging.rglob("*"):
             if f.is_file() and "__pycache__" not in f.parts:

@@ -39,6 +39,26 @@
  * more: every call returns fmi2Fatal and fmi2FreeInstance frees only this
  * layer's part (the inner instance, a few hundred bytes, is left allocated).
  *
+ * Instantiation: pythonfmu's library decodes only "%20" in the resource location
+ * and crashes the host (a null Python callable) when it cannot import the slave
+ * from it: a folder name with a non-ASCII letter or a '%', a location that is
+ * NULL, resources without slavemodule.txt or its module. So this layer checks
+ * first: a co-simulation instance, a file URI (file:///path, file:/path,
+ * file://localhost/path; every %XX decoded) whose folder holds slavemodule.txt,
+ * the module it names, and RESOURCE_GUID_FILE holding the GUID the host gave;
+ * else it logs why at fmi2Error and returns NULL. The inner library gets the
+ * decoded folder as "file://" + path (Windows: "file:///" + path, as it strips
+ * eight characters there).
+ *
+ * FMU states: the inner library copies exactly the buffer size the host gives
+ * out of the state (reading past its end for a larger buffer: heap bytes, or a
+ * crash), leaves *state set after fmi2FreeFMUstate, and takes NULL states as
+ * Python objects. This layer serializes exactly fmi2SerializedFMUstateSize
+ * bytes (zeros after them; fmi2Error for a smaller buffer), sets *state to NULL
+ * after a free (a NULL state is freed at once), refuses NULL arguments at
+ * fmi2Error, and gives fmi2GetFMUstate on an earlier state (*state != NULL)
+ * a new one after freeing the earlier (FMI 2.0 allows either).
+ *
  * Platforms: Linux (dlopen; compiled by the build with the C compiler) and
  * Windows (LoadLibrary; cross-compiled by the build with zig). The inner library
  * is the file INNER_LIBRARY in the folder of this library's own file.
@@ -49,6 +69,7 @@
 #ifndef _WIN32
 #define _GNU_SOURCE
 #endif
+#include <ctype.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -159,6 +180,9 @@ typedef struct {
     fmi2Real time;                /* the FMU's current time (fmi2LastSuccessfulTime) */
     int broken;                   /* the inner library returned fmi2Fatal: never call it again */
 } Bridge;
+
+/* the file in resources/ that holds the FMU's GUID (written by lpvest's build; see the top of this file) */
+#define RESOURCE_GUID_FILE "lpvest_guid.txt"
 
 /* the category of the slave's messages that state its time (see the top of this file) */
 #define TIME_CATEGORY "lpvest.time"
@@ -401,15 +425,152 @@ static fmi2Status drain(Bridge* b) {
     return inner.GetReal(b->inner, NULL, 0, NULL);
 }
 
+/* The folder a resource location names, %XX decoded, without a trailing '/' (malloc'd), or NULL:
+ * not a file URI, or one that decodes to a NUL. */
+static char* resource_folder(const char* uri) {
+    const char* p;
+    if (strncmp(uri, "file://localhost/", 17) == 0) {
+        p = uri + 16;
+    } else if (strncmp(uri, "file:///", 8) == 0) {
+        p = uri + 7;
+    } else if (strncmp(uri, "file:/", 6) == 0 && uri[6] != '/') {
+        p = uri + 5;
+    } else {
+        return NULL;
+    }
+#ifdef _WIN32
+    if (p[0] == '/' && isalpha((unsigned char)p[1]) && p[2] == ':') p++; /* /C:/x -> C:/x */
+#endif
+    size_t n = strlen(p), j = 0;
+    char* out = (char*)malloc(n + 1);
+    if (!out) return NULL;
+    for (size_t i = 0; i < n; i++) {
+        if (p[i] == '%' && isxdigit((unsigned char)p[i + 1]) && isxdigit((unsigned char)p[i + 2])) {
+            char hex[3] = {p[i + 1], p[i + 2], '\0'};
+            out[j] = (char)strtol(hex, NULL, 16);
+            if (out[j] == '\0') {
+                free(out);
+                return NULL;
+            }
+            j++;
+            i += 2;
+        } else {
+            out[j++] = p[i];
+        }
+    }
+    while (j > 1 && out[j - 1] == '/') j--;
+    out[j] = '\0';
+    return out;
+}
+
+/* The first line of folder/name (at most cap - 1 bytes, surrounding white space removed) into line;
+ * 0 if the file cannot be read or the line is empty. The folder is UTF-8 (Windows: opened as such). */
+static int read_first_line(const char* folder, const char* name, char* line, size_t cap) {
+    size_t len = strlen(folder) + 1 + strlen(name) + 1;
+    char* path = (char*)malloc(len);
+    if (!path) return 0;
+    snprintf(path, len, "%s/%s", folder, name);
+#ifdef _WIN32
+    FILE* f = NULL;
+    int wn = MultiByteToWideChar(CP_UTF8, MB_ERR_INVALID_CHARS, path, -1, NULL, 0);
+    wchar_t* wpath = wn > 0 ? (wchar_t*)malloc((size_t)wn * sizeof(wchar_t)) : NULL;
+    if (wpath && MultiByteToWideChar(CP_UTF8, MB_ERR_INVALID_CHARS, path, -1, wpath, wn) == wn)
+        f = _wfopen(wpath, L"rb");
+    free(wpath);
+#else
+    FILE* f = fopen(path, "rb");
+#endif
+    free(path);
+    if (!f) return 0;
+    size_t got = fread(line, 1, cap - 1, f);
+    fclose(f);
+    line[got] = '\0';
+    line[strcspn(line, "\r\n")] = '\0';
+    size_t start = 0, end = strlen(line);
+    while (start < end && isspace((unsigned char)line[start])) start++;
+    while (end > start && isspace((unsigned char)line[end - 1])) end--;
+    memmove(line, line + start, end - start);
+    line[end - start] = '\0';
+    return line[0] != '\0';
+}
+
+/* Why an instance cannot be made of this type, GUID and resource location (a message in msg),
+ * or NULL with the folder to hand on in *folder (malloc'd). */
+static const char* refuse_instantiate(fmi2Type type, fmi2String guid, fmi2String location, char** folder, char* msg,
+                                      size_t cap) {
+    *folder = NULL;
+    if (type != fmi2CoSimulation) return "fmi2Instantiate: this FMU supports co-simulation only";
+    if (!location) return "fmi2Instantiate: no resource location (NULL): the FMU's resources folder is needed";
+    char* dir = resource_folder(location);
+    if (!dir) {
+        snprintf(msg, cap, "fmi2Instantiate: resource location %.300s is not a file URI (file:///path)", location);
+        return msg;
+    }
+    char line[256], module[256];
+    if (!read_first_line(dir, "slavemodule.txt", module, sizeof module) || strlen(module) + 4 >= sizeof module) {
+        snprintf(msg, cap, "fmi2Instantiate: cannot read %.300s/slavemodule.txt: is the FMU extracted whole?", dir);
+        free(dir);
+        return msg;
+    }
+    strcat(module, ".py");
+    if (!read_first_line(dir, module, line, sizeof line)) {
+        snprintf(msg, cap, "fmi2Instantiate: cannot read %.300s/%.200s: is the FMU extracted whole?", dir, module);
+        free(dir);
+        return msg;
+    }
+    if (!read_first_line(dir, RESOURCE_GUID_FILE, line, sizeof line)) {
+        snprintf(msg, cap, "fmi2Instantiate: cannot read %.300s/" RESOURCE_GUID_FILE ": is the FMU extracted whole?",
+                 dir);
+        free(dir);
+        return msg;
+    }
+    if (guid && strcmp(guid, line) != 0) {
+        snprintf(msg, cap, "fmi2Instantiate: GUID %.100s does not match this FMU's %.100s", guid, line);
+        free(dir);
+        return msg;
+    }
+    if (strstr(dir, "%20")) { /* the inner library would read it as a space */
+        snprintf(msg, cap, "fmi2Instantiate: the resources folder %.300s has '%%20' in its name, which pythonfmu "
+                 "reads as a space: extract the FMU elsewhere", dir);
+        free(dir);
+        return msg;
+    }
+    *folder = dir;
+    return NULL;
+}
+
 EXPORT const char* fmi2GetTypesPlatform(void) { return "default"; }
 EXPORT const char* fmi2GetVersion(void) { return "2.0"; }
 
 EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                                      fmi2String fmuResourceLocation, const fmi2CallbackFunctions* functions,
                                      fmi2Boolean visible, fmi2Boolean loggingOn) {
-    if (!load_inner(functions, instanceName)) return NULL;
+    char msg[1024], *folder = NULL;
+    const char* why = refuse_instantiate(fmuType, fmuGUID, fmuResourceLocation, &folder, msg, sizeof msg);
+    if (why) {
+        report(functions ? functions->logger : NULL, functions ? functions->componentEnvironment : NULL, instanceName,
+               fmi2Error, why);
+        return NULL;
+    }
+#ifdef _WIN32
+    const char* scheme = "file:///";
+#else
+    const char* scheme = "file://";
+#endif
+    size_t uri_len = strlen(scheme) + strlen(folder) + 1;
+    char* uri = (char*)malloc(uri_len);
+    if (uri) snprintf(uri, uri_len, "%s%s", scheme, folder);
+    free(folder);
+    if (!uri) return NULL;
+    if (!load_inner(functions, instanceName)) {
+        free(uri);
+        return NULL;
+    }
     Bridge* b = (Bridge*)calloc(1, sizeof(Bridge));
-    if (!b) return NULL;
+    if (!b) {
+        free(uri);
+        return NULL;
+    }
     if (functions) b->host = *functions;
     b->mine.logger = bridge_logger;
     b->mine.allocateMemory = b->host.allocateMemory ? b->host.allocateMemory : calloc;
@@ -419,10 +580,12 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     b->logging_on = loggingOn;
     b->name = copy_string(instanceName ? instanceName : "");
     if (!b->name) {
+        free(uri);
         free(b);
         return NULL;
     }
-    b->inner = inner.Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation, &b->mine, visible, fmi2True);
+    b->inner = inner.Instantiate(instanceName, fmuType, fmuGUID, uri, &b->mine, visible, fmi2True);
+    free(uri);
     if (!b->inner) {
         free(b->name);
         free(b);
@@ -531,24 +694,79 @@ EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], 
     FORWARD(c, "fmi2SetString", inner.SetString(b_->inner, vr, nvr, value));
 }
 
+/* A NULL argument of an FMU-state call: fmi2Error with a message (the inner library would crash). */
+static fmi2Status refuse_null(Bridge* b, const char* what) {
+    char msg[256];
+    snprintf(msg, sizeof msg, "%s: a NULL argument (FMU state, pointer or buffer)", what);
+    report(b->host.logger, b->host.componentEnvironment, b->name, fmi2Error, msg);
+    return fmi2Error;
+}
+
+#define CHECKED(c, what, ok, call)                      \
+    do {                                                \
+        Bridge* b_ = BRIDGE(c);                         \
+        if (!b_) return fmi2Error;                      \
+        if (b_->broken) return refuse_broken(b_, what); \
+        if (!(ok)) return refuse_null(b_, what);        \
+        b_->worst = fmi2OK;                             \
+        fmi2Status s_ = call;                           \
+        return combine(b_, s_);                         \
+    } while (0)
+
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state) {
-    FORWARD(c, "fmi2GetFMUstate", inner.GetFMUstate(b_->inner, state));
+    Bridge* b = BRIDGE(c);
+    if (!b) return fmi2Error;
+    if (b->broken) return refuse_broken(b, "fmi2GetFMUstate");
+    if (!state) return refuse_null(b, "fmi2GetFMUstate");
+    b->worst = fmi2OK;
+    if (*state) { /* an earlier state to update: freed, and a new one made (see the top of this file) */
+        fmi2Status f = combine(b, inner.FreeFMUstate(b->inner, state));
+        if (f > fmi2Warning) return f;
+        *state = NULL;
+    }
+    return combine(b, inner.GetFMUstate(b->inner, state));
 }
 EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) {
-    FORWARD(c, "fmi2SetFMUstate", inner.SetFMUstate(b_->inner, state));
+    CHECKED(c, "fmi2SetFMUstate", state, inner.SetFMUstate(b_->inner, state));
 }
 EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* state) {
-    FORWARD(c, "fmi2FreeFMUstate", inner.FreeFMUstate(b_->inner, state));
+    Bridge* b = BRIDGE(c);
+    if (!b) return fmi2Error;
+    if (!state || !*state) return fmi2OK; /* nothing to free (FMI 2.0) */
+    if (b->broken) return refuse_broken(b, "fmi2FreeFMUstate");
+    b->worst = fmi2OK;
+    fmi2Status s = combine(b, inner.FreeFMUstate(b->inner, state));
+    if (s <= fmi2Warning) *state = NULL;
+    return s;
 }
 EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t* size) {
-    FORWARD(c, "fmi2SerializedFMUstateSize", inner.SerializedFMUstateSize(b_->inner, state, size));
+    CHECKED(c, "fmi2SerializedFMUstateSize", state && size, inner.SerializedFMUstateSize(b_->inner, state, size));
 }
 EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size) {
-    FORWARD(c, "fmi2SerializeFMUstate", inner.SerializeFMUstate(b_->inner, state, bytes, size));
+    Bridge* b = BRIDGE(c);
+    if (!b) return fmi2Error;
+    if (b->broken) return refuse_broken(b, "fmi2SerializeFMUstate");
+    if (!state || !bytes) return refuse_null(b, "fmi2SerializeFMUstate");
+    b->worst = fmi2OK;
+    size_t n = 0;
+    fmi2Status s = combine(b, inner.SerializedFMUstateSize(b->inner, state, &n));
+    if (s > fmi2Warning) return s;
+    if (size < n) {
+        char msg[256];
+        snprintf(msg, sizeof msg,
+                 "fmi2SerializeFMUstate: the buffer holds %llu bytes, the state needs %llu "
+                 "(fmi2SerializedFMUstateSize)",
+                 (unsigned long long)size, (unsigned long long)n);
+        report(b->host.logger, b->host.componentEnvironment, b->name, fmi2Error, msg);
+        return fmi2Error;
+    }
+    s = combine(b, inner.SerializeFMUstate(b->inner, state, bytes, n));
+    if (size > n) memset(bytes + n, 0, size - n);
+    return s;
 }
 EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size,
                                           fmi2FMUstate* state) {
-    FORWARD(c, "fmi2DeSerializeFMUstate", inner.DeSerializeFMUstate(b_->inner, bytes, size, state));
+    CHECKED(c, "fmi2DeSerializeFMUstate", bytes && state, inner.DeSerializeFMUstate(b_->inner, bytes, size, state));
 }
 
 static fmi2Status unsupported(fmi2Component c, const char* what) {
