@@ -685,6 +685,9 @@ SCENARIOS = {
     "a measurement two samples late": ("PeixotoEx1HinfPD", lambda d: (
         _init(d, measurement_delay=2), d.set("y[1]", 1.0), d.vector("zhat").tolist(), d.step(0.0, 1.0),
         d.vector("zhat").tolist(), d.step(1.0, 1.0), d.step(2.0, 1.0), bool(np.any(d.vector("zhat") != 0)))),
+    "a null array to every getter and setter": ("PeixotoEx1Plant", lambda d: (_init(d), *(
+        d.raw(f"fmi2{op}{kind}", None, 1, None) for op in ("Get", "Set")
+        for kind in ("Real", "Integer", "Boolean", "String")))),
     "outputs read before initialization": ("CoxTothTruncationPlant", lambda d: (
         d.raw("fmi2SetupExperiment", 0, 0.0, 0.0, 0, 0.0), d.raw("fmi2EnterInitializationMode"),
         d.set("p[1]", 0.5), bool(np.isfinite(d.vector("y")).all()))),

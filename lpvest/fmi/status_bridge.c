@@ -406,7 +406,17 @@ static fmi2Status refuse_broken(Bridge* b, const char* what) {
     return fmi2Fatal;
 }
 
+static fmi2Status refuse_null(Bridge* b, const char* what);
+static fmi2Status refuse_null_array(Bridge* b, const char* what);
+
 #define BRIDGE(c) ((Bridge*)(c))
+/* a getter or setter: nvr > 0 with a NULL array is refused (pythonfmu would read through it) */
+#define FORWARD_ARRAYS(c, what, call)                                    \
+    do {                                                                 \
+        Bridge* b0_ = BRIDGE(c);                                         \
+        if (b0_ && !b0_->broken && nvr && (!vr || !value)) return refuse_null_array(b0_, what); \
+        FORWARD(c, what, call);                                          \
+    } while (0)
 #define FORWARD(c, what, call)                          \
     do {                                                \
         Bridge* b_ = BRIDGE(c);                         \
@@ -667,37 +677,45 @@ EXPORT fmi2Status fmi2Reset(fmi2Component c) {
 }
 
 EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
-    FORWARD(c, "fmi2GetReal", inner.GetReal(b_->inner, vr, nvr, value));
+    FORWARD_ARRAYS(c, "fmi2GetReal", inner.GetReal(b_->inner, vr, nvr, value));
 }
 EXPORT fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
-    FORWARD(c, "fmi2GetInteger", inner.GetInteger(b_->inner, vr, nvr, value));
+    FORWARD_ARRAYS(c, "fmi2GetInteger", inner.GetInteger(b_->inner, vr, nvr, value));
 }
 EXPORT fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
-    FORWARD(c, "fmi2GetBoolean", inner.GetBoolean(b_->inner, vr, nvr, value));
+    FORWARD_ARRAYS(c, "fmi2GetBoolean", inner.GetBoolean(b_->inner, vr, nvr, value));
 }
 EXPORT fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
-    FORWARD(c, "fmi2GetString", inner.GetString(b_->inner, vr, nvr, value));
+    FORWARD_ARRAYS(c, "fmi2GetString", inner.GetString(b_->inner, vr, nvr, value));
 }
 EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
-    FORWARD(c, "fmi2SetReal", inner.SetReal(b_->inner, vr, nvr, value));
+    FORWARD_ARRAYS(c, "fmi2SetReal", inner.SetReal(b_->inner, vr, nvr, value));
 }
 EXPORT fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                  const fmi2Integer value[]) {
-    FORWARD(c, "fmi2SetInteger", inner.SetInteger(b_->inner, vr, nvr, value));
+    FORWARD_ARRAYS(c, "fmi2SetInteger", inner.SetInteger(b_->inner, vr, nvr, value));
 }
 EXPORT fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                  const fmi2Boolean value[]) {
-    FORWARD(c, "fmi2SetBoolean", inner.SetBoolean(b_->inner, vr, nvr, value));
+    FORWARD_ARRAYS(c, "fmi2SetBoolean", inner.SetBoolean(b_->inner, vr, nvr, value));
 }
 EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                 const fmi2String value[]) {
-    FORWARD(c, "fmi2SetString", inner.SetString(b_->inner, vr, nvr, value));
+    FORWARD_ARRAYS(c, "fmi2SetString", inner.SetString(b_->inner, vr, nvr, value));
 }
 
 /* A NULL argument of an FMU-state call: fmi2Error with a message (the inner library would crash). */
 static fmi2Status refuse_null(Bridge* b, const char* what) {
     char msg[256];
-    snprintf(msg, sizeof msg, "%s: a NULL argument (FMU state, pointer or buffer)", what);
+    snprintf(msg, sizeof msg, "%s: a NULL argument (a state, pointer or buffer)", what);
+    report(b->host.logger, b->host.componentEnvironment, b->name, fmi2Error, msg);
+    return fmi2Error;
+}
+
+/* the native FMUs' words for it */
+static fmi2Status refuse_null_array(Bridge* b, const char* what) {
+    char msg[256];
+    snprintf(msg, sizeof msg, "%s: a null array", what);
     report(b->host.logger, b->host.componentEnvironment, b->name, fmi2Error, msg);
     return fmi2Error;
 }

@@ -163,6 +163,12 @@ static void logf_(instance* s, fmi2Status st, const char* fmt, ...) {
     if (!s) return fmi2Error;                     \
     s->worst = fmi2OK
 #define END return s->worst
+/* a getter or setter given nvr > 0 and a NULL array: refused before any element is read */
+#define REFUSE_NULL_ARRAYS(what)                         \
+    if (nvr && (!vr || !value)) {                        \
+        logf_(s, fmi2Error, what ": a null array");      \
+        END;                                             \
+    }
 
 /* ----------------------------------------------------------- components */
 
@@ -707,10 +713,7 @@ static void refresh_for_get(instance* s, const char* where) {
 
 FMI2_Export fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
     BEGIN(c);
-    if (nvr && (!vr || !value)) {
-        logf_(s, fmi2Error, "fmi2GetReal: a null array");
-        END;
-    }
+    REFUSE_NULL_ARRAYS("fmi2GetReal");
     if (all_outputs(s, vr, nvr)) {
         if (s->dirty) {
             lpv_msg err;
@@ -744,6 +747,7 @@ FMI2_Export fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[
 FMI2_Export fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                       fmi2Integer value[]) {
     BEGIN(c);
+    REFUSE_NULL_ARRAYS("fmi2GetInteger");
     for (size_t i = 0; i < nvr; i++)
         if (check_vr(s, "fmi2GetInteger", "Integer", LPV_INTEGER, vr[i])) {
             for (size_t k = 0; k < nvr; k++) value[k] = 0;
@@ -756,6 +760,7 @@ FMI2_Export fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference 
 FMI2_Export fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                       fmi2Boolean value[]) {
     BEGIN(c);
+    REFUSE_NULL_ARRAYS("fmi2GetBoolean");
     for (size_t i = 0; i < nvr; i++)
         if (check_vr(s, "fmi2GetBoolean", "Boolean", LPV_BOOLEAN, vr[i])) {
             for (size_t k = 0; k < nvr; k++) value[k] = fmi2False;
@@ -767,6 +772,7 @@ FMI2_Export fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference 
 
 FMI2_Export fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
     BEGIN(c);
+    REFUSE_NULL_ARRAYS("fmi2GetString");
     for (size_t i = 0; i < nvr; i++)
         if (check_vr(s, "fmi2GetString", "String", LPV_STRING, vr[i])) {
             for (size_t k = 0; k < nvr; k++) value[k] = "";
@@ -789,6 +795,7 @@ static int settable(instance* s, const char* fn, const char* type_name, int type
 
 FMI2_Export fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
     BEGIN(c);
+    REFUSE_NULL_ARRAYS("fmi2SetReal");
     for (size_t i = 0; i < nvr; i++) {
         if (!settable(s, "fmi2SetReal", "Real", LPV_REAL, vr[i]) || arrive(s, (int)vr[i])) continue;
         const lpv_var* v = &s->m->vars[vr[i]];
@@ -811,6 +818,7 @@ FMI2_Export fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[
 FMI2_Export fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                       const fmi2Integer value[]) {
     BEGIN(c);
+    REFUSE_NULL_ARRAYS("fmi2SetInteger");
     for (size_t i = 0; i < nvr; i++) {
         if (!settable(s, "fmi2SetInteger", "Integer", LPV_INTEGER, vr[i]) || arrive(s, (int)vr[i])) continue;
         const lpv_var* v = &s->m->vars[vr[i]];
@@ -828,6 +836,7 @@ FMI2_Export fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference 
 FMI2_Export fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                       const fmi2Boolean value[]) {
     BEGIN(c);
+    REFUSE_NULL_ARRAYS("fmi2SetBoolean");
     for (size_t i = 0; i < nvr; i++) {
         if (!settable(s, "fmi2SetBoolean", "Boolean", LPV_BOOLEAN, vr[i]) || arrive(s, (int)vr[i])) continue;
         s->bools[s->m->vars[vr[i]].slot] = value[i] != fmi2False;
@@ -839,6 +848,7 @@ FMI2_Export fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference 
 FMI2_Export fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                      const fmi2String value[]) {
     BEGIN(c);
+    REFUSE_NULL_ARRAYS("fmi2SetString");
     for (size_t i = 0; i < nvr; i++) {
         if (!settable(s, "fmi2SetString", "String", LPV_STRING, vr[i]) || arrive(s, (int)vr[i])) continue;
         char* copy = dup_string(value[i]);
