@@ -13,6 +13,7 @@ semantics, messages and FMU states are the Python FMUs'.
 from __future__ import annotations
 
 import math
+import struct
 import zipfile
 from pathlib import Path
 
@@ -758,6 +759,21 @@ def test_fmu_states_restore_and_serialize_exactly(native_fmus, name, tmp_path):
     assert e.raw("fmi2SetFMUstate", bad) == 3
     assert "not a serialized lpvest FMU state" in e.errors()[-1]
     e.fmu.freeFMUstate(bad)
+    if name == "CoxTothTruncationTruncatedKalman":
+        # a state whose window indices or sample counter are damaged (a segfault at the next
+        # step before): refused, named. At t = 10 (tau = 10) the component's state holds the
+        # sample counter t, the log-likelihood, the window's count and its head: 10, ., 10, 0
+        ten, zero = struct.pack("<d", 10.0), struct.pack("<d", 0.0)
+        at = [i for i in range(len(blob) - 32) if blob[i:i + 8] == ten and blob[i + 16:i + 32] == ten + zero]
+        assert len(at) == 1, at
+        for offset, value, says in ((24, 1e5, "the state's window (10 samples from 100000) does not fit tau = 10"),
+                                    (16, 11.5, "the state's window (11.5 samples from 0) does not fit tau = 10"),
+                                    (0, math.nan, "the state's sample counter nan is not a whole number >= 0")):
+            i = at[0] + offset
+            bad = e.fmu.deSerializeFMUstate(bytes(blob[:i]) + struct.pack("<d", value) + bytes(blob[i + 8:]))
+            assert e.raw("fmi2SetFMUstate", bad) == 3
+            assert e.errors()[-1].endswith(says), e.errors()[-1]
+            e.fmu.freeFMUstate(bad)
     assert e.step(25.0, 1.0) == 0
     d.free(), e.free()
     del ctypes

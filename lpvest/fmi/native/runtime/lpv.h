@@ -191,6 +191,9 @@ typedef struct lpv_role {
     int (*evaluate)(lpv_comp* c, const double* in, double* out, lpv_msg* err);
     /* advance with what evaluate kept (timed components: to t_end) */
     int (*commit)(lpv_comp* c, double t_end, lpv_msg* err);
+    /* a restored state (an FMU state from the host): the counters and indices the
+     * role computes with are in range (NULL: nothing beyond the FMI layer's checks) */
+    int (*check_state)(const lpv_comp* c, lpv_msg* err);
 } lpv_role;
 
 /* the roles */

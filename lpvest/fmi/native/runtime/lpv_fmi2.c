@@ -1312,6 +1312,11 @@ static int restore(instance* s, const unsigned char* bytes, size_t size, lpv_msg
         lpv_msgf(err, "ArgumentError: not a serialized lpvest FMU state (it is cut short or damaged)");
         goto done;
     }
+    if (!isfinite(t.time) || !isfinite(t.start_time)) {
+        lpv_msgf(err, "ArgumentError: the state's time (%.17g, started at %.17g) is not finite", t.time,
+                 t.start_time);
+        goto done;
+    }
     if (t.initialized) {
         lpv_msg cfg_err;
         if (comp_configure(&t, &t.comp, &cfg_err)) {
@@ -1334,6 +1339,8 @@ static int restore(instance* s, const unsigned char* bytes, size_t size, lpv_msg
             lpv_msgf(err, "ArgumentError: the state's component does not fit this FMU's parameters");
             goto done;
         }
+        const lpv_role* role = role_of(m);
+        if (role->check_state && role->check_state(&c->comp, err)) goto done;
     }
     if (r.pos != r.size) {
         lpv_msgf(err, "ArgumentError: not a serialized lpvest FMU state (%lu bytes too many)",

@@ -200,6 +200,6 @@ static int commit(lpv_comp* c, double t_end, lpv_msg* err) {
     return 0;
 }
 
-static const lpv_role ROLE = {sizes, configure, reset, check, evaluate, commit};
+static const lpv_role ROLE = {sizes, configure, reset, check, evaluate, commit, NULL};
 
 const lpv_role* lpv_role_hinf(void) { return &ROLE; }

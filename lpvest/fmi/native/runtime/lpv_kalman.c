@@ -694,8 +694,30 @@ static int commit(lpv_comp* c, double t_end, lpv_msg* err) {
     return 0;
 }
 
-static const lpv_role KALMAN = {sizes, configure, reset, NULL, evaluate, commit};
-static const lpv_role TRUNCATED = {sizes, configure, reset, NULL, evaluate, commit};
+/* a restored state: the sample counter a whole number in [0, 2^53]; the truncated filter's
+ * window count in [0, min(t, tau + 1)] and its head in [0, tau], whole (indices into the window) */
+static int check_state(const lpv_comp* c, lpv_msg* err) {
+    const lpv_kalman_data* d = KD(c);
+    st_layout s = st_of(d, truncated(c));
+    double t = c->st[s.t];
+    if (!(t >= 0.0 && t <= 9007199254740992.0 && t == floor(t))) {
+        lpv_msgf(err, "ArgumentError: the state's sample counter %.17g is not a whole number >= 0", t);
+        return 1;
+    }
+    if (truncated(c)) {
+        double tau = c->values[0], count = c->st[s.count], head = c->st[s.head];
+        if (!(count >= 0.0 && count <= tau + 1.0 && count <= t && count == floor(count) && head >= 0.0 &&
+              head <= tau && head == floor(head))) {
+            lpv_msgf(err, "ArgumentError: the state's window (%.17g samples from %.17g) does not fit tau = %.17g",
+                     count, head, tau);
+            return 1;
+        }
+    }
+    return 0;
+}
+
+static const lpv_role KALMAN = {sizes, configure, reset, NULL, evaluate, commit, check_state};
+static const lpv_role TRUNCATED = {sizes, configure, reset, NULL, evaluate, commit, check_state};
 
 const lpv_role* lpv_role_kalman(void) { return &KALMAN; }
 const lpv_role* lpv_role_truncated(void) { return &TRUNCATED; }

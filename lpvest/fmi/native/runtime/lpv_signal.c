@@ -490,8 +490,8 @@ static int commit(lpv_comp* c, double t_end, lpv_msg* err) {
     return 0;
 }
 
-static const lpv_role SCHEDULER = {sizes, configure, reset, NULL, evaluate, commit};
-static const lpv_role SOURCE = {sizes, configure, reset, NULL, evaluate, commit};
+static const lpv_role SCHEDULER = {sizes, configure, reset, NULL, evaluate, commit, NULL};
+static const lpv_role SOURCE = {sizes, configure, reset, NULL, evaluate, commit, NULL};
 
 const lpv_role* lpv_role_scheduler(void) { return &SCHEDULER; }
 const lpv_role* lpv_role_source(void) { return &SOURCE; }
