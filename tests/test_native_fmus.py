@@ -652,6 +652,9 @@ SCENARIOS = {
     "a parameter after initialization": ("PeixotoEx1Plant", lambda d: (_init(d), d.set("x0[1]", 1.0))),
     "steps that are not the next sample": ("PeixotoEx1Plant", lambda d: (
         _init(d), d.step(0.0, 0.5), d.step(0.0, -1.0), d.step(3.0, 1.0), d.step(0.0, math.inf), d.step(0.0, 0.0))),
+    "a sample skipped inside a longer step far from t = 0": ("PeixotoEx1HinfPD", lambda d: (
+        d.initialize(2e6, sample_time=1e-3), d.step(2e6 + 1e-3, 1e-3), d.step(2e6 + 1e-3, 4e-3),
+        d.step(2e6, 4e-3))),
     "a skipped or repeated point far from t = 0": ("PeixotoEx1Plant", lambda d: (
         d.initialize(1e9, sample_time=0.5), d.step(1e9, 0.5), d.step(1e9 + 1.0, 0.5), d.step(1e9, 0.5),
         d.step(1e9 + 0.5, 0.5))),
@@ -853,6 +856,37 @@ def test_reset_starts_over_and_instances_are_independent(native_fmus):
 
 
 # -- the backend option: CLI, cache, reproduce -------------------------------------------
+
+
+def test_a_model_with_more_model_parameters_than_the_runtime_holds_is_refused_at_build(tmp_path):
+    """The runtime holds 64 model parameters per instance (formulas index them): a 65th was
+    read from the memory after them, silently (a review's finding). The build refuses it."""
+    from lpvest.fmi._build import BuildError, build_fmus
+    from lpvest.fmi.native._export import MAX_MODEL_PARAMS
+
+    n = MAX_MODEL_PARAMS + 1
+    names = [f"k{i}" for i in range(1, n + 1)]
+    a22 = '"0.1 + 0.001*(' + " + ".join(names) + ')"'
+    vertex = f"""
+[[models.plant.vertex]]
+A = [[0.5, 0.0], [0.0, {a22}]]
+Bw = [[1.0], [1.0]]
+Cy = [[1.0, 1.0]]
+Cz = [[1.0, 0.0]]
+Dy = [[0.0]]
+Dz = [[0.0]]
+"""
+    model = tmp_path / "many.toml"
+    model.write_text("[system]\nname = \"many\"\ntitle = \"many parameters\"\ndefault = \"plant\"\n\n[parameters]\n"
+                     + "".join(f'{k} = {{ value = 0.0, lower = -1.0, upper = 1.0, description = "{k}" }}\n'
+                               for k in names)
+                     + '\n[scheduling]\nnames = ["theta"]\nlower = [-1.0]\nupper = [1.0]\n\n[models.plant]\n'
+                     + 'type = "polytopic"\n\n[models.plant.map]\nkind = "formulas"\n'
+                     + 'alpha = ["(1 - theta)/2", "(1 + theta)/2"]\n' + vertex + vertex)
+    with pytest.raises(BuildError, match=rf"ManyPlant: {n} model parameters; a native FMU takes at most 64 \(build it "
+                                                r"with the pythonfmu backend\)"):
+        build_fmus([model], tmp_path, roles=["Plant"], backend="native")
+    assert not list(tmp_path.glob("*.fmu"))
 
 
 def test_lpvest_build_backend_native(native_fmus, tmp_path, capsys):

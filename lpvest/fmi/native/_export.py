@@ -53,6 +53,11 @@ ROLE_CODES = {"Plant": 1, "Scheduler": 2, "Source": 3, "Kalman": 4, "TruncatedKa
               "HinfRobust": 6}
 
 
+#: Model parameters a native FMU holds (``LPV_MAX_MODEL_PARAMS`` in runtime/lpv.h: an instance's
+#: array of their values, which formulas index).
+MAX_MODEL_PARAMS = 64
+
+
 class NativeExportError(LpvestError, ValueError):
     """An FMU cannot be exported to the native backend (the message says why)."""
 
@@ -430,6 +435,10 @@ def parameter_entries(
     """
     if not model_params:
         return []
+    if len(model_params) > MAX_MODEL_PARAMS:
+        raise NativeExportError(
+            f"{identifier}: {len(model_params)} model parameters; a native FMU takes at most {MAX_MODEL_PARAMS} "
+            "(build it with the pythonfmu backend)")
     base = role_data(role, make(dict(params)))
     target = base.entries_target
     base_flat: dict[str, object] = {}

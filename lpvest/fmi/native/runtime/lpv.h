@@ -24,6 +24,7 @@
  * one is cut, saying how much was cut. */
 #define LPV_MAX_MESSAGE 1000
 #define LPV_MSG 1200 /* buffer size of one message (with its prefix) */
+#define LPV_MAX_MODEL_PARAMS 64 /* model parameters an instance holds (MAX_MODEL_PARAMS in _export.py) */
 
 typedef struct {
     char text[LPV_MSG];

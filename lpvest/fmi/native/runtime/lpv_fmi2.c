@@ -103,7 +103,7 @@ typedef struct {
     component comp;
     component preview;
     int preview_valid;
-    double model_params[64];
+    double model_params[LPV_MAX_MODEL_PARAMS];
     lpv_msg msg;
 } instance;
 
@@ -216,7 +216,7 @@ static int comp_configure(instance* s, component* c, lpv_msg* err) {
         lpv_msgf(err, "LpvestError: this FMU's role %d is unknown to the runtime", m->role);
         return 1;
     }
-    for (int i = 0; i < m->n_model_params && i < 64; i++) s->model_params[i] = s->reals[m->model_params[i]];
+    for (int i = 0; i < m->n_model_params; i++) s->model_params[i] = s->reals[m->model_params[i]];
     lpv_values v = values_of(s);
     lpv_sizes z;
     memset(&z, 0, sizeof z);
@@ -244,7 +244,10 @@ static int comp_configure(instance* s, component* c, lpv_msg* err) {
     }
     c->delay = m->measurement_delay >= 0 ? s->ints[m->measurement_delay] : 0;
     if (c->delay > 0) {
-        if ((size_t)c->delay > ((size_t)1 << 40) / (sizeof(double) * (size_t)(m->n_inputs + 1))) {
+        /* at most 2^40 bytes, and what size_t holds (32-bit targets: a shift by 40 of a size_t is undefined) */
+        uint64_t per_sample = (uint64_t)sizeof(double) * (uint64_t)(m->n_inputs + 1);
+        if ((uint64_t)c->delay > ((uint64_t)1 << 40) / per_sample ||
+            (uint64_t)c->delay * per_sample > (uint64_t)SIZE_MAX) {
             lpv_msgf(err, "MemoryError: measurement_delay = %d: cannot keep that many samples", c->delay);
             comp_free(c);
             return 1;
@@ -564,6 +567,13 @@ FMI2_Export fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuT
         if (logger)
             logger(env, name, fmi2Error, "logStatusError",
                    "[%s] fmi2Instantiate: GUID %s does not match this FMU's %s", m->identifier, fmuGUID, m->guid);
+        return NULL;
+    }
+    if (m->n_model_params < 0 || m->n_model_params > LPV_MAX_MODEL_PARAMS) { /* not model data lpvest wrote */
+        if (logger)
+            logger(env, name, fmi2Error, "logStatusError",
+                   "[%s] fmi2Instantiate: the model data holds %d model parameters; at most %d", m->identifier,
+                   m->n_model_params, LPV_MAX_MODEL_PARAMS);
         return NULL;
     }
     instance* s = (instance*)calloc(1, sizeof(instance));
@@ -903,7 +913,10 @@ static int step_problem(instance* s, double t, double h, lpv_msg* p) {
     double scale = fabs(t) > fabs(s->time) ? fabs(t) : fabs(s->time);
     if (h > scale) scale = h;
     double tol = TIME_RTOL * scale;
-    if (tol > 0.5 * h) tol = 0.5 * h; /* far from 0 the fraction of |t| would exceed the step */
+    /* far from 0 the fraction of |t| would exceed the step, or a sample of a longer step (skipped) */
+    double unit = h;
+    if (s->m->sample_time >= 0 && s->reals[s->m->sample_time] < unit) unit = s->reals[s->m->sample_time];
+    if (tol > 0.5 * unit) tol = 0.5 * unit;
     if (fabs(t - s->time) > tol) {
         lpv_msgf(p,
                  "the communication point t = %s is not the FMU's current time %s (a skipped or repeated point; "
