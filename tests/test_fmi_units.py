@@ -37,6 +37,16 @@ def test_state_decoding_rejects_foreign_bytes():
         decode_state(b'{"format": "other"}')
     with pytest.raises(TypeError, match="cannot serialize a object"):
         encode_state({"x": object()})
+    # one digit of an estimate changed (base64 of its bytes), a number changed, or cut short:
+    # refused, never restored as another state
+    good = encode_state({"x": np.array([1.0, 2.0]), "k": 3})
+    at = good.index(b"__ndarray__") + len(b'__ndarray__": "') + 2
+    for bad in (good[:at] + (b"B" if good[at:at + 1] != b"B" else b"C") + good[at + 1:],
+                good.replace(b'"k": 3', b'"k": 4')):
+        with pytest.raises(ValueError, match=r"it is damaged: its SHA-256 does not match"):
+            decode_state(bad)
+    with pytest.raises(ValueError, match="not a serialized lpvest FMU state: "):
+        decode_state(good[:-3])
 
 
 def test_parameter_types_follow_the_start_value():

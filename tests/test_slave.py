@@ -320,6 +320,31 @@ def test_a_restored_state_continues_identically_and_a_foreign_state_is_refused(r
     assert "the state belongs to 'CoxTothTruncationKalman', not to 'PeixotoEx1Plant'" in p.errors()[0]
     p.set_state(edit_state(p.get_state(), params={"other": 1.0}))
     assert "the state's parameters do not match this FMU" in p.errors()[0]
+    # another build of the same FMU (its GUID differs), damaged bytes, a field that does not
+    # read: refused, and nothing of the refused state is applied (b goes on as before)
+    mid = b.get_state()
+    after = run(b, 10, 3)
+    b.set_state(mid)
+    for bad, says in ((edit_state(mid, guid="{another}"),
+                       "the state belongs to 'CoxTothTruncationKalman', not to 'CoxTothTruncationKalman' "
+                       "(another build of it)"),
+                      (mid.replace(b'"time": 10.0', b'"time": 11.0'),
+                       "not a serialized lpvest FMU state (it is damaged: its SHA-256 does not match)"),
+                      (mid[: len(mid) // 2], "not a serialized lpvest FMU state: "),
+                      (edit_state(mid, invalid=7, inputs=edit_inputs(mid)), "TypeError: 'int' object is not iterable"),
+                      (edit_state(mid, time=math.nan), "the state's time (nan, started at 0.0) is not finite")):
+        b.take_log()
+        b.set_state(bad)
+        errors = b.errors()
+        assert len(errors) == 1 and says in errors[0], (says, errors)
+    assert run(b, 10, 3) == after
+
+
+def edit_inputs(state: bytes) -> dict:
+    """The state's inputs, every value changed (to see that none is applied)."""
+    from lpvest.fmi._state import decode_state
+
+    return {k: np.asarray(v) + 123.0 for k, v in decode_state(state)["inputs"].items()}
 
 
 # -- non-Real variables and the model description's metadata -------------------------------

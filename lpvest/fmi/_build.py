@@ -77,7 +77,7 @@ from ..core._errors import ArgumentError, LpvestError
 from ..core._paths import user_cache_dir
 from ._bundle import Bundle, SourceRoot, make_bundle
 from ._naming import fmu_name
-from ._parameters import SPEC_FILE, SPEC_FORMAT
+from ._parameters import GUID_FILE, SPEC_FILE, SPEC_FORMAT
 from ._registry import EstimatorKind, estimator_kinds, resolve
 
 if TYPE_CHECKING:
@@ -112,8 +112,6 @@ DEFAULT_OUT = "fmu-build"
 
 #: The manifest in an FMU's resources folder: every input of the build and its SHA-256.
 MANIFEST_FILE = "manifest.json"
-#: The GUID of a pythonfmu-backend FMU, in its resources/ (read by the status bridge: ``RESOURCE_GUID_FILE``).
-GUID_FILE = "lpvest_guid.txt"
 
 #: The lpvest package an FMU carries modules of (this one).
 _PACKAGE_DIR = Path(__file__).resolve().parent.parent

@@ -24,6 +24,7 @@ from ..core._errors import ArgumentTypeError, ModelFileError
 
 __all__ = [
     "SPEC_FILE",
+    "GUID_FILE",
     "SPEC_FORMAT",
     "Parameter",
     "ModelDefault",
@@ -35,6 +36,10 @@ __all__ = [
 
 #: The spec file in an FMU's resources folder.
 SPEC_FILE = "lpvest_fmu.json"
+#: The GUID of a pythonfmu-backend FMU in its resources/, written by the build after the
+#: model description: the status bridge compares the host's GUID with it (RESOURCE_GUID_FILE
+#: in status_bridge.c), the slave binds its FMU states to it.
+GUID_FILE = "lpvest_guid.txt"
 #: Version tag of the spec format.
 SPEC_FORMAT = "lpvest-fmu-2"
 

@@ -72,7 +72,7 @@ from ..core._errors import ArgumentError
 from ..core._interrupt import hold
 from ..core._protocol import Component, Port, Sampled, Timed, whole_samples
 from ._naming import element_names
-from ._parameters import Parameter, read_spec
+from ._parameters import GUID_FILE, Parameter, read_spec
 from ._state import copy_state, decode_state, encode_state
 
 if TYPE_CHECKING:
@@ -260,6 +260,10 @@ class LpvestSlave(Fmi2Slave):
         super().__init__(**kwargs)
         self.spec = read_spec(self.resources)
         self.modelName = self.spec["identifier"]
+        try:  # what binds the FMU states to this build (None while the build itself instantiates it)
+            self._guid: str | None = (Path(self.resources) / GUID_FILE).read_text(encoding="ascii").strip()
+        except (OSError, UnicodeDecodeError):
+            self._guid = None
         self.description = self.spec.get("description", "")
         self.version = __version__
         # which code runs this FMU: its own copy of lpvest (lpvest.fmi), named here
@@ -895,6 +899,7 @@ class LpvestSlave(Fmi2Slave):
     def _snapshot(self) -> dict[str, object]:
         return {
             "identifier": self.modelName,
+            "guid": self._guid,
             "params": copy_state(self._params),
             "inputs": copy_state(self._inputs),
             "outputs": copy_state(self._outputs),
@@ -917,11 +922,13 @@ class LpvestSlave(Fmi2Slave):
     def _set_fmu_state(self, state: bytes) -> None:
         def run() -> None:
             snap = decode_state(bytes(state))
-            if snap.get("identifier") != self.modelName:
-                raise ArgumentError(f"the state belongs to {snap.get('identifier')!r}, not to {self.modelName!r}")
+            if snap.get("identifier") != self.modelName or snap.get("guid") != self._guid:
+                raise ArgumentError(f"the state belongs to {snap.get('identifier')!r}, not to {self.modelName!r}"
+                                    + (" (another build of it)" if snap.get("identifier") == self.modelName else ""))
             params = snap["params"]
             if set(params) != set(self._params):
                 raise ArgumentError("the state's parameters do not match this FMU")
+            # every field read before anything is assigned: a refused state changes nothing
             inputs = {k: np.asarray(snap["inputs"][k], dtype=float).reshape(v.shape) for k, v in self._inputs.items()}
             outputs = {
                 k: np.asarray(snap["outputs"][k], dtype=float).reshape(v.shape) for k, v in self._outputs.items()
@@ -929,8 +936,14 @@ class LpvestSlave(Fmi2Slave):
             held = snap.get("held")
             if held is not None:
                 held = {k: np.asarray(held[k], dtype=float).reshape(self._outputs[k].shape) for k in self._feedthrough}
+            invalid = {str(k): str(v) for k, v in dict(snap["invalid"]).items()}
+            initialized, terminated = bool(snap["initialized"]), bool(snap.get("terminated", False))
+            init_error, dirty = str(snap["init_error"]), bool(snap["dirty"])
+            time, start_time = float(snap["time"]), float(snap["start_time"])
+            if not (math.isfinite(time) and math.isfinite(start_time)):
+                raise ArgumentError(f"the state's time ({time}, started at {start_time}) is not finite")
             component = None
-            if snap["initialized"]:
+            if initialized:
                 component = self.make_component(params)
                 component.set_state(snap["component"])
             self._advance = component.advance if isinstance(component, Component) else None
@@ -942,12 +955,10 @@ class LpvestSlave(Fmi2Slave):
             self._store_outputs(outputs, check=False)
             self._held = held
             self._step_inputs = None
-            self._invalid = dict(snap["invalid"])
-            self._initialized = bool(snap["initialized"])
-            self._terminated = bool(snap.get("terminated", False))
-            self._init_error = str(snap["init_error"])
-            self._dirty = bool(snap["dirty"])
-            self._time, self._start_time = float(snap["time"]), float(snap["start_time"])
+            self._invalid = invalid
+            self._initialized, self._terminated = initialized, terminated
+            self._init_error, self._dirty = init_error, dirty
+            self._time, self._start_time = time, start_time
             self._component = component
             self._preview = None
             # the status bridge reports this time as fmi2LastSuccessfulTime (lpvest/fmi/status_bridge.c)

@@ -5,8 +5,10 @@
 parameters) as bytes that restore it exactly in a fresh instance. Arrays are
 stored as their raw little-endian bytes (base64), so a round trip is
 bit-for-bit, NaN and inf included; generator states (dicts of Python ints) and
-other scalars go through JSON unchanged. Only numpy and the standard library
-are used.
+other scalars go through JSON unchanged. The SHA-256 of the state's JSON is
+stored beside it: bytes damaged since (a changed digit of an estimate, a
+truncated file) are refused, never restored as another state. Only numpy and
+the standard library are used.
 
 >>> import numpy as np
 >>> state = {"x": np.array([1.0, np.nan]), "k": 3, "rng": {"state": 2**100}}
@@ -18,6 +20,7 @@ are used.
 from __future__ import annotations
 
 import base64
+import hashlib
 import json
 from typing import Any
 
@@ -28,7 +31,7 @@ from ..core._errors import ArgumentError, ArgumentTypeError
 __all__ = ["encode_state", "decode_state", "copy_state", "FORMAT"]
 
 #: Version tag stored in every serialized state.
-FORMAT = "lpvest-fmu-state-1"
+FORMAT = "lpvest-fmu-state-2"
 
 _ARRAY = "__ndarray__"
 _TUPLE = "__tuple__"
@@ -76,13 +79,26 @@ def _decode(obj: Any) -> Any:
     return obj
 
 
+def _digest(encoded: object) -> str:
+    # json.dumps of what json.loads read back from json.dumps is the same text (floats by repr)
+    return hashlib.sha256(json.dumps(encoded, allow_nan=True).encode("utf-8")).hexdigest()
+
+
 def encode_state(state: dict[str, object]) -> bytes:
     """``state`` (nested dicts, lists, tuples, numpy arrays, scalars) as bytes."""
-    return json.dumps({"format": FORMAT, "state": _encode(state)}, allow_nan=True).encode("utf-8")
+    encoded = _encode(state)
+    return json.dumps({"format": FORMAT, "sha256": _digest(encoded), "state": encoded},
+                      allow_nan=True).encode("utf-8")
 
 
 def decode_state(data: bytes) -> dict[str, Any]:
-    """The state :func:`encode_state` wrote (arrays come back as fresh copies)."""
+    """The state :func:`encode_state` wrote (arrays come back as fresh copies).
+
+    Raises
+    ------
+    ArgumentError
+        Not such a state, another format, or damaged (its SHA-256 differs).
+    """
     try:
         doc = json.loads(bytes(data).decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -90,7 +106,12 @@ def decode_state(data: bytes) -> dict[str, Any]:
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         found = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
         raise ArgumentError(f"not a serialized lpvest FMU state (format {found!r}; expected {FORMAT!r})")
-    return _decode(doc["state"])
+    if "state" not in doc or doc.get("sha256") != _digest(doc["state"]):
+        raise ArgumentError("not a serialized lpvest FMU state (it is damaged: its SHA-256 does not match)")
+    try:
+        return _decode(doc["state"])
+    except (TypeError, ValueError, KeyError, AttributeError) as exc:
+        raise ArgumentError(f"not a serialized lpvest FMU state: {exc}") from exc
 
 
 def copy_state(state: Any) -> Any:
