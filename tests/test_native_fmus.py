@@ -719,6 +719,14 @@ def _run(d: Driver, data: dict[str, np.ndarray], outs: list[str], k0: int, n: in
     return np.array(rows)
 
 
+def _fnv1a(data: bytes) -> int:
+    """The checksum a native FMU state ends with (lpv_fmi2.c, checksum)."""
+    h = 14695981039346656037
+    for b in data:
+        h = ((h ^ b) * 1099511628211) % 2**64
+    return h
+
+
 @pytest.mark.parametrize("name", ["CoxTothTruncationPlant", "CoxTothTruncationTruncatedKalman", "AffineDemoHinfPD",
                                   "CoxTothEx1Source", "PeixotoEx1Scheduler"])
 def test_fmu_states_restore_and_serialize_exactly(native_fmus, name, tmp_path):
@@ -762,6 +770,11 @@ def test_fmu_states_restore_and_serialize_exactly(native_fmus, name, tmp_path):
     assert e.raw("fmi2SetFMUstate", bad) == 3
     assert "not a serialized lpvest FMU state" in e.errors()[-1]
     e.fmu.freeFMUstate(bad)
+    # one byte of a number changed (the checksum, FNV-1a of the bytes before it, no longer fits)
+    bad = e.fmu.deSerializeFMUstate(bytes(blob[:-20]) + bytes([blob[-20] ^ 1]) + bytes(blob[-19:]))
+    assert e.raw("fmi2SetFMUstate", bad) == 3
+    assert e.errors()[-1].endswith("not a serialized lpvest FMU state (it is damaged: its checksum does not match)")
+    e.fmu.freeFMUstate(bad)
     if name == "CoxTothTruncationTruncatedKalman":
         # a state whose window indices or sample counter are damaged (a segfault at the next
         # step before): refused, named. At t = 10 (tau = 10) the component's state holds the
@@ -773,7 +786,8 @@ def test_fmu_states_restore_and_serialize_exactly(native_fmus, name, tmp_path):
                                     (16, 11.5, "the state's window (11.5 samples from 0) does not fit tau = 10"),
                                     (0, math.nan, "the state's sample counter nan is not a whole number >= 0")):
             i = at[0] + offset
-            bad = e.fmu.deSerializeFMUstate(bytes(blob[:i]) + struct.pack("<d", value) + bytes(blob[i + 8:]))
+            changed = bytes(blob[:i]) + struct.pack("<d", value) + bytes(blob[i + 8:-8])
+            bad = e.fmu.deSerializeFMUstate(changed + struct.pack("<Q", _fnv1a(changed)))  # well formed
             assert e.raw("fmi2SetFMUstate", bad) == 3
             assert e.errors()[-1].endswith(says), e.errors()[-1]
             e.fmu.freeFMUstate(bad)

@@ -10,8 +10,8 @@
  * (stack code, lpv_core.h). Nothing is read from files at run time.
  *
  * Memory: an instance allocates when it is created, configured (fmi2ExitInitializationMode,
- * or a preview of the outputs before it) or restored, through the host's allocator;
- * never in fmi2DoStep, fmi2GetReal or fmi2SetReal.
+ * or a preview of the outputs before it) or restored, with the C library's malloc (the
+ * host's allocateMemory is not used); never in fmi2DoStep, fmi2GetReal or fmi2SetReal.
  */
 #ifndef LPV_H
 #define LPV_H

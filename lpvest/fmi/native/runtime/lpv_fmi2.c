@@ -1201,7 +1201,15 @@ static char* get_str(reader* r) {
     return out;
 }
 
-static const char STATE_MAGIC[8] = {'L', 'P', 'V', 'S', 'T', 'A', 'T', '1'};
+static const char STATE_MAGIC[8] = {'L', 'P', 'V', 'S', 'T', 'A', 'T', '2'};
+
+/* FNV-1a (64 bits) of a state's bytes, stored after them: a buffer damaged since it was
+ * serialized (a changed digit of an estimate, cut short) is refused, never restored */
+static uint64_t checksum(const unsigned char* p, size_t n) {
+    uint64_t h = 14695981039346656037ULL;
+    for (size_t i = 0; i < n; i++) h = (h ^ p[i]) * 1099511628211ULL;
+    return h;
+}
 
 static void serialize(const instance* s, writer* w) {
     const lpv_model* m = s->m;
@@ -1237,6 +1245,7 @@ static void serialize(const instance* s, writer* w) {
         put_i32(w, c->delay), put_i32(w, c->n_queue), put_i32(w, c->head);
         put(w, c->queue, sizeof(double) * (size_t)c->delay * (size_t)m->n_inputs);
     }
+    if (!w->failed) put_u64(w, checksum(w->p, w->size));
 }
 
 /* restore from bytes; the instance is changed only when everything checks out */
@@ -1249,6 +1258,13 @@ static int restore(instance* s, const unsigned char* bytes, size_t size, lpv_msg
         lpv_msgf(err, "ArgumentError: not a serialized lpvest FMU state");
         return 1;
     }
+    uint64_t stored = 0;
+    if (size >= r.pos + sizeof stored) memcpy(&stored, bytes + size - sizeof stored, sizeof stored);
+    if (size < r.pos + sizeof stored || stored != checksum(bytes, size - sizeof stored)) {
+        lpv_msgf(err, "ArgumentError: not a serialized lpvest FMU state (it is damaged: its checksum does not match)");
+        return 1;
+    }
+    r.size = size - sizeof stored; /* the checksum is not part of what is read */
     char* ident = get_str(&r);
     char* guid = get_str(&r);
     if (r.failed) {
