@@ -761,6 +761,12 @@ def test_an_output_that_would_be_inf_is_an_error_naming_it(fmus):
     assert any("output y[1] is not finite (NaN or inf) at t = 1" in m for m in d.errors()), d.errors()
     assert any(s == 1 and "numpy: floating-point overflow" in m for s, _, m in d.messages), d.messages
     assert d.step(1.0, 1.0) == 3
+    state = d.fmu.getFMUstate()  # restored: still an error to read, still refused
+    d.fmu.setFMUstate(state)
+    d.fmu.freeFMUstate(state)
+    assert d.status(d.fmu.getReal, [d.vr["y[1]"]]) == 3
+    assert d.errors()[-1].endswith("output y[1] is not finite (NaN or inf) at t = 1")
+    assert d.step(1.0, 1.0) == 3
     assert any("fmi2DoStep refused at t = 1 (h = 1): output y[1]" in m for m in d.errors())
     d.free()
 

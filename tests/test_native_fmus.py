@@ -872,6 +872,25 @@ def test_reset_starts_over_and_instances_are_independent(native_fmus):
 # -- the backend option: CLI, cache, reproduce -------------------------------------------
 
 
+def test_an_output_that_is_not_finite_stays_an_error_after_a_restored_state(native_fmus):
+    """A step refused for an output that is not finite was accepted after fmi2GetFMUstate and
+    fmi2SetFMUstate (the restored outputs were not checked again): as in the Python FMU's test
+    (tests/test_fmu.py), it stays refused, and reading it stays an error."""
+    d = Driver(native_fmus["PeixotoEx1Plant"])
+    assert d.initialize() == 0
+    d.set_vector("p", 0.5)
+    d.set_vector("w", 1e308)
+    assert d.step(0.0, 1.0) == 0  # y_0 = D_y w is finite, x_1 overflows
+    assert d.step(1.0, 1.0) == 3
+    state = d.fmu.getFMUstate()
+    d.fmu.setFMUstate(state)
+    d.fmu.freeFMUstate(state)
+    assert d.status(d.fmu.getReal, [d.vr["y[1]"]]) == 3
+    assert d.errors()[-1].endswith("output y[1] is not finite (NaN or inf) at t = 1")
+    assert d.step(1.0, 1.0) == 3
+    d.free()
+
+
 def test_a_model_with_more_model_parameters_than_the_runtime_holds_is_refused_at_build(tmp_path):
     """The runtime holds 64 model parameters per instance (formulas index them): a 65th was
     read from the memory after them, silently (a review's finding). The build refuses it."""

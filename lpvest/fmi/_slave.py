@@ -952,13 +952,15 @@ class LpvestSlave(Fmi2Slave):
             for name, value in inputs.items():  # in place: the fast set_real writes into these arrays
                 self._inputs[name][...] = value
             self._inputs_in_range = None
-            self._store_outputs(outputs, check=False)
+            self._time, self._start_time = time, start_time
+            # outputs to compute again are checked then; the restored ones (not dirty) now: a step
+            # refused for an output that is not finite stays refused after a restore
+            self._store_outputs(outputs, check=not dirty)
             self._held = held
             self._step_inputs = None
             self._invalid = invalid
             self._initialized, self._terminated = initialized, terminated
             self._init_error, self._dirty = init_error, dirty
-            self._time, self._start_time = time, start_time
             self._component = component
             self._preview = None
             # the status bridge reports this time as fmi2LastSuccessfulTime (lpvest/fmi/status_bridge.c)

@@ -1388,7 +1388,10 @@ static int restore(instance* s, const unsigned char* bytes, size_t size, lpv_msg
         memcpy(s->init_error, t.init_error, sizeof s->init_error);
         s->comp = t.comp;
         s->pending = 0;
-        s->n_nonfinite = 0; /* as the Python slave: checked again when computed */
+        /* outputs to compute again are checked then; the restored ones (not dirty) now: a step
+           refused for an output that is not finite stays refused after a restore */
+        if (s->dirty) s->n_nonfinite = 0;
+        else count_nonfinite(s);
         s->preview_valid = 0;
         /* the old arrays go with the scratch instance */
         t.reals = keep.reals, t.ints = keep.ints, t.bools = keep.bools, t.strings = keep.strings;
