@@ -2,6 +2,7 @@
 
 import zipfile
 from pathlib import Path
+from xml.etree import ElementTree
 
 import numpy as np
 import pytest
@@ -14,7 +15,7 @@ from lpvest.cosim import (
     DiscardedStepWarning,
     simulate,
 )
-from lpvest.fmi._build import _inner_library, bridge_note, status_bridge
+from lpvest.fmi._build import GUID_FILE, _inner_library, bridge_note, status_bridge
 from tests.tolerances import roundoff
 
 SCRIPTS = Path(__file__).parent / "fmu_scripts"
@@ -33,12 +34,14 @@ def _behind_the_status_bridge(fmu: Path) -> None:
         pytest.skip("no C compiler (cc or zig) for lpvest's status bridge: " + str(bridge_note("linux64")))
     with zipfile.ZipFile(fmu) as z:
         entries = [(info, z.read(info)) for info in z.infolist()]
+        guid = ElementTree.fromstring(z.read("modelDescription.xml")).get("guid")
     with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as z:
         for info, data in entries:
             if info.filename.startswith("binaries/linux64/") and info.filename.endswith(".so"):
                 z.writestr(f"binaries/linux64/{_inner_library('linux64')}", data)
                 data = bridge.read_bytes()
             z.writestr(info, data)
+        z.writestr(f"resources/{GUID_FILE}", guid + "\n")  # what the bridge checks the host's GUID against
 
 
 @pytest.fixture(scope="module")
