@@ -692,6 +692,15 @@ SCENARIOS = {
     "a null array to every getter and setter": ("PeixotoEx1Plant", lambda d: (_init(d), *(
         d.raw(f"fmi2{op}{kind}", None, 1, None) for op in ("Get", "Set")
         for kind in ("Real", "Integer", "Boolean", "String")))),
+    "the initialization out of its order": ("CoxTothTruncationKalman", lambda d: (
+        d.raw("fmi2SetupExperiment", 0, 0.0, 0.0, 0, 0.0), d.raw("fmi2EnterInitializationMode"),
+        d.raw("fmi2EnterInitializationMode"), d.raw("fmi2SetupExperiment", 0, 0.0, 5.0, 0, 0.0),
+        d.raw("fmi2ExitInitializationMode"), d.set("p[1]", 0.5), d.set("y[1]", 1.0), d.step(0.0, 1.0),
+        d.fmu.getRealStatus(2), d.raw("fmi2ExitInitializationMode"),  # fmi2LastSuccessfulTime: 1
+        d.raw("fmi2SetupExperiment", 0, 0.0, 100.0, 0, 0.0), d.raw("fmi2EnterInitializationMode"),
+        d.fmu.getRealStatus(2), d.step(1.0, 1.0),  # still 1: neither restarted nor moved
+        d.raw("fmi2Terminate"), d.raw("fmi2ExitInitializationMode"),
+        d.raw("fmi2SetupExperiment", 0, 0.0, 0.0, 0, 0.0))),
     "outputs read before initialization": ("CoxTothTruncationPlant", lambda d: (
         d.raw("fmi2SetupExperiment", 0, 0.0, 0.0, 0, 0.0), d.raw("fmi2EnterInitializationMode"),
         d.set("p[1]", 0.5), bool(np.isfinite(d.vector("y")).all()))),
@@ -707,6 +716,19 @@ def test_the_same_statuses_and_messages_as_the_python_fmu(fmus, native_fmus, cas
     python, native = _both(fmus, native_fmus, name, script)
     assert native == python
     assert any(s >= 3 for s, _ in python[1]) or case.startswith(("a measurement", "outputs read"))
+
+
+def test_initialization_calls_out_of_their_fmi_state_are_refused_and_change_nothing(fmus):
+    """A second fmi2EnterInitializationMode, fmi2SetupExperiment after it, a second
+    fmi2ExitInitializationMode (it restarted the filter), fmi2SetupExperiment mid-run (it
+    moved the time) and after fmi2Terminate: fmi2Error, nothing changed (both backends: the
+    scenario above)."""
+    name, script = SCENARIOS["the initialization out of its order"]
+    d = Driver(fmus[name])
+    assert script(d) == (0, 0, 3, 3, 0, 0, 0, 0, 1.0, 3, 3, 3, 1.0, 0, 0, 3, 3)
+    assert f"[{name}] fmi2SetupExperiment: the FMU is initialized already (fmi2ExitInitializationMode was called; " \
+           "reset the instance to initialize it again)" in d.errors()
+    d.free()
 
 
 def _run(d: Driver, data: dict[str, np.ndarray], outs: list[str], k0: int, n: int, h: float = 1.0) -> np.ndarray:

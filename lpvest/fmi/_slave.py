@@ -270,6 +270,7 @@ class LpvestSlave(Fmi2Slave):
         self._log(Fmi2Status.ok, f"lpvest {__version__} ({__name__.rpartition('.fmi.')[0]})")
         self._elements: dict[int, _Element] = {}
         self._invalid: dict[str, str] = {}
+        self._entered = False  # fmi2EnterInitializationMode was called (a reset constructs the slave anew)
         self._params: dict[str, Any] = {}
         self._param_defs: dict[str, Parameter] = {}
         for par in self.declare():
@@ -628,6 +629,10 @@ class LpvestSlave(Fmi2Slave):
             self._construction_log = []
 
         def run() -> None:
+            why = self._lifecycle_problem(entering=True)
+            if why:
+                self._log(Fmi2Status.error, f"fmi2SetupExperiment: {why}")
+                return
             t0 = float(start_time)
             if not math.isfinite(t0):
                 raise ArgumentError(f"start time {t0} is not finite")
@@ -638,10 +643,32 @@ class LpvestSlave(Fmi2Slave):
 
         self._guard("fmi2SetupExperiment", run, None)
 
+    def _lifecycle_problem(self, *, entering: bool) -> str | None:
+        """Why a call of the initialization (fmi2SetupExperiment, fmi2EnterInitializationMode:
+        not after fmi2EnterInitializationMode; fmi2ExitInitializationMode: once) is out of its
+        FMI state, or None (the native runtime's words: lifecycle_problem in lpv_fmi2.c)."""
+        if self._terminated:
+            return "the FMU is terminated (fmi2Terminate was called; reset or free the instance)"
+        if self._initialized:
+            return ("the FMU is initialized already (fmi2ExitInitializationMode was called; reset the instance to "
+                    "initialize it again)")
+        if entering and self._entered:
+            return "the FMU is in initialization mode already (fmi2EnterInitializationMode was called)"
+        return None
+
     def enter_initialization_mode(self) -> None:
-        pass
+        why = self._lifecycle_problem(entering=True)
+        if why:
+            self._log(Fmi2Status.error, f"fmi2EnterInitializationMode: {why}")
+        else:
+            self._entered = True
 
     def exit_initialization_mode(self) -> None:
+        why = self._lifecycle_problem(entering=False)
+        if why:
+            self._log(Fmi2Status.error, f"fmi2ExitInitializationMode: {why}")
+            return
+
         def run() -> None:
             if self._invalid:
                 raise ArgumentError("invalid values were set: " + "; ".join(self._invalid.values()))

@@ -96,6 +96,7 @@ typedef struct {
     int* rejected_int;
 
     int initialized, terminated, dirty;
+    int entered; /* fmi2EnterInitializationMode was called (until a reset) */
     int n_nonfinite;
     double time, start_time;
     char init_error[LPV_MSG + 32]; /* "initialization failed: " and a message */
@@ -362,7 +363,7 @@ static int set_fresh(instance* s) {
     s->n_invalid = 0;
     s->held_valid = 0;
     s->pending = 0;
-    s->initialized = s->terminated = 0;
+    s->initialized = s->terminated = s->entered = 0;
     s->dirty = 1;
     s->n_nonfinite = 0;
     s->time = s->start_time = 0.0;
@@ -628,11 +629,29 @@ FMI2_Export fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingO
     END;
 }
 
+/* Why a call of the initialization (fmi2SetupExperiment, fmi2EnterInitializationMode: not after
+ * fmi2EnterInitializationMode; fmi2ExitInitializationMode: once) is out of its FMI state, or NULL;
+ * the Python slave's words (_lifecycle_problem) */
+static const char* lifecycle_problem(const instance* s, int entering) {
+    if (s->terminated) return "the FMU is terminated (fmi2Terminate was called; reset or free the instance)";
+    if (s->initialized)
+        return "the FMU is initialized already (fmi2ExitInitializationMode was called; reset the instance to "
+               "initialize it again)";
+    if (entering && s->entered)
+        return "the FMU is in initialization mode already (fmi2EnterInitializationMode was called)";
+    return NULL;
+}
+
 FMI2_Export fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                            fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
     BEGIN(c);
     (void)toleranceDefined, (void)tolerance, (void)stopTimeDefined, (void)stopTime;
     logf_(s, fmi2OK, "lpvest %s (native runtime)", s->m->version);
+    const char* why = lifecycle_problem(s, 1);
+    if (why) {
+        logf_(s, fmi2Error, "fmi2SetupExperiment: %s", why);
+        END;
+    }
     if (!isfinite(startTime)) {
         char a[48];
         logf_(s, fmi2Error, "fmi2SetupExperiment: ArgumentError: start time %s is not finite", lpv_repr(a, startTime));
@@ -647,11 +666,19 @@ FMI2_Export fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranc
 
 FMI2_Export fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
     BEGIN(c);
+    const char* why = lifecycle_problem(s, 1);
+    if (why) logf_(s, fmi2Error, "fmi2EnterInitializationMode: %s", why);
+    else s->entered = 1;
     END;
 }
 
 FMI2_Export fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     BEGIN(c);
+    const char* why = lifecycle_problem(s, 0);
+    if (why) {
+        logf_(s, fmi2Error, "fmi2ExitInitializationMode: %s", why);
+        END;
+    }
     const lpv_model* m = s->m;
     lpv_msg err;
     err.text[0] = '\0';
