@@ -575,8 +575,9 @@ class LpvestSlave(Fmi2Slave):
 
     def _refresh(self) -> None:
         """Compute the outputs when inputs, parameters or the state changed
-        (call it under :meth:`_compute`)."""
-        if not self._dirty or self._invalid:
+        (call it under :meth:`_compute`). An input rejected since was not stored: the
+        outputs follow the stored (valid) inputs."""
+        if not self._dirty:
             return
         component = self._preview_component()
         held = self._held

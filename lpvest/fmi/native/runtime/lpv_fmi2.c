@@ -448,7 +448,8 @@ static component* preview_component(instance* s, lpv_msg* err) {
 /* compute the outputs when inputs, parameters or the state changed (_refresh) */
 static int refresh(instance* s, lpv_msg* err) {
     const lpv_model* m = s->m;
-    if (!s->dirty || s->n_invalid) return 0;
+    /* an input rejected since was not stored: the outputs follow the stored (valid) inputs */
+    if (!s->dirty) return 0;
     component* c = preview_component(s, err);
     if (!c) return 1;
     if (!s->held_valid) {
