@@ -406,17 +406,34 @@ static fmi2Status refuse_broken(Bridge* b, const char* what) {
     return fmi2Fatal;
 }
 
-static fmi2Status refuse_null(Bridge* b, const char* what);
-static fmi2Status refuse_null_array(Bridge* b, const char* what);
+/* An argument the inner library would crash on (a NULL state, pointer, buffer or array):
+ * fmi2Error with "what: why", the call not forwarded. */
+static fmi2Status refuse_argument(Bridge* b, const char* what, const char* why) {
+    char msg[256];
+    snprintf(msg, sizeof msg, "%s: %s", what, why);
+    report(b->host.logger, b->host.componentEnvironment, b->name, fmi2Error, msg);
+    return fmi2Error;
+}
+
+/* the words for a NULL argument of an FMU-state call, and (the native FMUs' words) of a getter
+ * or setter given nvr > 0 */
+#define NULL_ARGUMENT "a NULL argument (a state, pointer or buffer)"
+#define NULL_ARRAY "a null array"
 
 #define BRIDGE(c) ((Bridge*)(c))
-/* a getter or setter: nvr > 0 with a NULL array is refused (pythonfmu would read through it) */
-#define FORWARD_ARRAYS(c, what, call)                                    \
-    do {                                                                 \
-        Bridge* b0_ = BRIDGE(c);                                         \
-        if (b0_ && !b0_->broken && nvr && (!vr || !value)) return refuse_null_array(b0_, what); \
-        FORWARD(c, what, call);                                          \
+/* FORWARD when ok holds, else refuse_argument with why */
+#define CHECKED(c, what, ok, why, call)                  \
+    do {                                                 \
+        Bridge* b_ = BRIDGE(c);                          \
+        if (!b_) return fmi2Error;                       \
+        if (b_->broken) return refuse_broken(b_, what);  \
+        if (!(ok)) return refuse_argument(b_, what, why); \
+        b_->worst = fmi2OK;                              \
+        fmi2Status s_ = call;                            \
+        return combine(b_, s_);                          \
     } while (0)
+/* a getter or setter (pythonfmu would read through a NULL array) */
+#define FORWARD_ARRAYS(c, what, call) CHECKED(c, what, !nvr || (vr && value), NULL_ARRAY, call)
 #define FORWARD(c, what, call)                          \
     do {                                                \
         Bridge* b_ = BRIDGE(c);                         \
@@ -519,34 +536,32 @@ static const char* refuse_instantiate(fmi2Type type, fmi2String guid, fmi2String
     char line[256], module[256];
     if (!read_first_line(dir, "slavemodule.txt", module, sizeof module) || strlen(module) + 4 >= sizeof module) {
         snprintf(msg, cap, "fmi2Instantiate: cannot read %.300s/slavemodule.txt: is the FMU extracted whole?", dir);
-        free(dir);
-        return msg;
+        goto refused;
     }
     strcat(module, ".py");
     if (!read_first_line(dir, module, line, sizeof line)) {
         snprintf(msg, cap, "fmi2Instantiate: cannot read %.300s/%.200s: is the FMU extracted whole?", dir, module);
-        free(dir);
-        return msg;
+        goto refused;
     }
     if (!read_first_line(dir, RESOURCE_GUID_FILE, line, sizeof line)) {
         snprintf(msg, cap, "fmi2Instantiate: cannot read %.300s/" RESOURCE_GUID_FILE ": is the FMU extracted whole?",
                  dir);
-        free(dir);
-        return msg;
+        goto refused;
     }
     if (guid && strcmp(guid, line) != 0) {
         snprintf(msg, cap, "fmi2Instantiate: GUID %.100s does not match this FMU's %.100s", guid, line);
-        free(dir);
-        return msg;
+        goto refused;
     }
     if (strstr(dir, "%20")) { /* the inner library would read it as a space */
         snprintf(msg, cap, "fmi2Instantiate: the resources folder %.300s has '%%20' in its name, which pythonfmu "
                  "reads as a space: extract the FMU elsewhere", dir);
-        free(dir);
-        return msg;
+        goto refused;
     }
     *folder = dir;
     return NULL;
+refused:
+    free(dir);
+    return msg;
 }
 
 EXPORT const char* fmi2GetTypesPlatform(void) { return "default"; }
@@ -704,38 +719,11 @@ EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], 
     FORWARD_ARRAYS(c, "fmi2SetString", inner.SetString(b_->inner, vr, nvr, value));
 }
 
-/* A NULL argument of an FMU-state call: fmi2Error with a message (the inner library would crash). */
-static fmi2Status refuse_null(Bridge* b, const char* what) {
-    char msg[256];
-    snprintf(msg, sizeof msg, "%s: a NULL argument (a state, pointer or buffer)", what);
-    report(b->host.logger, b->host.componentEnvironment, b->name, fmi2Error, msg);
-    return fmi2Error;
-}
-
-/* the native FMUs' words for it */
-static fmi2Status refuse_null_array(Bridge* b, const char* what) {
-    char msg[256];
-    snprintf(msg, sizeof msg, "%s: a null array", what);
-    report(b->host.logger, b->host.componentEnvironment, b->name, fmi2Error, msg);
-    return fmi2Error;
-}
-
-#define CHECKED(c, what, ok, call)                      \
-    do {                                                \
-        Bridge* b_ = BRIDGE(c);                         \
-        if (!b_) return fmi2Error;                      \
-        if (b_->broken) return refuse_broken(b_, what); \
-        if (!(ok)) return refuse_null(b_, what);        \
-        b_->worst = fmi2OK;                             \
-        fmi2Status s_ = call;                           \
-        return combine(b_, s_);                         \
-    } while (0)
-
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state) {
     Bridge* b = BRIDGE(c);
     if (!b) return fmi2Error;
     if (b->broken) return refuse_broken(b, "fmi2GetFMUstate");
-    if (!state) return refuse_null(b, "fmi2GetFMUstate");
+    if (!state) return refuse_argument(b, "fmi2GetFMUstate", NULL_ARGUMENT);
     b->worst = fmi2OK;
     if (*state) { /* an earlier state to update: freed, and a new one made (see the top of this file) */
         fmi2Status f = combine(b, inner.FreeFMUstate(b->inner, state));
@@ -745,7 +733,7 @@ EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state) {
     return combine(b, inner.GetFMUstate(b->inner, state));
 }
 EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) {
-    CHECKED(c, "fmi2SetFMUstate", state, inner.SetFMUstate(b_->inner, state));
+    CHECKED(c, "fmi2SetFMUstate", state, NULL_ARGUMENT, inner.SetFMUstate(b_->inner, state));
 }
 EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* state) {
     Bridge* b = BRIDGE(c);
@@ -758,25 +746,23 @@ EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* state) {
     return s;
 }
 EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t* size) {
-    CHECKED(c, "fmi2SerializedFMUstateSize", state && size, inner.SerializedFMUstateSize(b_->inner, state, size));
+    CHECKED(c, "fmi2SerializedFMUstateSize", state && size, NULL_ARGUMENT,
+            inner.SerializedFMUstateSize(b_->inner, state, size));
 }
 EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size) {
     Bridge* b = BRIDGE(c);
     if (!b) return fmi2Error;
     if (b->broken) return refuse_broken(b, "fmi2SerializeFMUstate");
-    if (!state || !bytes) return refuse_null(b, "fmi2SerializeFMUstate");
+    if (!state || !bytes) return refuse_argument(b, "fmi2SerializeFMUstate", NULL_ARGUMENT);
     b->worst = fmi2OK;
     size_t n = 0;
     fmi2Status s = combine(b, inner.SerializedFMUstateSize(b->inner, state, &n));
     if (s > fmi2Warning) return s;
     if (size < n) {
-        char msg[256];
-        snprintf(msg, sizeof msg,
-                 "fmi2SerializeFMUstate: the buffer holds %llu bytes, the state needs %llu "
-                 "(fmi2SerializedFMUstateSize)",
+        char why[160];
+        snprintf(why, sizeof why, "the buffer holds %llu bytes, the state needs %llu (fmi2SerializedFMUstateSize)",
                  (unsigned long long)size, (unsigned long long)n);
-        report(b->host.logger, b->host.componentEnvironment, b->name, fmi2Error, msg);
-        return fmi2Error;
+        return refuse_argument(b, "fmi2SerializeFMUstate", why);
     }
     s = combine(b, inner.SerializeFMUstate(b->inner, state, bytes, n));
     if (size > n) memset(bytes + n, 0, size - n);
@@ -784,7 +770,8 @@ EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi
 }
 EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size,
                                           fmi2FMUstate* state) {
-    CHECKED(c, "fmi2DeSerializeFMUstate", bytes && state, inner.DeSerializeFMUstate(b_->inner, bytes, size, state));
+    CHECKED(c, "fmi2DeSerializeFMUstate", bytes && state, NULL_ARGUMENT,
+            inner.DeSerializeFMUstate(b_->inner, bytes, size, state));
 }
 
 static fmi2Status unsupported(fmi2Component c, const char* what) {
