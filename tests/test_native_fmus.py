@@ -701,6 +701,9 @@ SCENARIOS = {
         d.fmu.getRealStatus(2), d.step(1.0, 1.0),  # still 1: neither restarted nor moved
         d.raw("fmi2Terminate"), d.raw("fmi2ExitInitializationMode"),
         d.raw("fmi2SetupExperiment", 0, 0.0, 0.0, 0, 0.0))),
+    "fmi2ExitInitializationMode before fmi2EnterInitializationMode": ("PeixotoEx1Plant", lambda d: (
+        d.raw("fmi2SetupExperiment", 0, 0.0, 0.0, 0, 0.0), d.raw("fmi2ExitInitializationMode"), d.step(0.0, 1.0),
+        d.raw("fmi2EnterInitializationMode"), d.raw("fmi2ExitInitializationMode"), d.step(0.0, 1.0))),
     "outputs read after an input was rejected": ("PeixotoEx1HinfPD", lambda d: (
         _init(d), d.set("p[1]", 0.3), d.set("y[1]", 1.0), d.step(0.0, 1.0), d.set("p[1]", 5.0), d.set("y[1]", 2.0),
         d.vector("zhat").tolist() == (d.set("p[1]", 0.3), d.vector("zhat").tolist())[1])),  # not stale: True
@@ -720,6 +723,8 @@ def test_the_same_statuses_and_messages_as_the_python_fmu(fmus, native_fmus, cas
     assert native == python
     if case == "outputs read after an input was rejected":  # they follow the stored inputs (were stale)
         assert python[0][-1] is True
+    if case.startswith("fmi2ExitInitializationMode before"):  # refused (was fmi2OK: found by the fuzzer)
+        assert python[0] == (0, 3, 3, 0, 0, 0)
     assert any(s >= 3 for s, _ in python[1]) or case.startswith(("a measurement", "outputs read"))
 
 

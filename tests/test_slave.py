@@ -143,6 +143,7 @@ def test_a_failed_initialization_refuses_every_step_and_says_why(resources):
     s = plant(resources)
     s.slave.setup_experiment(0.0)
     s.set("sample_time", 0.0)
+    s.slave.enter_initialization_mode()
     s.slave.exit_initialization_mode()
     [message] = s.errors()
     assert "sample_time = 0 must be > 0" in message
@@ -251,6 +252,7 @@ def test_an_output_that_would_be_inf_is_an_error_naming_it_and_numpy_warnings_ar
     s.slave.setup_experiment(0.0)
     s.set("x0[1]", 1.5e308)
     s.set("x0[2]", 1.5e308)
+    s.slave.enter_initialization_mode()
     s.slave.exit_initialization_mode()
     assert s.errors() == []
     s.set_reals({"p[1]": -1.0, "w[1]": 0.0})  # vertex 1: x2 <- x1 + 0.48 x2 overflows
@@ -362,6 +364,7 @@ def test_string_integer_and_boolean_parameters_are_set_read_and_checked(resource
                           "[0, 2147483647]; value rejected"]
     assert s.get("seed") == [7]
     s.set("seed", 8)  # a valid value clears the complaint
+    s.slave.enter_initialization_mode()
     s.slave.exit_initialization_mode()
     assert s.errors() == []
     s.set("kind", "random")
@@ -440,6 +443,7 @@ def test_every_invalid_value_is_named_when_initialization_fails(resources):
     s.set("sample_time", -1.0)
     s.set("x0[1]", math.inf)
     s.take_log()
+    s.slave.enter_initialization_mode()
     s.slave.exit_initialization_mode()
     assert s.errors() == ["[PeixotoEx1Plant] fmi2ExitInitializationMode: invalid values were set: parameter "
                           "sample_time = -1 is outside its declared range [0, inf]; value rejected; parameter "
@@ -530,6 +534,7 @@ def test_a_sample_of_a_long_step_that_fails_names_every_bad_output_and_consumes_
     s.slave.setup_experiment(0.0)
     s.set("x0[1]", 1.5e308)
     s.set("x0[2]", 1.5e308)
+    s.slave.enter_initialization_mode()
     s.slave.exit_initialization_mode()
     s.set_reals({"p[1]": -1.0, "w[1]": 0.0})
     before = s.get("x[1]", "x[2]")
@@ -696,6 +701,7 @@ Dy = [[1.0]]
     s.slave.setup_experiment(0.0)
     s.set("p[1]", 1e6 + 5e-7)
     assert s.errors() == []
+    s.slave.enter_initialization_mode()
     s.slave.exit_initialization_mode()
     for value in (1e6 + 5e-7, 1e6 + 2e-6):
         s.set("p[1]", value)
@@ -824,6 +830,7 @@ def test_parameters_are_checked_against_a_one_sided_range_and_may_not_change_the
     s.set("gain", -1e300)
     s.set("limit", 5)
     s.set("extra", True)
+    s.slave.enter_initialization_mode()
     s.slave.exit_initialization_mode()
     assert s.errors() == ["[PeixotoEx1Plant] fmi2ExitInitializationMode: these parameters change the FMU's inputs "
                           "or outputs; rebuild the FMU instead"]

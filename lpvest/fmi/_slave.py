@@ -655,6 +655,8 @@ class LpvestSlave(Fmi2Slave):
                     "initialize it again)")
         if entering and self._entered:
             return "the FMU is in initialization mode already (fmi2EnterInitializationMode was called)"
+        if not entering and not self._entered:
+            return "the FMU is not in initialization mode (call fmi2EnterInitializationMode first)"
         return None
 
     def enter_initialization_mode(self) -> None:

@@ -631,7 +631,7 @@ FMI2_Export fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingO
 }
 
 /* Why a call of the initialization (fmi2SetupExperiment, fmi2EnterInitializationMode: not after
- * fmi2EnterInitializationMode; fmi2ExitInitializationMode: once) is out of its FMI state, or NULL;
+ * fmi2EnterInitializationMode; fmi2ExitInitializationMode: once, after it) is out of its FMI state, or NULL;
  * the Python slave's words (_lifecycle_problem) */
 static const char* lifecycle_problem(const instance* s, int entering) {
     if (s->terminated) return "the FMU is terminated (fmi2Terminate was called; reset or free the instance)";
@@ -640,6 +640,8 @@ static const char* lifecycle_problem(const instance* s, int entering) {
                "initialize it again)";
     if (entering && s->entered)
         return "the FMU is in initialization mode already (fmi2EnterInitializationMode was called)";
+    if (!entering && !s->entered)
+        return "the FMU is not in initialization mode (call fmi2EnterInitializationMode first)";
     return NULL;
 }
 
