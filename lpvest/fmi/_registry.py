@@ -52,7 +52,7 @@ MEASUREMENT_DELAY = Parameter(
     "samples by which the measurement arrives late (1 under a Jacobi master: libcosim, fmpy's simulate_ssp); "
     "it is paired with the other inputs of its own sample, and the estimate of sample k is output at step "
     "k + measurement_delay (every output 0 before the first measurement)",
-    minimum=0)
+    minimum=0, maximum=100_000)
 
 
 @dataclass(frozen=True)
