@@ -117,6 +117,28 @@ def test_the_bridge_drains_what_a_constructor_logged_before_the_instance_can_be_
     assert inner.fake_frees() == 2 and inner.fake_frees_with_queue() == 0
 
 
+@needs_cc
+def test_instances_made_from_several_threads_at_once_start_python_once(tmp_path):
+    """A host that creates its first instances in parallel threads: one thread
+    loads the inner library and starts the interpreter, the others wait (two
+    Py_InitializeEx at once crash the host; the bridge had no lock). The C host
+    of tests/data/bridge_threads.c stands in for CPython and counts the threads
+    inside at once; every instance is made."""
+    built = build.status_bridge("linux64")
+    assert built is not None
+    shutil.copy(built, tmp_path / "Bridge.so")
+    subprocess.run([CC, "-shared", "-fPIC", "-O2", "-o", str(tmp_path / "lpvest-pythonfmu-export.so"),
+                    str(ROOT / "tests" / "data" / "fake_inner.c"), "-lm"], check=True)
+    host = tmp_path / "bridge_threads"
+    subprocess.run([CC, "-O2", "-rdynamic", "-o", str(host), str(ROOT / "tests" / "data" / "bridge_threads.c"),
+                    "-ldl", "-lpthread"], check=True)
+    resources = _resources(tmp_path / "resources")
+    proc = subprocess.run([str(host), str(tmp_path / "Bridge.so"), "guid", resources.as_uri(), "6"],
+                          capture_output=True, text=True, timeout=120, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["1", "1", "6"], proc.stdout + proc.stderr
+
+
 def test_a_message_logged_at_error_makes_the_call_return_error(bridge):
     lib, _, messages, instantiate, _ = bridge
     c = instantiate(logging_on=False)

@@ -543,7 +543,7 @@ def _bridge_command(platform: str, src: Path, out: Path) -> tuple[list[str], str
     if cc is not None:
         # -ffile-prefix-map and no -g: nothing of the build folder ends up in the binary
         return ([*cc.split(), "-shared", "-fPIC", "-O2", "-fvisibility=hidden", f"-ffile-prefix-map={src.parent}=.",
-                 inner, "-o", str(out), str(src), "-ldl"], _compiler_version())
+                 inner, "-o", str(out), str(src), "-ldl", "-lpthread"], _compiler_version())
     zig, program = zig_version(), zig_program()
     if zig is None or program is None:
         return None
@@ -554,7 +554,7 @@ def _bridge_command(platform: str, src: Path, out: Path) -> tuple[list[str], str
            inner, "-o", str(out), str(src)]
     if platform == "linux64":
         cmd[-4:-4] = ["-fPIC", "-fvisibility=hidden"]
-        cmd.append("-ldl")
+        cmd += ["-ldl", "-lpthread"]
     return cmd, f"zig {zig}"
 
 

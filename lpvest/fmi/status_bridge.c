@@ -78,12 +78,19 @@
 #ifdef _WIN32
 #include <windows.h>
 #define EXPORT __declspec(dllexport)
+static SRWLOCK load_lock = SRWLOCK_INIT;
+#define LOAD_LOCK() AcquireSRWLockExclusive(&load_lock)
+#define LOAD_UNLOCK() ReleaseSRWLockExclusive(&load_lock)
 #ifndef INNER_LIBRARY
 #define INNER_LIBRARY "lpvest-pythonfmu-export.dll"
 #endif
 #else
 #include <dlfcn.h>
+#include <pthread.h>
 #define EXPORT __attribute__((visibility("default")))
+static pthread_mutex_t load_lock = PTHREAD_MUTEX_INITIALIZER;
+#define LOAD_LOCK() pthread_mutex_lock(&load_lock)
+#define LOAD_UNLOCK() pthread_mutex_unlock(&load_lock)
 #ifndef INNER_LIBRARY
 #define INNER_LIBRARY "lpvest-pythonfmu-export.so"
 #endif
@@ -587,7 +594,13 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     if (uri) snprintf(uri, uri_len, "%s%s", scheme, folder);
     free(folder);
     if (!uri) return NULL;
-    if (!load_inner(functions, instanceName)) {
+    /* the first instantiations may come from several threads at once (a host that creates its
+       instances in parallel): one of them loads the inner library and starts the interpreter, the
+       others wait for it (two Py_InitializeEx at once crash the host) */
+    LOAD_LOCK();
+    int loaded = load_inner(functions, instanceName);
+    LOAD_UNLOCK();
+    if (!loaded) {
         free(uri);
         return NULL;
     }
