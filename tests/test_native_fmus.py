@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fmpy import read_model_description
 
 from tests.fmu_driver import Driver
 from tests.native_hosts import HostDriver
@@ -704,6 +705,11 @@ SCENARIOS = {
     "fmi2ExitInitializationMode before fmi2EnterInitializationMode": ("PeixotoEx1Plant", lambda d: (
         d.raw("fmi2SetupExperiment", 0, 0.0, 0.0, 0, 0.0), d.raw("fmi2ExitInitializationMode"), d.step(0.0, 1.0),
         d.raw("fmi2EnterInitializationMode"), d.raw("fmi2ExitInitializationMode"), d.step(0.0, 1.0))),
+    "a step of more samples than one step runs, and a NaN time": ("PeixotoEx1Plant", lambda d: (
+        _init(d), d.step(0.0, 1e9), d.step(math.nan, 1.0))),
+    "value references of another type or of no variable": ("PeixotoEx1Plant", lambda d: (
+        _init(d), d.status(d.fmu.getInteger, [d.vr["p[1]"]]), d.status(d.fmu.setBoolean, [d.vr["x0[1]"]], [True]),
+        d.status(d.fmu.getReal, [999_999]), d.status(d.fmu.setString, [d.vr["sample_time"]], ["1"]))),
     "outputs read after an input was rejected": ("PeixotoEx1HinfPD", lambda d: (
         _init(d), d.set("p[1]", 0.3), d.set("y[1]", 1.0), d.step(0.0, 1.0), d.set("p[1]", 5.0), d.set("y[1]", 2.0),
         d.vector("zhat").tolist() == (d.set("p[1]", 0.3), d.vector("zhat").tolist())[1])),  # not stale: True
@@ -721,8 +727,26 @@ def test_the_same_statuses_and_messages_as_the_python_fmu(fmus, native_fmus, cas
     name, script = SCENARIOS[case]
     python, native = _both(fmus, native_fmus, name, script)
     assert native == python
+    vr = {v.name: v.valueReference for v in read_model_description(str(fmus[name])).modelVariables}
     if case == "outputs read after an input was rejected":  # they follow the stored inputs (were stale)
         assert python[0][-1] is True
+    if case.startswith("a step of more samples"):  # (was "not a whole number of samples", and "t = nan")
+        assert python[1][:2] == [
+            (3, "fmi2DoStep refused at t = 0 (h = 1000000000): the communication step h = 1000000000 is 1000000000 "
+                "samples of the sample time 1, more than one step runs (fewer than 500000000 = 0.5 / 1e-9, the "
+                "relative time tolerance; split it into shorter steps)"),
+            (3, "fmi2DoStep refused at t = nan (h = 1): the communication point t = nan and step h = 1 must be "
+                "finite")]
+    if case == "a start point outside the box":  # named as the parameter it is (was "scheduling value p")
+        assert python[1] == [(3, "fmi2ExitInitializationMode: parameter start_p[1] (scheduling variable p) = 2 is "
+                                 "outside its declared range [-1, 1]")]
+    if case.startswith("value references of another type"):  # (was "is not a Integer variable")
+        assert [m for _, m in python[1]] == [
+            f"fmi2GetInteger: value reference {vr['p[1]']} is the Real variable p[1], not an Integer variable",
+            f"fmi2SetBoolean: value reference {vr['x0[1]']} is the Real variable x0[1], not a Boolean variable",
+            "fmi2GetReal: value reference 999999 is not a variable of this FMU",
+            f"fmi2SetString: value reference {vr['sample_time']} is the Real variable sample_time, not a String "
+            "variable"]
     if case.startswith("fmi2ExitInitializationMode before"):  # refused (was fmi2OK: found by the fuzzer)
         assert python[0] == (0, 3, 3, 0, 0, 0)
     assert any(s >= 3 for s, _ in python[1]) or case.startswith(("a measurement", "outputs read"))

@@ -168,6 +168,15 @@ class _WeakCall:
             method(*args)
 
 
+def _not_of_type(vr: int, e: _Element | None, fmi_type: str) -> str:
+    """Why value reference ``vr`` (its element ``e``, or None) cannot be got or set as ``fmi_type``
+    (the native runtime's words: check_vr in lpv_fmi2.c)."""
+    if e is None:
+        return f"value reference {vr} is not a variable of this FMU"
+    article = "an" if fmi_type == "Integer" else "a"
+    return f"value reference {vr} is the {e.fmi_type} variable {e.name}, not {article} {fmi_type} variable"
+
+
 class _Element:
     """One FMI scalar variable of a port or parameter."""
 
@@ -712,7 +721,7 @@ class LpvestSlave(Fmi2Slave):
         if not self._initialized:
             return self._init_error
         if not (math.isfinite(t) and math.isfinite(h)):
-            return f"the communication point t = {t} and step h = {h} must be finite"
+            return f"the communication point t = {_num(t)} and step h = {_num(h)} must be finite"
         if h <= 0:
             return f"the communication step h = {_num(h)} must be > 0"
         unit = h if self._sample_time is None else min(h, self._sample_length())
@@ -721,6 +730,10 @@ class LpvestSlave(Fmi2Slave):
                     "(a skipped or repeated point; restore a state with fmi2SetFMUstate to go back)")
         if self._sample_time is not None and self._samples_in(h) is None:
             ts = self._sample_length()
+            if _TIME_RTOL * (h / ts) >= 0.5:  # whole_samples cannot tell m from m + 1 any more
+                return (f"the communication step h = {_num(h)} is {_num(h / ts)} samples of the sample time "
+                        f"{_num(ts)}, more than one step runs (fewer than 500000000 = 0.5 / 1e-9, the relative "
+                        "time tolerance; split it into shorter steps)")
             return (f"the communication step h = {_num(h)} is not a whole number of samples of the sample time "
                     f"{_num(ts)} (a step runs m >= 1 samples; set the parameter {self._sample_time})")
         if self._invalid:
@@ -848,7 +861,7 @@ class LpvestSlave(Fmi2Slave):
         elements: list[_Element] = []
         for vr, e in zip(vrs, found, strict=True):
             if e is None or e.fmi_type != fmi_type:
-                self._log(Fmi2Status.error, f"fmi2Get{fmi_type}: value reference {vr} is not a {fmi_type} variable")
+                self._log(Fmi2Status.error, f"fmi2Get{fmi_type}: {_not_of_type(vr, e, fmi_type)}")
                 return [nan] * len(vrs)
             elements.append(e)
         if any(e.kind == "output" for e in elements):
@@ -891,7 +904,7 @@ class LpvestSlave(Fmi2Slave):
         for vr, value in zip(vrs, values, strict=True):
             e = self._elements.get(vr)
             if e is None or e.fmi_type != fmi_type:
-                self._log(Fmi2Status.error, f"fmi2Set{fmi_type}: value reference {vr} is not a {fmi_type} variable")
+                self._log(Fmi2Status.error, f"fmi2Set{fmi_type}: {_not_of_type(vr, e, fmi_type)}")
                 continue
             if e.kind == "output":
                 self._log(Fmi2Status.error, f"fmi2Set{fmi_type}: {e.name} is an output; it cannot be set")

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ...core._errors import LpvestError
+from ...core._validation import check_box
 from ...estimators._truncated import TruncatedKalmanFilter
 
 if TYPE_CHECKING:
@@ -30,4 +31,9 @@ def build(
     if start not in STARTS:
         raise LpvestError(f"start = {start!r}; expected one of {', '.join(STARTS)}")
     p = None if start_p is None else np.asarray(start_p, dtype=float)
+    if start == "steady-state" and p is not None and p.shape == (model.space.dim,):
+        # named as the FMU parameter it is (the filter's own check says "scheduling value p1")
+        space = model.space
+        check_box(p, space.lower, space.upper,
+                  [f"start_p[{j + 1}] (scheduling variable {n})" for j, n in enumerate(space.names)], what="parameter")
     return TruncatedKalmanFilter(model, int(tau), start=start, start_p=p if start == "steady-state" else None)

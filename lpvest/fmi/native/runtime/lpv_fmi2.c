@@ -540,8 +540,15 @@ static void stored(instance* s, int vr) {
 }
 
 static int check_vr(instance* s, const char* fn, const char* type_name, int type, fmi2ValueReference vr) {
-    if ((size_t)vr >= (size_t)s->m->n_vars || s->m->vars[vr].type != type) {
-        logf_(s, fmi2Error, "%s: value reference %u is not a %s variable", fn, (unsigned)vr, type_name);
+    static const char* const type_names[] = {"Real", "Integer", "Boolean", "String"};
+    if ((size_t)vr >= (size_t)s->m->n_vars) {
+        logf_(s, fmi2Error, "%s: value reference %u is not a variable of this FMU", fn, (unsigned)vr);
+        return 1;
+    }
+    const lpv_var* v = &s->m->vars[vr];
+    if (v->type != type) { /* the Python slave's words (_not_of_type) */
+        logf_(s, fmi2Error, "%s: value reference %u is the %s variable %s, not %s %s variable", fn, (unsigned)vr,
+              type_names[v->type], v->name, type == LPV_INTEGER ? "an" : "a", type_name);
         return 1;
     }
     return 0;
@@ -933,7 +940,7 @@ static int step_problem(instance* s, double t, double h, lpv_msg* p) {
         return 1;
     }
     if (!(isfinite(t) && isfinite(h))) {
-        lpv_msgf(p, "the communication point t = %s and step h = %s must be finite", lpv_repr(a, t), lpv_repr(b, h));
+        lpv_msgf(p, "the communication point t = %s and step h = %s must be finite", lpv_num(a, t), lpv_num(b, h));
         return 1;
     }
     if (h <= 0) {
@@ -955,6 +962,15 @@ static int step_problem(instance* s, double t, double h, lpv_msg* p) {
         return 1;
     }
     if (s->m->sample_time >= 0 && samples_in(s, h) == 0) {
+        double ts = s->reals[s->m->sample_time];
+        if (TIME_RTOL * (h / ts) >= 0.5) { /* samples_in cannot tell m from m + 1 any more */
+            char c[48];
+            lpv_msgf(p,
+                     "the communication step h = %s is %s samples of the sample time %s, more than one step runs "
+                     "(fewer than 500000000 = 0.5 / 1e-9, the relative time tolerance; split it into shorter steps)",
+                     lpv_num(a, h), lpv_num(b, h / ts), lpv_num(c, ts));
+            return 1;
+        }
         lpv_msgf(p,
                  "the communication step h = %s is not a whole number of samples of the sample time %s (a step "
                  "runs m >= 1 samples; set the parameter sample_time)",

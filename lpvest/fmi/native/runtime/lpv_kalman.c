@@ -489,8 +489,10 @@ static int configure(lpv_comp* c, const lpv_values* v, const double* mp, lpv_msg
                     shown_back = 0.0;
                     lpv_parse_float(a, strlen(a), &shown_back);
                     if (shown_back != p[j]) lpv_repr(a, p[j]);
-                    lpv_msgf(err, "SchedulingRangeError: scheduling value %s = %s is outside its declared range [%s, %s]",
-                             d->names[j], a, lpv_fmt_g(b, lo, 6), lpv_fmt_g(e, hi, 6));
+                    lpv_msgf(err,
+                             "SchedulingRangeError: parameter start_p[%d] (scheduling variable %s) = %s is outside its "
+                             "declared range [%s, %s]",
+                             j + 1, d->names[j], a, lpv_fmt_g(b, lo, 6), lpv_fmt_g(e, hi, 6));
                     return 1;
                 }
             }
