@@ -102,6 +102,109 @@ def test_every_call_sequence_runs_clean_under_address_and_undefined_behaviour_sa
         assert any(line.startswith("LOG 3") and "is not finite; value rejected" in line for line in out)
 
 
+def _random_script(md, seed: int, calls: int) -> list[str]:  # noqa: ANN001
+    """``calls`` random FMI calls on up to three instances of the FMU ``md`` describes:
+    any order of the lifecycle calls, setters and getters of every type on any value
+    reference (and unknown ones) with values in and out of range or not finite, steps
+    from the FMU's time or not, of whole samples or not, FMU states taken, restored,
+    serialized and freed. Only live instances are called (FMI gives a freed one no
+    meaning), and an instance is made again after it was freed."""
+    import random
+
+    rnd = random.Random(seed)
+    variables = [v for v in md.modelVariables]
+    ts = float(md.defaultExperiment.stepSize)
+    reals = ["0", "-0", "0.25", "0.5", "-0.5", "1", "-1", "2", "3", "1e3", "1e308", "-1e308", "5e-324", "nan", "inf",
+             "-inf"]
+    strings = ["", "theorem", "steady-state", "zero", "constant", "sinusoid", "decaying", "gaussian", "table",
+               "0 1; 1 2", "0 1 2; 1 2 3", "0 nan", "x", "%s%n"]
+    live: set[int] = set()
+    lines: list[str] = []
+
+    def vr(kind: str) -> int:
+        same = [v for v in variables if v.type == kind]
+        r = rnd.random()
+        if r < 0.1:
+            return rnd.choice([len(variables) + 5, 999_999, 2**32 - 1])
+        return rnd.choice(same if same and r < 0.8 else variables).valueReference
+
+    for _ in range(calls):
+        free = [i for i in range(3) if i not in live]
+        if not live or (free and rnd.random() < 0.02):
+            i = rnd.choice(free)
+            lines.append(f"instantiate {i} fuzz{i} {rnd.randint(0, 1)}")
+            live.add(i)
+            continue
+        i = rnd.choice(sorted(live))
+        op = rnd.randrange(20)
+        if op == 0:
+            lines.append(f"setup {i} {rnd.choice(['0', '1', '-2', '1e9', 'nan'])}")
+        elif op == 1:
+            lines += [f"setup {i} 0", f"enter {i}", f"exit {i}"]
+        elif op == 2:
+            lines.append(rnd.choice([f"enter {i}", f"exit {i}", f"terminate {i}", f"reset {i}"]))
+        elif op in (3, 4):
+            lines.append(f"set_real {i} {vr('Real')} {rnd.choice(reals)}")
+        elif op == 5:
+            lines.append(f"set_integer {i} {vr('Integer')} {rnd.choice(['0', '1', '2', '-1', '200', '2147483647'])}")
+        elif op == 6:
+            lines.append(f"set_boolean {i} {vr('Boolean')} {rnd.choice(['0', '1', '2'])}")
+        elif op == 7:
+            lines.append(f"set_string {i} {vr('String')} {rnd.choice(strings)}")
+        elif op in (8, 9):
+            lines.append(f"get_real {i} " + " ".join(str(vr("Real")) for _ in range(rnd.randint(1, 6))))
+        elif op == 10:
+            lines.append(f"get_{rnd.choice(['integer', 'boolean', 'string'])} {i} "
+                         f"{vr(rnd.choice(['Integer', 'Boolean', 'String']))}")
+        elif op in (11, 12, 13):
+            lines.append(f"step_here {i} {rnd.choice([1, 1, 1, 2, 3, 0.5, 0, -1]) * ts!r}")
+        elif op == 14:
+            lines.append(f"step {i} {rnd.choice([0, 1, 2, -1]) * ts!r} {ts!r}")
+        elif op == 15:
+            lines.append(f"{rnd.choice(['get_state', 'get_state', 'set_state', 'free_state', 'serialize'])} {i} "
+                         f"{rnd.randrange(3)}")
+        elif op == 16:
+            lines.append(f"time {i}")
+        elif op == 17 and rnd.random() < 0.1:
+            lines.append(f"free {i}")
+            live.discard(i)
+        else:
+            lines.append(f"get_real {i} " + " ".join(str(v.valueReference) for v in variables
+                                                      if v.causality == "output" and v.type == "Real"))
+    return lines
+
+
+@pytest.mark.parametrize("name", ["PeixotoEx1Plant", "CoxTothTruncationTruncatedKalman", "AffineDemoHinfPD",
+                                  "PeixotoEx1Scheduler", "IoDemoPlant"])
+def test_random_call_sequences_run_clean_under_address_and_undefined_behaviour_sanitizers(native_fmus, name,
+                                                                                         tmp_path):
+    """3,000 random FMI calls (seeded: the same every run) on up to three instances,
+    in the C host with the runtime built under ASan and UBSan: no memory error, no
+    leak, no undefined behaviour, every call answered fmi2OK, fmi2Warning or
+    fmi2Error. (tests/test_fmu_differential.py checks what such sequences answer,
+    against the Python FMU, in fmpy.)"""
+    from tests.native_hosts import host_exe
+
+    if shutil.which("cc") is None and shutil.which("gcc") is None:
+        pytest.skip("no C compiler with sanitizers (cc, gcc) on this machine")
+    lib = sanitized_library(native_fmus[name], tmp_path)
+    md = read_model_description(str(native_fmus[name]))
+    env = {"ASAN_OPTIONS": "detect_leaks=1:exitcode=23", "UBSAN_OPTIONS": "print_stacktrace=1:halt_on_error=1"}
+    script = _random_script(md, seed=sum(map(ord, name)), calls=3000)
+    proc = _run_script([str(host_exe("sanitized")), str(lib), md.guid, "file:///nonexistent"], script, env)
+    assert proc.returncode == 0, proc.stderr[-4000:]
+    assert "ERROR: AddressSanitizer" not in proc.stderr and "runtime error" not in proc.stderr, proc.stderr[-4000:]
+    out = proc.stdout.splitlines()
+    assert out[-1] == "DONE"
+    statuses = [line.split() for line in out if line.startswith("STATUS")]
+    assert len(statuses) == len(script)
+    assert all(s[2] in ("0", "1", "3") for s in statuses), sorted({s[2] for s in statuses})
+    # the sequences reach what they are for: steps taken and refused, states restored
+    steps = [s[2] for s in statuses if s[1].startswith("step")]
+    assert steps.count("0") >= 20 and steps.count("3") >= 20, (steps.count("0"), steps.count("3"))
+    assert sum(s[1] == "set_state" and s[2] == "0" for s in statuses) >= 5
+
+
 @pytest.mark.parametrize("name", EVERY_ROLE)
 def test_the_c_host_runs_every_role_with_an_empty_environment(native_fmus, name):
     """The zig-built linux64 binary in the plain C host under ``env -i``: the

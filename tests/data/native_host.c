@@ -15,6 +15,7 @@
  *   get_real ID VR [VR ...]         prints: REAL v1 v2 ... (%.17g)
  *   get_integer ID VR | get_boolean ID VR | get_string ID VR
  *   step ID T H                     fmi2DoStep(T, H)
+ *   step_here ID H                  fmi2DoStep(t, H) from the fmi2LastSuccessfulTime t the FMU reports
  *   time ID                         fmi2GetRealStatus(fmi2LastSuccessfulTime): TIME t
  *   get_state ID SLOT | set_state ID SLOT | free_state ID SLOT
  *   serialize ID SLOT               serialize the state in SLOT and deserialize it into SLOT again
@@ -255,6 +256,10 @@ int main(int argc, char** argv) {
             double t = strtod(rest, &end);
             double h = strtod(end, NULL);
             st = F.do_step(c[id], t, h, 1);
+        } else if (strcmp(cmd, "step_here") == 0) { /* a step from the time the FMU reports */
+            double t = 0.0;
+            F.get_real_status(c[id], 2, &t);
+            st = F.do_step(c[id], t, strtod(rest, NULL), 1);
         } else if (strcmp(cmd, "time") == 0) {
             double t = 0.0;
             st = F.get_real_status(c[id], 2, &t);
