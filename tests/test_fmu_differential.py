@@ -51,6 +51,11 @@ CALLS = st.one_of(
     st.tuples(st.just("set"), st.integers(0, 10**6), st.sampled_from(["Real", "Integer", "Boolean", "String"]),
               st.integers(0, 10**6)),
     st.tuples(st.just("get"), st.integers(0, 10**6), st.sampled_from(["Real", "Integer", "Boolean", "String"])),
+    # several elements in one call, the same one twice possibly: a bad one among good ones
+    st.tuples(st.just("set_many"), st.sampled_from(["Real", "Integer", "Boolean", "String"]),
+              st.lists(st.tuples(st.integers(0, 10**6), st.integers(0, 10**6)), min_size=2, max_size=4)),
+    st.tuples(st.just("get_many"), st.sampled_from(["Real", "Integer", "Boolean", "String"]),
+              st.lists(st.integers(0, 10**6), min_size=2, max_size=4)),
     st.tuples(st.just("outputs")),
     # a step from the time the FMU is at (offset 0) or not, of whole samples or not
     st.tuples(st.just("step"), st.sampled_from([0.0, 0.0, 0.0, 0.0, 1.0, -1.0, 0.5]),
@@ -109,6 +114,12 @@ class _Run:
         elif f == "get":
             vr, kind = self._variable(call[1], call[2])
             status, value = self._get(kind, [vr])
+        elif f == "set_many":
+            kind, pool = call[1], VALUES[call[1]]
+            vrs = [self._variable(pick, kind)[0] for pick, _ in call[2]]
+            status = d.status(getattr(d.fmu, f"set{kind}"), vrs, [pool[v % len(pool)] for _, v in call[2]])
+        elif f == "get_many":
+            status, value = self._get(call[1], [self._variable(pick, call[1])[0] for pick in call[2]])
         elif f == "outputs":
             status, value = self._get("Real", self.outputs)
         elif f == "step":
