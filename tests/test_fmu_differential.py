@@ -20,7 +20,6 @@ import os
 
 import numpy as np
 import pytest
-from fmpy import read_model_description
 from hypothesis import given, settings, strategies as st
 
 from tests.fmu_driver import Driver
@@ -72,8 +71,7 @@ class _Run:
 
     def __init__(self, path) -> None:  # noqa: ANN001
         self.d = Driver(path)
-        md = read_model_description(str(path))
-        self.md = md
+        md = self.d.md
         self.ts = float(md.defaultExperiment.stepSize)
         self.variables = sorted(md.modelVariables, key=lambda v: v.valueReference)
         self.outputs = [v.valueReference for v in self.variables if v.causality == "output" and v.type == "Real"]

@@ -112,7 +112,7 @@ def _random_script(md, seed: int, calls: int) -> list[str]:  # noqa: ANN001
     import random
 
     rnd = random.Random(seed)
-    variables = [v for v in md.modelVariables]
+    variables = list(md.modelVariables)
     ts = float(md.defaultExperiment.stepSize)
     reals = ["0", "-0", "0.25", "0.5", "-0.5", "1", "-1", "2", "3", "1e3", "1e308", "-1e308", "5e-324", "nan", "inf",
              "-inf"]

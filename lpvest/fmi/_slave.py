@@ -639,9 +639,7 @@ class LpvestSlave(Fmi2Slave):
             self._construction_log = []
 
         def run() -> None:
-            why = self._lifecycle_problem(entering=True)
-            if why:
-                self._log(Fmi2Status.error, f"fmi2SetupExperiment: {why}")
+            if self._refused_out_of_state("fmi2SetupExperiment", entering=True):
                 return
             t0 = float(start_time)
             if not math.isfinite(t0):
@@ -653,10 +651,19 @@ class LpvestSlave(Fmi2Slave):
 
         self._guard("fmi2SetupExperiment", run, None)
 
+    def _refused_out_of_state(self, fn: str, *, entering: bool) -> bool:
+        """Whether the initialization call ``fn`` is out of its FMI state (fmi2SetupExperiment,
+        fmi2EnterInitializationMode: not after fmi2EnterInitializationMode;
+        fmi2ExitInitializationMode: once, after it); if so the reason is logged at fmi2Error
+        (the native runtime's words: refused_out_of_state in lpv_fmi2.c)."""
+        why = self._lifecycle_problem(entering=entering)
+        if why:
+            self._log(Fmi2Status.error, f"{fn}: {why}")
+        return why is not None
+
     def _lifecycle_problem(self, *, entering: bool) -> str | None:
-        """Why a call of the initialization (fmi2SetupExperiment, fmi2EnterInitializationMode:
-        not after fmi2EnterInitializationMode; fmi2ExitInitializationMode: once) is out of its
-        FMI state, or None (the native runtime's words: lifecycle_problem in lpv_fmi2.c)."""
+        """Why a call of the initialization is out of its FMI state (:meth:`_refused_out_of_state`),
+        or None."""
         if self._terminated:
             return "the FMU is terminated (fmi2Terminate was called; reset or free the instance)"
         if self._initialized:
@@ -669,16 +676,11 @@ class LpvestSlave(Fmi2Slave):
         return None
 
     def enter_initialization_mode(self) -> None:
-        why = self._lifecycle_problem(entering=True)
-        if why:
-            self._log(Fmi2Status.error, f"fmi2EnterInitializationMode: {why}")
-        else:
+        if not self._refused_out_of_state("fmi2EnterInitializationMode", entering=True):
             self._entered = True
 
     def exit_initialization_mode(self) -> None:
-        why = self._lifecycle_problem(entering=False)
-        if why:
-            self._log(Fmi2Status.error, f"fmi2ExitInitializationMode: {why}")
+        if self._refused_out_of_state("fmi2ExitInitializationMode", entering=False):
             return
 
         def run() -> None:

@@ -428,7 +428,8 @@ static fmi2Status refuse_argument(Bridge* b, const char* what, const char* why) 
 #define NULL_ARRAY "a null array"
 
 #define BRIDGE(c) ((Bridge*)(c))
-/* FORWARD when ok holds, else refuse_argument with why */
+/* the call forwarded to the inner library, its status combined with what the slave logged,
+ * when ok holds; else refuse_argument with why */
 #define CHECKED(c, what, ok, why, call)                  \
     do {                                                 \
         Bridge* b_ = BRIDGE(c);                          \
@@ -441,15 +442,8 @@ static fmi2Status refuse_argument(Bridge* b, const char* what, const char* why) 
     } while (0)
 /* a getter or setter (pythonfmu would read through a NULL array) */
 #define FORWARD_ARRAYS(c, what, call) CHECKED(c, what, !nvr || (vr && value), NULL_ARRAY, call)
-#define FORWARD(c, what, call)                          \
-    do {                                                \
-        Bridge* b_ = BRIDGE(c);                         \
-        if (!b_) return fmi2Error;                      \
-        if (b_->broken) return refuse_broken(b_, what); \
-        b_->worst = fmi2OK;                             \
-        fmi2Status s_ = call;                           \
-        return combine(b_, s_);                         \
-    } while (0)
+/* a call with nothing to check but the instance */
+#define FORWARD(c, what, call) CHECKED(c, what, 1, "", call)
 
 /* After the slave was constructed (fmi2Instantiate, fmi2Reset): have pythonfmu hand on what the
  * constructor logged, which it otherwise keeps queued until the next call, and which its

@@ -652,16 +652,20 @@ static const char* lifecycle_problem(const instance* s, int entering) {
     return NULL;
 }
 
+/* whether the initialization call fn is out of its FMI state; if so the reason is logged at
+ * fmi2Error (the Python slave's _refused_out_of_state) */
+static int refused_out_of_state(instance* s, const char* fn, int entering) {
+    const char* why = lifecycle_problem(s, entering);
+    if (why) logf_(s, fmi2Error, "%s: %s", fn, why);
+    return why != NULL;
+}
+
 FMI2_Export fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                            fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
     BEGIN(c);
     (void)toleranceDefined, (void)tolerance, (void)stopTimeDefined, (void)stopTime;
     logf_(s, fmi2OK, "lpvest %s (native runtime)", s->m->version);
-    const char* why = lifecycle_problem(s, 1);
-    if (why) {
-        logf_(s, fmi2Error, "fmi2SetupExperiment: %s", why);
-        END;
-    }
+    if (refused_out_of_state(s, "fmi2SetupExperiment", 1)) END;
     if (!isfinite(startTime)) {
         char a[48];
         logf_(s, fmi2Error, "fmi2SetupExperiment: ArgumentError: start time %s is not finite", lpv_repr(a, startTime));
@@ -676,19 +680,13 @@ FMI2_Export fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranc
 
 FMI2_Export fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
     BEGIN(c);
-    const char* why = lifecycle_problem(s, 1);
-    if (why) logf_(s, fmi2Error, "fmi2EnterInitializationMode: %s", why);
-    else s->entered = 1;
+    if (!refused_out_of_state(s, "fmi2EnterInitializationMode", 1)) s->entered = 1;
     END;
 }
 
 FMI2_Export fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     BEGIN(c);
-    const char* why = lifecycle_problem(s, 0);
-    if (why) {
-        logf_(s, fmi2Error, "fmi2ExitInitializationMode: %s", why);
-        END;
-    }
+    if (refused_out_of_state(s, "fmi2ExitInitializationMode", 0)) END;
     const lpv_model* m = s->m;
     lpv_msg err;
     err.text[0] = '\0';
