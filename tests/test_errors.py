@@ -82,7 +82,11 @@ def test_a_long_value_is_never_echoed_whole(plant):
 @pytest.mark.parametrize(
     ("value", "limit", "shown"),
     [("short", 40, "'short'"), ("x" * 100, 20, "'xxxxxxx...xx' (100 characters)"), (0.5, 40, "0.5"),
-     ([1] * 50, 20, "[1, 1, 1, 1, 1, 1..."), ("a\nb", 40, "'a\\nb'")],
+     ([1] * 50, 20, "[1, 1, 1, 1, 1, 1..."), ("a\nb", 40, "'a\\nb'"),
+     # characters repr shows as escapes count by their width: a name of three such characters
+     # (found by test_properties under hypothesis 6.170) was "cut" to all three twice
+     ("\U00018cd6\U00018d09\U0001b2fc", 30, "'\\U00018cd6...' (3 characters)"),
+     ("\x00" * 40, 30, "'\\x00\\x00\\x00...\\x00' (40 characters)")],
 )
 def test_abbreviate(value, limit, shown):
     assert abbreviate(value, limit) == shown

@@ -135,8 +135,8 @@ def abbreviate(value: object, limit: int = 40) -> str:
         The value to show; a string is quoted and, when too long, cut in the
         middle, any other value cut at the end (``...``).
     limit : int, default 40
-        The length aimed at (characters); the kept part is never shorter than
-        8 characters.
+        The length aimed at (characters); the kept part is shown in no fewer
+        than 8 characters, and keeps at least the first character.
 
     Returns
     -------
@@ -155,10 +155,24 @@ def abbreviate(value: object, limit: int = 40) -> str:
     if len(shown) <= limit:
         return shown
     if text is not None:
+        # cut by the width the characters are shown in, not by their count: repr
+        # shows a character as up to 10 (an escape such as \U0001b2fc)
         keep = max(limit - 10, 8)
-        head, tail = text[: keep * 3 // 4], text[-(keep // 4) :]
+        head = _shown_within(text, keep * 3 // 4) or text[0]
+        tail = _shown_within(text[len(head) :][::-1], keep // 4)[::-1]
         return f"{head + '...' + tail!r} ({len(text):,} characters)"
     return shown[: max(limit - 3, 8)] + "..."
+
+
+def _shown_within(text: str, width: int) -> str:
+    """The longest start of ``text`` that ``repr`` shows in at most ``width``
+    characters (without its quotes)."""
+    used = 0
+    for i, char in enumerate(text):
+        used += len(repr(char)) - 2
+        if used > width:
+            return text[:i]
+    return text
 
 
 def shorten(text: str, limit: int = 80) -> str:
