@@ -84,6 +84,19 @@ def wine() -> str | None:
     return shutil.which("wine") or shutil.which("wine64")
 
 
+def windows_host(folder: Path, md) -> tuple[list[str], dict[str, str]]:  # noqa: ANN001
+    """The command and environment that run the C host cross-compiled for Windows
+    under wine on the win64 DLL of the FMU unpacked in ``folder`` (``md``: its
+    model description)."""
+    wine_exe = wine()
+    assert wine_exe is not None
+    dll = folder / "binaries" / "win64" / f"{md.coSimulation.modelIdentifier}.dll"
+    lib = "Z:" + str(dll).replace("/", "\\")
+    env = {"WINEDEBUG": "-all", "HOME": os.environ.get("HOME", "/root"),
+           "PATH": "/usr/bin:/bin"}  # wine itself needs its home and its programs
+    return [wine_exe, str(host_exe("windows")), lib, md.guid, (folder / "resources").as_uri()], env
+
+
 class HostDriver:
     """One instance of an FMU in the C host (a process of its own, started with
     an empty environment: no PYTHONPATH, no LD_LIBRARY_PATH, nothing of
@@ -100,12 +113,7 @@ class HostDriver:
         uri = (self.folder / "resources").as_uri()
         env: dict[str, str] = {}
         if kind == "windows":
-            lib = "Z:" + str(self.folder / "binaries" / "win64" / f"{ident}.dll").replace("/", "\\")
-            wine_exe = wine()
-            assert wine_exe is not None
-            cmd = [wine_exe, str(host_exe("windows")), lib, self.md.guid, uri]
-            env = {"WINEDEBUG": "-all", "HOME": os.environ.get("HOME", "/root"),
-                   "PATH": "/usr/bin:/bin"}  # wine itself needs its home and its programs
+            cmd, env = windows_host(self.folder, self.md)
         else:
             lib = str(library or self.folder / "binaries" / "linux64" / f"{ident}.so")
             cmd = [str(host_exe(kind)), lib, self.md.guid, uri]
