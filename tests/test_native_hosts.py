@@ -6,6 +6,7 @@ fmpy; byte-identical builds."""
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import sys
@@ -48,7 +49,7 @@ def _lifecycle_script(md) -> list[str]:  # noqa: ANN001
         "instantiate 0 a 0", "setup 0 0", "enter 0", f"get_real 0 {outs}", "free 0",  # outputs before init
         "instantiate 0 a 1", "setup 0 0", "enter 0", "exit 0",
         *step, "step 0 0 1", *step, "get_state 0 0", "step 0 1 1", *step, "step 0 2 2",  # two samples at once
-        "set_state 0 0", "time 0", "serialize 0 0", "set_state 0 0", *step, "step 0 1 1",
+        "set_state 0 0", "time 0", "serialize 0 0", "replace 0 0", "set_state 0 0", *step, "step 0 1 1",
         "step 0 7 1", "step 0 2 0.5", "step 0 2 -1", "step 0 2 nan",  # refused steps
         *(f"set_real 0 {v.valueReference} nan" for v in ins[:1]),  # a bad input, then a step
         "step 0 2 1", *set_inputs, "step 0 2 1",
@@ -161,8 +162,8 @@ def _random_script(md, seed: int, calls: int) -> list[str]:  # noqa: ANN001
         elif op == 14:
             lines.append(f"step {i} {rnd.choice([0, 1, 2, -1]) * ts!r} {ts!r}")
         elif op == 15:
-            lines.append(f"{rnd.choice(['get_state', 'get_state', 'set_state', 'free_state', 'serialize'])} {i} "
-                         f"{rnd.randrange(3)}")
+            op_name = rnd.choice(["get_state", "get_state", "set_state", "free_state", "serialize", "replace"])
+            lines.append(f"{op_name} {i} {rnd.randrange(3)}")
         elif op == 16:
             lines.append(f"time {i}")
         elif op == 17 and rnd.random() < 0.1:
@@ -299,6 +300,98 @@ def test_the_win64_binary_answers_random_call_sequences_as_the_linux64_binary(na
         else:
             same = x == y
         assert same, f"line {i + 1} of the hosts' output: linux {x!r}, windows {y!r}"
+
+
+# -- both backends in one C host: what a careless host passes -------------------------------------
+
+#: Calls fmpy never makes (tests/test_fmu_differential.py runs the rest on both backends): names and
+#: strings that are NULL or not UTF-8, statuses of every kind, log categories unknown or NULL, a
+#: state deserialized over the one its variable holds. The FMU: a truncated Kalman filter (String
+#: parameter ``start``, value reference 1).
+CARELESS_HOST = [
+    "instantiate 0 \\null 1", "instantiate 0 R\\xe9gulateur 1", "instantiate 0 \\xed\\xa0\\x80 1",
+    "instantiate 0 R\\xc3\\xa9gulateur 1",
+    "debug 0 1 2 logAll nonsense", "debug 0 1 1 \\xff", "debug 0 1 2", "debug 0 1 1 logStatusError", "debug 0 1 0",
+    "set_string 0 1 \\null", "get_string 0 1", "set_string 0 1 caf\\xe9", "get_string 0 1",
+    "set_string 0 1 \\xf0\\x9f\\x98\\x80", "get_string 0 1", "set_string 0 1 steady-state",
+    *(f"status 0 {kind} {which}" for kind in ("status", "integer", "string", "real", "boolean", "real_null",
+                                               "boolean_null") for which in range(4)),
+    "setup 0 0.5", "enter 0", "exit 0", "step 0 0.5 1", "get_state 0 0", "replace 0 0", "step 0 1.5 1",
+    "set_state 0 0", "time 0", "status 0 real 2", "free 0",
+]
+
+
+def _comparable(line: str) -> str:
+    """A host's output line as both backends must print it: without the ``[ModelIdentifier] ``
+    the native FMUs (and the Python slaves) put before a message and the status bridge's own
+    messages lack, without the backend the version message names, and without the size of a
+    serialized state (each backend's own format)."""
+    line = re.sub(r"^(LOG \d+ \w* )\[\w+\] ", r"\1", line)
+    line = re.sub(r"^(LOG 0 logAll lpvest \S+) \(.*\)$", r"\1 (backend)", line)
+    return re.sub(r"^SIZE \d+$", "SIZE n", line)
+
+
+def _both_backends(fmus, native_fmus, name: str, script: list[str], tmp_path: Path,  # noqa: ANN001
+                   env: dict[str, str] | None = None) -> tuple[list[str], list[str]]:
+    """The C host's output of ``script`` on the Python FMU ``name`` (libpython preloaded) and
+    on the native one."""
+    from tests.lifecycle_host import c_env
+    from tests.native_hosts import host_exe
+
+    outs = []
+    for backend, fmu, extra in (("python", fmus[name], c_env()), ("native", native_fmus[name], {})):
+        md = read_model_description(str(fmu))
+        folder = tmp_path / backend
+        with zipfile.ZipFile(fmu) as z:
+            z.extractall(folder)
+        lib = folder / "binaries" / "linux64" / f"{md.coSimulation.modelIdentifier}.so"
+        proc = _run_script([str(host_exe("plain")), str(lib), md.guid, (folder / "resources").as_uri()], script,
+                           {**extra, **(env or {})})
+        assert proc.returncode == 0 and proc.stdout.splitlines()[-1] == "DONE", (backend, proc.stderr[-3000:])
+        outs.append([_comparable(line) for line in proc.stdout.splitlines()])
+    return outs[0], outs[1]
+
+
+def test_both_backends_answer_a_careless_c_host_alike(fmus, native_fmus, tmp_path):
+    """What fmpy never passes, in the C host on the Python FMU (through the status bridge)
+    and the native one: the same status and the same message for every call. pythonfmu
+    crashed the host on an instance name that is not UTF-8 (Latin-1, a lone surrogate),
+    answered fmi2Fatal with a NULL log category to such a string value and stored a NULL
+    one as "None"; fmi2GetStatus said fmi2Error ("not supported") where FMI 2.0 (4.2.3)
+    says fmi2Discard; the backends disagreed on unknown log categories; and the native
+    fmi2DeSerializeFMUstate freed the state its output variable held, which the host
+    then freed again."""
+    python, native = _both_backends(fmus, native_fmus, "CoxTothTruncationTruncatedKalman", CARELESS_HOST, tmp_path)
+    assert python == native, "\n".join(f"{a!r} | {b!r}" for a, b in zip(python, native, strict=False) if a != b)
+    statuses = [line.split()[2] for line in native if line.startswith("STATUS")]
+    assert statuses[:4] == ["null", "null", "null", "0"]  # NULL, Latin-1, a surrogate refused; UTF-8 made
+    assert "LOG 3 logStatusError fmi2Instantiate: no instance name (NULL)" in native
+    assert native.count("LOG 3 logStatusError fmi2Instantiate: the instance name is not UTF-8 text") == 2
+    assert "LOG 1 logStatusWarning fmi2SetDebugLogging: unknown log category (not UTF-8 text)" in native
+    assert "STRING \U0001f600" in native  # four bytes of UTF-8 taken
+    assert native.count("STRING theorem") == 2  # a NULL value and Latin-1 refused, nothing set
+    assert "TIME 1.5" in native  # the restored time, after a state replaced by its deserialized copy
+    assert statuses.count("2") == 3 * 4 + 3 + 3  # fmi2Discard: the statuses no FMU has
+
+
+@pytest.mark.skipif(shutil.which("localedef") is None, reason="needs localedef (glibc) to make a German locale")
+def test_the_restored_time_is_read_the_same_in_a_locale_with_a_decimal_comma(fmus, native_fmus, tmp_path):
+    """The status bridge read the time a Python slave states after fmi2SetFMUstate with strtod,
+    which in a host whose locale writes a decimal comma read "1.5" as 1: fmi2LastSuccessfulTime
+    was wrong with fmi2OK, and the host's next step from it was refused. Now both backends
+    report 1,5 (printed by the host in that locale)."""
+    locales = tmp_path / "locales"
+    locales.mkdir()
+    made = subprocess.run(["localedef", "-i", "de_DE", "-f", "UTF-8", str(locales / "de_DE.UTF-8")],
+                          capture_output=True, text=True, check=False)
+    if not (locales / "de_DE.UTF-8").exists():
+        pytest.skip(f"localedef could not make de_DE.UTF-8: {made.stderr[-300:]}")
+    script = ["instantiate 0 a 0", "setup 0 0.5", "enter 0", "exit 0", "step 0 0.5 1", "get_state 0 0",
+              "step 0 1.5 1", "locale de_DE.UTF-8", "set_state 0 0", "time 0", "free 0"]
+    python, native = _both_backends(fmus, native_fmus, "CoxTothTruncationTruncatedKalman", script, tmp_path,
+                                    {"LOCPATH": str(locales)})
+    assert "STATUS locale 0" in native and "TIME 1,5" in native
+    assert python == native
 
 
 # -- libcosim, fmpy's simulate_fmu -----------------------------------------------------------------

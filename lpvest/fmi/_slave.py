@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import struct
 import threading
 import weakref
 from collections import OrderedDict
@@ -146,6 +147,17 @@ def _loaded(path: Path, digest: bytes | None, values: tuple[tuple[str, float], .
             while len(_LOADED) > _LOADED_MAX:
                 _LOADED.popitem(last=False)
     return found
+
+
+def time_bits(t: float) -> str:
+    """``t`` as the 16 lower-case hexadecimal digits of its IEEE 754 bits: how a
+    slave states its time to the status bridge (category ``lpvest.time``), which
+    reads them with strtoull, the same in every locale.
+
+    >>> time_bits(1.25)
+    '3ff4000000000000'
+    """
+    return f"{struct.unpack('<Q', struct.pack('<d', t))[0]:016x}"
 
 
 def _num(value: float) -> str:
@@ -1008,8 +1020,10 @@ class LpvestSlave(Fmi2Slave):
             self._init_error, self._dirty = init_error, dirty
             self._component = component
             self._preview = None
-            # the status bridge reports this time as fmi2LastSuccessfulTime (lpvest/fmi/status_bridge.c)
-            self.log(repr(self._time), Fmi2Status.ok, "lpvest.time")
+            # the status bridge reports this time as fmi2LastSuccessfulTime (lpvest/fmi/status_bridge.c),
+            # sent as the 16 hexadecimal digits of its bits: strtod would read "1.25" as 1 in a host
+            # whose locale writes a decimal comma
+            self.log(time_bits(self._time), Fmi2Status.ok, "lpvest.time")
 
         self._guard("fmi2SetFMUstate", run, None)
 

@@ -22,8 +22,18 @@
  * fmi2OK or fmi2Warning, unchanged after a refused step (pythonfmu's library
  * would report the refused step's t), and after fmi2SetFMUstate the restored
  * time, which the slave states in a log message of category "lpvest.time"
- * (consumed here, never shown to the host). fmi2GetBooleanStatus(fmi2Terminated)
- * is fmi2False: an lpvest slave never asks to end the simulation.
+ * (consumed here, never shown to the host) as the 16 hexadecimal digits of its
+ * IEEE 754 bits (strtod would read "1.25" as 1 in a host whose locale writes a
+ * decimal comma). fmi2GetBooleanStatus(fmi2Terminated) is fmi2False: an lpvest
+ * slave never asks to end the simulation; the statuses of fmi2GetStatus,
+ * fmi2GetIntegerStatus and fmi2GetStringStatus are not available (fmi2Discard,
+ * FMI 2.0, 4.2.3).
+ *
+ * Strings: pythonfmu turns a C string into a Python one, and a string that is not
+ * UTF-8 (FMI 2.0's encoding) makes it crash the host (an instance name, a
+ * resources folder) or fail with fmi2Fatal and a NULL log category (fmi2SetString);
+ * a NULL string value became the text "None". This layer refuses them first, at
+ * fmi2Error with a message, as the native FMUs do.
  *
  * Lifecycle: pythonfmu 0.7's fmi2FreeInstance destroys an instance's logger
  * before the instance, whose destructor then passes the messages still queued
@@ -177,6 +187,7 @@ static void finalize_inner(void) {
 
 typedef struct {
     fmi2Component inner;
+    int filter;                   /* 1: only the categories listed are forwarded (fmi2SetDebugLogging) */
     fmi2CallbackFunctions host;   /* the host's callbacks (copied) */
     fmi2CallbackFunctions mine;   /* given to the inner library; lives as long as the instance */
     char* name;
@@ -213,6 +224,25 @@ static char* copy_string(const char* text) {
     char* out = (char*)malloc(n);
     if (out) memcpy(out, text, n);
     return out;
+}
+
+/* 1 if text is well-formed UTF-8 (no overlong forms, no surrogates, at most U+10FFFF) */
+static int is_utf8(const char* text) {
+    const unsigned char* p = (const unsigned char*)text;
+    while (*p) {
+        unsigned c = *p++;
+        int more = c < 0x80 ? 0 : (c & 0xE0) == 0xC0 ? 1 : (c & 0xF0) == 0xE0 ? 2 : (c & 0xF8) == 0xF0 ? 3 : -1;
+        if (more < 0) return 0;
+        unsigned long cp = more == 0 ? c : more == 1 ? (c & 0x1F) : more == 2 ? (c & 0x0F) : (c & 0x07);
+        for (int i = 0; i < more; i++, p++) {
+            if ((*p & 0xC0) != 0x80) return 0;
+            cp = (cp << 6) | (*p & 0x3F);
+        }
+        if ((more == 1 && cp < 0x80) || (more == 2 && cp < 0x800) || (more == 3 && cp < 0x10000) || cp > 0x10FFFF ||
+            (cp >= 0xD800 && cp <= 0xDFFF))
+            return 0;
+    }
+    return 1;
 }
 
 #define LOAD_ALL(LOAD)                                                                                          \
@@ -372,8 +402,12 @@ static char* safe_format(const char* message) {
     return out;
 }
 
+/* the log categories of the model description (pythonfmu's), as the native FMUs know them */
+static const char* const CATEGORIES[] = {"logStatusWarning", "logStatusDiscard", "logStatusError", "logStatusFatal",
+                                         "logAll"};
+
 static int category_enabled(const Bridge* b, fmi2String category) {
-    if (b->n_categories == 0) return 1;
+    if (!b->filter) return 1;
     if (!category) return 0;
     for (size_t i = 0; i < b->n_categories; i++)
         if (strcmp(b->categories[i], category) == 0) return 1;
@@ -385,7 +419,10 @@ static void bridge_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Sta
     Bridge* b = (Bridge*)env;
     if (!b) return;
     if (category && strcmp(category, TIME_CATEGORY) == 0) {
-        if (message) b->time = strtod(message, NULL);
+        /* 16 hexadecimal digits, the bits of the time (see the top of this file) */
+        char* end = NULL;
+        unsigned long long bits = message ? strtoull(message, &end, 16) : 0;
+        if (message && end == message + 16 && *end == '\0') memcpy(&b->time, &bits, sizeof b->time);
         return;
     }
     if (status > b->worst && status <= fmi2Error) b->worst = status;
@@ -553,6 +590,11 @@ static const char* refuse_instantiate(fmi2Type type, fmi2String guid, fmi2String
         snprintf(msg, cap, "fmi2Instantiate: GUID %.100s does not match this FMU's %.100s", guid, line);
         goto refused;
     }
+    if (!is_utf8(dir)) { /* pythonfmu would crash the host: it makes a Python string of it */
+        snprintf(msg, cap, "fmi2Instantiate: the path of the resources folder is not UTF-8 text, which pythonfmu "
+                 "cannot load: extract the FMU into a folder whose path is");
+        goto refused;
+    }
     if (strstr(dir, "%20")) { /* the inner library would read it as a space */
         snprintf(msg, cap, "fmi2Instantiate: the resources folder %.300s has '%%20' in its name, which pythonfmu "
                  "reads as a space: extract the FMU elsewhere", dir);
@@ -572,10 +614,12 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
                                      fmi2String fmuResourceLocation, const fmi2CallbackFunctions* functions,
                                      fmi2Boolean visible, fmi2Boolean loggingOn) {
     char msg[1024], *folder = NULL;
-    const char* why = refuse_instantiate(fmuType, fmuGUID, fmuResourceLocation, &folder, msg, sizeof msg);
+    const char* why = !instanceName           ? "fmi2Instantiate: no instance name (NULL)"
+                      : !is_utf8(instanceName) ? "fmi2Instantiate: the instance name is not UTF-8 text"
+                      : refuse_instantiate(fmuType, fmuGUID, fmuResourceLocation, &folder, msg, sizeof msg);
     if (why) {
-        report(functions ? functions->logger : NULL, functions ? functions->componentEnvironment : NULL, instanceName,
-               fmi2Error, why);
+        report(functions ? functions->logger : NULL, functions ? functions->componentEnvironment : NULL,
+               instanceName && is_utf8(instanceName) ? instanceName : "", fmi2Error, why);
         return NULL;
     }
 #ifdef _WIN32
@@ -653,19 +697,31 @@ EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, si
     if (!b) return fmi2Error;
     free_categories(b);
     b->logging_on = loggingOn;
-    if (nCategories > 0 && categories) {
-        b->categories = (char**)calloc(nCategories, sizeof(char*));
-        if (!b->categories) return fmi2Error;
-        b->n_categories = nCategories;
-        for (size_t i = 0; i < nCategories; i++) {
-            b->categories[i] = copy_string(categories[i] ? categories[i] : "");
-            if (!b->categories[i]) {
-                free_categories(b);
-                return fmi2Error;
-            }
+    b->filter = nCategories > 0; /* none: every category; else only the known ones listed */
+    if (nCategories == 0) return fmi2OK;
+    b->categories = (char**)calloc(nCategories, sizeof(char*));
+    if (!b->categories) return fmi2Error;
+    fmi2Status status = fmi2OK;
+    for (size_t i = 0; i < nCategories; i++) {
+        const char* name = categories ? categories[i] : NULL;
+        int known = 0;
+        for (size_t k = 0; name && k < sizeof CATEGORIES / sizeof CATEGORIES[0]; k++) known |= !strcmp(name, CATEGORIES[k]);
+        if (!known) { /* the native FMUs' words */
+            char msg[300];
+            snprintf(msg, sizeof msg, "fmi2SetDebugLogging: unknown log category %.200s",
+                     !name ? "(null)" : is_utf8(name) ? name : "(not UTF-8 text)");
+            report(b->host.logger, b->host.componentEnvironment, b->name, fmi2Warning, msg);
+            status = fmi2Warning;
+            continue;
         }
+        b->categories[b->n_categories] = copy_string(name);
+        if (!b->categories[b->n_categories]) {
+            free_categories(b);
+            return fmi2Error;
+        }
+        b->n_categories++;
     }
-    return fmi2OK;
+    return status;
 }
 
 EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
@@ -721,9 +777,25 @@ EXPORT fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[],
                                  const fmi2Boolean value[]) {
     FORWARD_ARRAYS(c, "fmi2SetBoolean", inner.SetBoolean(b_->inner, vr, nvr, value));
 }
+/* Why pythonfmu cannot take these string values (NULL, or not UTF-8: see the top of this file), in
+ * the native FMUs' words, into msg; NULL if it can. */
+static const char* refuse_strings(const fmi2ValueReference vr[], size_t nvr, const fmi2String value[], char* msg,
+                                  size_t cap) {
+    for (size_t i = 0; vr && value && i < nvr; i++) {
+        if (value[i] && is_utf8(value[i])) continue;
+        snprintf(msg, cap, "value reference %u: the value is %s; no value set", vr[i],
+                 value[i] ? "not UTF-8 text" : "NULL");
+        return msg;
+    }
+    return NULL;
+}
+
 EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                 const fmi2String value[]) {
-    FORWARD_ARRAYS(c, "fmi2SetString", inner.SetString(b_->inner, vr, nvr, value));
+    char msg[160];
+    const char* why = refuse_strings(vr, nvr, value, msg, sizeof msg);
+    CHECKED(c, "fmi2SetString", (!nvr || (vr && value)) && !why, why ? why : NULL_ARRAY,
+            inner.SetString(b_->inner, vr, nvr, value));
 }
 
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state) {
@@ -820,37 +892,42 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint
     return s;
 }
 EXPORT fmi2Status fmi2CancelStep(fmi2Component c) { return unsupported(c, "fmi2CancelStep"); }
+/* a status the FMU does not have: fmi2Discard (FMI 2.0, 4.2.3), in the native FMUs' words */
+static fmi2Status not_available(fmi2Component c, const char* what) {
+    Bridge* b = BRIDGE(c);
+    if (!b) return fmi2Error;
+    char msg[300];
+    snprintf(msg, sizeof msg, "%s: this status is not available (only fmi2GetRealStatus(fmi2LastSuccessfulTime) and "
+             "fmi2GetBooleanStatus(fmi2Terminated) are)", what);
+    report(b->host.logger, b->host.componentEnvironment, b->name, fmi2Discard, msg);
+    return fmi2Discard;
+}
+
 EXPORT fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status* value) {
     (void)s, (void)value;
-    return unsupported(c, "fmi2GetStatus");
+    return not_available(c, "fmi2GetStatus");
 }
 EXPORT fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real* value) {
     Bridge* b = BRIDGE(c);
-    if (!b || !value) return fmi2Error;
-    if (s != fmi2LastSuccessfulTime) {
-        report(b->host.logger, b->host.componentEnvironment, b->name, fmi2Discard,
-               "fmi2GetRealStatus: only fmi2LastSuccessfulTime is available");
-        return fmi2Discard;
-    }
+    if (!b) return fmi2Error;
+    if (!value) return refuse_argument(b, "fmi2GetRealStatus", NULL_ARGUMENT);
+    if (s != fmi2LastSuccessfulTime) return not_available(c, "fmi2GetRealStatus");
     *value = b->time;
     return fmi2OK;
 }
 EXPORT fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer* value) {
     (void)s, (void)value;
-    return unsupported(c, "fmi2GetIntegerStatus");
+    return not_available(c, "fmi2GetIntegerStatus");
 }
 EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean* value) {
     Bridge* b = BRIDGE(c);
-    if (!b || !value) return fmi2Error;
-    if (s != fmi2Terminated) {
-        report(b->host.logger, b->host.componentEnvironment, b->name, fmi2Discard,
-               "fmi2GetBooleanStatus: only fmi2Terminated is available");
-        return fmi2Discard;
-    }
+    if (!b) return fmi2Error;
+    if (!value) return refuse_argument(b, "fmi2GetBooleanStatus", NULL_ARGUMENT);
+    if (s != fmi2Terminated) return not_available(c, "fmi2GetBooleanStatus");
     *value = fmi2False;
     return fmi2OK;
 }
 EXPORT fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String* value) {
     (void)s, (void)value;
-    return unsupported(c, "fmi2GetStringStatus");
+    return not_available(c, "fmi2GetStringStatus");
 }

@@ -19,7 +19,15 @@
  *   time ID                         fmi2GetRealStatus(fmi2LastSuccessfulTime): TIME t
  *   get_state ID SLOT | set_state ID SLOT | free_state ID SLOT
  *   serialize ID SLOT               serialize the state in SLOT and deserialize it into SLOT again
+ *   replace ID SLOT                 the same, deserialized into SLOT's variable over the state it
+ *                                   holds, which is freed after (*FMUstate is an output only)
  *   unload / load                   close and open the library again
+ *   status ID KIND WHICH            fmi2Get<KIND>Status(WHICH) for KIND status|real|integer|boolean|string
+ *                                   and WHICH 0..3; KIND real_null|boolean_null: a NULL value pointer
+ *   debug ID ON N [CATEGORY ...]    fmi2SetDebugLogging(ON, N, the categories); none given: a NULL array
+ *   locale NAME                     setlocale(LC_ALL, NAME): numbers are read and printed in it from now on
+ * In NAME (instantiate), TEXT (set_string) and CATEGORY, \xHH is the byte HH and \null alone a
+ * NULL pointer: what a careless host may pass.
  * Each call prints "STATUS <command> <status>". The logger prints
  * "LOG <status> <category> <message>".
  */
@@ -27,6 +35,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <locale.h>
 
 #ifdef _WIN32
 #include <windows.h>
@@ -66,6 +75,9 @@ typedef int (*SetString)(fmi2Component, const fmi2ValueReference*, size_t, const
 typedef int (*GetString)(fmi2Component, const fmi2ValueReference*, size_t, const char**);
 typedef int (*DoStep)(fmi2Component, double, double, int);
 typedef int (*GetRealStatus)(fmi2Component, int, double*);
+typedef int (*GetIntStatus)(fmi2Component, int, int*);
+typedef int (*GetStringStatus)(fmi2Component, int, const char**);
+typedef int (*SetDebugLogging)(fmi2Component, int, size_t, const char* const*);
 typedef int (*GetState)(fmi2Component, fmi2FMUstate*);
 typedef int (*SetState)(fmi2Component, fmi2FMUstate);
 typedef int (*FreeState)(fmi2Component, fmi2FMUstate*);
@@ -87,6 +99,9 @@ static struct {
     GetString get_string;
     DoStep do_step;
     GetRealStatus get_real_status;
+    GetIntStatus get_status, get_integer_status, get_boolean_status;
+    GetStringStatus get_string_status;
+    SetDebugLogging set_debug_logging;
     GetState get_state;
     SetState set_state;
     FreeState free_state;
@@ -132,6 +147,11 @@ static int load(const char* path) {
     SYM(get_string, "fmi2GetString")
     SYM(do_step, "fmi2DoStep")
     SYM(get_real_status, "fmi2GetRealStatus")
+    SYM(get_status, "fmi2GetStatus")
+    SYM(get_integer_status, "fmi2GetIntegerStatus")
+    SYM(get_boolean_status, "fmi2GetBooleanStatus")
+    SYM(get_string_status, "fmi2GetStringStatus")
+    SYM(set_debug_logging, "fmi2SetDebugLogging")
     SYM(get_state, "fmi2GetFMUstate")
     SYM(set_state, "fmi2SetFMUstate")
     SYM(free_state, "fmi2FreeFMUstate")
@@ -139,6 +159,23 @@ static int load(const char* path) {
     SYM(serialize, "fmi2SerializeFMUstate")
     SYM(deserialize, "fmi2DeSerializeFMUstate")
     return 1;
+}
+
+/* text with \xHH decoded in place, or NULL for \null (see the top of this file) */
+static char* decode(char* text) {
+    if (strcmp(text, "\\null") == 0) return NULL;
+    char* out = text;
+    for (char* p = text; *p; p++) {
+        unsigned x;
+        if (p[0] == '\\' && p[1] == 'x' && sscanf(p + 2, "%2x", &x) == 1) {
+            *out++ = (char)x;
+            p += 3;
+        } else {
+            *out++ = *p;
+        }
+    }
+    *out = '\0';
+    return text;
 }
 
 #define N_INSTANCES 8
@@ -169,6 +206,13 @@ int main(int argc, char** argv) {
             fflush(stdout);
             continue;
         }
+        if (strcmp(cmd, "locale") == 0) {
+            char name[128] = {0};
+            sscanf(line + n, "%127s", name);
+            printf("STATUS locale %d\n", setlocale(LC_ALL, name) ? 0 : 1);
+            fflush(stdout);
+            continue;
+        }
         if (strcmp(cmd, "load") == 0) {
             printf("STATUS load %d\n", load(argv[1]) ? 0 : 4);
             fflush(stdout);
@@ -186,7 +230,7 @@ int main(int argc, char** argv) {
             char name[256];
             int logging = 0;
             sscanf(rest, "%255s %d", name, &logging);
-            c[id] = F.instantiate(name, 1, argv[2], argv[3], &cb, 0, logging);
+            c[id] = F.instantiate(decode(name), 1, argv[2], argv[3], &cb, 0, logging);
             printf("STATUS instantiate %s\n", c[id] ? "0" : "null");
             fflush(stdout);
             continue;
@@ -223,7 +267,7 @@ int main(int argc, char** argv) {
             fmi2ValueReference vr = (fmi2ValueReference)strtoul(rest, &end, 10);
             while (*end == ' ') end++;
             end[strcspn(end, "\r\n")] = '\0';
-            const char* v = end;
+            const char* v = decode(end);
             st = F.set_string(c[id], &vr, 1, &v);
         } else if (strcmp(cmd, "get_real") == 0) {
             fmi2ValueReference vrs[512];
@@ -251,6 +295,30 @@ int main(int argc, char** argv) {
             const char* v = "";
             st = F.get_string(c[id], &vr, 1, &v);
             printf("STRING %s\n", v ? v : "(null)");
+        } else if (strcmp(cmd, "status") == 0) {
+            char kind[32] = {0};
+            int which = 0;
+            sscanf(rest, "%31s %d", kind, &which);
+            int v = -1;
+            double t = -1.0;
+            const char* text = "(unset)";
+            if (strcmp(kind, "status") == 0) st = F.get_status(c[id], which, &v);
+            else if (strcmp(kind, "integer") == 0) st = F.get_integer_status(c[id], which, &v);
+            else if (strcmp(kind, "boolean") == 0) st = F.get_boolean_status(c[id], which, &v);
+            else if (strcmp(kind, "boolean_null") == 0) st = F.get_boolean_status(c[id], which, NULL);
+            else if (strcmp(kind, "real") == 0) st = F.get_real_status(c[id], which, &t);
+            else if (strcmp(kind, "real_null") == 0) st = F.get_real_status(c[id], which, NULL);
+            else st = F.get_string_status(c[id], which, &text);
+            printf("VALUES %d %.17g %s\n", v, t, text ? text : "(null)");
+        } else if (strcmp(cmd, "debug") == 0) {
+            int on = 0, count = 0, used = 0;
+            sscanf(rest, "%d %d%n", &on, &count, &used);
+            char* names[16];
+            char words[16][128];
+            int k = 0;
+            for (char* p = rest + used; k < 16 && sscanf(p, "%127s%n", words[k], &used) == 1; p += used, k++)
+                names[k] = decode(words[k]);
+            st = F.set_debug_logging(c[id], on, (size_t)count, k ? (const char* const*)names : NULL);
         } else if (strcmp(cmd, "step") == 0) {
             char* end;
             double t = strtod(rest, &end);
@@ -265,7 +333,7 @@ int main(int argc, char** argv) {
             st = F.get_real_status(c[id], 2, &t);
             printf("TIME %.17g\n", t);
         } else if (strcmp(cmd, "get_state") == 0 || strcmp(cmd, "set_state") == 0 || strcmp(cmd, "free_state") == 0 ||
-                   strcmp(cmd, "serialize") == 0) {
+                   strcmp(cmd, "serialize") == 0 || strcmp(cmd, "replace") == 0) {
             int slot = atoi(rest);
             if (slot < 0 || slot >= N_SLOTS) {
                 printf("BADLINE %s", line);
@@ -281,12 +349,18 @@ int main(int argc, char** argv) {
                 char* bytes = (char*)malloc(size ? size : 1);
                 if (!st) st = F.serialize(c[id], states[id][slot], bytes, size);
                 fmi2FMUstate copy = NULL;
-                if (!st) st = F.deserialize(c[id], bytes, size, &copy);
-                free(bytes);
-                if (!st) {
-                    F.free_state(c[id], &states[id][slot]);
-                    states[id][slot] = copy;
+                if (cmd[0] == 'r') {
+                    fmi2FMUstate old = states[id][slot];
+                    if (!st) st = F.deserialize(c[id], bytes, size, &states[id][slot]);
+                    if (!st && old) F.free_state(c[id], &old);
+                } else {
+                    if (!st) st = F.deserialize(c[id], bytes, size, &copy);
+                    if (!st) {
+                        F.free_state(c[id], &states[id][slot]);
+                        states[id][slot] = copy;
+                    }
                 }
+                free(bytes);
                 printf("SIZE %lu\n", (unsigned long)size);
             }
         } else {

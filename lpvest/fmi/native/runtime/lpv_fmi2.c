@@ -323,6 +323,27 @@ static int comp_commit(const instance* s, component* c, const double* in, double
 
 /* ----------------------------------------------------------- instance */
 
+/* 1 if text is well-formed UTF-8 (no overlong forms, no surrogates, at most U+10FFFF): FMI 2.0's
+   strings; the Python FMUs cannot take others (lpvest/fmi/status_bridge.c), and refuse them in the
+   same words */
+static int is_utf8(const char* text) {
+    const unsigned char* p = (const unsigned char*)text;
+    while (*p) {
+        unsigned c = *p++;
+        int more = c < 0x80 ? 0 : (c & 0xE0) == 0xC0 ? 1 : (c & 0xF0) == 0xE0 ? 2 : (c & 0xF8) == 0xF0 ? 3 : -1;
+        if (more < 0) return 0;
+        unsigned long cp = more == 0 ? c : more == 1 ? (c & 0x1F) : more == 2 ? (c & 0x0F) : (c & 0x07);
+        for (int i = 0; i < more; i++, p++) {
+            if ((*p & 0xC0) != 0x80) return 0;
+            cp = (cp << 6) | (*p & 0x3F);
+        }
+        if ((more == 1 && cp < 0x80) || (more == 2 && cp < 0x800) || (more == 3 && cp < 0x10000) || cp > 0x10FFFF ||
+            (cp >= 0xD800 && cp <= 0xDFFF))
+            return 0;
+    }
+    return 1;
+}
+
 static char* dup_string(const char* text) {
     if (!text) text = "";
     size_t n = strlen(text) + 1;
@@ -566,7 +587,13 @@ FMI2_Export fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuT
     const lpv_model* m = &lpv_model_data;
     fmi2CallbackLogger logger = functions ? functions->logger : NULL;
     void* env = functions ? functions->componentEnvironment : NULL;
-    const char* name = instanceName ? instanceName : "";
+    const char* name = instanceName && is_utf8(instanceName) ? instanceName : "";
+    if (!instanceName || !is_utf8(instanceName)) { /* FMI 2.0: a name, in UTF-8 */
+        if (logger)
+            logger(env, name, fmi2Error, "logStatusError", "[%s] fmi2Instantiate: %s", m->identifier,
+                   instanceName ? "the instance name is not UTF-8 text" : "no instance name (NULL)");
+        return NULL;
+    }
     if (fmuType != fmi2CoSimulation) {
         if (logger) logger(env, name, fmi2Error, "logStatusError", "[%s] fmi2Instantiate: this FMU supports co-simulation only",
                            m->identifier);
@@ -630,8 +657,10 @@ FMI2_Export fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingO
             for (int k = 0; k < N_CATEGORIES; k++)
                 if (categories && categories[i] && strcmp(categories[i], CATEGORIES[k]) == 0)
                     s->categories |= 1u << k, found = 1;
-            if (!found) logf_(s, fmi2Warning, "fmi2SetDebugLogging: unknown log category %s",
-                              categories && categories[i] ? categories[i] : "(null)");
+            const char* name = categories ? categories[i] : NULL;
+            if (!found)
+                logf_(s, fmi2Warning, "fmi2SetDebugLogging: unknown log category %.200s",
+                      !name ? "(null)" : is_utf8(name) ? name : "(not UTF-8 text)");
         }
     }
     END;
@@ -894,6 +923,12 @@ FMI2_Export fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference v
                                      const fmi2String value[]) {
     BEGIN(c);
     REFUSE_NULL_ARRAYS("fmi2SetString");
+    for (size_t i = 0; i < nvr; i++) { /* all or nothing, as the Python FMUs (status_bridge.c) */
+        if (value[i] && is_utf8(value[i])) continue;
+        logf_(s, fmi2Error, "fmi2SetString: value reference %u: the value is %s; no value set", vr[i],
+              value[i] ? "not UTF-8 text" : "NULL");
+        END;
+    }
     for (size_t i = 0; i < nvr; i++) {
         if (!settable(s, "fmi2SetString", "String", LPV_STRING, vr[i]) || arrive(s, (int)vr[i])) continue;
         char* copy = dup_string(value[i]);
@@ -1094,14 +1129,20 @@ FMI2_Export fmi2Status fmi2CancelStep(fmi2Component c) {
 FMI2_Export fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind k, fmi2Status* value) {
     BEGIN(c);
     (void)k, (void)value;
-    logf_(s, fmi2Error, "FMI function not supported: fmi2GetStatus");
-    END;
+    logf_(s, fmi2Discard, "fmi2GetStatus: this status is not available (only fmi2GetRealStatus(fmi2LastSuccessfulTime) and "
+                          "fmi2GetBooleanStatus(fmi2Terminated) are)"); /* FMI 2.0, 4.2.3 */
+    return fmi2Discard;
 }
 
 FMI2_Export fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real* value) {
     BEGIN(c);
-    if (k != fmi2LastSuccessfulTime || !value) {
-        logf_(s, fmi2Discard, "fmi2GetRealStatus: only fmi2LastSuccessfulTime is available");
+    if (!value) {
+        logf_(s, fmi2Error, "fmi2GetRealStatus: a NULL argument (a state, pointer or buffer)");
+        END;
+    }
+    if (k != fmi2LastSuccessfulTime) {
+        logf_(s, fmi2Discard, "fmi2GetRealStatus: this status is not available (only fmi2GetRealStatus(fmi2LastSuccessfulTime) and "
+                          "fmi2GetBooleanStatus(fmi2Terminated) are)");
         return fmi2Discard;
     }
     *value = s->time;
@@ -1111,14 +1152,20 @@ FMI2_Export fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k
 FMI2_Export fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind k, fmi2Integer* value) {
     BEGIN(c);
     (void)k, (void)value;
-    logf_(s, fmi2Error, "FMI function not supported: fmi2GetIntegerStatus");
-    END;
+    logf_(s, fmi2Discard, "fmi2GetIntegerStatus: this status is not available (only fmi2GetRealStatus(fmi2LastSuccessfulTime) and "
+                          "fmi2GetBooleanStatus(fmi2Terminated) are)"); /* FMI 2.0, 4.2.3 */
+    return fmi2Discard;
 }
 
 FMI2_Export fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind k, fmi2Boolean* value) {
     BEGIN(c);
-    if (k != fmi2Terminated || !value) {
-        logf_(s, fmi2Discard, "fmi2GetBooleanStatus: only fmi2Terminated is available");
+    if (!value) {
+        logf_(s, fmi2Error, "fmi2GetBooleanStatus: a NULL argument (a state, pointer or buffer)");
+        END;
+    }
+    if (k != fmi2Terminated) {
+        logf_(s, fmi2Discard, "fmi2GetBooleanStatus: this status is not available (only fmi2GetRealStatus(fmi2LastSuccessfulTime) and "
+                          "fmi2GetBooleanStatus(fmi2Terminated) are)");
         return fmi2Discard;
     }
     *value = fmi2False;
@@ -1128,8 +1175,9 @@ FMI2_Export fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKin
 FMI2_Export fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind k, fmi2String* value) {
     BEGIN(c);
     (void)k, (void)value;
-    logf_(s, fmi2Error, "FMI function not supported: fmi2GetStringStatus");
-    END;
+    logf_(s, fmi2Discard, "fmi2GetStringStatus: this status is not available (only fmi2GetRealStatus(fmi2LastSuccessfulTime) and "
+                          "fmi2GetBooleanStatus(fmi2Terminated) are)"); /* FMI 2.0, 4.2.3 */
+    return fmi2Discard;
 }
 
 FMI2_Export fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
@@ -1540,11 +1588,9 @@ FMI2_Export fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte s
     memcpy(bytes, serializedState, size);
     blob->bytes = bytes;
     blob->size = size;
-    if (*state) {
-        state_blob* old = (state_blob*)*state;
-        free(old->bytes);
-        free(old);
-    }
+    /* *state is an output only (FMI 2.0, 2.1.8: "constructs a copy of the FMU state and
+       returns FMUstate"): what it held on entry is the host's, not freed here (a host may
+       still free it, or it may be uninitialized), as pythonfmu does */
     *state = blob;
     END;
 }
