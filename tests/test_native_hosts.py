@@ -46,7 +46,9 @@ def _lifecycle_script(md) -> list[str]:  # noqa: ANN001
     lines = [
         "instantiate 0 a 1", "free 0",  # instantiate -> free
         "instantiate 0 a 0", "setup 0 0", "free 0",  # free in setup
-        "instantiate 0 a 0", "setup 0 0", "enter 0", f"get_real 0 {outs}", "free 0",  # outputs before init
+        "instantiate 0 a 0", "setup 0 0", "enter 0", f"get_real 0 {outs}",  # outputs before init
+        # a string the FMU returned, passed back in one call after another value for the same variable
+        *(f"set_string_back 0 {v.valueReference} x" for v in pars if v.type == "String"), "free 0",
         "instantiate 0 a 1", "setup 0 0", "enter 0", "exit 0",
         *step, "step 0 0 1", *step, "get_state 0 0", "step 0 1 1", *step, "step 0 2 2",  # two samples at once
         "set_state 0 0", "time 0", "serialize 0 0", "replace 0 0", "set_state 0 0", *step, "step 0 1 1",
@@ -314,6 +316,7 @@ CARELESS_HOST = [
     "debug 0 1 2 logAll nonsense", "debug 0 1 1 \\xff", "debug 0 1 2", "debug 0 1 1 logStatusError", "debug 0 1 0",
     "set_string 0 1 \\null", "get_string 0 1", "set_string 0 1 caf\\xe9", "get_string 0 1",
     "set_string 0 1 \\xf0\\x9f\\x98\\x80", "get_string 0 1", "set_string 0 1 steady-state",
+    "set_string_back 0 1 zero", "get_string 0 1",
     *(f"status 0 {kind} {which}" for kind in ("status", "integer", "string", "real", "boolean", "real_null",
                                                "boolean_null") for which in range(4)),
     "setup 0 0.5", "enter 0", "exit 0", "step 0 0.5 1", "get_state 0 0", "replace 0 0", "step 0 1.5 1",
@@ -370,6 +373,7 @@ def test_both_backends_answer_a_careless_c_host_alike(fmus, native_fmus, tmp_pat
     assert "LOG 1 logStatusWarning fmi2SetDebugLogging: unknown log category (not UTF-8 text)" in native
     assert "STRING \U0001f600" in native  # four bytes of UTF-8 taken
     assert native.count("STRING theorem") == 2  # a NULL value and Latin-1 refused, nothing set
+    assert native[native.index("STATUS set_string_back 0") + 1] == "STRING steady-state"  # the last one set
     assert "TIME 1.5" in native  # the restored time, after a state replaced by its deserialized copy
     assert statuses.count("2") == 3 * 4 + 3 + 3  # fmi2Discard: the statuses no FMU has
 

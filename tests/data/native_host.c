@@ -22,6 +22,8 @@
  *   replace ID SLOT                 the same, deserialized into SLOT's variable over the state it
  *                                   holds, which is freed after (*FMUstate is an output only)
  *   unload / load                   close and open the library again
+ *   set_string_back ID VR TEXT      fmi2SetString of VR to TEXT, then, in the same call, to the string
+ *                                   fmi2GetString returned for VR before the call
  *   status ID KIND WHICH            fmi2Get<KIND>Status(WHICH) for KIND status|real|integer|boolean|string
  *                                   and WHICH 0..3; KIND real_null|boolean_null: a NULL value pointer
  *   debug ID ON N [CATEGORY ...]    fmi2SetDebugLogging(ON, N, the categories); none given: a NULL array
@@ -269,6 +271,16 @@ int main(int argc, char** argv) {
             end[strcspn(end, "\r\n")] = '\0';
             const char* v = decode(end);
             st = F.set_string(c[id], &vr, 1, &v);
+        } else if (strcmp(cmd, "set_string_back") == 0) {
+            char* end;
+            fmi2ValueReference vr = (fmi2ValueReference)strtoul(rest, &end, 10);
+            while (*end == ' ') end++;
+            end[strcspn(end, "\r\n")] = '\0';
+            const char* before = "";
+            st = F.get_string(c[id], &vr, 1, &before);
+            fmi2ValueReference vrs[2] = {vr, vr};
+            const char* values[2] = {decode(end), before};
+            if (st <= 1) st = F.set_string(c[id], vrs, 2, values);
         } else if (strcmp(cmd, "get_real") == 0) {
             fmi2ValueReference vrs[512];
             double v[512];

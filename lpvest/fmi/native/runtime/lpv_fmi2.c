@@ -929,6 +929,13 @@ FMI2_Export fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference v
               value[i] ? "not UTF-8 text" : "NULL");
         END;
     }
+    /* the strings replaced are freed after the call's last element: a value may be one this FMU
+       returned (fmi2GetString), which a host may pass back in the same call, for another element */
+    char** replaced = (char**)calloc(nvr ? nvr : 1, sizeof(char*));
+    if (!replaced) {
+        logf_(s, fmi2Error, "fmi2SetString: out of memory");
+        END;
+    }
     for (size_t i = 0; i < nvr; i++) {
         if (!settable(s, "fmi2SetString", "String", LPV_STRING, vr[i]) || arrive(s, (int)vr[i])) continue;
         char* copy = dup_string(value[i]);
@@ -937,10 +944,12 @@ FMI2_Export fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference v
             continue;
         }
         int slot = s->m->vars[vr[i]].slot;
-        free(s->strings[slot]);
+        replaced[i] = s->strings[slot];
         s->strings[slot] = copy;
         stored(s, (int)vr[i]);
     }
+    for (size_t i = 0; i < nvr; i++) free(replaced[i]);
+    free(replaced);
     END;
 }
 
