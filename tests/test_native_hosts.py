@@ -316,11 +316,12 @@ CARELESS_HOST = [
     "debug 0 1 2 logAll nonsense", "debug 0 1 1 \\xff", "debug 0 1 2", "debug 0 1 1 logStatusError", "debug 0 1 0",
     "set_string 0 1 \\null", "get_string 0 1", "set_string 0 1 caf\\xe9", "get_string 0 1",
     "set_string 0 1 \\xf0\\x9f\\x98\\x80", "get_string 0 1", "set_string 0 1 steady-state",
-    "set_string_back 0 1 zero", "get_string 0 1",
+    "set_string_back 0 1 zero", "get_string 0 1", "get_real 0 2147483653", "get_integer 0 4294967295",
     *(f"status 0 {kind} {which}" for kind in ("status", "integer", "string", "real", "boolean", "real_null",
                                                "boolean_null") for which in range(4)),
-    "setup 0 0.5", "enter 0", "exit 0", "step 0 0.5 1", "get_state 0 0", "replace 0 0", "step 0 1.5 1",
-    "set_state 0 0", "time 0", "status 0 real 2", "free 0",
+    "setup 0 0.5 nan", "setup 0 0.5 0.25", "setup 0 0.5 3.5", "enter 0", "exit 0", "step 0 0.5 1",
+    "get_state 0 0", "replace 0 0", "step 0 1.5 1", "set_state 0 0", "time 0", "status 0 real 2",
+    "step 0 1.5 3", "step 0 1.5 2", "step 0 3.5 1", "free 0",  # past the stop time 3.5: refused
 ]
 
 
@@ -374,8 +375,16 @@ def test_both_backends_answer_a_careless_c_host_alike(fmus, native_fmus, tmp_pat
     assert "STRING \U0001f600" in native  # four bytes of UTF-8 taken
     assert native.count("STRING theorem") == 2  # a NULL value and Latin-1 refused, nothing set
     assert native[native.index("STATUS set_string_back 0") + 1] == "STRING steady-state"  # the last one set
+    # pythonfmu hands a value reference above 2**31 - 1 on as negative: named as the host gave it
+    assert "LOG 3 logStatusError fmi2GetReal: value reference 2147483653 is not a variable of this FMU" in python
     assert "TIME 1.5" in native  # the restored time, after a state replaced by its deserialized copy
     assert statuses.count("2") == 3 * 4 + 3 + 3  # fmi2Discard: the statuses no FMU has
+    # a stop time that is not a number or before the start refused; steps ending after it refused
+    assert statuses[-6:] == ["0", "0", "3", "0", "3", "0"], native[-12:]  # time, status, 3 steps, free
+    assert "LOG 3 logStatusError fmi2SetupExperiment: ArgumentError: stop time 0.25 is before the start time 0.5" \
+        in native
+    assert ("LOG 3 logStatusError fmi2DoStep refused at t = 1.5 (h = 3): the step would end at t + h = 4.5, after "
+            "the stop time 3.5 (fmi2SetupExperiment; FMI 2.0, 2.1.6)") in native
 
 
 @pytest.mark.skipif(shutil.which("localedef") is None, reason="needs localedef (glibc) to make a German locale")

@@ -183,6 +183,7 @@ class _WeakCall:
 def _not_of_type(vr: int, e: _Element | None, fmi_type: str) -> str:
     """Why value reference ``vr`` (its element ``e``, or None) cannot be got or set as ``fmi_type``
     (the native runtime's words: check_vr in lpv_fmi2.c)."""
+    vr &= 0xFFFF_FFFF  # an fmi2ValueReference (unsigned int): pythonfmu hands a large one on as negative
     if e is None:
         return f"value reference {vr} is not a variable of this FMU"
     article = "an" if fmi_type == "Integer" else "a"
@@ -351,6 +352,7 @@ class LpvestSlave(Fmi2Slave):
         self._dirty = True
         self._time = 0.0
         self._start_time = 0.0
+        self._stop_time: float | None = None  # fmi2SetupExperiment's, when defined: no step ends after it
         # pythonfmu 0.7 passes queued messages to the host at the end of each FMI call, but not
         # at the end of fmi2Instantiate or fmi2Reset (the two calls that run this constructor);
         # its fmi2FreeInstance then flushes what is still queued through a logger it has already
@@ -656,7 +658,12 @@ class LpvestSlave(Fmi2Slave):
             t0 = float(start_time)
             if not math.isfinite(t0):
                 raise ArgumentError(f"start time {t0} is not finite")
-            self._start_time = t0
+            t1 = None if stop_time is None else float(stop_time)
+            if t1 is not None and math.isnan(t1):
+                raise ArgumentError("stop time nan is not a number")
+            if t1 is not None and t1 < t0:
+                raise ArgumentError(f"stop time {t1} is before the start time {t0}")
+            self._start_time, self._stop_time = t0, t1
             self._time = t0
             self._preview = None
             self._dirty = True
@@ -742,6 +749,10 @@ class LpvestSlave(Fmi2Slave):
         if abs(t - self._time) > min(_TIME_RTOL * max(abs(t), abs(self._time), h), 0.5 * unit):
             return (f"the communication point t = {_num(t)} is not the FMU's current time {_num(self._time)} "
                     "(a skipped or repeated point; restore a state with fmi2SetFMUstate to go back)")
+        if self._stop_time is not None and t + h - self._stop_time > min(
+                _TIME_RTOL * max(abs(t + h), abs(self._stop_time), h), 0.5 * unit):
+            return (f"the step would end at t + h = {_num(t + h)}, after the stop time {_num(self._stop_time)} "
+                    "(fmi2SetupExperiment; FMI 2.0, 2.1.6)")
         if self._sample_time is not None and self._samples_in(h) is None:
             ts = self._sample_length()
             if _TIME_RTOL * (h / ts) >= 0.5:  # whole_samples cannot tell m from m + 1 any more

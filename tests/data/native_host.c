@@ -9,7 +9,7 @@
  *
  * Script lines (ID: an instance number 0..7):
  *   instantiate ID NAME LOGGING     fmi2Instantiate (LOGGING 0 or 1)
- *   setup ID T0 | enter ID | exit ID | terminate ID | reset ID | free ID
+ *   setup ID T0 [STOP] | enter ID | exit ID | terminate ID | reset ID | free ID
  *   set_real ID VR VALUE            (VALUE as strtod reads it: 0.5, nan, inf)
  *   set_integer ID VR VALUE | set_boolean ID VR 0|1 | set_string ID VR TEXT
  *   get_real ID VR [VR ...]         prints: REAL v1 v2 ... (%.17g)
@@ -245,7 +245,9 @@ int main(int argc, char** argv) {
             fflush(stdout);
             continue;
         } else if (strcmp(cmd, "setup") == 0) {
-            st = F.setup(c[id], 0, 0.0, strtod(rest, NULL), 0, 0.0);
+            char *end, *after;
+            double t0 = strtod(rest, &end), stop = strtod(end, &after); /* a stop time when given */
+            st = F.setup(c[id], 0, 0.0, t0, after != end, stop);
         } else if (strcmp(cmd, "enter") == 0) {
             st = F.enter(c[id]);
         } else if (strcmp(cmd, "exit") == 0) {

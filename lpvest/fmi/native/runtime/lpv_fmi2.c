@@ -99,6 +99,10 @@ typedef struct {
     int entered; /* fmi2EnterInitializationMode was called (until a reset) */
     int n_nonfinite;
     double time, start_time;
+    int announced;    /* the version message was logged (once after fmi2Instantiate or fmi2Reset, as the
+                         Python slaves log what their constructor logged, at fmi2SetupExperiment) */
+    int stop_defined; /* fmi2SetupExperiment's stop time, when defined: no step ends after it */
+    double stop_time;
     char init_error[LPV_MSG + 32]; /* "initialization failed: " and a message */
 
     component comp;
@@ -388,6 +392,9 @@ static int set_fresh(instance* s) {
     s->dirty = 1;
     s->n_nonfinite = 0;
     s->time = s->start_time = 0.0;
+    s->stop_defined = 0;
+    s->stop_time = 0.0;
+    s->announced = 0;
     snprintf(s->init_error, sizeof s->init_error, "%s", NOT_INITIALIZED);
     comp_free(&s->comp);
     comp_free(&s->preview);
@@ -692,14 +699,27 @@ static int refused_out_of_state(instance* s, const char* fn, int entering) {
 FMI2_Export fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                            fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
     BEGIN(c);
-    (void)toleranceDefined, (void)tolerance, (void)stopTimeDefined, (void)stopTime;
-    logf_(s, fmi2OK, "lpvest %s (native runtime)", s->m->version);
+    (void)toleranceDefined, (void)tolerance;
+    if (!s->announced) logf_(s, fmi2OK, "lpvest %s (native runtime)", s->m->version);
+    s->announced = 1;
     if (refused_out_of_state(s, "fmi2SetupExperiment", 1)) END;
     if (!isfinite(startTime)) {
         char a[48];
         logf_(s, fmi2Error, "fmi2SetupExperiment: ArgumentError: start time %s is not finite", lpv_repr(a, startTime));
         END;
     }
+    if (stopTimeDefined && isnan(stopTime)) {
+        logf_(s, fmi2Error, "fmi2SetupExperiment: ArgumentError: stop time nan is not a number");
+        END;
+    }
+    if (stopTimeDefined && stopTime < startTime) {
+        char a[48], b[48];
+        logf_(s, fmi2Error, "fmi2SetupExperiment: ArgumentError: stop time %s is before the start time %s",
+              lpv_repr(a, stopTime), lpv_repr(b, startTime));
+        END;
+    }
+    s->stop_defined = stopTimeDefined != 0;
+    s->stop_time = stopTime;
     s->start_time = s->time = startTime;
     s->preview_valid = 0;
     comp_free(&s->preview);
@@ -1002,6 +1022,16 @@ static int step_problem(instance* s, double t, double h, lpv_msg* p) {
                  "restore a state with fmi2SetFMUstate to go back)",
                  lpv_num(a, t), lpv_num(b, s->time));
         return 1;
+    }
+    if (s->stop_defined) {
+        double end = t + h, big = fabs(end) > fabs(s->stop_time) ? fabs(end) : fabs(s->stop_time);
+        double slack = TIME_RTOL * (big > h ? big : h);
+        if (slack > 0.5 * unit) slack = 0.5 * unit;
+        if (end - s->stop_time > slack) {
+            lpv_msgf(p, "the step would end at t + h = %s, after the stop time %s (fmi2SetupExperiment; FMI 2.0, 2.1.6)",
+                     lpv_num(a, end), lpv_num(b, s->stop_time));
+            return 1;
+        }
     }
     if (s->m->sample_time >= 0 && samples_in(s, h) == 0) {
         double ts = s->reals[s->m->sample_time];
