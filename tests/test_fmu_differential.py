@@ -42,7 +42,9 @@ SLOTS = 3
 
 #: the calls: (name, arguments drawn independently of the FMU)
 CALLS = st.one_of(
-    st.tuples(st.just("setup"), st.sampled_from([0.0, 1.0, -2.0, math.nan])),
+    # a start time; a stop time or none (a step past it, NaN or before the start: refused)
+    st.tuples(st.just("setup"), st.sampled_from([0.0, 1.0, -2.0, math.nan]),
+              st.sampled_from([None, None, None, 3.0, 0.5, -3.0, math.inf, math.nan])),
     st.tuples(st.just("enter")),
     st.tuples(st.just("exit")),
     st.tuples(st.just("terminate")),
@@ -93,7 +95,8 @@ class _Run:
         f, d = call[0], self.d
         value: object = None
         if f == "setup":
-            status = d.raw("fmi2SetupExperiment", 0, 0.0, call[1], 0, 0.0)
+            stop = call[2] if len(call) > 2 else None
+            status = d.raw("fmi2SetupExperiment", 0, 0.0, call[1], int(stop is not None), stop or 0.0)
             if status == 0:
                 self.time = call[1]
         elif f == "enter":
