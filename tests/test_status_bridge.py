@@ -218,7 +218,8 @@ def test_fmu_states_are_serialized_into_the_buffer_the_host_gives_and_freed_to_n
     assert lib.fmi2SerializeFMUstate(c, state, buffer, 64) == 0
     assert inner.fake_serialize_size() == 8 and buffer.raw == b"STATE-01" + b"\0" * 56
     assert lib.fmi2SerializeFMUstate(c, state, buffer, 7) == 3
-    assert messages[-1] == (3, "fmi2SerializeFMUstate: the buffer holds 7 bytes, the state needs 8 "
+    # the bridge's own messages start with the model identifier (its file name), as the slaves' do
+    assert messages[-1] == (3, "[Bridge] fmi2SerializeFMUstate: the buffer holds 7 bytes, the state needs 8 "
                                "(fmi2SerializedFMUstateSize)")
     assert lib.fmi2GetFMUstate(c, ctypes.byref(state)) == 0  # an earlier state: freed, a new one made
     assert inner.fake_live_states() == 1

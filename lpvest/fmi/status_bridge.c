@@ -11,7 +11,9 @@
  * sees fmi2Error with a message naming the variable and can still free, reset
  * or restore the instance.
  *
- * Logging: the inner library only forwards messages when logging is on, so it
+ * Logging: this layer's own messages start with "[<model identifier>] " as the
+ * slaves' and the native FMUs' do (the identifier is this library's file name).
+ * The inner library only forwards messages when logging is on, so it
  * is always instantiated with logging on; this layer forwards every message of
  * status warning or worse to the host, and the others only when the host turned
  * logging on (for the categories it chose). Messages reach the host as a
@@ -207,9 +209,44 @@ typedef struct {
 
 static char* safe_format(const char* message);
 
+/* the model identifier: this library's file name without its folder and extension (set once, under
+   LOAD_LOCK, by fmi2Instantiate before its first message); "" where it cannot be found */
+static char model_identifier[128];
+
+static void find_model_identifier(void) {
+    if (model_identifier[0]) return;
+    char file[1024] = {0};
+#ifdef _WIN32
+    HMODULE self = NULL;
+    wchar_t path[1024];
+    if (!GetModuleHandleExW(GET_MODULE_HANDLE_EX_FLAG_FROM_ADDRESS | GET_MODULE_HANDLE_EX_FLAG_UNCHANGED_REFCOUNT,
+                            (LPCWSTR)(void*)&find_model_identifier, &self))
+        return;
+    DWORD n = GetModuleFileNameW(self, path, (DWORD)(sizeof path / sizeof path[0]));
+    if (n == 0 || n >= sizeof path / sizeof path[0]) return;
+    for (DWORD i = 0; i <= n && i < sizeof file - 1; i++) file[i] = path[i] < 128 ? (char)path[i] : '_';
+#else
+    Dl_info info;
+    if (!dladdr((void*)&find_model_identifier, &info) || !info.dli_fname) return;
+    snprintf(file, sizeof file, "%s", info.dli_fname);
+#endif
+    const char* base = file;
+    for (const char* q = file; *q; q++)
+        if (*q == '/' || *q == '\\') base = q + 1;
+    size_t len = strcspn(base, ".");
+    if (len >= sizeof model_identifier) len = sizeof model_identifier - 1;
+    memcpy(model_identifier, base, len);
+    model_identifier[len] = '\0';
+}
+
 static void report(fmi2CallbackLogger logger, fmi2ComponentEnvironment env, fmi2String name, fmi2Status status,
                    const char* text) {
     if (!logger) return;
+    char prefixed[1200];
+    if (model_identifier[0]) {
+        snprintf(prefixed, sizeof prefixed, "[%s] %s", model_identifier, text);
+        text = prefixed;
+    }
     char* fmt = safe_format(text);
     const char* category = status == fmi2Fatal   ? "logStatusFatal"
                            : status == fmi2Error   ? "logStatusError"
@@ -613,6 +650,9 @@ EXPORT const char* fmi2GetVersion(void) { return "2.0"; }
 EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                                      fmi2String fmuResourceLocation, const fmi2CallbackFunctions* functions,
                                      fmi2Boolean visible, fmi2Boolean loggingOn) {
+    LOAD_LOCK();
+    find_model_identifier();
+    LOAD_UNLOCK();
     char msg[1024], *folder = NULL;
     const char* why = !instanceName           ? "fmi2Instantiate: no instance name (NULL)"
                       : !is_utf8(instanceName) ? "fmi2Instantiate: the instance name is not UTF-8 text"
