@@ -87,6 +87,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* the checks and words both backends share (the native runtime's header) */
+#include "native/runtime/lpv_host_words.h"
+
 #ifdef _WIN32
 #include <windows.h>
 #define EXPORT __declspec(dllexport)
@@ -261,25 +264,6 @@ static char* copy_string(const char* text) {
     char* out = (char*)malloc(n);
     if (out) memcpy(out, text, n);
     return out;
-}
-
-/* 1 if text is well-formed UTF-8 (no overlong forms, no surrogates, at most U+10FFFF) */
-static int is_utf8(const char* text) {
-    const unsigned char* p = (const unsigned char*)text;
-    while (*p) {
-        unsigned c = *p++;
-        int more = c < 0x80 ? 0 : (c & 0xE0) == 0xC0 ? 1 : (c & 0xF0) == 0xE0 ? 2 : (c & 0xF8) == 0xF0 ? 3 : -1;
-        if (more < 0) return 0;
-        unsigned long cp = more == 0 ? c : more == 1 ? (c & 0x1F) : more == 2 ? (c & 0x0F) : (c & 0x07);
-        for (int i = 0; i < more; i++, p++) {
-            if ((*p & 0xC0) != 0x80) return 0;
-            cp = (cp << 6) | (*p & 0x3F);
-        }
-        if ((more == 1 && cp < 0x80) || (more == 2 && cp < 0x800) || (more == 3 && cp < 0x10000) || cp > 0x10FFFF ||
-            (cp >= 0xD800 && cp <= 0xDFFF))
-            return 0;
-    }
-    return 1;
 }
 
 #define LOAD_ALL(LOAD)                                                                                          \
@@ -627,7 +611,7 @@ static const char* refuse_instantiate(fmi2Type type, fmi2String guid, fmi2String
         snprintf(msg, cap, "fmi2Instantiate: GUID %.100s does not match this FMU's %.100s", guid, line);
         goto refused;
     }
-    if (!is_utf8(dir)) { /* pythonfmu would crash the host: it makes a Python string of it */
+    if (!lpv_is_utf8(dir)) { /* pythonfmu would crash the host: it makes a Python string of it */
         snprintf(msg, cap, "fmi2Instantiate: the path of the resources folder is not UTF-8 text, which pythonfmu "
                  "cannot load: extract the FMU into a folder whose path is");
         goto refused;
@@ -655,11 +639,11 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     LOAD_UNLOCK();
     char msg[1024], *folder = NULL;
     const char* why = !instanceName           ? "fmi2Instantiate: no instance name (NULL)"
-                      : !is_utf8(instanceName) ? "fmi2Instantiate: the instance name is not UTF-8 text"
+                      : !lpv_is_utf8(instanceName) ? "fmi2Instantiate: the instance name is not UTF-8 text"
                       : refuse_instantiate(fmuType, fmuGUID, fmuResourceLocation, &folder, msg, sizeof msg);
     if (why) {
         report(functions ? functions->logger : NULL, functions ? functions->componentEnvironment : NULL,
-               instanceName && is_utf8(instanceName) ? instanceName : "", fmi2Error, why);
+               instanceName && lpv_is_utf8(instanceName) ? instanceName : "", fmi2Error, why);
         return NULL;
     }
 #ifdef _WIN32
@@ -749,7 +733,7 @@ EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, si
         if (!known) { /* the native FMUs' words */
             char msg[300];
             snprintf(msg, sizeof msg, "fmi2SetDebugLogging: unknown log category %.200s",
-                     !name ? "(null)" : is_utf8(name) ? name : "(not UTF-8 text)");
+                     !name ? "(null)" : lpv_is_utf8(name) ? name : "(not UTF-8 text)");
             report(b->host.logger, b->host.componentEnvironment, b->name, fmi2Warning, msg);
             status = fmi2Warning;
             continue;
@@ -822,7 +806,7 @@ EXPORT fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[],
 static const char* refuse_strings(const fmi2ValueReference vr[], size_t nvr, const fmi2String value[], char* msg,
                                   size_t cap) {
     for (size_t i = 0; vr && value && i < nvr; i++) {
-        if (value[i] && is_utf8(value[i])) continue;
+        if (value[i] && lpv_is_utf8(value[i])) continue;
         snprintf(msg, cap, "value reference %u: the value is %s; no value set", vr[i],
                  value[i] ? "not UTF-8 text" : "NULL");
         return msg;
@@ -937,8 +921,7 @@ static fmi2Status not_available(fmi2Component c, const char* what) {
     Bridge* b = BRIDGE(c);
     if (!b) return fmi2Error;
     char msg[300];
-    snprintf(msg, sizeof msg, "%s: this status is not available (only fmi2GetRealStatus(fmi2LastSuccessfulTime) and "
-             "fmi2GetBooleanStatus(fmi2Terminated) are)", what);
+    snprintf(msg, sizeof msg, "%s: " LPV_STATUS_NOT_AVAILABLE, what);
     report(b->host.logger, b->host.componentEnvironment, b->name, fmi2Discard, msg);
     return fmi2Discard;
 }

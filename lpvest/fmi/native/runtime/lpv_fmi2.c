@@ -37,6 +37,7 @@
 
 #include "fmi2Functions.h"
 #include "lpv.h"
+#include "lpv_host_words.h"
 
 /* the relative tolerance of communication points (lpvest.fmi.slave._TIME_RTOL), at most h / 2 */
 #define TIME_RTOL 1e-9
@@ -327,27 +328,6 @@ static int comp_commit(const instance* s, component* c, const double* in, double
 
 /* ----------------------------------------------------------- instance */
 
-/* 1 if text is well-formed UTF-8 (no overlong forms, no surrogates, at most U+10FFFF): FMI 2.0's
-   strings; the Python FMUs cannot take others (lpvest/fmi/status_bridge.c), and refuse them in the
-   same words */
-static int is_utf8(const char* text) {
-    const unsigned char* p = (const unsigned char*)text;
-    while (*p) {
-        unsigned c = *p++;
-        int more = c < 0x80 ? 0 : (c & 0xE0) == 0xC0 ? 1 : (c & 0xF0) == 0xE0 ? 2 : (c & 0xF8) == 0xF0 ? 3 : -1;
-        if (more < 0) return 0;
-        unsigned long cp = more == 0 ? c : more == 1 ? (c & 0x1F) : more == 2 ? (c & 0x0F) : (c & 0x07);
-        for (int i = 0; i < more; i++, p++) {
-            if ((*p & 0xC0) != 0x80) return 0;
-            cp = (cp << 6) | (*p & 0x3F);
-        }
-        if ((more == 1 && cp < 0x80) || (more == 2 && cp < 0x800) || (more == 3 && cp < 0x10000) || cp > 0x10FFFF ||
-            (cp >= 0xD800 && cp <= 0xDFFF))
-            return 0;
-    }
-    return 1;
-}
-
 static char* dup_string(const char* text) {
     if (!text) text = "";
     size_t n = strlen(text) + 1;
@@ -594,8 +574,8 @@ FMI2_Export fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuT
     const lpv_model* m = &lpv_model_data;
     fmi2CallbackLogger logger = functions ? functions->logger : NULL;
     void* env = functions ? functions->componentEnvironment : NULL;
-    const char* name = instanceName && is_utf8(instanceName) ? instanceName : "";
-    if (!instanceName || !is_utf8(instanceName)) { /* FMI 2.0: a name, in UTF-8 */
+    const char* name = instanceName && lpv_is_utf8(instanceName) ? instanceName : "";
+    if (!instanceName || !lpv_is_utf8(instanceName)) { /* FMI 2.0: a name, in UTF-8 */
         if (logger)
             logger(env, name, fmi2Error, "logStatusError", "[%s] fmi2Instantiate: %s", m->identifier,
                    instanceName ? "the instance name is not UTF-8 text" : "no instance name (NULL)");
@@ -667,7 +647,7 @@ FMI2_Export fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingO
             const char* name = categories ? categories[i] : NULL;
             if (!found)
                 logf_(s, fmi2Warning, "fmi2SetDebugLogging: unknown log category %.200s",
-                      !name ? "(null)" : is_utf8(name) ? name : "(not UTF-8 text)");
+                      !name ? "(null)" : lpv_is_utf8(name) ? name : "(not UTF-8 text)");
         }
     }
     END;
@@ -944,7 +924,7 @@ FMI2_Export fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference v
     BEGIN(c);
     REFUSE_NULL_ARRAYS("fmi2SetString");
     for (size_t i = 0; i < nvr; i++) { /* all or nothing, as the Python FMUs (status_bridge.c) */
-        if (value[i] && is_utf8(value[i])) continue;
+        if (value[i] && lpv_is_utf8(value[i])) continue;
         logf_(s, fmi2Error, "fmi2SetString: value reference %u: the value is %s; no value set", vr[i],
               value[i] ? "not UTF-8 text" : "NULL");
         END;
@@ -1165,12 +1145,16 @@ FMI2_Export fmi2Status fmi2CancelStep(fmi2Component c) {
     END;
 }
 
+/* a status this FMU does not have: fmi2Discard (FMI 2.0, 4.2.3) */
+static fmi2Status not_available(instance* s, const char* what) {
+    logf_(s, fmi2Discard, "%s: " LPV_STATUS_NOT_AVAILABLE, what);
+    return fmi2Discard;
+}
+
 FMI2_Export fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind k, fmi2Status* value) {
     BEGIN(c);
     (void)k, (void)value;
-    logf_(s, fmi2Discard, "fmi2GetStatus: this status is not available (only fmi2GetRealStatus(fmi2LastSuccessfulTime) and "
-                          "fmi2GetBooleanStatus(fmi2Terminated) are)"); /* FMI 2.0, 4.2.3 */
-    return fmi2Discard;
+    return not_available(s, "fmi2GetStatus");
 }
 
 FMI2_Export fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real* value) {
@@ -1180,9 +1164,7 @@ FMI2_Export fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k
         END;
     }
     if (k != fmi2LastSuccessfulTime) {
-        logf_(s, fmi2Discard, "fmi2GetRealStatus: this status is not available (only fmi2GetRealStatus(fmi2LastSuccessfulTime) and "
-                          "fmi2GetBooleanStatus(fmi2Terminated) are)");
-        return fmi2Discard;
+        return not_available(s, "fmi2GetRealStatus");
     }
     *value = s->time;
     END;
@@ -1191,9 +1173,7 @@ FMI2_Export fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k
 FMI2_Export fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind k, fmi2Integer* value) {
     BEGIN(c);
     (void)k, (void)value;
-    logf_(s, fmi2Discard, "fmi2GetIntegerStatus: this status is not available (only fmi2GetRealStatus(fmi2LastSuccessfulTime) and "
-                          "fmi2GetBooleanStatus(fmi2Terminated) are)"); /* FMI 2.0, 4.2.3 */
-    return fmi2Discard;
+    return not_available(s, "fmi2GetIntegerStatus");
 }
 
 FMI2_Export fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind k, fmi2Boolean* value) {
@@ -1203,9 +1183,7 @@ FMI2_Export fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKin
         END;
     }
     if (k != fmi2Terminated) {
-        logf_(s, fmi2Discard, "fmi2GetBooleanStatus: this status is not available (only fmi2GetRealStatus(fmi2LastSuccessfulTime) and "
-                          "fmi2GetBooleanStatus(fmi2Terminated) are)");
-        return fmi2Discard;
+        return not_available(s, "fmi2GetBooleanStatus");
     }
     *value = fmi2False;
     END;
@@ -1214,9 +1192,7 @@ FMI2_Export fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKin
 FMI2_Export fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind k, fmi2String* value) {
     BEGIN(c);
     (void)k, (void)value;
-    logf_(s, fmi2Discard, "fmi2GetStringStatus: this status is not available (only fmi2GetRealStatus(fmi2LastSuccessfulTime) and "
-                          "fmi2GetBooleanStatus(fmi2Terminated) are)"); /* FMI 2.0, 4.2.3 */
-    return fmi2Discard;
+    return not_available(s, "fmi2GetStringStatus");
 }
 
 FMI2_Export fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,

@@ -1,0 +1,36 @@
+/*
+ * What both FMI backends check of a host's arguments, and say, the same way: the
+ * native runtime (lpv_fmi2.c) and the status bridge of the Python FMUs
+ * (lpvest/fmi/status_bridge.c, which includes this file by its relative path).
+ * Self-contained: the C library's headers only.
+ */
+#ifndef LPV_HOST_WORDS_H
+#define LPV_HOST_WORDS_H
+
+/* why a status query is fmi2Discard (FMI 2.0, 4.2.3), after "<function>: " */
+#define LPV_STATUS_NOT_AVAILABLE                                                                   \
+    "this status is not available (only fmi2GetRealStatus(fmi2LastSuccessfulTime) and "          \
+    "fmi2GetBooleanStatus(fmi2Terminated) are)"
+
+/* 1 if text is well-formed UTF-8 (no overlong forms, no surrogates, at most U+10FFFF): FMI 2.0's
+   strings. pythonfmu crashes the host or fails with fmi2Fatal on others, so both backends refuse
+   them, in the same words. */
+static int lpv_is_utf8(const char* text) {
+    const unsigned char* p = (const unsigned char*)text;
+    while (*p) {
+        unsigned c = *p++;
+        int more = c < 0x80 ? 0 : (c & 0xE0) == 0xC0 ? 1 : (c & 0xF0) == 0xE0 ? 2 : (c & 0xF8) == 0xF0 ? 3 : -1;
+        if (more < 0) return 0;
+        unsigned long cp = more == 0 ? c : more == 1 ? (c & 0x1F) : more == 2 ? (c & 0x0F) : (c & 0x07);
+        for (int i = 0; i < more; i++, p++) {
+            if ((*p & 0xC0) != 0x80) return 0;
+            cp = (cp << 6) | (*p & 0x3F);
+        }
+        if ((more == 1 && cp < 0x80) || (more == 2 && cp < 0x800) || (more == 3 && cp < 0x10000) || cp > 0x10FFFF ||
+            (cp >= 0xD800 && cp <= 0xDFFF))
+            return 0;
+    }
+    return 1;
+}
+
+#endif
