@@ -312,7 +312,7 @@ def test_the_win64_binary_answers_random_call_sequences_as_the_linux64_binary(na
 #: parameter ``start``, value reference 1).
 CARELESS_HOST = [
     "instantiate 0 \\null 1", "instantiate 0 R\\xe9gulateur 1", "instantiate 0 \\xed\\xa0\\x80 1",
-    "instantiate 0 R\\xc3\\xa9gulateur 1",
+    "instantiate 0 \\x00 1", "instantiate 0 \\x20\\x09\\x0d 1", "instantiate 0 R\\xc3\\xa9gulateur 1",
     "debug 0 1 2 logAll nonsense", "debug 0 1 1 \\xff", "debug 0 1 2", "debug 0 1 1 logStatusError", "debug 0 1 0",
     "set_string 0 1 \\null", "get_string 0 1", "set_string 0 1 caf\\xe9", "get_string 0 1",
     "set_string 0 1 \\xf0\\x9f\\x98\\x80", "get_string 0 1", "set_string 0 1 steady-state",
@@ -365,10 +365,13 @@ def test_both_backends_answer_a_careless_c_host_alike(fmus, native_fmus, tmp_pat
     python, native = _both_backends(fmus, native_fmus, "CoxTothTruncationTruncatedKalman", CARELESS_HOST, tmp_path)
     assert python == native, "\n".join(f"{a!r} | {b!r}" for a, b in zip(python, native, strict=False) if a != b)
     statuses = [line.split()[2] for line in native if line.startswith("STATUS")]
-    assert statuses[:4] == ["null", "null", "null", "0"]  # NULL, Latin-1, a surrogate refused; UTF-8 made
+    # NULL, Latin-1, a surrogate, an empty name and one of white space refused; UTF-8 made
+    assert statuses[:6] == ["null"] * 5 + ["0"]
     log = "LOG 3 logStatusError [CoxTothTruncationTruncatedKalman] "  # the bridge's messages too
     assert log + "fmi2Instantiate: no instance name (NULL)" in native
     assert native.count(log + "fmi2Instantiate: the instance name is not UTF-8 text") == 2
+    assert native.count(log + "fmi2Instantiate: the instance name is empty or white space only (FMI 2.0, 2.1.5: "
+                        "a non-empty name)") == 2
     assert ("LOG 1 logStatusWarning [CoxTothTruncationTruncatedKalman] fmi2SetDebugLogging: unknown log category "
             "(not UTF-8 text)") in native
     assert "STRING \U0001f600" in native  # four bytes of UTF-8 taken

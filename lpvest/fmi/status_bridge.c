@@ -640,6 +640,7 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     char msg[1024], *folder = NULL;
     const char* why = !instanceName           ? "fmi2Instantiate: no instance name (NULL)"
                       : !lpv_is_utf8(instanceName) ? "fmi2Instantiate: the instance name is not UTF-8 text"
+                      : !lpv_has_text(instanceName) ? "fmi2Instantiate: " LPV_BLANK_NAME
                       : refuse_instantiate(fmuType, fmuGUID, fmuResourceLocation, &folder, msg, sizeof msg);
     if (why) {
         report(functions ? functions->logger : NULL, functions ? functions->componentEnvironment : NULL,

@@ -575,10 +575,12 @@ FMI2_Export fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuT
     fmi2CallbackLogger logger = functions ? functions->logger : NULL;
     void* env = functions ? functions->componentEnvironment : NULL;
     const char* name = instanceName && lpv_is_utf8(instanceName) ? instanceName : "";
-    if (!instanceName || !lpv_is_utf8(instanceName)) { /* FMI 2.0: a name, in UTF-8 */
+    if (!instanceName || !lpv_is_utf8(instanceName) || !lpv_has_text(instanceName)) { /* FMI 2.0: a name, in UTF-8 */
         if (logger)
             logger(env, name, fmi2Error, "logStatusError", "[%s] fmi2Instantiate: %s", m->identifier,
-                   instanceName ? "the instance name is not UTF-8 text" : "no instance name (NULL)");
+                   !instanceName                ? "no instance name (NULL)"
+                   : !lpv_is_utf8(instanceName) ? "the instance name is not UTF-8 text"
+                                                : LPV_BLANK_NAME);
         return NULL;
     }
     if (fmuType != fmi2CoSimulation) {

@@ -7,6 +7,8 @@
 #ifndef LPV_HOST_WORDS_H
 #define LPV_HOST_WORDS_H
 
+#include <string.h>
+
 /* why a status query is fmi2Discard (FMI 2.0, 4.2.3), after "<function>: " */
 #define LPV_STATUS_NOT_AVAILABLE                                                                   \
     "this status is not available (only fmi2GetRealStatus(fmi2LastSuccessfulTime) and "          \
@@ -32,5 +34,16 @@ static int lpv_is_utf8(const char* text) {
     }
     return 1;
 }
+
+/* 1 if text has a character that is not white space: FMI 2.0 (2.1.5) asks for an instance name
+   with at least one (the C locale's white space, whatever the host's locale) */
+static int lpv_has_text(const char* text) {
+    for (; *text; text++)
+        if (!strchr(" \t\n\v\f\r", *text)) return 1;
+    return 0;
+}
+
+/* why an instance name is refused, after "fmi2Instantiate: " */
+#define LPV_BLANK_NAME "the instance name is empty or white space only (FMI 2.0, 2.1.5: a non-empty name)"
 
 #endif
