@@ -57,6 +57,9 @@ CALLS = st.one_of(
               st.lists(st.tuples(st.integers(0, 10**6), st.integers(0, 10**6)), min_size=2, max_size=4)),
     st.tuples(st.just("get_many"), st.sampled_from(["Real", "Integer", "Boolean", "String"]),
               st.lists(st.integers(0, 10**6), min_size=2, max_size=4)),
+    # a call of no elements (nvr = 0): changes nothing (FMI 2.0, 2.1.7)
+    st.tuples(st.just("set_many"), st.sampled_from(["Real", "Integer", "Boolean", "String"]), st.just([])),
+    st.tuples(st.just("get_many"), st.sampled_from(["Real", "Integer", "Boolean", "String"]), st.just([])),
     st.tuples(st.just("outputs")),
     # a step from the time the FMU is at (offset 0) or not, of whole samples or not
     st.tuples(st.just("step"), st.sampled_from([0.0, 0.0, 0.0, 0.0, 1.0, -1.0, 0.5]),
@@ -201,6 +204,30 @@ def _not_finite_with_ok(answer: tuple) -> bool:
     status, value, _ = answer
     return status == 0 and isinstance(value, list) and any(
         isinstance(x, float) and not np.isfinite(x) for x in value)
+
+
+@pytest.mark.parametrize("name", ROLES)
+def test_a_call_of_no_elements_changes_nothing_on_either_backend(fmus, native_fmus, name):
+    """fmi2Set* of no elements (nvr = 0) sets nothing (FMI 2.0, 2.1.7): the outputs held
+    after a step stay what they were. The Python FMU's fast path for inputs took an empty
+    call for "every input set" and computed the next sample's feedthrough outputs, with
+    fmi2OK."""
+    for path in (fmus[name], native_fmus[name]):
+        run = _Run(path)
+        try:
+            inputs = [v.valueReference for v in run.variables if v.causality == "input" and v.type == "Real"]
+            for call in (("setup", 0.0), ("enter",), ("exit",), ("step", 0.0, 1.0)):
+                assert run.call(call)[0] == 0, (name, call)
+            if inputs:  # inputs of the next sample, then a step to it: outputs held from then on
+                assert run.d.status(run.d.fmu.setReal, inputs, [0.5] * len(inputs)) == 0
+                assert run.call(("step", 0.0, 1.0))[0] == 0
+            before = run.call(("outputs",))
+            for kind in ("Real", "Integer", "Boolean", "String"):
+                assert run.call(("set_many", kind, []))[::2] == (0, []), (name, kind)
+                assert run.call(("get_many", kind, [])) == (0, [], []), (name, kind)
+            assert run.call(("outputs",)) == before, name
+        finally:
+            run.free()
 
 
 @pytest.mark.parametrize("name", ROLES)

@@ -938,9 +938,10 @@ class LpvestSlave(Fmi2Slave):
 
     def set_real(self, vrs: list[int], values: list[float]) -> None:
         try:
-            # fast path (what a master does every step): inputs only, each finite and in its range
+            # fast path (what a master does every step): inputs only, each finite and in its range;
+            # a call of no elements sets nothing (FMI 2.0, 2.1.7), so the held outputs stay
             targets = self._input_targets
-            if self._initialized and not self._terminated and not self._invalid:
+            if vrs and self._initialized and not self._terminated and not self._invalid:
                 found = [targets.get(vr) for vr in vrs]
                 if all(t is not None and math.isfinite(v) and t[2] <= v <= t[3]
                        for t, v in zip(found, values, strict=True)):
