@@ -166,7 +166,7 @@ def test_after_fmi2fatal_no_call_reaches_the_inner_library_and_free_is_safe(brid
 
 @pytest.mark.parametrize(("kind", "damage", "says"), [
     (0, None, "this FMU supports co-simulation only"),  # fmi2ModelExchange
-    (1, "null", "no resource location (NULL)"),
+    (1, "null", "no resource location (NULL; FMI 2.0, 2.1.5"),
     (1, "http", "is not a file URI"),
     (1, "slavemodule.txt", "slavemodule.txt: is the FMU extracted whole?"),
     (1, "entry.py", "entry.py: is the FMU extracted whole?"),
@@ -233,6 +233,28 @@ def test_fmu_states_are_serialized_into_the_buffer_the_host_gives_and_freed_to_n
                  lambda: lib.fmi2DeSerializeFMUstate(c, None, 8, ctypes.byref(state))):
         n = len(messages)
         assert call() == 3 and len(messages) == n + 1 and "a NULL argument" in messages[-1][1]
+    lib.fmi2FreeInstance(c)
+
+
+def test_bytes_that_do_not_begin_as_an_lpvest_state_are_refused_when_deserialized(bridge):
+    """The native FMUs refuse bytes without their state's header at fmi2DeSerializeFMUstate;
+    the bridge refuses bytes that do not begin as every state encode_state writes does, in
+    the same words, and hands on those that do (the rest is checked at fmi2SetFMUstate)."""
+    from lpvest.fmi._state import encode_state
+
+    prefix = re.search(r'#define STATE_PREFIX "((?:[^"\\]|\\.)*)"', SOURCE.read_text())[1]
+    prefix = prefix.encode().decode("unicode_escape").encode()
+    assert encode_state({}).startswith(prefix) and encode_state({"x": [1.0]}).startswith(prefix)
+    lib, inner, messages, instantiate, _ = bridge
+    c = instantiate(logging_on=False)
+    state = ctypes.c_void_p()
+    for bad in (b"", b"abc", b"LPVSTAT2", prefix[:-1]):
+        assert lib.fmi2DeSerializeFMUstate(c, bad, len(bad), ctypes.byref(state)) == 3, bad
+        assert messages[-1] == (3, "[Bridge] fmi2DeSerializeFMUstate: ArgumentError: not a serialized lpvest FMU "
+                                   "state"), bad
+    good = encode_state({})
+    assert lib.fmi2DeSerializeFMUstate(c, good, len(good), ctypes.byref(state)) == 0 and state.value
+    assert lib.fmi2FreeFMUstate(c, ctypes.byref(state)) == 0
     lib.fmi2FreeInstance(c)
 
 

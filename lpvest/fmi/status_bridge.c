@@ -482,7 +482,11 @@ static fmi2Status refuse_argument(Bridge* b, const char* what, const char* why) 
 
 /* the words for a NULL argument of an FMU-state call, and (the native FMUs' words) of a getter
  * or setter given nvr > 0 */
-#define NULL_ARGUMENT "a NULL argument (a state, pointer or buffer)"
+#define NULL_ARGUMENT LPV_NULL_ARGUMENT
+/* how every state lpvest/fmi/_state.py's encode_state writes begins (json.dumps of a dict whose
+   first key is its format): other bytes are refused when deserialized, as the native FMUs refuse
+   bytes without their header (tests/test_status_bridge.py checks this against encode_state) */
+#define STATE_PREFIX "{\"format\": \"lpvest-fmu-state-2\""
 #define NULL_ARRAY "a null array"
 
 #define BRIDGE(c) ((Bridge*)(c))
@@ -586,7 +590,7 @@ static const char* refuse_instantiate(fmi2Type type, fmi2String guid, fmi2String
                                       size_t cap) {
     *folder = NULL;
     if (type != fmi2CoSimulation) return "fmi2Instantiate: this FMU supports co-simulation only";
-    if (!location) return "fmi2Instantiate: no resource location (NULL): the FMU's resources folder is needed";
+    if (!location) return "fmi2Instantiate: " LPV_NO_RESOURCES;
     char* dir = resource_folder(location);
     if (!dir) {
         snprintf(msg, cap, "fmi2Instantiate: resource location %.300s is not a file URI (file:///path)", location);
@@ -864,8 +868,7 @@ EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi
     if (s > fmi2Warning) return s;
     if (size < n) {
         char why[160];
-        snprintf(why, sizeof why, "the buffer holds %llu bytes, the state needs %llu (fmi2SerializedFMUstateSize)",
-                 (unsigned long long)size, (unsigned long long)n);
+        snprintf(why, sizeof why, LPV_BUFFER_TOO_SMALL, (unsigned long long)size, (unsigned long long)n);
         return refuse_argument(b, "fmi2SerializeFMUstate", why);
     }
     s = combine(b, inner.SerializeFMUstate(b->inner, state, bytes, n));
@@ -874,8 +877,9 @@ EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi
 }
 EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size,
                                           fmi2FMUstate* state) {
-    CHECKED(c, "fmi2DeSerializeFMUstate", bytes && state, NULL_ARGUMENT,
-            inner.DeSerializeFMUstate(b_->inner, bytes, size, state));
+    const size_t n = sizeof STATE_PREFIX - 1;
+    CHECKED(c, "fmi2DeSerializeFMUstate", bytes && state && size >= n && memcmp(bytes, STATE_PREFIX, n) == 0,
+            bytes && state ? LPV_NOT_A_STATE : NULL_ARGUMENT, inner.DeSerializeFMUstate(b_->inner, bytes, size, state));
 }
 
 static fmi2Status unsupported(fmi2Component c, const char* what) {

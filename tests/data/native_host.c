@@ -28,8 +28,18 @@
  *                                   and WHICH 0..3; KIND real_null|boolean_null: a NULL value pointer
  *   debug ID ON N [CATEGORY ...]    fmi2SetDebugLogging(ON, N, the categories); none given: a NULL array
  *   locale NAME                     setlocale(LC_ALL, NAME): numbers are read and printed in it from now on
- * In NAME (instantiate), TEXT (set_string) and CATEGORY, \xHH is the byte HH and \null alone a
- * NULL pointer: what a careless host may pass.
+ *   state_null ID WHICH SLOT        an FMU-state call with one NULL argument, WHICH: get (the state
+ *                                   pointer), set (the state), size_state/size_out (the state, the size
+ *                                   pointer), serialize_state/serialize_buffer, deserialize_bytes/
+ *                                   deserialize_out (the bytes, the state pointer); SLOT's state otherwise
+ *   serialize_short ID SLOT LESS    fmi2SerializeFMUstate of SLOT's state into a buffer LESS bytes smaller
+ *                                   than fmi2SerializedFMUstateSize says
+ *   deserialize_text ID SLOT TEXT   fmi2DeSerializeFMUstate of TEXT's bytes into SLOT (its state freed
+ *                                   when it worked)
+ * instantiate ID NAME LOGGING [RESOURCES] passes RESOURCES as fmuResourceLocation instead of the
+ * one given on the command line.
+ * In NAME and RESOURCES (instantiate), TEXT (set_string, deserialize_text) and CATEGORY, \xHH is
+ * the byte HH and \null alone a NULL pointer: what a careless host may pass.
  * Each call prints "STATUS <command> <status>". The logger prints
  * "LOG <status> <category> <message>".
  */
@@ -229,10 +239,10 @@ int main(int argc, char** argv) {
         rest += m;
         int st = 0;
         if (strcmp(cmd, "instantiate") == 0) {
-            char name[256];
+            char name[256], resources[1024];
             int logging = 0;
-            sscanf(rest, "%255s %d", name, &logging);
-            c[id] = F.instantiate(decode(name), 1, argv[2], argv[3], &cb, 0, logging);
+            int got = sscanf(rest, "%255s %d %1023s", name, &logging, resources);
+            c[id] = F.instantiate(decode(name), 1, argv[2], got == 3 ? decode(resources) : argv[3], &cb, 0, logging);
             printf("STATUS instantiate %s\n", c[id] ? "0" : "null");
             fflush(stdout);
             continue;
@@ -346,6 +356,51 @@ int main(int argc, char** argv) {
             double t = 0.0;
             st = F.get_real_status(c[id], 2, &t);
             printf("TIME %.17g\n", t);
+        } else if (strcmp(cmd, "state_null") == 0) {
+            char which[32] = {0};
+            int slot = 0;
+            sscanf(rest, "%31s %d", which, &slot);
+            fmi2FMUstate state = slot >= 0 && slot < N_SLOTS ? states[id][slot] : NULL, made = NULL;
+            size_t size = 0;
+            char bytes[16] = "LPVSTAT2";
+            if (strcmp(which, "get") == 0) st = F.get_state(c[id], NULL);
+            else if (strcmp(which, "set") == 0) st = F.set_state(c[id], NULL);
+            else if (strcmp(which, "size_state") == 0) st = F.state_size(c[id], NULL, &size);
+            else if (strcmp(which, "size_out") == 0) st = F.state_size(c[id], state, NULL);
+            else if (strcmp(which, "serialize_state") == 0) st = F.serialize(c[id], NULL, bytes, sizeof bytes);
+            else if (strcmp(which, "serialize_buffer") == 0) st = F.serialize(c[id], state, NULL, 1u << 20);
+            else if (strcmp(which, "deserialize_bytes") == 0) st = F.deserialize(c[id], NULL, 8, &made);
+            else if (strcmp(which, "deserialize_out") == 0) st = F.deserialize(c[id], bytes, 8, NULL);
+            else {
+                printf("BADLINE %s", line);
+                fflush(stdout);
+                continue;
+            }
+            if (made) F.free_state(c[id], &made);
+        } else if (strcmp(cmd, "serialize_short") == 0) {
+            int slot = 0;
+            unsigned long less = 0;
+            sscanf(rest, "%d %lu", &slot, &less);
+            size_t size = 0;
+            st = F.state_size(c[id], slot >= 0 && slot < N_SLOTS ? states[id][slot] : NULL, &size);
+            char* bytes = (char*)malloc(size + 1);
+            if (!st) st = F.serialize(c[id], states[id][slot], bytes, size > less ? size - less : 0);
+            free(bytes);
+        } else if (strcmp(cmd, "deserialize_text") == 0) {
+            int slot = 0, used = 0;
+            sscanf(rest, "%d %n", &slot, &used);
+            char* text = rest + used;
+            text[strcspn(text, "\r\n")] = '\0';
+            size_t n = strlen(text); /* the bytes before decoding shortens them; \x00 ends them */
+            const char* bytes = decode(text);
+            fmi2FMUstate made = NULL;
+            st = F.deserialize(c[id], bytes, bytes ? strlen(bytes) : n, &made);
+            if (!st && slot >= 0 && slot < N_SLOTS) {
+                if (states[id][slot]) F.free_state(c[id], &states[id][slot]);
+                states[id][slot] = made;
+            } else if (made) {
+                F.free_state(c[id], &made);
+            }
         } else if (strcmp(cmd, "get_state") == 0 || strcmp(cmd, "set_state") == 0 || strcmp(cmd, "free_state") == 0 ||
                    strcmp(cmd, "serialize") == 0 || strcmp(cmd, "replace") == 0) {
             int slot = atoi(rest);

@@ -570,7 +570,7 @@ FMI2_Export const char* fmi2GetVersion(void) { return fmi2Version; }
 FMI2_Export fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                                           fmi2String fmuResourceLocation, const fmi2CallbackFunctions* functions,
                                           fmi2Boolean visible, fmi2Boolean loggingOn) {
-    (void)fmuResourceLocation, (void)visible;
+    (void)visible;
     const lpv_model* m = &lpv_model_data;
     fmi2CallbackLogger logger = functions ? functions->logger : NULL;
     void* env = functions ? functions->componentEnvironment : NULL;
@@ -586,6 +586,10 @@ FMI2_Export fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuT
     if (fmuType != fmi2CoSimulation) {
         if (logger) logger(env, name, fmi2Error, "logStatusError", "[%s] fmi2Instantiate: this FMU supports co-simulation only",
                            m->identifier);
+        return NULL;
+    }
+    if (!fmuResourceLocation) { /* not read here, but refused as the Python FMUs refuse it */
+        if (logger) logger(env, name, fmi2Error, "logStatusError", "[%s] fmi2Instantiate: " LPV_NO_RESOURCES, m->identifier);
         return NULL;
     }
     if (fmuGUID && strcmp(fmuGUID, m->guid) != 0) {
@@ -1522,7 +1526,7 @@ done:
 FMI2_Export fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state) {
     BEGIN(c);
     if (!state) {
-        logf_(s, fmi2Error, "fmi2GetFMUstate: a null pointer for the state");
+        logf_(s, fmi2Error, "fmi2GetFMUstate: " LPV_NULL_ARGUMENT);
         END;
     }
     writer w = {NULL, 0, 0, 0};
@@ -1544,7 +1548,7 @@ FMI2_Export fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) {
     BEGIN(c);
     const state_blob* blob = (const state_blob*)state;
     lpv_msg err;
-    if (!blob || !blob->bytes) lpv_msgf(&err, "ArgumentError: no state given");
+    if (!blob || !blob->bytes) lpv_msgf(&err, LPV_NULL_ARGUMENT);
     if (!blob || !blob->bytes || restore(s, blob->bytes, blob->size, &err)) logf_(s, fmi2Error, "fmi2SetFMUstate: %s", err.text);
     END;
 }
@@ -1564,7 +1568,7 @@ FMI2_Export fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate 
     BEGIN(c);
     const state_blob* blob = (const state_blob*)state;
     if (!blob || !size) {
-        logf_(s, fmi2Error, "fmi2SerializedFMUstateSize: no state given");
+        logf_(s, fmi2Error, "fmi2SerializedFMUstateSize: " LPV_NULL_ARGUMENT);
         END;
     }
     *size = blob->size;
@@ -1575,8 +1579,13 @@ FMI2_Export fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state
                                              size_t size) {
     BEGIN(c);
     const state_blob* blob = (const state_blob*)state;
-    if (!blob || !serializedState || size < blob->size) {
-        logf_(s, fmi2Error, "fmi2SerializeFMUstate: %s", !blob ? "no state given" : "the buffer is too small");
+    if (!blob || !serializedState) {
+        logf_(s, fmi2Error, "fmi2SerializeFMUstate: " LPV_NULL_ARGUMENT);
+        END;
+    }
+    if (size < blob->size) {
+        logf_(s, fmi2Error, "fmi2SerializeFMUstate: " LPV_BUFFER_TOO_SMALL, (unsigned long long)size,
+              (unsigned long long)blob->size);
         END;
     }
     memcpy(serializedState, blob->bytes, blob->size);
@@ -1587,12 +1596,12 @@ FMI2_Export fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte s
                                                fmi2FMUstate* state) {
     BEGIN(c);
     if (!serializedState || !state) {
-        logf_(s, fmi2Error, "fmi2DeSerializeFMUstate: a null pointer");
+        logf_(s, fmi2Error, "fmi2DeSerializeFMUstate: " LPV_NULL_ARGUMENT);
         END;
     }
     /* checked when set (fmi2SetFMUstate); here: the header */
     if (size < sizeof STATE_MAGIC || memcmp(serializedState, STATE_MAGIC, sizeof STATE_MAGIC) != 0) {
-        logf_(s, fmi2Error, "fmi2DeSerializeFMUstate: ArgumentError: not a serialized lpvest FMU state");
+        logf_(s, fmi2Error, "fmi2DeSerializeFMUstate: " LPV_NOT_A_STATE);
         END;
     }
     state_blob* blob = (state_blob*)calloc(1, sizeof(state_blob));

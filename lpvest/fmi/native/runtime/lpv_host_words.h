@@ -43,6 +43,21 @@ static int lpv_has_text(const char* text) {
     return 0;
 }
 
+/* a NULL argument of an FMU-state call (fmi2GetFMUstate ... fmi2DeSerializeFMUstate), after
+   "<function>: " */
+#define LPV_NULL_ARGUMENT "a NULL argument (a state, pointer or buffer)"
+
+/* fmi2SerializeFMUstate's buffer smaller than the state: printf's format of the buffer's size and
+   the state's, both unsigned long long */
+#define LPV_BUFFER_TOO_SMALL "the buffer holds %llu bytes, the state needs %llu (fmi2SerializedFMUstateSize)"
+
+/* fmi2DeSerializeFMUstate of bytes that do not start as a state of this backend does, after
+   "fmi2DeSerializeFMUstate: " (what fmi2SetFMUstate checks of the rest, it says then) */
+#define LPV_NOT_A_STATE "ArgumentError: not a serialized lpvest FMU state"
+
+/* fmi2Instantiate with no resource location, after "fmi2Instantiate: " */
+#define LPV_NO_RESOURCES "no resource location (NULL; FMI 2.0, 2.1.5: the URI of the FMU's resources folder)"
+
 /* why an instance name is refused, after "fmi2Instantiate: " */
 #define LPV_BLANK_NAME "the instance name is empty or white space only (FMI 2.0, 2.1.5: a non-empty name)"
 
