@@ -349,3 +349,36 @@ def test_each_task_is_submitted_and_run_by_the_task_function_on_the_shared_data(
     assert client.mapped == [Task(0, {"a": 0}), Task(1, {"a": 1})]
     out = engine_module._run(Task(4, {"a": 4}), lambda shared, task: TaskResult({"v": shared * task.index}), 2.5)
     assert out.index == 4 and out.ok and out.result == TaskResult({"v": 10.0})
+
+
+def test_one_blas_thread_limits_numpys_and_scipys_blas_in_this_process():
+    """A task run in this process must compute as on a Dask worker, whose BLAS has one thread.
+    numpy's and scipy's wheels each carry an OpenBLAS; one_blas_thread kept a controller made
+    before scipy's was loaded, so scipy's kept its threads in this process: the serial and the
+    Dask runs of sridhar-noisy differed by 3e-11 when the tests ran without
+    OPENBLAS_NUM_THREADS=1. Checked in a process with two BLAS threads by default, with scipy
+    loaded only inside the limit, as a task's first call may load it."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    script = """
+import json
+import numpy
+from lpvest.parallel import one_blas_thread
+from threadpoolctl import threadpool_info
+with one_blas_thread():
+    import scipy.linalg
+    inside = [(i["filepath"], i["num_threads"]) for i in threadpool_info() if i["user_api"] == "blas"]
+after = [(i["filepath"], i["num_threads"]) for i in threadpool_info() if i["user_api"] == "blas"]
+print(json.dumps([inside, after]))
+"""
+    env = {k: v for k, v in os.environ.items() if k not in ("OMP_NUM_THREADS", "MKL_NUM_THREADS")}
+    env["OPENBLAS_NUM_THREADS"] = "2"
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, check=False)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    inside, after = json.loads(proc.stdout)
+    assert inside and all(threads == 1 for _, threads in inside), inside
+    if os.cpu_count() and os.cpu_count() > 1:  # the limit is lifted after (OpenBLAS keeps to the cores)
+        assert all(threads == 2 for _, threads in after), after

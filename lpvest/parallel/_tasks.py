@@ -14,7 +14,6 @@ This module needs only numpy: the experiments import it whether or not the
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import json
 import os
@@ -175,23 +174,26 @@ def _worker_name() -> str:
         return f"{socket.gethostname()}:{os.getpid()}"
 
 
-@functools.cache
-def _blas_controller() -> Any:
-    from threadpoolctl import ThreadpoolController
-
-    return ThreadpoolController()
-
-
 def one_blas_thread() -> AbstractContextManager[object]:
     """A context manager that runs BLAS on one thread, as on a Dask worker
     (whose nanny sets ``OMP/OPENBLAS/MKL_NUM_THREADS=1``; see :func:`execute`).
+
+    Every BLAS loaded when it is entered is limited: numpy's and scipy's, which
+    are two libraries (numpy's and scipy's wheels each carry an OpenBLAS of their
+    own), so scipy's is loaded first. A controller made earlier and kept would
+    miss a BLAS loaded after it: scipy's kept its default threads, and a task
+    run in this process differed from the same task on a worker in its last bits
+    (the Sridhar GCV fit by 3e-11). Finding the libraries costs about 1.5 ms.
 
     Returns
     -------
     context manager
         ``with one_blas_thread(): ...`` (threadpoolctl's limit).
     """
-    return _blas_controller().limit(limits=1, user_api="blas")
+    import scipy.linalg  # noqa: F401 - loads scipy's own BLAS, so that the limit covers it
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController().limit(limits=1, user_api="blas")
 
 
 def execute(fn: Callable[[S, Task], TaskResult], shared: S, task: Task) -> Outcome:
