@@ -18,8 +18,8 @@ import lpvest.fmi.native
 #: The C runtime (package data of lpvest.fmi.native).
 RUNTIME_DIR = Path(lpvest.fmi.native.__file__).resolve().parent / "runtime"
 
-#: The numerical core of the runtime (no FMI layer, no model data).
-CORE = ("lpv_linalg.c", "lpv_rng.c", "lpv_vm.c")
+#: The numerical core of the runtime (no FMI layer, no model data), and its support functions.
+CORE = ("lpv_linalg.c", "lpv_rng.c", "lpv_vm.c", "lpv_support.c")
 #: The flags the FMUs are built with (lpvest.fmi.native._build.CFLAGS), for a test library.
 TEST_FLAGS = ("-std=c99", "-O2", "-ffp-contract=off", "-Wall", "-Wextra", "-Werror", "-fPIC", "-shared",
               "-fvisibility=hidden", "-DLPV_TEST_EXPORTS")
@@ -57,6 +57,8 @@ def core_library() -> ctypes.CDLL:
     lib.lpv_cholesky.restype = i
     lib.lpv_lu_solve.restype = i
     lib.lpv_sym_eigenvalues.restype = i
+    lib.lpv_abbreviate.argtypes = [ctypes.c_char_p, ctypes.c_size_t, ctypes.c_char_p, ctypes.c_size_t, i]
+    lib.lpv_abbreviate.restype = None
     return lib
 
 

@@ -86,7 +86,9 @@ def test_a_long_value_is_never_echoed_whole(plant):
      # characters repr shows as escapes count by their width: a name of three such characters
      # (found by test_properties under hypothesis 6.170) was "cut" to all three twice
      ("\U00018cd6\U00018d09\U0001b2fc", 30, "'\\U00018cd6...' (3 characters)"),
-     ("\x00" * 40, 30, "'\\x00\\x00\\x00...\\x00' (40 characters)")],
+     ("\x00" * 40, 30, "'\\x00\\x00\\x00...\\x00' (40 characters)"),
+     # a limit below the empty string's quotes: no first character to keep (an IndexError once)
+     ("", 1, "'...' (0 characters)")],
 )
 def test_abbreviate(value, limit, shown):
     assert abbreviate(value, limit) == shown

@@ -10,13 +10,14 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 
-from lpvest.core._errors import ExpressionError
+from lpvest.core._errors import ExpressionError, abbreviate
 from lpvest.core._expressions import Expression
 from lpvest.core._rng import Stream, log, lower_times, normal_quantile, psd_cholesky
 from lpvest.estimators.kalman._recursion import small_chol_inverse
 from lpvest.fmi.native._formulas import VM_STACK, compile_formula
-from tests.native_helpers import Formula, core_library, doubles, seeded
+from tests.native_helpers import RUNTIME_DIR, Formula, core_library, doubles, seeded
 from tests.tolerances import roundoff
 
 lib = core_library()
@@ -247,6 +248,57 @@ def test_names_are_resolved_and_checked_when_compiled():
         compile_formula(Expression.parse("p + q"), ["p"])
     with pytest.raises(ExpressionError, match="uses a shifted variable"):
         compile_formula(Expression.parse("shift(p, 1) * 2"), ["p"])
+
+
+def _abbreviate_in_c(text: str, limit: int) -> str:
+    out = ctypes.create_string_buffer(320)
+    raw = text.encode("utf-8")
+    lib.lpv_abbreviate(out, 320, raw, len(raw), limit)
+    return out.value.decode("utf-8")
+
+
+TEXTS = ["", "x", "theorem", "it's", 'say "x"', "it's \"x\"", "a\\b", "tab\there\nnew\rline", "\x00\x1f\x7f",
+         "caf\xe9", "\x85\xa0\xad", "\u2028\u200b\ufeff\ue000", "\U0001f600 \U000e0041", "x" * 300,
+         "\t" * 40, "'" * 50, "\U000e0041" * 3, "\x01" + "x" * 60 + "\x02", "é" * 100 + "'\"", "0 1; 1 2" * 20]
+
+
+@pytest.mark.parametrize("text", TEXTS)
+@pytest.mark.parametrize("limit", [1, 8, 30, 40])
+def test_a_text_is_shown_in_messages_as_abbreviate_shows_it(text, limit):
+    """The native FMUs' messages quote a String parameter (a signal kind, a table row, the
+    Kalman start) as the Python FMUs do, with lpvest's abbreviate: Python's repr (the
+    quotes it picks, its escapes, the characters it shows as they are), cut in the middle
+    by the width the characters are shown in."""
+    assert _abbreviate_in_c(text, limit) == abbreviate(text, limit)
+
+
+@settings(max_examples=300)
+@given(st.text(st.characters(exclude_categories=("Cn", "Cs")), max_size=80), st.integers(1, 40))
+def test_any_assigned_text_is_shown_as_abbreviate_shows_it(text, limit):
+    """As above, for any text of assigned characters (unassigned ones Python escapes by its
+    Unicode version; the runtime shows them as they are)."""
+    assert _abbreviate_in_c(text, limit) == abbreviate(text, limit)
+
+
+@pytest.mark.skipif(__import__("unicodedata").unidata_version != "14.0.0",
+                    reason="the runtime's table is of Unicode 14.0 (Python 3.11's unicodedata)")
+def test_the_runtimes_table_of_characters_python_escapes_is_unicodedatas():
+    import re
+    import sys
+    import unicodedata
+
+    source = (RUNTIME_DIR / "lpv_support.c").read_text()
+    table = source[source.index("NOT_PRINTABLE[][2] = {"):source.index("};", source.index("NOT_PRINTABLE[][2]"))]
+    ranges = [(int(a, 16), int(b, 16)) for a, b in re.findall(r"\{0x([0-9a-f]+), 0x([0-9a-f]+)\}", table)]
+    expected: list[list[int]] = []
+    for cp in range(0x80, sys.maxunicode + 1):
+        c = chr(cp)
+        if unicodedata.category(c) not in ("Cn", "Cs") and not c.isprintable():
+            if expected and expected[-1][1] == cp - 1:
+                expected[-1][1] = cp
+            else:
+                expected.append([cp, cp])
+    assert ranges == [tuple(r) for r in expected]
 
 
 @pytest.mark.parametrize("target", ["host", "x86_64-linux-gnu", "x86_64-windows-gnu", "x86_64-macos",

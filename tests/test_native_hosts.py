@@ -410,6 +410,45 @@ def test_both_backends_answer_a_careless_c_host_alike(fmus, native_fmus, tmp_pat
             "3.5 (fmi2SetupExperiment; FMI 2.0, 2.1.6)") in native
 
 
+#: String parameter values a message must quote as Python's repr does (escapes as \xHH)
+ODD_STRINGS = ["it's\\x09\\xc2\\x85\\xc2\\xa0caf\\xc3\\xa9", "x" * 200, "\\xe2\\x80\\xa8" + "'\"" * 20,
+               "\\xf0\\x9f\\x98\\x80\\x5c"]
+
+
+def _decoded(text: str) -> str:
+    return re.sub(r"\\x([0-9a-f]{2})", lambda m: chr(int(m[1], 16)), text).encode("latin-1").decode("utf-8")
+
+
+def test_both_backends_quote_a_bad_string_parameter_alike(fmus, native_fmus, tmp_path):
+    """A String parameter's bad value is quoted in the refusal as lpvest's abbreviate does,
+    by both backends: a quote, a tab, a character Python escapes (U+0085, U+00A0, U+2028),
+    others shown as they are, a long value cut in the middle with its length. The native
+    runtime cut the Kalman start at 159 bytes with no word of it and quoted it in '%s'."""
+    from lpvest.core._errors import abbreviate
+
+    table = [("0", "table"), ("9", "0\\x091 2 \\xf0\\x9f\\x98\\x80; 1 2")]  # a row of 3 numbers and more
+    cases = {"CoxTothTruncationTruncatedKalman": [[("1", v)] for v in ODD_STRINGS],
+             "CoxTothTruncationScheduler": [[("0", v)] for v in ODD_STRINGS[:2]] + [table]}
+    for name, instances in cases.items():
+        script = []
+        for sets in instances:  # an instance each, its strings set, initialized: refused
+            script += ["instantiate 0 a 1", *(f"set_string 0 {vr} {value}" for vr, value in sets), "setup 0 0",
+                       "enter 0", "exit 0", "free 0"]
+        python, native = _both_backends(fmus, native_fmus, name, script, tmp_path / name)
+        assert python == native, "\n".join(f"{a!r} | {b!r}" for a, b in zip(python, native, strict=False) if a != b)
+        errors = [line for line in native if line.startswith("LOG 3 ")]
+        if name.endswith("Kalman"):
+            for [(_, value)] in instances:
+                said = f"start = {abbreviate(_decoded(value), 30)}; expected one of theorem, steady-state"
+                assert any(said in line for line in errors), (said, errors)
+        else:
+            for [(_, value)] in instances[:2]:
+                said = f"kind = {abbreviate(_decoded(value), 30)} is not a signal kind"
+                assert any(said in line for line in errors), (said, errors)
+            assert any(f"table row 1 ({abbreviate('0' + chr(9) + '1 2 ' + chr(0x1f600), 30)}) has 4 numbers" in line
+                       for line in errors), errors
+
+
 @pytest.mark.skipif(shutil.which("localedef") is None, reason="needs localedef (glibc) to make a German locale")
 def test_the_restored_time_is_read_the_same_in_a_locale_with_a_decimal_comma(fmus, native_fmus, tmp_path):
     """The status bridge read the time a Python slave states after fmi2SetFMUstate with strtod,

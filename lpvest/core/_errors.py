@@ -158,7 +158,7 @@ def abbreviate(value: object, limit: int = 40) -> str:
         # cut by the width the characters are shown in, not by their count: repr
         # shows a character as up to 10 (an escape such as \U0001b2fc)
         keep = max(limit - 10, 8)
-        head = _shown_within(text, keep * 3 // 4) or text[0]
+        head = _shown_within(text, keep * 3 // 4) or text[:1]
         tail = _shown_within(text[len(head) :][::-1], keep // 4)[::-1]
         return f"{head + '...' + tail!r} ({len(text):,} characters)"
     return shown[: max(limit - 3, 8)] + "..."

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ...core._errors import LpvestError
+from ...core._errors import LpvestError, abbreviate
 from ...core._validation import check_box
 from ...estimators._truncated import TruncatedKalmanFilter
 
@@ -29,7 +29,7 @@ def build(
     the restarted recursion from the steady-state covariance of the model frozen
     at the scheduling value ``start_p`` (scipy's DARE)."""
     if start not in STARTS:
-        raise LpvestError(f"start = {start!r}; expected one of {', '.join(STARTS)}")
+        raise LpvestError(f"start = {abbreviate(start, 30)}; expected one of {', '.join(STARTS)}")
     p = None if start_p is None else np.asarray(start_p, dtype=float)
     if start == "steady-state" and p is not None and p.shape == (model.space.dim,):
         # named as the FMU parameter it is (the filter's own check says "scheduling value p1")

@@ -49,6 +49,10 @@ void lpv_msg_append(lpv_msg* m, const char* fmt, ...)
 char* lpv_repr(char* buf, double v);
 char* lpv_num(char* buf, double v);
 char* lpv_fmt_g(char* buf, double v, int prec);
+/* lpvest's abbreviate(text, limit) (lpvest/core/_errors.py) of the len bytes of UTF-8 at text:
+   Python's repr, cut in the middle when longer than limit, into out (size bytes; 320 hold any
+   limit up to 40). Exact but for unassigned code points, which Python escapes and this shows. */
+LPV_API void lpv_abbreviate(char* out, size_t size, const char* text, size_t len, int limit);
 /* a list of floats as Python writes it: "[0.5, -1.0]" (buf >= 40 n + 3 chars) */
 char* lpv_repr_list(char* buf, size_t size, const double* v, int n);
 /* parse a decimal number as Python's float() does for ordinary text (sign, digits,

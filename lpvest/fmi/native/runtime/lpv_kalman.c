@@ -426,9 +426,9 @@ static int sizes(const lpv_model* m, const lpv_values* v, const double* mp, lpv_
         }
         const char* start = lpv_param_string(m, v, "start");
         if (!start || (strcmp(start, "theorem") != 0 && strcmp(start, "steady-state") != 0)) {
-            char a[160];
-            snprintf(a, sizeof a, "%s", start ? start : "");
-            lpv_msgf(err, "LpvestError: start = '%s'; expected one of theorem, steady-state", a);
+            char a[320];
+            lpv_abbreviate(a, sizeof a, start ? start : "", start ? strlen(start) : 0, 30);
+            lpv_msgf(err, "LpvestError: start = %s; expected one of theorem, steady-state", a);
             return 1;
         }
         if (strcmp(start, "theorem") == 0 && !d->theorem_start) {

@@ -61,58 +61,6 @@ static int sig_out(const signals* s, int i) { return s->scheduler ? s->sd->out_p
 
 static int is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v' || c == '\n'; }
 
-/* Python's repr of a short string for messages (abbreviate(text, 30)) */
-static void repr_short(char* out, size_t size, const char* text, size_t len, int limit) {
-    char full[256];
-    size_t shown_len = len;
-    int has_single = 0, has_double = 0;
-    for (size_t i = 0; i < len; i++) has_single |= text[i] == '\'', has_double |= text[i] == '"';
-    char q = has_single && !has_double ? '"' : '\'';
-    /* the repr of the whole text, or of its head and tail when too long */
-    size_t keep = (size_t)(limit - 10 > 8 ? limit - 10 : 8);
-    int cut = 0;
-    {
-        /* length of the repr: quotes plus escaped characters (approximately the characters) */
-        size_t r = 2;
-        for (size_t i = 0; i < len; i++) r += (text[i] == '\\' || text[i] == q || (unsigned char)text[i] < 32) ? 2 : 1;
-        cut = r > (size_t)limit;
-    }
-    char body[256];
-    size_t b = 0;
-    if (cut) {
-        size_t head = keep * 3 / 4, tail = keep / 4;
-        for (size_t i = 0; i < head && i < len && b < 200; i++) body[b++] = text[i];
-        memcpy(body + b, "...", 3), b += 3;
-        for (size_t i = len - (tail < len ? tail : len); i < len && b < 250; i++) body[b++] = text[i];
-    } else {
-        for (size_t i = 0; i < len && b < 250; i++) body[b++] = text[i];
-    }
-    body[b] = '\0';
-    size_t f = 0;
-    full[f++] = q;
-    for (size_t i = 0; i < b && f < sizeof full - 6; i++) {
-        char c = body[i];
-        if (c == '\\' || c == q) full[f++] = '\\', full[f++] = c;
-        else if (c == '\n') full[f++] = '\\', full[f++] = 'n';
-        else if (c == '\t') full[f++] = '\\', full[f++] = 't';
-        else if (c == '\r') full[f++] = '\\', full[f++] = 'r';
-        else if ((unsigned char)c < 32) f += (size_t)snprintf(full + f, sizeof full - f, "\\x%02x", (unsigned char)c);
-        else full[f++] = c;
-    }
-    full[f++] = q;
-    full[f] = '\0';
-    if (cut) {
-        char digits[32], grouped[48];
-        int nd = snprintf(digits, sizeof digits, "%lu", (unsigned long)shown_len), g = 0;
-        for (int i = 0; i < nd; i++) {
-            if (i && (nd - i) % 3 == 0) grouped[g++] = ',';
-            grouped[g++] = digits[i];
-        }
-        grouped[g] = '\0';
-        snprintf(out, size, "%s (%s characters)", full, grouped);
-    }
-    else snprintf(out, size, "%s", full);
-}
 
 /* parse_table: rows 't v_1 ... v_n' into out (rows x (n + 1)); returns the rows, or -1 with err */
 static int parse_table(const char* text, int n, const char* name, double* out, lpv_msg* err) {
@@ -141,7 +89,7 @@ static int parse_table(const char* text, int n, const char* name, double* out, l
                 f = g;
             }
             char shown[320];
-            repr_short(shown, sizeof shown, a, (size_t)(z - a), 30);
+            lpv_abbreviate(shown, sizeof shown, a, (size_t)(z - a), 30);
             if (fields != n + 1) {
                 lpv_msgf(err, "SignalError: %s row %d (%s) has %d numbers; expected %d (t and %d values)", name, rows + 1,
                          shown, fields, n + 1, n);
@@ -224,7 +172,7 @@ static int read_signal(const lpv_model* m, const lpv_values* v, const signals* s
         if (kind_text && strcmp(kind_text, KINDS[k]) == 0) kind = k;
     if (kind < 0) {
         char shown[320];
-        repr_short(shown, sizeof shown, kind_text ? kind_text : "", kind_text ? strlen(kind_text) : 0, 30);
+        lpv_abbreviate(shown, sizeof shown, kind_text ? kind_text : "", kind_text ? strlen(kind_text) : 0, 30);
         lpv_msgf(err, "SignalError: %skind = %s is not a signal kind (one of zero, constant, sinusoid, decaying, gaussian, "
                  "random, table)", prefix, shown);
         return 1;

@@ -245,3 +245,120 @@ void lpv_apply_entries(const lpv_model* m, int array, const double* model_params
         if (m->entries[i].array == array)
             target[m->entries[i].index] = lpv_formula_eval(&m->entries[i].f, model_params);
 }
+
+/* ------------------------------------------------- Python's repr, abbreviated */
+
+/* the code points Python's str.isprintable() refuses, above ASCII, but for the unassigned ones:
+   categories Cc, Zs, Zl, Zp, Cf and Co of Unicode 14.0 (Python 3.11's unicodedata; whose
+   ranges tests/test_native_core.py checks against the running Python's) */
+static const unsigned long NOT_PRINTABLE[][2] = {
+    {0x80, 0xa0},       {0xad, 0xad},       {0x600, 0x605},     {0x61c, 0x61c},     {0x6dd, 0x6dd},
+    {0x70f, 0x70f},     {0x890, 0x891},     {0x8e2, 0x8e2},     {0x1680, 0x1680},   {0x180e, 0x180e},
+    {0x2000, 0x200f},   {0x2028, 0x202f},   {0x205f, 0x2064},   {0x2066, 0x206f},   {0x3000, 0x3000},
+    {0xe000, 0xf8ff},   {0xfeff, 0xfeff},   {0xfff9, 0xfffb},   {0x110bd, 0x110bd}, {0x110cd, 0x110cd},
+    {0x13430, 0x13438}, {0x1bca0, 0x1bca3}, {0x1d173, 0x1d17a}, {0xe0001, 0xe0001}, {0xe0020, 0xe007f},
+    {0xf0000, 0xffffd}, {0x100000, 0x10fffd}};
+
+static int printable(unsigned long cp) {
+    if (cp < 0x20 || cp == 0x7f) return 0;
+    for (size_t i = 0; cp >= 0x80 && i < sizeof NOT_PRINTABLE / sizeof NOT_PRINTABLE[0]; i++)
+        if (cp >= NOT_PRINTABLE[i][0] && cp <= NOT_PRINTABLE[i][1]) return 0;
+    return 1;
+}
+
+/* how repr shows cp inside quotes q (0: as a string of this one character, where no quote is
+   escaped), into out (at least 11 bytes); its length in characters in *width; returns the bytes */
+static size_t shown(unsigned long cp, char q, char* out, size_t* width) {
+    size_t n;
+    if (cp == '\\' || (q && cp == (unsigned long)q)) out[0] = '\\', out[1] = (char)cp, n = 2;
+    else if (cp == '\t') memcpy(out, "\\t", 2), n = 2;
+    else if (cp == '\n') memcpy(out, "\\n", 2), n = 2;
+    else if (cp == '\r') memcpy(out, "\\r", 2), n = 2;
+    else if (!printable(cp))
+        n = (size_t)snprintf(out, 11, cp < 0x100 ? "\\x%02lx" : cp < 0x10000 ? "\\u%04lx" : "\\U%08lx", cp);
+    else {
+        *width = 1;
+        if (cp < 0x80) return out[0] = (char)cp, 1;
+        if (cp < 0x800) return out[0] = (char)(0xC0 | (cp >> 6)), out[1] = (char)(0x80 | (cp & 0x3F)), 2;
+        if (cp < 0x10000)
+            return out[0] = (char)(0xE0 | (cp >> 12)), out[1] = (char)(0x80 | ((cp >> 6) & 0x3F)),
+                   out[2] = (char)(0x80 | (cp & 0x3F)), 3;
+        return out[0] = (char)(0xF0 | (cp >> 18)), out[1] = (char)(0x80 | ((cp >> 12) & 0x3F)),
+               out[2] = (char)(0x80 | ((cp >> 6) & 0x3F)), out[3] = (char)(0x80 | (cp & 0x3F)), 4;
+    }
+    *width = n;
+    return n;
+}
+
+/* repr of the code points cps[0..n) into out; its length in characters */
+static size_t repr_of(const unsigned long* cps, size_t n, char* out, size_t size) {
+    int single = 0, dbl = 0;
+    for (size_t i = 0; i < n; i++) single |= cps[i] == '\'', dbl |= cps[i] == '"';
+    char q = single && !dbl ? '"' : '\'';
+    size_t pos = 0, chars = 2;
+    if (size) out[pos++] = q;
+    for (size_t i = 0; i < n; i++) {
+        char one[12];
+        size_t width, bytes = shown(cps[i], q, one, &width);
+        chars += width;
+        for (size_t k = 0; k < bytes && pos + 2 < size; k++) out[pos++] = one[k];
+    }
+    if (pos + 1 < size) out[pos++] = q;
+    if (size) out[pos < size ? pos : size - 1] = '\0';
+    return chars;
+}
+
+void lpv_abbreviate(char* out, size_t size, const char* text, size_t len, int limit) {
+    unsigned long* cps = (unsigned long*)malloc((len + 3) * sizeof(unsigned long));
+    if (!cps) {
+        snprintf(out, size, "(a text of %lu bytes)", (unsigned long)len);
+        return;
+    }
+    size_t n = 0;
+    const unsigned char* p = (const unsigned char*)text;
+    for (size_t i = 0; i < len; n++) { /* valid UTF-8 (the FMI setters refuse other text); a stray byte as itself */
+        unsigned c = p[i];
+        int more = c < 0x80 ? 0 : (c & 0xE0) == 0xC0 ? 1 : (c & 0xF0) == 0xE0 ? 2 : (c & 0xF8) == 0xF0 ? 3 : 0;
+        if (i + (size_t)more >= len) more = 0;
+        unsigned long cp = more == 0 ? c : more == 1 ? (c & 0x1F) : more == 2 ? (c & 0x0F) : (c & 0x07);
+        for (int k = 1; k <= more; k++) cp = (cp << 6) | (p[i + (size_t)k] & 0x3F);
+        cps[n] = cp;
+        i += 1 + (size_t)more;
+    }
+    if (repr_of(cps, n, out, size) <= (size_t)limit) {
+        free(cps);
+        return;
+    }
+    /* the start and the end, each by the width its characters are shown in (abbreviate) */
+    size_t keep = (size_t)(limit - 10 > 8 ? limit - 10 : 8), used = 0, head = n, tail = n;
+    char one[12];
+    for (size_t i = 0, w; i < n; i++) {
+        shown(cps[i], 0, one, &w);
+        if ((used += w) > keep * 3 / 4) {
+            head = i;
+            break;
+        }
+    }
+    if (head == 0 && n) head = 1; /* the first character at least (as abbreviate) */
+    used = 0;
+    for (size_t i = n, w; i > head; i--) {
+        shown(cps[i - 1], 0, one, &w);
+        if ((used += w) > keep / 4) break;
+        tail = i - 1;
+    }
+    /* head, "...", tail: the tail moved first (head + 3 + n - tail <= n + 3 code points fit) */
+    memmove(cps + head + 3, cps + tail, (n - tail) * sizeof(unsigned long));
+    size_t m = head;
+    for (int k = 0; k < 3; k++) cps[m++] = '.';
+    char joined[320];
+    repr_of(cps, m + (n - tail), joined, sizeof joined);
+    char digits[32], grouped[48];
+    int nd = snprintf(digits, sizeof digits, "%lu", (unsigned long)n), g = 0;
+    for (int i = 0; i < nd; i++) {
+        if (i && (nd - i) % 3 == 0) grouped[g++] = ',';
+        grouped[g++] = digits[i];
+    }
+    grouped[g] = '\0';
+    snprintf(out, size, "%s (%s characters)", joined, grouped);
+    free(cps);
+}
