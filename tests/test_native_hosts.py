@@ -427,8 +427,13 @@ def test_both_backends_quote_a_bad_string_parameter_alike(fmus, native_fmus, tmp
     from lpvest.core._errors import abbreviate
 
     table = [("0", "table"), ("9", "0\\x091 2 \\xf0\\x9f\\x98\\x80; 1 2")]  # a row of 3 numbers and more
+    # numbers and blanks are ASCII (Python's strip, \\s and float() took Unicode's: NBSP, \\x1c, an
+    # ideographic space, NEL, an Arabic-Indic digit), at most 300 characters
+    tables = [[("0", "table"), ("9", text)] for text in (
+        "0\\xc2\\xa01; 1 2", "0\\x1c1; 1 2", "0 1\\xe3\\x80\\x80; 1 2", "0 1;\\xc2\\x85 1 2", "0 \\xd9\\xa1; 1 2",
+        "0 " + "1" * 301 + "; 1 2")]
     cases = {"CoxTothTruncationTruncatedKalman": [[("1", v)] for v in ODD_STRINGS],
-             "CoxTothTruncationScheduler": [[("0", v)] for v in ODD_STRINGS[:2]] + [table]}
+             "CoxTothTruncationScheduler": [[("0", v)] for v in ODD_STRINGS[:2]] + [table, *tables]}
     for name, instances in cases.items():
         script = []
         for sets in instances:  # an instance each, its strings set, initialized: refused
@@ -447,6 +452,7 @@ def test_both_backends_quote_a_bad_string_parameter_alike(fmus, native_fmus, tmp
                 assert any(said in line for line in errors), (said, errors)
             assert any(f"table row 1 ({abbreviate('0' + chr(9) + '1 2 ' + chr(0x1f600), 30)}) has 4 numbers" in line
                        for line in errors), errors
+            assert sum("table row" in line for line in errors) == 1 + len(tables), errors
 
 
 @pytest.mark.skipif(shutil.which("localedef") is None, reason="needs localedef (glibc) to make a German locale")

@@ -97,6 +97,23 @@ def test_parse_table_reports_the_row():
         parse_table("0 1; 1 2 3", 1)
 
 
+@pytest.mark.parametrize(("text", "message"), [
+    ("0\xa01; 1 2", r"row 1 \('0\\xa01'\) has 1 numbers"),  # NBSP: no blank
+    ("0\x1c1; 1 2", r"row 1 \('0\\x1c1'\) has 1 numbers"),
+    ("0 1\u3000; 1 2", r"row 1 \('0 1\\u3000'\) holds something that is not a number"),  # not stripped
+    ("0 1;\x85 1 2", r"row 2 \('\\x85 1 2'\) has 3 numbers"),
+    ("0 \u0661; 1 2", r"row 1 \('0 \u0661'\) holds something that is not a number"),  # an Arabic-Indic 1
+    ("0 " + "1" * 301, r"holds something that is not a number"),
+])
+def test_a_tables_numbers_and_blanks_are_ascii_as_the_native_fmus_read_them(text, message):
+    """str.strip, \\s and float() took Unicode's white space and digits, which the native
+    runtime does not: the two backends answered such a table differently."""
+    with pytest.raises(SignalError, match=message):
+        parse_table(text, 1)
+    times, values = parse_table(" 0\t1_0 ;\n1,2\v", 1)  # ASCII blanks, an underscore between digits
+    assert times.tolist() == [0.0, 1.0] and values.ravel().tolist() == [10.0, 2.0]
+
+
 def test_scheduler_rejects_a_signal_that_leaves_the_box():
     plant = load_system("peixoto-ex1").model()
     spec = SignalSpec.build("sinusoid", 1, amplitude=0.8, offset=0.5)

@@ -74,6 +74,12 @@ class SignalError(LpvestError, ValueError):
     """A signal specification is invalid (the message names the parameter)."""
 
 
+#: What separates a table's numbers besides ',' (C's isspace in the "C" locale)
+_BLANKS = " \t\n\r\f\v"
+#: The most characters a table's number may have (the native runtime's lpv_parse_float)
+_LONGEST_NUMBER = 300
+
+
 def parse_table(text: str, n: int, *, name: str = "table") -> tuple[np.ndarray, np.ndarray]:
     """Parse ``"t v_1 ... v_n; t v_1 ... v_n; ..."`` (rows separated by ``;`` or
     newlines, numbers by spaces or commas) into times ``(m,)`` and values ``(m, n)``.
@@ -97,8 +103,9 @@ def parse_table(text: str, n: int, *, name: str = "table") -> tuple[np.ndarray, 
     Raises
     ------
     SignalError
-        No rows, a row without ``n + 1`` numbers, a field that is not a number,
-        a non-finite number, or times not strictly increasing.
+        No rows, a row without ``n + 1`` numbers, a field that is not a number
+        (numbers are ASCII, at most 300 characters, separated by ASCII white space
+        or commas), a non-finite number, or times not strictly increasing.
 
     Examples
     --------
@@ -106,18 +113,22 @@ def parse_table(text: str, n: int, *, name: str = "table") -> tuple[np.ndarray, 
     (array([ 0., 10.]), array([[ 0.5],
            [-0.5]]))
     """
-    rows = [r.strip() for r in re.split(r"[;\n]", text or "") if r.strip()]
+    # ASCII white space and digits only, as the native FMUs read a table (str.strip, \s and
+    # float() would take Unicode's too: "0\xa01" or an Arabic-Indic digit)
+    rows = [r.strip(_BLANKS) for r in re.split(r"[;\n]", text or "") if r.strip(_BLANKS)]
     if not rows:
         raise SignalError(f"{name} is empty; expected rows 't v_1 ... v_{n}' separated by ';'")
     data = []
     for i, row in enumerate(rows):
-        fields = [f for f in re.split(r"[,\s]+", row) if f]
+        fields = [f for f in re.split(r"[, \t\n\r\f\v]+", row) if f]
         if len(fields) != n + 1:
             raise SignalError(
                 f"{name} row {i + 1} ({abbreviate(row, 30)}) has {len(fields)} numbers; expected {n + 1} "
                 f"(t and {n} values)"
             )
         try:
+            if not all(f.isascii() and len(f) <= _LONGEST_NUMBER for f in fields):
+                raise ValueError
             data.append([float(f) for f in fields])
         except ValueError:
             raise SignalError(
