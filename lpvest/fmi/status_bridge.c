@@ -612,7 +612,7 @@ static const char* refuse_instantiate(fmi2Type type, fmi2String guid, fmi2String
         goto refused;
     }
     if (guid && strcmp(guid, line) != 0) {
-        snprintf(msg, cap, "fmi2Instantiate: GUID %.100s does not match this FMU's %.100s", guid, line);
+        snprintf(msg, cap, LPV_GUID_MISMATCH, guid, line);
         goto refused;
     }
     if (!lpv_is_utf8(dir)) { /* pythonfmu would crash the host: it makes a Python string of it */

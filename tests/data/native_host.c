@@ -36,8 +36,8 @@
  *                                   than fmi2SerializedFMUstateSize says
  *   deserialize_text ID SLOT TEXT   fmi2DeSerializeFMUstate of TEXT's bytes into SLOT (its state freed
  *                                   when it worked)
- * instantiate ID NAME LOGGING [RESOURCES] passes RESOURCES as fmuResourceLocation instead of the
- * one given on the command line.
+ * instantiate ID NAME LOGGING [RESOURCES [GUID]] passes RESOURCES as fmuResourceLocation and GUID as
+ * fmuGUID instead of those given on the command line ("=": the one given there).
  * In NAME and RESOURCES (instantiate), TEXT (set_string, deserialize_text) and CATEGORY, \xHH is
  * the byte HH and \null alone a NULL pointer: what a careless host may pass.
  * Each call prints "STATUS <command> <status>". The logger prints
@@ -239,10 +239,12 @@ int main(int argc, char** argv) {
         rest += m;
         int st = 0;
         if (strcmp(cmd, "instantiate") == 0) {
-            char name[256], resources[1024];
+            char name[256], resources[1024], guid[1024];
             int logging = 0;
-            int got = sscanf(rest, "%255s %d %1023s", name, &logging, resources);
-            c[id] = F.instantiate(decode(name), 1, argv[2], got == 3 ? decode(resources) : argv[3], &cb, 0, logging);
+            int got = sscanf(rest, "%255s %d %1023s %1023s", name, &logging, resources, guid);
+            const char* uri = got >= 3 && strcmp(resources, "=") != 0 ? decode(resources) : argv[3];
+            const char* id_guid = got >= 4 && strcmp(guid, "=") != 0 ? decode(guid) : argv[2];
+            c[id] = F.instantiate(decode(name), 1, id_guid, uri, &cb, 0, logging);
             printf("STATUS instantiate %s\n", c[id] ? "0" : "null");
             fflush(stdout);
             continue;

@@ -595,7 +595,7 @@ FMI2_Export fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuT
     if (fmuGUID && strcmp(fmuGUID, m->guid) != 0) {
         if (logger)
             logger(env, name, fmi2Error, "logStatusError",
-                   "[%s] fmi2Instantiate: GUID %s does not match this FMU's %s", m->identifier, fmuGUID, m->guid);
+                   "[%s] " LPV_GUID_MISMATCH, m->identifier, fmuGUID, m->guid);
         return NULL;
     }
     if (m->n_model_params < 0 || m->n_model_params > LPV_MAX_MODEL_PARAMS) { /* not model data lpvest wrote */

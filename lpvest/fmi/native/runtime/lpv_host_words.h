@@ -55,6 +55,10 @@ static int lpv_has_text(const char* text) {
    "fmi2DeSerializeFMUstate: " (what fmi2SetFMUstate checks of the rest, it says then) */
 #define LPV_NOT_A_STATE "ArgumentError: not a serialized lpvest FMU state"
 
+/* fmi2Instantiate with another FMU's GUID: printf's format of the host's GUID and this FMU's,
+   each cut at 100 bytes (a message stays within 1000 characters) */
+#define LPV_GUID_MISMATCH "fmi2Instantiate: GUID %.100s does not match this FMU's %.100s"
+
 /* fmi2Instantiate with no resource location, after "fmi2Instantiate: " */
 #define LPV_NO_RESOURCES "no resource location (NULL; FMI 2.0, 2.1.5: the URI of the FMU's resources folder)"
 
