@@ -356,8 +356,8 @@ def test_one_blas_thread_limits_numpys_and_scipys_blas_in_this_process():
     numpy's and scipy's wheels each carry an OpenBLAS; one_blas_thread kept a controller made
     before scipy's was loaded, so scipy's kept its threads in this process: the serial and the
     Dask runs of sridhar-noisy differed by 3e-11 when the tests ran without
-    OPENBLAS_NUM_THREADS=1. Checked in a process with two BLAS threads by default, with scipy
-    loaded only inside the limit, as a task's first call may load it."""
+    OPENBLAS_NUM_THREADS=1. Checked in a process with two BLAS threads by default that has
+    not loaded scipy before the limit is entered (as a worker's first task)."""
     import json
     import os
     import subprocess

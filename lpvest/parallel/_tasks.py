@@ -7,8 +7,9 @@ member, one design ...), each run by a module-level function
 way on a Dask worker and in this process: an exception becomes a failed
 :class:`Outcome` carrying its message, so one bad task never stops the others.
 
-This module needs only numpy: the experiments import it whether or not the
-``sweep`` extra (Dask, pyarrow, zarr) is installed, and run their tasks through
+This module needs only lpvest's own dependencies (numpy, scipy, threadpoolctl):
+the experiments import it whether or not the ``sweep`` extra (Dask, pyarrow,
+zarr) is installed, and run their tasks through
 :func:`map_tasks` serially or on an :class:`~lpvest.parallel.Engine`.
 """
 
