@@ -329,7 +329,10 @@ class ProductQuadrature:
         J = self.m - 1
         out = pieces[..., :J]
         if pieces.shape[-1] > J:
-            np.add.at(out, (Ellipsis, self.piece_interval[J:]), pieces[..., J:])  # type: ignore[arg-type]  # numpy's stubs omit index tuples
+            # along the first axis of moved views (writes land in ``out``): numpy's
+            # stubs before 2.5 refuse an index tuple such as ``(..., idx)``
+            np.add.at(np.moveaxis(out, -1, 0), self.piece_interval[J:],
+                      np.moveaxis(pieces[..., J:], -1, 0))
         return out
 
 
