@@ -28,6 +28,7 @@ subcommand has a description and examples in ``lpvest COMMAND --help``.
 from __future__ import annotations
 
 import argparse
+import atexit
 import dataclasses
 import difflib
 import json
@@ -791,9 +792,15 @@ def _version() -> str:
 def run(argv: Sequence[str] | None = None) -> int:
     """:func:`main` for the console script: after an interruption that left a
     native solve running, the process leaves at once with the status (see
-    :func:`lpvest.core.abandoned_calls`)."""
+    :func:`lpvest.core.abandoned_calls`), after the functions registered with
+    :mod:`atexit` (which remove the temporary folders: the status bridges, the
+    native runtime, the unpacked FMUs of a co-simulation), as the interpreter's
+    exit would have run them before its shutdown."""
     status = main(argv)
     if abandoned_calls():
+        # what a normal exit does first, while the other threads still run; then
+        # not the interpreter's shutdown, which can abort with the solver running
+        atexit._run_exitfuncs()
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(status)

@@ -27,12 +27,14 @@ def lpvest_command(*args: str) -> list[str]:
 
 
 def interrupt_at(cmd: list[str], moment: str, tmp_path: Path, *, signum: int = signal.SIGINT,
-                 cwd: Path = ROOT, group: bool = False) -> subprocess.CompletedProcess[str]:
+                 cwd: Path = ROOT, group: bool = False,
+                 env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
     """Run ``cmd`` with the hook holding at ``moment``; send ``signum`` once it
     says it is there (``group``: to its whole process group, as a terminal's
-    Ctrl-C does: the command runs in a new session); return how it ended."""
+    Ctrl-C does: the command runs in a new session; ``env``: variables added to
+    this process's environment); return how it ended."""
     ready = tmp_path / f"ready-{moment}-{os.getpid()}-{len(list(tmp_path.iterdir()))}"
-    env = {**os.environ, "LPVEST_TEST_HOLD": moment, "LPVEST_TEST_READY": str(ready)}
+    env = {**os.environ, **(env or {}), "LPVEST_TEST_HOLD": moment, "LPVEST_TEST_READY": str(ready)}
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=cwd,
                             start_new_session=group, preexec_fn=_default_sigint)
     try:

@@ -55,15 +55,21 @@ def test_a_signal_during_a_design_solve_stops_it_and_writes_nothing(tmp_path, si
 
 
 def test_an_interrupted_build_caches_no_design_and_leaves_no_partial_fmu(tmp_path):
+    """... nor the status bridges it compiled before the design in the temporary
+    folder: the command leaves with ``os._exit`` (the solve it abandoned runs on),
+    after the clean-ups registered with atexit."""
     out = tmp_path / "fmus"
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
     res = interrupt_at(_lpvest("build", "--model", "examples/own_plant.toml", "--kinds", "Plant,HinfPD",
-                               "--out", str(out)), "solve", tmp_path)
+                               "--out", str(out)), "solve", tmp_path, env={"TMPDIR": str(scratch)})
     assert res.returncode == 130, res.stderr
     line = _one_line(res.stderr)
     assert "the interrupted one was not kept; run the same command again to resume" in line
     assert not (out / ".designs").exists() or not any((out / ".designs").iterdir())
     assert sorted(p.name for p in out.glob("*.fmu*")) == ["OwnPlantPlant.fmu"]  # built before the design; no .part
     assert not list(out.glob(".*.part"))
+    assert not any(scratch.iterdir()), sorted(p.name for p in scratch.iterdir())
 
 
 def test_a_call_interrupted_while_it_runs_stays_abandoned_until_it_ends():
