@@ -226,12 +226,21 @@ def test_two_workers_one_worker_and_a_serial_loop_give_the_same_summary(spec_fil
 
 @pytest.mark.slow
 def test_killing_a_worker_mid_sweep_still_records_every_task_exactly_once(small_spec_file, one_worker, tmp_path):
+    """... and what the killed worker unpacked (the sweep's FMUs) is in its Dask
+    work folder, which the next worker to start there purges: nothing is left."""
+    import dask
+
     killed: list[int] = []
     seen: list[int] = []
     n = 60
-    with Engine(workers=2, idle_timeout=TIMEOUT) as engine:
+    scratch = tmp_path / "scratch"  # the workers' temporary folder (Dask's temporary-directory)
+    scratch.mkdir()
+    with dask.config.set({"temporary-directory": str(scratch)}), Engine(workers=2, idle_timeout=TIMEOUT) as engine:
         pids = engine.client.run(os.getpid)  # worker address -> process id
         victim = sorted(pids.values())[0]
+        folders = engine.client.run(lambda: __import__("tempfile").gettempdir())
+        assert sorted(folders.values()) == sorted(str(p) for p in (scratch / "dask-scratch-space").glob("worker-*")
+                                                  if p.is_dir())
 
         def on_outcome(outcome):
             seen.append(outcome.index)
@@ -248,6 +257,13 @@ def test_killing_a_worker_mid_sweep_still_records_every_task_exactly_once(small_
     assert sorted(parts["task"].to_pylist()) == list(range(n))  # each task once on disk
     assert res.complete and not res.failures
     _same_rows(res, one_worker)
+    # the killed worker's folder: purged when its nanny started the next worker, if no other
+    # worker held Dask's lock then, else at the start below
+    assert [p.name for p in scratch.iterdir()] == ["dask-scratch-space"]
+    with dask.config.set({"temporary-directory": str(scratch)}), Engine(workers=1, idle_timeout=TIMEOUT) as engine:
+        engine.client.run(os.getpid)
+    # purged at the start, removed at the close (with its lock file)
+    assert not list((scratch / "dask-scratch-space").glob("worker-*"))
 
 
 @pytest.mark.slow

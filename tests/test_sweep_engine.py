@@ -309,18 +309,24 @@ def test_the_local_cluster_is_worker_processes_of_one_thread_each_quiet_and_conf
     assert made["closed"] == 9.0
 
 
-def test_the_preload_the_engine_names_is_a_module_that_leaves_ctrl_c_to_the_client():
+def test_the_preload_the_engine_names_is_a_module_that_leaves_ctrl_c_to_the_client(tmp_path, monkeypatch):
     """The engine names its workers' preload by a string (above), which no import checks: that
-    module exists and its ``dask_setup`` (what Dask calls in each new worker) ignores SIGINT."""
+    module exists and its ``dask_setup`` (what Dask calls in each new worker) ignores SIGINT and
+    makes the worker's Dask folder the process's temporary folder (tests/test_sweep.py: a killed
+    worker leaves nothing)."""
     import importlib
     import signal
+    import tempfile
+    from types import SimpleNamespace
 
     module = importlib.import_module("lpvest.parallel._worker")
     previous = signal.getsignal(signal.SIGINT)
+    monkeypatch.setattr(tempfile, "tempdir", tempfile.tempdir)  # restored after the test
     try:
         signal.signal(signal.SIGINT, signal.default_int_handler)
-        module.dask_setup(None)
+        module.dask_setup(SimpleNamespace(local_directory=tmp_path))
         assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+        assert tempfile.gettempdir() == str(tmp_path)
     finally:
         signal.signal(signal.SIGINT, previous)
 
