@@ -360,6 +360,21 @@ def test_a_simulation_never_closed_removes_its_unpacked_fmus_when_collected_and_
     assert kept.name.startswith("lpvest-cosim-") and not kept.exists()
 
 
+def test_the_fmus_are_unpacked_in_the_folder_given_and_removed_with_the_simulation(fmus, tmp_path):
+    folder = tmp_path / "unpack"
+    folder.mkdir()
+    sim = chain(fmus, unpack_in=folder)
+    made = sim._tmp
+    assert made.parent == folder and made.name.startswith("lpvest-cosim-") and any(made.iterdir())
+    sim.close()
+    assert not made.exists() and not any(folder.iterdir())
+    for bad in (tmp_path / "missing", str(tmp_path / "missing"), 3):
+        with pytest.raises(CoSimulationError, match=r"^unpack_in must be an existing folder; found ") as info:
+            chain(fmus, unpack_in=bad)
+        assert info.value.where == "unpack_in"
+    assert not (tmp_path / "missing").exists()
+
+
 def test_a_failure_while_instantiating_frees_what_was_made(fmus):
     FakeSlave.FAIL[("gain", "instantiate")] = 3
     with pytest.raises(CoSimulationError, match=r"^component gain: instantiate failed: ") as info:

@@ -13,6 +13,7 @@ engine has an idle timeout, and the co-simulations are short (20 steps).
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 import signal
@@ -264,6 +265,31 @@ def test_killing_a_worker_mid_sweep_still_records_every_task_exactly_once(small_
         engine.client.run(os.getpid)
     # purged at the start, removed at the close (with its lock file)
     assert not list((scratch / "dask-scratch-space").glob("worker-*"))
+
+
+@pytest.mark.slow
+def test_a_sweep_on_an_existing_cluster_is_the_local_one_and_unpacks_in_the_workers_folders(
+        small_spec_file, one_worker, tmp_path):
+    """``scheduler=ADDRESS`` (README, "On a cluster"): a cluster lpvest did not start, so
+    without lpvest's preload, its workers' temporary folder the system's. The rows are the
+    local cluster's, bit for bit; the FMUs are shipped to and unpacked in the worker's Dask
+    work folder, which Dask purges even after the worker was killed."""
+    import tempfile
+
+    from distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0",
+                      silence_logs=logging.CRITICAL) as cluster:
+        res = run_sweep(small_spec_file, tmp_path / "out", scheduler=cluster.scheduler_address, progress=False)
+        with Client(cluster) as client:
+            (folder, temporary, names), = client.run(
+                lambda dask_worker: (dask_worker.local_directory, tempfile.gettempdir(),
+                                     sorted(p.name for p in Path(dask_worker.local_directory).iterdir()))).values()
+    assert res.complete and not res.failures
+    _same_rows(res, one_worker)
+    assert Path(temporary) != Path(folder)  # no preload of lpvest's made it the temporary folder
+    # the shipped FMUs, and the folder of the worker's cached simulation (it runs the next task)
+    assert "lpvest-fmus" in names and sum(n.startswith("lpvest-cosim-") for n in names) == 1, names
 
 
 @pytest.mark.slow

@@ -453,6 +453,11 @@ class CoSimulation:
         Variables to record (``"comp.var"``, vectors expand; Real, Integer,
         Boolean or Enumeration). Default: every output of every component but
         String ones (:attr:`not_recorded`).
+    unpack_in : str or Path, optional
+        An existing folder in which the FMUs are unpacked (into a new folder
+        ``lpvest-cosim-*`` that :meth:`close` removes). Default: the system's
+        temporary folder. A sweep's Dask worker gives its own work folder,
+        which Dask purges even after the worker was killed.
 
     Raises
     ------
@@ -471,12 +476,16 @@ class CoSimulation:
         step_size: float,
         start_time: float = 0.0,
         record: Sequence[str] | None = None,
+        unpack_in: str | Path | None = None,
     ) -> None:
         if not step_size > 0:
             raise CoSimulationError(f"step_size must be positive; found {step_size}", where="step_size")
+        if unpack_in is not None and not (isinstance(unpack_in, str | Path) and Path(unpack_in).is_dir()):
+            raise CoSimulationError(f"unpack_in must be an existing folder; found {abbreviate(unpack_in, 60)}",
+                                    where="unpack_in")
         self.step_size = float(step_size)
         self.start_time = float(start_time)
-        self._tmp = Path(tempfile.mkdtemp(prefix="lpvest-cosim-"))
+        self._tmp = Path(tempfile.mkdtemp(prefix="lpvest-cosim-", dir=unpack_in))
         # the unpacked FMUs go with the simulation: on close(), when it is collected, or at the
         # interpreter's exit for one still alive (a worker's cached simulation)
         self._remove_tmp = weakref.finalize(self, shutil.rmtree, self._tmp, True)

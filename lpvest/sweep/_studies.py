@@ -75,8 +75,9 @@ _WORKER: dict[str, Any] = {}
 
 
 def _fmu_folder() -> Path:
-    """A folder of this process for shipped FMUs: the Dask worker's local
-    directory (removed with the worker), else a temporary folder."""
+    """A folder of this process for shipped FMUs, in the Dask worker's local
+    directory (removed with the worker), else in a temporary folder; its parent
+    holds the unpacked FMUs of the worker's simulation."""
     if "folder" not in _WORKER:
         try:
             from distributed import get_worker
@@ -110,8 +111,10 @@ def _simulation(payload: CosimPayload) -> CoSimulation:
     release_simulation()
     comps = [Component(name, _fmu_path(payload, sha), dict(params), feed)
              for name, sha, params, feed in payload.components]
+    # unpacked beside the shipped FMUs: in a Dask worker's work folder, which Dask purges
+    # even after the worker was killed (on any cluster, not only lpvest's own)
     sim = CoSimulation(comps, payload.connections, step_size=payload.step_size, start_time=payload.start_time,
-                       record=payload.record)
+                       record=payload.record, unpack_in=_fmu_folder().parent)
     _WORKER["digest"], _WORKER["sim"] = payload.digest, sim
     return sim
 
