@@ -34,6 +34,7 @@ import difflib
 import json
 import os
 import re
+import signal
 import sys
 import time
 import warnings
@@ -798,8 +799,13 @@ def run(argv: Sequence[str] | None = None) -> int:
     exit would have run them before its shutdown."""
     status = main(argv)
     if abandoned_calls():
-        # what a normal exit does first, while the other threads still run; then
-        # not the interpreter's shutdown, which can abort with the solver running
+        # a second Ctrl-C or SIGTERM from here on leaves at once, skipping what is
+        # left of the clean-ups, never through the interpreter's shutdown
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, lambda *_: os._exit(status))
+        # the atexit functions, as the interpreter's exit runs them (while the
+        # solver's thread still runs); then not its shutdown, which can abort
+        # with the solver running
         atexit._run_exitfuncs()
         sys.stdout.flush()
         sys.stderr.flush()

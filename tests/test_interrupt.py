@@ -72,6 +72,33 @@ def test_an_interrupted_build_caches_no_design_and_leaves_no_partial_fmu(tmp_pat
     assert not any(scratch.iterdir()), sorted(p.name for p in scratch.iterdir())
 
 
+_SLOW_CLEAN_UP = """
+import atexit, os, sys, threading
+import lpvest.cli as cli
+
+cli.main = lambda argv=None: 130  # a command interrupted while its solve runs on
+cli.abandoned_calls = lambda: True
+
+def slow_clean_up():
+    with open(os.environ["LPVEST_TEST_READY"], "a") as f:
+        f.write("clean-up\\n")
+    threading.Event().wait(300)
+
+atexit.register(slow_clean_up)
+sys.exit(cli.run([]))
+"""
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_a_second_signal_during_the_clean_ups_leaves_at_once_with_the_first_status(tmp_path, signum):
+    """After an abandoned solve the command runs the atexit clean-ups before ``os._exit``; a
+    second Ctrl-C or SIGTERM while one of them runs leaves at once with the status already
+    chosen, with no traceback and not through the interpreter's shutdown."""
+    res = interrupt_at([sys.executable, "-c", _SLOW_CLEAN_UP], "clean-up", tmp_path, signum=signum)
+    assert res.returncode == 130, res.stderr
+    assert res.stderr == "", res.stderr
+
+
 def test_a_call_interrupted_while_it_runs_stays_abandoned_until_it_ends():
     """The call itself signals the main thread (which is then starting it or
     waiting for it): the interrupted call counts as running until it ends, so
