@@ -229,6 +229,8 @@ def test_two_workers_one_worker_and_a_serial_loop_give_the_same_summary(spec_fil
 def test_killing_a_worker_mid_sweep_still_records_every_task_exactly_once(small_spec_file, one_worker, tmp_path):
     """... and what the killed worker unpacked (the sweep's FMUs) is in its Dask
     work folder, which Dask purges when a worker or cluster next starts there."""
+    import tempfile
+
     import dask
 
     killed: list[int] = []
@@ -239,7 +241,7 @@ def test_killing_a_worker_mid_sweep_still_records_every_task_exactly_once(small_
     with dask.config.set({"temporary-directory": str(scratch)}), Engine(workers=2, idle_timeout=TIMEOUT) as engine:
         pids = engine.client.run(os.getpid)  # worker address -> process id
         victim = sorted(pids.values())[0]
-        folders = engine.client.run(lambda: __import__("tempfile").gettempdir())
+        folders = engine.client.run(tempfile.gettempdir)
         assert sorted(folders.values()) == sorted(str(p) for p in (scratch / "dask-scratch-space").glob("worker-*")
                                                   if p.is_dir())
 

@@ -74,27 +74,27 @@ class CosimPayload:
 _WORKER: dict[str, Any] = {}
 
 
-def _fmu_folder() -> Path:
-    """A folder of this process for shipped FMUs, in the Dask worker's local
-    directory (removed with the worker), else in a temporary folder; its parent
-    holds the unpacked FMUs of the worker's simulation."""
+def _process_folder() -> Path:
+    """This process's folder for its shipped and unpacked FMUs: the Dask
+    worker's local directory (removed with the worker, and purged by Dask even
+    after the worker was killed), else a temporary folder."""
     if "folder" not in _WORKER:
         try:
             from distributed import get_worker
 
-            base = Path(get_worker().local_directory)
+            _WORKER["folder"] = Path(get_worker().local_directory)
         except (ImportError, ValueError):
-            base = Path(tempfile.mkdtemp(prefix="lpvest-sweep-"))
-            atexit.register(shutil.rmtree, base, True)
-        _WORKER["folder"] = base / "lpvest-fmus"
-        _WORKER["folder"].mkdir(parents=True, exist_ok=True)
+            _WORKER["folder"] = Path(tempfile.mkdtemp(prefix="lpvest-sweep-"))
+            atexit.register(shutil.rmtree, _WORKER["folder"], True)
     return _WORKER["folder"]
 
 
 def _fmu_path(payload: CosimPayload, sha: str) -> Path:
     if sha in payload.fmu_paths:
         return Path(payload.fmu_paths[sha])
-    path = _fmu_folder() / f"{sha}.fmu"
+    folder = _process_folder() / "lpvest-fmus"
+    folder.mkdir(exist_ok=True)
+    path = folder / f"{sha}.fmu"
     if not path.is_file():
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
         tmp.write_bytes(payload.fmu_bytes[sha])
@@ -111,10 +111,9 @@ def _simulation(payload: CosimPayload) -> CoSimulation:
     release_simulation()
     comps = [Component(name, _fmu_path(payload, sha), dict(params), feed)
              for name, sha, params, feed in payload.components]
-    # unpacked beside the shipped FMUs: in a Dask worker's work folder, which Dask purges
-    # even after the worker was killed (on any cluster, not only lpvest's own)
+    # on any cluster, not only lpvest's own (whose preload makes it the temporary folder)
     sim = CoSimulation(comps, payload.connections, step_size=payload.step_size, start_time=payload.start_time,
-                       record=payload.record, unpack_in=_fmu_folder().parent)
+                       record=payload.record, unpack_in=_process_folder())
     _WORKER["digest"], _WORKER["sim"] = payload.digest, sim
     return sim
 
